@@ -1,0 +1,162 @@
+#include "commands.h"
+
+#include <fmt/format.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "progress.h"
+#include "trailmark/core/error.h"
+#include "trailmark/eval/metrics.h"
+#include "trailmark/io/metrics_io.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/report/html_report.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark::cli {
+
+namespace fs = std::filesystem;
+
+void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
+  const SimulatedMission sim = SimulateScenario(scenario, seed);
+  WriteMissionDirectory(out, sim.data, &sim.plan);
+  const auto& d = sim.data;
+  std::size_t crumbs = 0;
+  for (const auto& e : d.events) crumbs += e.event == "drop";
+  fmt::print("simulated '{}' (seed {}) into {}: {} steps, {} RSSI packets, {} crumbs dropped, "
+             "{} truth rows, {:.0f} s\n",
+             scenario, seed, out.string(), d.steps.size(), d.rssi.size(), crumbs, d.truth.size(),
+             d.truth.empty() ? 0.0 : d.truth.back().t - d.truth.front().t);
+}
+
+RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::path& out,
+              const std::map<std::string, std::string>& options) {
+  const Pipeline* pipeline = FindPipeline(name);
+  if (pipeline == nullptr) {
+    std::string known;
+    for (const auto& p : AllPipelines()) known += (known.empty() ? "" : ", ") + p->name();
+    throw std::invalid_argument(fmt::format("unknown pipeline '{}' (known: {})", name, known));
+  }
+  const MissionDirectory mission(mission_dir);
+  for (const auto& f : pipeline->required_files()) mission.Require(f, "pipeline '" + name + "'");
+  ProgressBar bar("run " + name);
+  PipelineContext context{mission, options, [&](double f) { bar.Update(f); }};
+  RunResult result = RunPipeline(*pipeline, context, out);
+  bar.Finish();
+  return result;
+}
+
+Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
+             const fs::path& metrics_out, bool print) {
+  const MissionDirectory mission(mission_dir);
+  mission.Require("truth.csv", "evaluation");
+  const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
+  const auto estimates = ReadAll<Estimate>(estimates_path.string(), &mission.registry());
+  const Metrics metrics = Evaluate(mission.info(), truth, estimates);
+  WriteMetricsJson(metrics_out, metrics);
+  if (print) {
+    fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9}\n", "node", "kind",
+               "samples", "mean m", "median", "p95 m", "max m", "final m", "dist m", "mean %dist");
+    auto row = [](const NodeMetrics& m) {
+      fmt::print("{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9}\n",
+                 m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m,
+                 m.stats.p95_m, m.stats.max_m, m.stats.final_m, m.distance_m,
+                 m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-");
+    };
+    for (const auto& m : metrics.nodes) row(m);
+    row(metrics.agents);
+    if (metrics.static_nodes.stats.samples > 0) row(metrics.static_nodes);
+    fmt::print("metrics written to {}\n", metrics_out.string());
+  }
+  return metrics;
+}
+
+namespace {
+
+fs::path MissionOfRun(const fs::path& run_dir) {
+  std::ifstream in(run_dir / "diagnostics.json");
+  if (!in) throw InputError((run_dir / "diagnostics.json").string(), 0,
+                            "missing: pass --mission or a directory written by 'trailmark run'");
+  nlohmann::json j;
+  try {
+    in >> j;
+  } catch (const std::exception& e) {
+    throw InputError((run_dir / "diagnostics.json").string(), 0, e.what());
+  }
+  return fs::path(j.value("mission", std::string()));
+}
+
+std::string PipelineOfRun(const fs::path& run_dir) {
+  std::ifstream in(run_dir / "diagnostics.json");
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (j.is_object() && j.contains("pipeline")) return j["pipeline"].get<std::string>();
+  return run_dir.filename().string();
+}
+
+double WallTimeOfRun(const fs::path& run_dir) {
+  std::ifstream in(run_dir / "diagnostics.json");
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (j.is_object() && j.contains("wall_time_s")) return j["wall_time_s"].get<double>();
+  return 0.0;
+}
+
+}  // namespace
+
+void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
+            const fs::path& out) {
+  if (run_dirs.empty()) throw std::invalid_argument("report: give at least one run directory");
+  const fs::path mission_dir = mission_arg.empty() ? MissionOfRun(run_dirs.front()) : mission_arg;
+  const MissionDirectory mission(mission_dir);
+  ReportInput input;
+  input.info = mission.info();
+  input.plan = mission.LoadFloorPlan();
+  if (mission.Has("truth.csv")) {
+    input.truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
+  }
+  for (const auto& dir : run_dirs) {
+    ReportRun run;
+    run.pipeline = PipelineOfRun(dir);
+    run.wall_time_s = WallTimeOfRun(dir);
+    run.estimates = ReadAll<Estimate>((dir / "estimates.csv").string(), &mission.registry());
+    run.metrics = Evaluate(input.info, input.truth, run.estimates);
+    input.runs.push_back(std::move(run));
+  }
+  std::ofstream(out, std::ios::binary) << BuildHtmlReport(input);
+  fmt::print("report written to {}\n", out.string());
+}
+
+void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows) {
+  fmt::print("\n{:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "pipeline",
+             "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist", "crumbs m",
+             "run time s");
+  for (const auto& [run, m] : rows) {
+    const auto& a = m.agents;
+    fmt::print("{:<14} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>10} {:>10} {:>11} {:>10.3f}\n",
+               run.pipeline, a.stats.mean_m, a.stats.p95_m, a.stats.max_m, a.stats.final_m,
+               a.mean_pct_of_distance ? fmt::format("{:.2f}", *a.mean_pct_of_distance) : "-",
+               a.max_pct_of_distance ? fmt::format("{:.2f}", *a.max_pct_of_distance) : "-",
+               m.static_nodes.stats.samples > 0 ? fmt::format("{:.2f}", m.static_nodes.stats.mean_m)
+                                                : "-",
+               run.wall_time_s);
+  }
+}
+
+int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
+  const fs::path mission_dir = out / "mission";
+  Simulate(scenario, seed, mission_dir);
+  const MissionDirectory mission(mission_dir);
+  std::vector<std::pair<RunResult, Metrics>> rows;
+  std::vector<fs::path> run_dirs;
+  for (const auto& name : RunnablePipelines(mission)) {
+    const fs::path run_dir = out / "runs" / name;
+    RunResult r = Run(name, mission_dir, run_dir, {});
+    Metrics m = Eval(mission_dir, run_dir / "estimates.csv", run_dir / "metrics.json", false);
+    rows.emplace_back(std::move(r), std::move(m));
+    run_dirs.push_back(run_dir);
+  }
+  PrintSummaryTable(rows);
+  Report(run_dirs, mission_dir, out / "report.html");
+  return 0;
+}
+
+}  // namespace trailmark::cli

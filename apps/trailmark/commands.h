@@ -1,0 +1,30 @@
+#pragma once
+// The CLI's commands. Each is a plain function so tests and the demo can call them.
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "trailmark/eval/metrics.h"
+#include "trailmark/pipelines/pipeline.h"
+
+namespace trailmark::cli {
+
+void Simulate(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
+RunResult Run(const std::string& pipeline, const std::filesystem::path& mission,
+              const std::filesystem::path& out, const std::map<std::string, std::string>& options);
+/// Evaluates, prints the per-node table, writes metrics.json next to the estimates (or `out`).
+Metrics Eval(const std::filesystem::path& mission, const std::filesystem::path& estimates,
+             const std::filesystem::path& metrics_out, bool print);
+void Report(const std::vector<std::filesystem::path>& run_dirs,
+            const std::filesystem::path& mission, const std::filesystem::path& out);
+/// The main job: simulate the default mission, run every pipeline on it, print the summary
+/// table and write the HTML report.
+int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
+int Bench(std::size_t rows, const std::filesystem::path& json_out);
+
+void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows);
+
+}  // namespace trailmark::cli

@@ -1,0 +1,116 @@
+// trailmark: the command-line contract (docs/cli.md).
+//   trailmark simulate SCENARIO --seed N --out DIR
+//   trailmark run --pipeline NAME MISSION --out DIR
+//   trailmark eval MISSION ESTIMATES.csv
+//   trailmark report RUN_DIR... --out report.html
+//   trailmark pipelines | scenarios | demo | bench
+
+#include <fmt/format.h>
+
+#include <CLI/CLI.hpp>
+#include <map>
+
+#include "commands.h"
+#include "trailmark/core/error.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace fs = std::filesystem;
+using namespace trailmark;
+
+int main(int argc, char** argv) {
+  CLI::App app{"trailmark: where every firefighter is, without GPS or infrastructure"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "trailmark 0.1.0");
+
+  std::string scenario = "office-loop";
+  std::uint64_t seed = 1;
+  std::string out;
+  auto* simulate = app.add_subcommand("simulate", "simulate a scenario into a mission directory");
+  simulate->add_option("scenario", scenario, "scenario name (see 'trailmark scenarios')")
+      ->required();
+  simulate->add_option("--seed", seed, "random seed; the same seed gives the same mission");
+  simulate->add_option("--out", out, "mission directory to write")->required();
+
+  app.add_subcommand("scenarios", "list the simulator's scenarios");
+
+  std::string pipeline, mission;
+  std::vector<std::string> run_options;
+  auto* run = app.add_subcommand("run", "run a pipeline on a mission: DIR/estimates.csv");
+  run->add_option("--pipeline", pipeline, "pipeline name (see 'trailmark pipelines')")->required();
+  run->add_option("mission", mission, "mission directory")->required()->check(CLI::ExistingDirectory);
+  run->add_option("--out", out, "output directory")->required();
+  run->add_option("--option", run_options, "pipeline option key=value (repeatable)");
+
+  app.add_subcommand("pipelines", "list pipelines and the files each needs");
+
+  std::string estimates, metrics_out;
+  auto* eval = app.add_subcommand("eval", "score estimates against the mission's truth");
+  eval->add_option("mission", mission, "mission directory with truth.csv")->required();
+  eval->add_option("estimates", estimates, "estimates.csv")->required()->check(CLI::ExistingFile);
+  eval->add_option("--out", metrics_out, "metrics.json path (default: next to the estimates)");
+
+  std::vector<std::string> run_dirs;
+  auto* report = app.add_subcommand("report", "write one self-contained HTML report");
+  report->add_option("runs", run_dirs, "run directories (written by 'trailmark run')")
+      ->required()->check(CLI::ExistingDirectory);
+  report->add_option("--mission", mission, "mission directory (default: from the runs)");
+  report->add_option("--out", out, "HTML file")->required();
+
+  std::string demo_out = "out/demo";
+  auto* demo = app.add_subcommand("demo", "the main job: simulate the default mission, run every "
+                                          "pipeline, print the summary and write the report");
+  demo->add_option("--scenario", scenario, "scenario");
+  demo->add_option("--seed", seed, "random seed");
+  demo->add_option("--out", demo_out, "output directory");
+
+  std::size_t bench_rows = 1'000'000;
+  std::string bench_json;
+  auto* bench = app.add_subcommand("bench", "I/O throughput per stream and pipeline speed");
+  bench->add_option("--rows", bench_rows, "rows per stream");
+  bench->add_option("--json", bench_json, "write the results as JSON");
+
+  CLI11_PARSE(app, argc, argv);
+  try {
+    if (*simulate) {
+      cli::Simulate(scenario, seed, out);
+    } else if (app.got_subcommand("scenarios")) {
+      for (const auto& s : Scenarios()) fmt::print("{:<18} {}\n", s.name, s.description);
+    } else if (*run) {
+      std::map<std::string, std::string> options;
+      for (const auto& kv : run_options) {
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos) throw std::invalid_argument("--option wants key=value, got " + kv);
+        options[kv.substr(0, eq)] = kv.substr(eq + 1);
+      }
+      const RunResult r = cli::Run(pipeline, mission, out, options);
+      fmt::print("{}: {} estimates in {:.3f} s -> {}\n", r.pipeline, r.estimates, r.wall_time_s,
+                 (fs::path(out) / "estimates.csv").string());
+    } else if (app.got_subcommand("pipelines")) {
+      for (const auto& p : AllPipelines()) {
+        std::string req, opt;
+        for (const auto& f : p->required_files()) req += (req.empty() ? "" : ", ") + f;
+        for (const auto& f : p->optional_files()) opt += (opt.empty() ? "" : ", ") + f;
+        fmt::print("{:<14} {}\n{:<14} needs: mission.json, {}{}\n", p->name(), p->description(),
+                   "", req, opt.empty() ? "" : "; uses if present: " + opt);
+      }
+    } else if (*eval) {
+      const fs::path m = metrics_out.empty() ? fs::path(estimates).parent_path() / "metrics.json"
+                                             : fs::path(metrics_out);
+      cli::Eval(mission, estimates, m, true);
+    } else if (*report) {
+      std::vector<fs::path> dirs(run_dirs.begin(), run_dirs.end());
+      cli::Report(dirs, mission, out);
+    } else if (*demo) {
+      return cli::Demo(scenario, seed, demo_out);
+    } else if (*bench) {
+      return cli::Bench(bench_rows, bench_json);
+    }
+  } catch (const InputError& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    fmt::print(stderr, "error: {}\n", e.what());
+    return 1;
+  }
+  return 0;
+}

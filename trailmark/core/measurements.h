@@ -1,0 +1,80 @@
+#pragma once
+/// One struct per row kind of the mission format (spec: "Streams"). Plain values, no I/O.
+
+#include <optional>
+#include <string>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark {
+
+/// imu.csv: raw foot-mounted IMU sample in the sensor body frame.
+struct ImuSample {
+  TimeS t = 0;
+  std::string agent;
+  Vec3 accel_b = Vec3::Zero();  ///< specific force incl. gravity, m/s^2
+  Vec3 gyro_b = Vec3::Zero();   ///< angular rate, rad/s
+};
+
+/// steps.csv: PDR displacement of an agent between t0 and t1, navigation frame.
+struct Step {
+  TimeS t0 = 0;
+  TimeS t1 = 0;  ///< time the displacement became known; rows ordered by t1
+  std::string agent;
+  Vec3 delta_n = Vec3::Zero();            ///< displacement, m
+  std::optional<Vec3> variance_m2;        ///< per-axis variances; empty when unknown
+};
+
+/// rssi.csv: one received packet.
+struct RssiPacket {
+  TimeS t = 0;
+  std::string rx;
+  std::string tx;
+  double rssi_dbm = 0;
+};
+
+/// ranges.csv: a direct range between two nodes.
+struct RangeMeasurement {
+  TimeS t = 0;
+  std::string a;
+  std::string b;
+  double range_m = 0;
+  std::optional<double> sigma_m;
+  std::string kind;  ///< "ultrasound", "uwb", "rssi" (or empty when unknown)
+};
+
+/// bearings.csv: bearing from a to b in the navigation frame, radians from +x, CCW.
+struct BearingMeasurement {
+  TimeS t = 0;
+  std::string a;
+  std::string b;
+  double bearing_rad = 0;
+  std::optional<double> sigma_rad;
+};
+
+/// events.csv.
+struct MissionEvent {
+  TimeS t = 0;
+  std::string agent;
+  std::string event;  ///< drop, wake, enter, exit, stop, go (others are kept verbatim)
+  std::string node;   ///< may be empty
+};
+
+/// truth.csv.
+struct TruthSample {
+  TimeS t = 0;
+  std::string id;
+  Vec3 position_n = Vec3::Zero();
+};
+
+/// estimates.csv: the online estimate of a node with its horizontal covariance.
+struct Estimate {
+  TimeS t = 0;
+  std::string id;
+  Vec3 position_n = Vec3::Zero();
+  double sxx = 0;
+  double sxy = 0;
+  double syy = 0;
+};
+
+}  // namespace trailmark

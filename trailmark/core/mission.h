@@ -1,0 +1,67 @@
+#pragma once
+/// The in-memory description of a mission (mission.json of the spec). No I/O here.
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark {
+
+struct NodeInfo {
+  std::string id;
+  NodeKind kind = NodeKind::kAgent;
+  std::optional<Vec3> position;           ///< known a priori (anchors, surveyed landmarks)
+  std::optional<double> position_sigma_m;
+  std::optional<Vec3> start;              ///< agent position at its first sample
+  std::optional<double> start_sigma_m;
+  std::optional<double> start_heading_rad;  ///< radians from +x, counter-clockwise
+  std::optional<double> start_heading_sigma_rad;
+};
+
+/// Log-distance path-loss calibration: rssi = alpha - 10 n log10(d / 1 m) + N(0, sigma^2).
+struct RadioCalibration {
+  std::string model = "log-distance";
+  double alpha_dbm = -40.0;
+  double path_loss_exponent = 2.3;
+  double shadowing_sigma_db = 4.0;
+};
+
+struct MissionInfo {
+  std::string format = "trailmark-mission/1";
+  std::string name;
+  std::string description;
+  std::vector<NodeInfo> nodes;
+  std::optional<RadioCalibration> radio;
+  std::optional<std::string> floorplan;  ///< path relative to the mission directory
+
+  const NodeInfo* Find(const std::string& id) const;
+  /// The single base node, or nullptr when there is none or more than one.
+  const NodeInfo* SingleBase() const;
+  /// The agent's start: its own `start`, else the single base's position (spec).
+  std::optional<Vec3> AgentStart(const NodeInfo& agent) const;
+};
+
+}  // namespace trailmark
+
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+
+namespace trailmark {
+
+/// A whole mission held in memory (simulator output, small recorded sets). Large recorded
+/// missions are read stream by stream instead (io/streams.h).
+struct MissionData {
+  MissionInfo info;
+  std::vector<ImuSample> imu;
+  std::vector<Step> steps;
+  std::vector<RssiPacket> rssi;
+  std::vector<RangeMeasurement> ranges;
+  std::vector<BearingMeasurement> bearings;
+  std::vector<MissionEvent> events;
+  std::vector<TruthSample> truth;
+};
+
+}  // namespace trailmark

@@ -1,0 +1,159 @@
+#include "trailmark/eval/metrics.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+
+namespace trailmark {
+namespace {
+
+double HorizontalError(const Vec3& a, const Vec3& b) { return (a - b).head<2>().norm(); }
+
+void FinishPercentages(NodeMetrics& m) {
+  if (m.distance_m > 0 && m.stats.samples > 0) {
+    m.mean_pct_of_distance = 100.0 * m.stats.mean_m / m.distance_m;
+    m.max_pct_of_distance = 100.0 * m.stats.max_m / m.distance_m;
+  }
+}
+
+}  // namespace
+
+double Percentile(std::vector<double> values, double q) {
+  if (values.empty()) return 0.0;
+  std::sort(values.begin(), values.end());
+  const double pos = std::clamp(q, 0.0, 100.0) / 100.0 * static_cast<double>(values.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(pos));
+  const auto hi = std::min(lo + 1, values.size() - 1);
+  return values[lo] + (pos - static_cast<double>(lo)) * (values[hi] - values[lo]);
+}
+
+ErrorStatistics ComputeStatistics(const std::vector<ErrorSample>& series) {
+  ErrorStatistics s;
+  s.samples = series.size();
+  if (series.empty()) return s;
+  std::vector<double> e;
+  e.reserve(series.size());
+  double sum = 0, sum2 = 0;
+  for (const auto& x : series) {
+    e.push_back(x.error_m);
+    sum += x.error_m;
+    sum2 += x.error_m * x.error_m;
+  }
+  const double n = static_cast<double>(series.size());
+  s.mean_m = sum / n;
+  s.rmse_m = std::sqrt(sum2 / n);
+  s.max_m = *std::max_element(e.begin(), e.end());
+  s.median_m = Percentile(e, 50);
+  s.p75_m = Percentile(e, 75);
+  s.p95_m = Percentile(std::move(e), 95);
+  s.final_m = series.back().error_m;
+  return s;
+}
+
+Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
+                 const std::vector<Estimate>& estimates) {
+  std::map<std::string, std::vector<const TruthSample*>> truth_by_id;
+  std::vector<std::string> order;
+  TimeS end_t = -std::numeric_limits<double>::infinity();
+  for (const auto& s : truth) {
+    auto& v = truth_by_id[s.id];
+    if (v.empty()) order.push_back(s.id);
+    v.push_back(&s);
+    end_t = std::max(end_t, s.t);
+  }
+  std::map<std::string, std::vector<const Estimate*>> est_by_id;
+  Metrics out;
+  for (const auto& e : estimates) {
+    if (truth_by_id.count(e.id) == 0) {
+      ++out.estimates_without_truth;
+      continue;
+    }
+    est_by_id[e.id].push_back(&e);
+    end_t = std::max(end_t, e.t);
+  }
+
+  out.agents.id = "agents";
+  out.agents.kind = NodeKind::kAgent;
+  out.static_nodes.id = "static";
+  out.static_nodes.kind = NodeKind::kCrumb;
+  std::vector<double> agent_mean_pct, agent_max_pct;
+
+  for (const auto& id : order) {
+    NodeMetrics m;
+    m.id = id;
+    const NodeInfo* declared = info.Find(id);
+    m.kind = declared ? declared->kind : NodeKind::kCrumb;
+    const auto& tr = truth_by_id[id];
+    const auto& es = est_by_id[id];
+    if (m.kind == NodeKind::kAgent) {
+      for (std::size_t i = 1; i < tr.size(); ++i) {
+        m.distance_m += HorizontalError(tr[i]->position_n, tr[i - 1]->position_n);
+      }
+      std::size_t k = 0;  // es[k-1] is the latest estimate with t <= truth t
+      for (const TruthSample* s : tr) {
+        while (k < es.size() && es[k]->t <= s->t) ++k;
+        if (k == 0) {
+          ++m.uncovered;
+          continue;
+        }
+        m.series.push_back({s->t, HorizontalError(es[k - 1]->position_n, s->position_n)});
+      }
+    } else {
+      std::size_t j = 0;  // tr[j] is the truth in force
+      auto truth_at = [&](TimeS t) {
+        while (j + 1 < tr.size() && tr[j + 1]->t <= t) ++j;
+        return tr[j]->position_n;
+      };
+      for (const Estimate* e : es) m.series.push_back({e->t, HorizontalError(e->position_n, truth_at(e->t))});
+      if (!es.empty() && es.back()->t < end_t) {
+        m.series.push_back({end_t, HorizontalError(es.back()->position_n, truth_at(end_t))});
+      }
+      if (es.empty()) m.uncovered = 1;
+    }
+    m.stats = ComputeStatistics(m.series);
+    FinishPercentages(m);
+    if (m.kind == NodeKind::kAgent) {
+      out.agents.series.insert(out.agents.series.end(), m.series.begin(), m.series.end());
+      out.agents.distance_m += m.distance_m;
+      out.agents.uncovered += m.uncovered;
+      if (m.mean_pct_of_distance) {
+        agent_mean_pct.push_back(*m.mean_pct_of_distance);
+        agent_max_pct.push_back(*m.max_pct_of_distance);
+      }
+    } else if (m.kind != NodeKind::kBase) {
+      out.static_nodes.series.insert(out.static_nodes.series.end(), m.series.begin(),
+                                     m.series.end());
+      out.static_nodes.uncovered += m.uncovered;
+    }
+    out.nodes.push_back(std::move(m));
+  }
+  for (NodeMetrics* pooled : {&out.agents, &out.static_nodes}) {
+    std::stable_sort(pooled->series.begin(), pooled->series.end(),
+                     [](const auto& a, const auto& b) { return a.t < b.t; });
+    pooled->stats = ComputeStatistics(pooled->series);
+  }
+  // Final error of the pool: mean of the nodes' final errors.
+  for (auto [pooled, kind_is_agent] : {std::pair{&out.agents, true},
+                                       std::pair{&out.static_nodes, false}}) {
+    double sum = 0;
+    int n = 0;
+    for (const auto& m : out.nodes) {
+      const bool is_agent = m.kind == NodeKind::kAgent;
+      if (is_agent != kind_is_agent || m.kind == NodeKind::kBase || m.stats.samples == 0) continue;
+      sum += m.stats.final_m;
+      ++n;
+    }
+    pooled->stats.final_m = n > 0 ? sum / n : 0.0;
+  }
+  auto mean = [](const std::vector<double>& v) {
+    return std::accumulate(v.begin(), v.end(), 0.0) / static_cast<double>(v.size());
+  };
+  if (!agent_mean_pct.empty()) {
+    out.agents.mean_pct_of_distance = mean(agent_mean_pct);
+    out.agents.max_pct_of_distance = mean(agent_max_pct);
+  }
+  return out;
+}
+
+}  // namespace trailmark

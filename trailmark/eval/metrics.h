@@ -1,0 +1,59 @@
+#pragma once
+/// Accuracy metrics of estimates against truth (spec: "metrics.json"). Kept apart from every
+/// estimator, as OpenVINS keeps ov_eval apart. No I/O (io/metrics_io writes metrics.json).
+///
+/// Online semantics: at an evaluation instant t the estimate in force is the latest row of that
+/// node with time <= t; instants before a node's first estimate are counted as `uncovered` and
+/// not scored. Agents are scored at every truth sample. Static nodes (crumbs, landmarks, base)
+/// are scored at each of their estimate rows and at the end of the mission, against the truth
+/// in force then (a kicked crumb has a second truth row).
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+#include "trailmark/core/mission.h"
+
+namespace trailmark {
+
+struct ErrorSample {
+  TimeS t = 0;
+  double error_m = 0;  ///< horizontal error
+};
+
+struct ErrorStatistics {
+  std::size_t samples = 0;
+  double mean_m = 0, median_m = 0, p75_m = 0, p95_m = 0, max_m = 0, rmse_m = 0;
+  double final_m = 0;  ///< error at the last scored instant
+};
+
+struct NodeMetrics {
+  std::string id;
+  NodeKind kind = NodeKind::kAgent;
+  ErrorStatistics stats;
+  std::size_t uncovered = 0;         ///< evaluation instants before the first estimate
+  double distance_m = 0;             ///< horizontal distance travelled (truth)
+  std::optional<double> mean_pct_of_distance;  ///< mean error / distance x 100
+  std::optional<double> max_pct_of_distance;   ///< max error / distance x 100
+  std::vector<ErrorSample> series;
+};
+
+struct Metrics {
+  std::vector<NodeMetrics> nodes;  ///< every node with truth, in order of first truth row
+  /// All agent instants pooled; distance summed; percentages are the mean over agents.
+  NodeMetrics agents;
+  /// All static-node instants pooled (crumbs and landmarks; the base is skipped when exact).
+  NodeMetrics static_nodes;
+  std::size_t estimates_without_truth = 0;  ///< rows for ids that have no truth
+};
+
+/// Linear-interpolation percentile (numpy's default) of unsorted values; q in [0, 100].
+double Percentile(std::vector<double> values, double q);
+ErrorStatistics ComputeStatistics(const std::vector<ErrorSample>& series);
+
+/// Both inputs in non-decreasing time. `info` gives node kinds (undeclared ids are crumbs).
+Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
+                 const std::vector<Estimate>& estimates);
+
+}  // namespace trailmark

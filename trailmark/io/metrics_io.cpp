@@ -1,0 +1,57 @@
+#include "trailmark/io/metrics_io.h"
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+namespace trailmark {
+namespace {
+
+nlohmann::json NodeJson(const NodeMetrics& m, std::size_t max_series) {
+  nlohmann::json j;
+  j["id"] = m.id;
+  j["kind"] = std::string(ToString(m.kind));
+  j["samples"] = m.stats.samples;
+  j["uncovered"] = m.uncovered;
+  j["mean_m"] = m.stats.mean_m;
+  j["median_m"] = m.stats.median_m;
+  j["p75_m"] = m.stats.p75_m;
+  j["p95_m"] = m.stats.p95_m;
+  j["max_m"] = m.stats.max_m;
+  j["rmse_m"] = m.stats.rmse_m;
+  j["final_m"] = m.stats.final_m;
+  j["distance_m"] = m.distance_m;
+  j["mean_pct_of_distance"] = m.mean_pct_of_distance ? nlohmann::json(*m.mean_pct_of_distance)
+                                                     : nlohmann::json(nullptr);
+  j["max_pct_of_distance"] = m.max_pct_of_distance ? nlohmann::json(*m.max_pct_of_distance)
+                                                   : nlohmann::json(nullptr);
+  nlohmann::json t = nlohmann::json::array(), e = nlohmann::json::array();
+  const std::size_t n = m.series.size();
+  const std::size_t stride = (max_series == 0 || n <= max_series) ? 1 : (n + max_series - 1) / max_series;
+  for (std::size_t i = 0; i < n; i += stride) {
+    t.push_back(m.series[i].t);
+    e.push_back(m.series[i].error_m);
+  }
+  j["series"] = {{"t", t}, {"error_m", e}};
+  return j;
+}
+
+}  // namespace
+
+std::string MetricsToJson(const Metrics& metrics, std::size_t max_series) {
+  nlohmann::json root;
+  root["overall"] = {{"agents", NodeJson(metrics.agents, max_series)},
+                     {"static", NodeJson(metrics.static_nodes, max_series)}};
+  nlohmann::json nodes = nlohmann::json::array();
+  for (const auto& m : metrics.nodes) nodes.push_back(NodeJson(m, max_series));
+  root["nodes"] = nodes;
+  root["estimates_without_truth"] = metrics.estimates_without_truth;
+  return root.dump(1) + "\n";
+}
+
+void WriteMetricsJson(const std::filesystem::path& path, const Metrics& metrics) {
+  std::ofstream out(path, std::ios::binary);
+  out << MetricsToJson(metrics);
+  if (!out) throw std::runtime_error(path.string() + ": write failed");
+}
+
+}  // namespace trailmark

@@ -1,0 +1,409 @@
+#include "trailmark/io/mission_io.h"
+
+#include <fmt/format.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "trailmark/core/error.h"
+
+namespace trailmark {
+namespace {
+
+using nlohmann::json;
+
+std::string ReadText(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw InputError(path.string(), 0, "file does not exist");
+  const auto size = std::filesystem::file_size(path, ec);
+  if (!ec && size > (64u << 20)) {
+    throw InputError(path.string(), 0,
+                     fmt::format("{} bytes: too large for a JSON description (limit 64 MiB)", size));
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path.string(), 0, "cannot open");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+// Line of a byte offset, for parse errors.
+std::size_t LineOf(const std::string& text, std::size_t byte) {
+  std::size_t line = 1;
+  for (std::size_t i = 0; i < std::min(byte, text.size()); ++i) line += text[i] == '\n';
+  return line;
+}
+
+json ParseJson(const std::string& text, const std::string& source) {
+  try {
+    return json::parse(text);
+  } catch (const json::parse_error& e) {
+    std::string what = e.what();
+    // nlohmann's message starts with "[json.exception.parse_error.101] parse error at ...".
+    const auto pos = what.find("] ");
+    if (pos != std::string::npos) what = what.substr(pos + 2);
+    throw InputError(source, LineOf(text, e.byte), "invalid JSON: " + what);
+  }
+}
+
+[[noreturn]] void Bad(const std::string& source, const std::string& where,
+                      const std::string& problem) {
+  throw InputError(source, 0, where + ": " + problem);
+}
+
+double Number(const json& j, const std::string& source, const std::string& where) {
+  if (!j.is_number()) Bad(source, where, "expected a number");
+  const double v = j.get<double>();
+  if (!std::isfinite(v)) Bad(source, where, "not a finite number");
+  return v;
+}
+
+std::optional<double> OptNumber(const json& obj, const char* key, const std::string& source,
+                                const std::string& where) {
+  if (!obj.contains(key) || obj[key].is_null()) return std::nullopt;
+  return Number(obj[key], source, where + "/" + key);
+}
+
+Vec3 Position(const json& j, const std::string& source, const std::string& where) {
+  if (!j.is_array() || j.size() < 2 || j.size() > 3) {
+    Bad(source, where, "expected [x, y] or [x, y, z] in metres");
+  }
+  Vec3 p = Vec3::Zero();
+  for (std::size_t i = 0; i < j.size(); ++i) {
+    p[static_cast<int>(i)] = Number(j[i], source, fmt::format("{}/{}", where, i));
+  }
+  return p;
+}
+
+std::string String(const json& obj, const char* key, const std::string& source,
+                   const std::string& where, bool required) {
+  if (!obj.contains(key) || obj[key].is_null()) {
+    if (required) Bad(source, where, fmt::format("missing key '{}'", key));
+    return {};
+  }
+  if (!obj[key].is_string()) Bad(source, where + "/" + key, "expected a string");
+  return obj[key].get<std::string>();
+}
+
+json Pos(const Vec3& p) { return json::array({p.x(), p.y(), p.z()}); }
+
+}  // namespace
+
+MissionInfo ParseMissionInfo(const std::string& text, const std::string& source) {
+  const json root = ParseJson(text, source);
+  if (!root.is_object()) Bad(source, "/", "expected a JSON object");
+  MissionInfo info;
+  info.format = String(root, "format", source, "/", false);
+  if (!info.format.empty() && info.format.rfind("trailmark-mission/", 0) != 0) {
+    Bad(source, "/format", fmt::format("'{}' is not a trailmark mission", info.format));
+  }
+  if (!info.format.empty() && info.format != "trailmark-mission/1") {
+    Bad(source, "/format", fmt::format("version '{}' is newer than this reader (1)", info.format));
+  }
+  if (info.format.empty()) info.format = "trailmark-mission/1";
+  info.name = String(root, "name", source, "/", false);
+  info.description = String(root, "description", source, "/", false);
+
+  if (root.contains("nodes")) {
+    const json& nodes = root["nodes"];
+    if (!nodes.is_array()) Bad(source, "/nodes", "expected an array");
+    std::set<std::string> seen;
+    for (std::size_t i = 0; i < nodes.size(); ++i) {
+      const std::string where = fmt::format("/nodes/{}", i);
+      const json& n = nodes[i];
+      if (!n.is_object()) Bad(source, where, "expected an object");
+      NodeInfo node;
+      node.id = String(n, "id", source, where, true);
+      if (!IsValidNodeId(node.id)) {
+        Bad(source, where + "/id", fmt::format("'{}' is not a node id ([A-Za-z0-9_.-]+)", node.id));
+      }
+      if (!seen.insert(node.id).second) {
+        Bad(source, where + "/id", fmt::format("node '{}' declared twice", node.id));
+      }
+      const std::string kind = String(n, "kind", source, where, true);
+      const auto parsed = ParseNodeKind(kind);
+      if (!parsed) {
+        Bad(source, where + "/kind",
+            fmt::format("unknown kind '{}' (agent, crumb, landmark, base)", kind));
+      }
+      node.kind = *parsed;
+      if (n.contains("position") && !n["position"].is_null()) {
+        node.position = Position(n["position"], source, where + "/position");
+      }
+      node.position_sigma_m = OptNumber(n, "position_sigma", source, where);
+      if (n.contains("start") && !n["start"].is_null()) {
+        node.start = Position(n["start"], source, where + "/start");
+      }
+      node.start_sigma_m = OptNumber(n, "start_sigma", source, where);
+      node.start_heading_rad = OptNumber(n, "start_heading", source, where);
+      node.start_heading_sigma_rad = OptNumber(n, "start_heading_sigma", source, where);
+      for (const auto& [key, sigma] : {std::pair{"position_sigma", node.position_sigma_m},
+                                       std::pair{"start_sigma", node.start_sigma_m},
+                                       std::pair{"start_heading_sigma",
+                                                 node.start_heading_sigma_rad}}) {
+        if (sigma && *sigma < 0) Bad(source, where + "/" + key, "must not be negative");
+      }
+      if (node.kind == NodeKind::kBase && !node.position) {
+        Bad(source, where, "a base node needs its known 'position'");
+      }
+      info.nodes.push_back(std::move(node));
+    }
+  }
+  if (root.contains("radio") && !root["radio"].is_null()) {
+    const json& r = root["radio"];
+    if (!r.is_object()) Bad(source, "/radio", "expected an object");
+    RadioCalibration radio;
+    radio.model = String(r, "model", source, "/radio", false);
+    if (radio.model.empty()) radio.model = "log-distance";
+    if (radio.model != "log-distance") {
+      Bad(source, "/radio/model", fmt::format("unknown model '{}' (log-distance)", radio.model));
+    }
+    radio.alpha_dbm = OptNumber(r, "alpha_dbm", source, "/radio").value_or(radio.alpha_dbm);
+    radio.path_loss_exponent =
+        OptNumber(r, "path_loss_exponent", source, "/radio").value_or(radio.path_loss_exponent);
+    radio.shadowing_sigma_db =
+        OptNumber(r, "shadowing_sigma_db", source, "/radio").value_or(radio.shadowing_sigma_db);
+    if (radio.path_loss_exponent <= 0) Bad(source, "/radio/path_loss_exponent", "must be > 0");
+    if (radio.shadowing_sigma_db < 0) Bad(source, "/radio/shadowing_sigma_db", "must be >= 0");
+    info.radio = radio;
+  }
+  if (root.contains("floorplan") && !root["floorplan"].is_null()) {
+    info.floorplan = String(root, "floorplan", source, "/", false);
+  }
+  return info;
+}
+
+MissionInfo ReadMissionInfo(const std::filesystem::path& path) {
+  return ParseMissionInfo(ReadText(path), path.string());
+}
+
+std::string MissionInfoToJson(const MissionInfo& info) {
+  json root;
+  root["format"] = info.format;
+  root["name"] = info.name;
+  if (!info.description.empty()) root["description"] = info.description;
+  json nodes = json::array();
+  for (const auto& n : info.nodes) {
+    json j;
+    j["id"] = n.id;
+    j["kind"] = std::string(ToString(n.kind));
+    if (n.position) j["position"] = Pos(*n.position);
+    if (n.position_sigma_m) j["position_sigma"] = *n.position_sigma_m;
+    if (n.start) j["start"] = Pos(*n.start);
+    if (n.start_sigma_m) j["start_sigma"] = *n.start_sigma_m;
+    if (n.start_heading_rad) j["start_heading"] = *n.start_heading_rad;
+    if (n.start_heading_sigma_rad) j["start_heading_sigma"] = *n.start_heading_sigma_rad;
+    nodes.push_back(j);
+  }
+  root["nodes"] = nodes;
+  if (info.radio) {
+    root["radio"] = {{"model", info.radio->model},
+                     {"alpha_dbm", info.radio->alpha_dbm},
+                     {"path_loss_exponent", info.radio->path_loss_exponent},
+                     {"shadowing_sigma_db", info.radio->shadowing_sigma_db}};
+  }
+  if (info.floorplan) root["floorplan"] = *info.floorplan;
+  return root.dump(2) + "\n";
+}
+
+void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info) {
+  std::ofstream out(path, std::ios::binary);
+  out << MissionInfoToJson(info);
+  if (!out) throw std::runtime_error(path.string() + ": write failed");
+}
+
+FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source, int level) {
+  const json root = ParseJson(text, source);
+  if (!root.is_object() || root.value("type", "") != "FeatureCollection") {
+    Bad(source, "/", "expected a GeoJSON FeatureCollection");
+  }
+  if (!root.contains("features") || !root["features"].is_array()) {
+    Bad(source, "/features", "expected an array");
+  }
+  std::vector<Segment2> walls, doors;
+  std::vector<Room> rooms;
+  const json& features = root["features"];
+  for (std::size_t i = 0; i < features.size(); ++i) {
+    const std::string where = fmt::format("/features/{}", i);
+    const json& f = features[i];
+    if (!f.is_object()) Bad(source, where, "expected a Feature object");
+    const json props = f.contains("properties") && f["properties"].is_object()
+                           ? f["properties"]
+                           : json::object();
+    const std::string kind = props.contains("kind") && props["kind"].is_string()
+                                 ? props["kind"].get<std::string>()
+                                 : std::string();
+    int feature_level = 0;
+    if (props.contains("level") && !props["level"].is_null()) {
+      if (!props["level"].is_number_integer()) Bad(source, where + "/properties/level",
+                                                  "expected an integer");
+      feature_level = props["level"].get<int>();
+    }
+    if (level >= 0 && feature_level != level) continue;
+    if (kind != "wall" && kind != "door" && kind != "room") continue;  // others are ignored
+    if (!f.contains("geometry") || !f["geometry"].is_object()) {
+      Bad(source, where + "/geometry", "missing geometry");
+    }
+    const json& g = f["geometry"];
+    const std::string type = g.value("type", "");
+    if (!g.contains("coordinates") || !g["coordinates"].is_array()) {
+      Bad(source, where + "/geometry/coordinates", "expected an array");
+    }
+    auto point = [&](const json& c, const std::string& w) {
+      if (!c.is_array() || c.size() < 2) Bad(source, w, "expected a position [x, y]");
+      return Vec2(Number(c[0], source, w + "/0"), Number(c[1], source, w + "/1"));
+    };
+    auto line = [&](const json& coords, const std::string& w, std::vector<Segment2>& out) {
+      if (coords.size() < 2) Bad(source, w, "a LineString needs at least two positions");
+      for (std::size_t k = 0; k + 1 < coords.size(); ++k) {
+        out.push_back({point(coords[k], fmt::format("{}/{}", w, k)),
+                       point(coords[k + 1], fmt::format("{}/{}", w, k + 1))});
+      }
+    };
+    const json& coords = g["coordinates"];
+    const std::string cw = where + "/geometry/coordinates";
+    if (kind == "room") {
+      if (type != "Polygon") Bad(source, where + "/geometry/type", "a room must be a Polygon");
+      if (coords.empty() || !coords[0].is_array()) Bad(source, cw, "expected a ring");
+      Room room;
+      room.level = feature_level;
+      if (props.contains("name") && props["name"].is_string()) room.name = props["name"];
+      for (std::size_t k = 0; k < coords[0].size(); ++k) {
+        room.ring.push_back(point(coords[0][k], fmt::format("{}/0/{}", cw, k)));
+      }
+      if (room.ring.size() >= 2 && (room.ring.front() - room.ring.back()).norm() < 1e-12) {
+        room.ring.pop_back();
+      }
+      if (room.ring.size() < 3) Bad(source, cw, "a room needs at least three corners");
+      rooms.push_back(std::move(room));
+      continue;
+    }
+    auto& out = kind == "wall" ? walls : doors;
+    if (type == "LineString") {
+      line(coords, cw, out);
+    } else if (type == "MultiLineString") {
+      for (std::size_t k = 0; k < coords.size(); ++k) {
+        if (!coords[k].is_array()) Bad(source, fmt::format("{}/{}", cw, k), "expected a line");
+        line(coords[k], fmt::format("{}/{}", cw, k), out);
+      }
+    } else {
+      Bad(source, where + "/geometry/type",
+          fmt::format("a {} must be a LineString or MultiLineString, not '{}'", kind, type));
+    }
+  }
+  return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
+}
+
+FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level) {
+  return ParseFloorPlanGeoJson(ReadText(path), path.string(), level);
+}
+
+std::string FloorPlanToGeoJson(const FloorPlan& plan) {
+  json features = json::array();
+  auto add_line = [&](const Segment2& s, const char* kind) {
+    features.push_back({{"type", "Feature"},
+                        {"properties", {{"kind", kind}}},
+                        {"geometry",
+                         {{"type", "LineString"},
+                          {"coordinates", json::array({json::array({s.a.x(), s.a.y()}),
+                                                       json::array({s.b.x(), s.b.y()})})}}}});
+  };
+  for (const auto& w : plan.walls()) add_line(w, "wall");
+  for (const auto& d : plan.doors()) add_line(d, "door");
+  for (const auto& r : plan.rooms()) {
+    json ring = json::array();
+    for (const auto& p : r.ring) ring.push_back(json::array({p.x(), p.y()}));
+    ring.push_back(json::array({r.ring.front().x(), r.ring.front().y()}));
+    features.push_back({{"type", "Feature"},
+                        {"properties", {{"kind", "room"}, {"name", r.name}, {"level", r.level}}},
+                        {"geometry", {{"type", "Polygon"}, {"coordinates", json::array({ring})}}}});
+  }
+  return json{{"type", "FeatureCollection"}, {"features", features}}.dump() + "\n";
+}
+
+void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
+                           const FloorPlan* plan) {
+  std::filesystem::create_directories(dir);
+  MissionInfo info = data.info;
+  if (plan != nullptr && !info.floorplan) info.floorplan = "floorplan.geojson";
+  WriteMissionInfo(dir / "mission.json", info);
+  auto write = [&](const auto& rows) {
+    using Row = typename std::decay_t<decltype(rows)>::value_type;
+    if (!rows.empty()) WriteAll<Row>((dir / StreamFileName<Row>()).string(), rows);
+  };
+  write(data.imu);
+  write(data.steps);
+  write(data.rssi);
+  write(data.ranges);
+  write(data.bearings);
+  write(data.events);
+  write(data.truth);
+  if (plan != nullptr) {
+    std::ofstream out(dir / *info.floorplan, std::ios::binary);
+    out << FloorPlanToGeoJson(*plan);
+    if (!out) throw std::runtime_error((dir / *info.floorplan).string() + ": write failed");
+  }
+}
+
+MissionData ReadMissionData(const MissionDirectory& mission) {
+  MissionData data;
+  data.info = mission.info();
+  auto read = [&](auto& rows) {
+    using Row = typename std::decay_t<decltype(rows)>::value_type;
+    if (!mission.HasStream<Row>()) return;
+    auto reader = mission.OpenStream<Row>();
+    Row row;
+    while (reader.Next(row)) rows.push_back(row);
+  };
+  read(data.imu);
+  read(data.steps);
+  read(data.rssi);
+  read(data.ranges);
+  read(data.bearings);
+  read(data.events);
+  read(data.truth);
+  return data;
+}
+
+MissionDirectory::MissionDirectory(std::filesystem::path dir) : dir_(std::move(dir)) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir_, ec)) {
+    throw InputError(dir_.string(), 0, "not a mission directory (does not exist or not a folder)");
+  }
+  info_ = ReadMissionInfo(dir_ / "mission.json");
+  for (const auto& n : info_.nodes) registry_.Add(n.id);
+  if (Has("events.csv")) {
+    // Pass 1 over events: crumbs that drops introduce. Ids are checked for syntax here and
+    // against the registry (declared ids + all drops) when the stream is read for real.
+    RowReader<MissionEvent> events(Path("events.csv").string());
+    MissionEvent e;
+    std::set<std::string> seen;
+    while (events.Next(e)) {
+      if (e.event == "drop" && !registry_.Contains(e.node) && seen.insert(e.node).second) {
+        dropped_.push_back(e.node);
+      }
+    }
+    for (const auto& id : dropped_) registry_.Add(id);
+  }
+}
+
+bool MissionDirectory::Has(const std::string& file) const {
+  std::error_code ec;
+  return std::filesystem::is_regular_file(dir_ / file, ec);
+}
+
+void MissionDirectory::Require(const std::string& file, const std::string& needed_by) const {
+  if (!Has(file)) {
+    throw InputError((dir_ / file).string(), 0,
+                     fmt::format("missing: {} needs this file", needed_by));
+  }
+}
+
+std::optional<FloorPlan> MissionDirectory::LoadFloorPlan() const {
+  if (!info_.floorplan) return std::nullopt;
+  return ReadFloorPlanGeoJson(dir_ / *info_.floorplan);
+}
+
+}  // namespace trailmark

@@ -1,0 +1,72 @@
+#pragma once
+/// mission.json and the mission directory (spec: ../shared/spec/mission-format.md).
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+#include "trailmark/core/mission.h"
+#include "trailmark/geometry/floor_plan.h"
+#include "trailmark/io/streams.h"
+
+namespace trailmark {
+
+/// Parses mission.json text; `source` names it in errors. Throws InputError.
+MissionInfo ParseMissionInfo(const std::string& json_text, const std::string& source);
+MissionInfo ReadMissionInfo(const std::filesystem::path& path);
+std::string MissionInfoToJson(const MissionInfo& info);
+void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info);
+
+/// Floor plan GeoJSON (spec: "Floor plans"). `level` selects one floor (-1 = all levels).
+FloorPlan ParseFloorPlanGeoJson(const std::string& json_text, const std::string& source,
+                                int level = -1);
+FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level = -1);
+std::string FloorPlanToGeoJson(const FloorPlan& plan);
+
+/// Writes mission.json, every non-empty stream and (when given) the floor plan into `dir`,
+/// creating it. Streams are written in the order held; the caller keeps them time-sorted.
+void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
+                           const FloorPlan* plan = nullptr);
+
+/// Reads every stream of a (small) mission into memory.
+class MissionDirectory;
+MissionData ReadMissionData(const MissionDirectory& mission);
+
+/// A mission directory opened for reading: mission.json parsed and validated, the ids that
+/// streams may use collected (declared nodes plus crumbs dropped in events.csv).
+class MissionDirectory {
+ public:
+  explicit MissionDirectory(std::filesystem::path dir);
+
+  const std::filesystem::path& dir() const { return dir_; }
+  const MissionInfo& info() const { return info_; }
+  const NodeRegistry& registry() const { return registry_; }
+  /// Crumb ids introduced by drop events, in drop order.
+  const std::vector<std::string>& dropped_crumbs() const { return dropped_; }
+
+  bool Has(const std::string& file) const;
+  std::filesystem::path Path(const std::string& file) const { return dir_ / file; }
+  /// Throws InputError naming the missing file and who needs it.
+  void Require(const std::string& file, const std::string& needed_by) const;
+
+  template <class Row>
+  bool HasStream() const {
+    return Has(StreamFileName<Row>());
+  }
+  template <class Row>
+  RowReader<Row> OpenStream() const {
+    return RowReader<Row>(Path(StreamFileName<Row>()).string(), &registry_);
+  }
+  /// The floor plan named in mission.json, if any.
+  std::optional<FloorPlan> LoadFloorPlan() const;
+
+ private:
+  std::filesystem::path dir_;
+  MissionInfo info_;
+  NodeRegistry registry_;
+  std::vector<std::string> dropped_;
+};
+
+}  // namespace trailmark

@@ -1,0 +1,259 @@
+#include "trailmark/io/streams.h"
+
+#include <fmt/format.h>
+
+#include "trailmark/core/error.h"
+
+namespace trailmark {
+namespace {
+
+// Per row kind: header, required/optional columns, parse and format. Columns are looked up
+// once per file; `cols` holds their indices in the order of kColumns (-1 when optional and
+// absent).
+struct ColumnSpec {
+  const char* name;
+  bool required;
+};
+
+template <class Row>
+struct Layout;
+
+template <>
+struct Layout<ImuSample> {
+  static constexpr ColumnSpec kColumns[] = {{"t", true},  {"agent", true}, {"ax", true},
+                                            {"ay", true}, {"az", true},    {"gx", true},
+                                            {"gy", true}, {"gz", true}};
+  static double Time(const ImuSample& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, ImuSample& r) {
+    r.t = c.Double(k[0]);
+    r.agent.assign(c.NodeId(k[1]));
+    r.accel_b = Vec3(c.Double(k[2]), c.Double(k[3]), c.Double(k[4]));
+    r.gyro_b = Vec3(c.Double(k[5]), c.Double(k[6]), c.Double(k[7]));
+  }
+  static std::vector<std::string_view> Ids(const ImuSample& r) { return {r.agent}; }
+  static void Format(CsvWriter& w, const ImuSample& r) {
+    w.Add(r.t).Add(r.agent).Add(r.accel_b.x()).Add(r.accel_b.y()).Add(r.accel_b.z());
+    w.Add(r.gyro_b.x()).Add(r.gyro_b.y()).Add(r.gyro_b.z());
+  }
+};
+
+template <>
+struct Layout<Step> {
+  static constexpr ColumnSpec kColumns[] = {{"t0", true},  {"t1", true},  {"agent", true},
+                                            {"dx", true},  {"dy", true},  {"dz", false},
+                                            {"sxx", false}, {"syy", false}, {"szz", false}};
+  static double Time(const Step& r) { return r.t1; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, Step& r) {
+    r.t0 = c.Double(k[0]);
+    r.t1 = c.Double(k[1]);
+    if (r.t1 < r.t0) c.Fail(fmt::format("t1 = {} is before t0 = {}", r.t1, r.t0));
+    r.agent.assign(c.NodeId(k[2]));
+    r.delta_n = Vec3(c.Double(k[3]), c.Double(k[4]), c.OptionalDouble(k[5]).value_or(0.0));
+    const auto sxx = c.OptionalDouble(k[6]);
+    const auto syy = c.OptionalDouble(k[7]);
+    const auto szz = c.OptionalDouble(k[8]);
+    if (sxx && syy) {
+      if (*sxx < 0 || *syy < 0 || (szz && *szz < 0)) c.Fail("negative variance");
+      r.variance_m2 = Vec3(*sxx, *syy, szz.value_or(0.0));
+    } else {
+      r.variance_m2.reset();
+    }
+  }
+  static std::vector<std::string_view> Ids(const Step& r) { return {r.agent}; }
+  static void Format(CsvWriter& w, const Step& r) {
+    w.Add(r.t0).Add(r.t1).Add(r.agent).Add(r.delta_n.x()).Add(r.delta_n.y()).Add(r.delta_n.z());
+    if (r.variance_m2) {
+      w.Add(r.variance_m2->x()).Add(r.variance_m2->y()).Add(r.variance_m2->z());
+    } else {
+      w.Add(std::nullopt).Add(std::nullopt).Add(std::nullopt);
+    }
+  }
+};
+
+template <>
+struct Layout<RssiPacket> {
+  static constexpr ColumnSpec kColumns[] = {
+      {"t", true}, {"rx", true}, {"tx", true}, {"rssi_dbm", true}};
+  static double Time(const RssiPacket& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, RssiPacket& r) {
+    r.t = c.Double(k[0]);
+    r.rx.assign(c.NodeId(k[1]));
+    r.tx.assign(c.NodeId(k[2]));
+    r.rssi_dbm = c.Double(k[3]);
+  }
+  static std::vector<std::string_view> Ids(const RssiPacket& r) { return {r.rx, r.tx}; }
+  static void Format(CsvWriter& w, const RssiPacket& r) {
+    w.Add(r.t).Add(r.rx).Add(r.tx).Add(r.rssi_dbm);
+  }
+};
+
+template <>
+struct Layout<RangeMeasurement> {
+  static constexpr ColumnSpec kColumns[] = {{"t", true},     {"a", true},     {"b", true},
+                                            {"range", true}, {"sigma", false}, {"kind", false}};
+  static double Time(const RangeMeasurement& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, RangeMeasurement& r) {
+    r.t = c.Double(k[0]);
+    r.a.assign(c.NodeId(k[1]));
+    r.b.assign(c.NodeId(k[2]));
+    r.range_m = c.Double(k[3]);
+    if (r.range_m < 0) c.Fail(fmt::format("column 'range': negative range {}", r.range_m));
+    r.sigma_m = c.OptionalDouble(k[4]);
+    if (r.sigma_m && *r.sigma_m <= 0) c.Fail("column 'sigma': must be positive");
+    r.kind = k[5] >= 0 ? std::string(c.Field(k[5])) : std::string();
+  }
+  static std::vector<std::string_view> Ids(const RangeMeasurement& r) { return {r.a, r.b}; }
+  static void Format(CsvWriter& w, const RangeMeasurement& r) {
+    w.Add(r.t).Add(r.a).Add(r.b).Add(r.range_m).Add(r.sigma_m).Add(r.kind);
+  }
+};
+
+template <>
+struct Layout<BearingMeasurement> {
+  static constexpr ColumnSpec kColumns[] = {
+      {"t", true}, {"a", true}, {"b", true}, {"bearing", true}, {"sigma", false}};
+  static double Time(const BearingMeasurement& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, BearingMeasurement& r) {
+    r.t = c.Double(k[0]);
+    r.a.assign(c.NodeId(k[1]));
+    r.b.assign(c.NodeId(k[2]));
+    r.bearing_rad = c.Double(k[3]);
+    r.sigma_rad = c.OptionalDouble(k[4]);
+    if (r.sigma_rad && *r.sigma_rad <= 0) c.Fail("column 'sigma': must be positive");
+  }
+  static std::vector<std::string_view> Ids(const BearingMeasurement& r) { return {r.a, r.b}; }
+  static void Format(CsvWriter& w, const BearingMeasurement& r) {
+    w.Add(r.t).Add(r.a).Add(r.b).Add(r.bearing_rad).Add(r.sigma_rad);
+  }
+};
+
+template <>
+struct Layout<MissionEvent> {
+  static constexpr ColumnSpec kColumns[] = {
+      {"t", true}, {"agent", true}, {"event", true}, {"node", false}};
+  static double Time(const MissionEvent& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, MissionEvent& r) {
+    r.t = c.Double(k[0]);
+    r.agent.assign(c.NodeId(k[1]));
+    r.event.assign(c.Field(k[2]));
+    if (r.event.empty()) c.Fail("column 'event': empty");
+    r.node.clear();
+    if (k[3] >= 0 && !c.Field(k[3]).empty()) r.node.assign(c.NodeId(k[3]));
+    if (r.event == "drop" && r.node.empty()) c.Fail("a 'drop' event needs the dropped node id");
+  }
+  static std::vector<std::string_view> Ids(const MissionEvent& r) {
+    if (r.node.empty()) return {r.agent};
+    return {r.agent, r.node};
+  }
+  static void Format(CsvWriter& w, const MissionEvent& r) {
+    w.Add(r.t).Add(r.agent).Add(r.event).Add(r.node);
+  }
+};
+
+template <>
+struct Layout<TruthSample> {
+  static constexpr ColumnSpec kColumns[] = {
+      {"t", true}, {"id", true}, {"x", true}, {"y", true}, {"z", false}};
+  static double Time(const TruthSample& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, TruthSample& r) {
+    r.t = c.Double(k[0]);
+    r.id.assign(c.NodeId(k[1]));
+    r.position_n = Vec3(c.Double(k[2]), c.Double(k[3]), c.OptionalDouble(k[4]).value_or(0.0));
+  }
+  static std::vector<std::string_view> Ids(const TruthSample& r) { return {r.id}; }
+  static void Format(CsvWriter& w, const TruthSample& r) {
+    w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
+  }
+};
+
+template <>
+struct Layout<Estimate> {
+  static constexpr ColumnSpec kColumns[] = {{"t", true},    {"id", true},    {"x", true},
+                                            {"y", true},    {"z", false},    {"sxx", false},
+                                            {"sxy", false}, {"syy", false}};
+  static double Time(const Estimate& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, Estimate& r) {
+    r.t = c.Double(k[0]);
+    r.id.assign(c.NodeId(k[1]));
+    r.position_n = Vec3(c.Double(k[2]), c.Double(k[3]), c.OptionalDouble(k[4]).value_or(0.0));
+    r.sxx = c.OptionalDouble(k[5]).value_or(0.0);
+    r.sxy = c.OptionalDouble(k[6]).value_or(0.0);
+    r.syy = c.OptionalDouble(k[7]).value_or(0.0);
+    if (r.sxx < 0 || r.syy < 0) c.Fail("negative variance");
+  }
+  static std::vector<std::string_view> Ids(const Estimate& r) { return {r.id}; }
+  static void Format(CsvWriter& w, const Estimate& r) {
+    w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
+    w.Add(r.sxx).Add(r.sxy).Add(r.syy);
+  }
+};
+
+template <class Row>
+std::vector<std::string> Header() {
+  std::vector<std::string> h;
+  for (const auto& c : Layout<Row>::kColumns) h.emplace_back(c.name);
+  return h;
+}
+
+}  // namespace
+
+template <class Row>
+RowReader<Row>::RowReader(std::string path, const NodeRegistry* registry,
+                          CsvReader::Options options)
+    : csv_(std::move(path), options), registry_(registry) {
+  for (const auto& c : Layout<Row>::kColumns) {
+    columns_.push_back(c.required ? csv_.RequireColumn(c.name) : csv_.Column(c.name));
+  }
+}
+
+template <class Row>
+RowReader<Row>::~RowReader() = default;
+
+template <class Row>
+bool RowReader<Row>::Next(Row& row) {
+  if (!csv_.Next()) return false;
+  Layout<Row>::Parse(csv_, columns_, row);
+  const double t = Layout<Row>::Time(row);
+  if (t < last_t_) {
+    csv_.Fail(fmt::format("row out of time order: t = {} comes after t = {} (line {}); rows "
+                          "must be in non-decreasing time",
+                          t, last_t_, last_t_line_));
+  }
+  last_t_ = t;
+  last_t_line_ = csv_.line();
+  if (registry_ != nullptr) {
+    for (std::string_view id : Layout<Row>::Ids(row)) {
+      if (!registry_->Contains(id)) {
+        csv_.Fail(fmt::format("unknown node id '{}': not declared in mission.json nor dropped "
+                              "in events.csv",
+                              id));
+      }
+    }
+  }
+  ++rows_;
+  return true;
+}
+
+template <class Row>
+RowWriter<Row>::RowWriter(std::string path) : csv_(std::move(path), Header<Row>()) {}
+
+template <class Row>
+void RowWriter<Row>::Write(const Row& row) {
+  Layout<Row>::Format(csv_, row);
+  csv_.EndRow();
+}
+
+#define TRAILMARK_INSTANTIATE(Row) \
+  template class RowReader<Row>;   \
+  template class RowWriter<Row>;
+TRAILMARK_INSTANTIATE(ImuSample)
+TRAILMARK_INSTANTIATE(Step)
+TRAILMARK_INSTANTIATE(RssiPacket)
+TRAILMARK_INSTANTIATE(RangeMeasurement)
+TRAILMARK_INSTANTIATE(BearingMeasurement)
+TRAILMARK_INSTANTIATE(MissionEvent)
+TRAILMARK_INSTANTIATE(TruthSample)
+TRAILMARK_INSTANTIATE(Estimate)
+#undef TRAILMARK_INSTANTIATE
+
+}  // namespace trailmark

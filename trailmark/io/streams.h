@@ -1,0 +1,125 @@
+#pragma once
+/// Typed, streaming readers and writers for every CSV stream of the mission format.
+///
+///   RowReader<Step> reader(dir / "steps.csv", &registry);
+///   Step step;
+///   while (reader.Next(step)) { ... }
+///
+/// Each row is checked as it is read: required columns present, numbers finite, node ids
+/// well formed and (when a registry is given) declared, rows in non-decreasing time.
+
+#include <functional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+#include "trailmark/io/csv.h"
+
+namespace trailmark {
+
+/// Ids a stream may use: those declared in mission.json plus crumbs introduced by drops.
+class NodeRegistry {
+ public:
+  void Add(std::string id) { ids_.insert(std::move(id)); }
+  bool Contains(std::string_view id) const { return ids_.find(id) != ids_.end(); }
+  std::size_t size() const { return ids_.size(); }
+
+ private:
+  std::set<std::string, std::less<>> ids_;
+};
+
+/// Column layout and parsing of one row kind (specialised in streams.cpp).
+template <class Row>
+struct StreamTraits;
+
+template <class Row>
+class RowReader {
+ public:
+  /// `registry` may be null (then ids are only checked for their syntax).
+  explicit RowReader(std::string path, const NodeRegistry* registry = nullptr,
+                     CsvReader::Options options = {});
+  ~RowReader();
+  /// Reads the next row into `row`; false at end of file. Throws InputError on bad input.
+  bool Next(Row& row);
+  std::size_t rows() const { return rows_; }
+  const CsvReader& csv() const { return csv_; }
+
+ private:
+  CsvReader csv_;
+  const NodeRegistry* registry_;
+  std::vector<int> columns_;
+  double last_t_ = -std::numeric_limits<double>::infinity();
+  std::size_t last_t_line_ = 0;
+  std::size_t rows_ = 0;
+};
+
+template <class Row>
+class RowWriter {
+ public:
+  explicit RowWriter(std::string path);
+  void Write(const Row& row);
+  void Close() { csv_.Close(); }
+  std::size_t rows() const { return csv_.rows(); }
+
+ private:
+  CsvWriter csv_;
+};
+
+/// Reads a whole (small) stream into memory; use RowReader for large ones.
+template <class Row>
+std::vector<Row> ReadAll(const std::string& path, const NodeRegistry* registry = nullptr) {
+  RowReader<Row> reader(path, registry);
+  std::vector<Row> rows;
+  Row row;
+  while (reader.Next(row)) rows.push_back(row);
+  return rows;
+}
+
+template <class Row>
+void WriteAll(const std::string& path, const std::vector<Row>& rows) {
+  RowWriter<Row> writer(path);
+  for (const auto& r : rows) writer.Write(r);
+  writer.Close();
+}
+
+/// The file name of each stream in a mission directory ("steps.csv", ...).
+template <class Row>
+const char* StreamFileName() {
+  return StreamTraits<Row>::kFileName;
+}
+
+template <>
+struct StreamTraits<ImuSample> {
+  static constexpr const char* kFileName = "imu.csv";
+};
+template <>
+struct StreamTraits<Step> {
+  static constexpr const char* kFileName = "steps.csv";
+};
+template <>
+struct StreamTraits<RssiPacket> {
+  static constexpr const char* kFileName = "rssi.csv";
+};
+template <>
+struct StreamTraits<RangeMeasurement> {
+  static constexpr const char* kFileName = "ranges.csv";
+};
+template <>
+struct StreamTraits<BearingMeasurement> {
+  static constexpr const char* kFileName = "bearings.csv";
+};
+template <>
+struct StreamTraits<MissionEvent> {
+  static constexpr const char* kFileName = "events.csv";
+};
+template <>
+struct StreamTraits<TruthSample> {
+  static constexpr const char* kFileName = "truth.csv";
+};
+template <>
+struct StreamTraits<Estimate> {
+  static constexpr const char* kFileName = "estimates.csv";
+};
+
+}  // namespace trailmark

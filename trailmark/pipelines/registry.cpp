@@ -1,0 +1,81 @@
+#include <fmt/format.h>
+
+#include <chrono>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/pipelines/pipeline.h"
+
+namespace trailmark {
+
+const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
+  static const auto* pipelines = [] {
+    auto* v = new std::vector<std::unique_ptr<Pipeline>>();
+    v->push_back(std::make_unique<PdrPipeline>());
+    return v;
+  }();
+  return *pipelines;
+}
+
+const Pipeline* FindPipeline(const std::string& name) {
+  for (const auto& p : AllPipelines()) {
+    if (p->name() == name) return p.get();
+  }
+  return nullptr;
+}
+
+std::vector<std::string> RunnablePipelines(const MissionDirectory& mission) {
+  std::vector<std::string> names;
+  for (const auto& p : AllPipelines()) {
+    bool ok = true;
+    for (const auto& f : p->required_files()) ok = ok && mission.Has(f);
+    if (ok) names.push_back(p->name());
+  }
+  return names;
+}
+
+namespace {
+
+class CsvEstimateSink : public EstimateSink {
+ public:
+  explicit CsvEstimateSink(const std::string& path) : writer_(path) {}
+  void Add(const Estimate& e) override {
+    writer_.Write(e);
+    ++count_;
+  }
+  void Close() { writer_.Close(); }
+  std::size_t count() const { return count_; }
+
+ private:
+  RowWriter<Estimate> writer_;
+  std::size_t count_ = 0;
+};
+
+}  // namespace
+
+RunResult RunPipeline(const Pipeline& pipeline, const PipelineContext& context,
+                      const std::filesystem::path& out_dir) {
+  std::filesystem::create_directories(out_dir);
+  CsvEstimateSink sink((out_dir / "estimates.csv").string());
+  const auto t0 = std::chrono::steady_clock::now();
+  RunResult result;
+  result.pipeline = pipeline.name();
+  result.summary = pipeline.Run(context, sink);
+  sink.Close();
+  result.wall_time_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  result.estimates = sink.count();
+  nlohmann::json diag;
+  diag["pipeline"] = pipeline.name();
+  diag["mission"] = context.mission.dir().string();
+  diag["estimates"] = result.estimates;
+  diag["wall_time_s"] = result.wall_time_s;
+  diag["numbers"] = result.summary.numbers;
+  diag["notes"] = result.summary.notes;
+  diag["options"] = context.options;
+  std::ofstream(out_dir / "diagnostics.json") << diag.dump(2) << "\n";
+  return result;
+}
+
+}  // namespace trailmark

@@ -1,0 +1,257 @@
+#include "trailmark/report/html_report.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <set>
+
+#include "trailmark_generated/chartjs_bundle.h"
+
+namespace trailmark {
+namespace {
+
+using nlohmann::json;
+
+const char* kPalette[] = {"#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e",
+                          "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f"};
+
+double Round3(double v) { return std::round(v * 1000.0) / 1000.0; }
+
+json Point(const Vec2& p) { return {{"x", Round3(p.x())}, {"y", Round3(p.y())}}; }
+
+template <class T, class F>
+json Decimated(const std::vector<T>& rows, std::size_t max_points, F&& point) {
+  json out = json::array();
+  const std::size_t stride = rows.size() <= max_points ? 1 : (rows.size() + max_points - 1) / max_points;
+  for (std::size_t i = 0; i < rows.size(); i += stride) out.push_back(point(rows[i]));
+  if (!rows.empty() && (rows.size() - 1) % stride != 0) out.push_back(point(rows.back()));
+  return out;
+}
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '<': out += "&lt;"; break;
+      case '>': out += "&gt;"; break;
+      case '&': out += "&amp;"; break;
+      case '"': out += "&quot;"; break;
+      default: out += c;
+    }
+  }
+  return out;
+}
+
+std::string Cell(const std::optional<double>& v, int digits = 2) {
+  return v ? fmt::format("{:.{}f}", *v, digits) : "&ndash;";
+}
+
+}  // namespace
+
+std::vector<Vec2> ConfidenceEllipse(const Vec2& centre, double sxx, double sxy, double syy,
+                                    int points) {
+  Mat2 cov;
+  cov << sxx, sxy, sxy, syy;
+  Eigen::SelfAdjointEigenSolver<Mat2> eig(cov);
+  const Vec2 radii = eig.eigenvalues().cwiseMax(0.0).cwiseSqrt() * std::sqrt(5.991);
+  std::vector<Vec2> out;
+  for (int i = 0; i <= points; ++i) {
+    const double a = 2.0 * std::numbers::pi * i / points;
+    out.push_back(centre + eig.eigenvectors() * Vec2(radii.x() * std::cos(a), radii.y() * std::sin(a)));
+  }
+  return out;
+}
+
+std::string BuildHtmlReport(const ReportInput& in) {
+  Box2 box;
+  json datasets = json::array();
+  // Floor plan: solid walls as one dataset, segments separated by nulls.
+  if (in.plan) {
+    json pts = json::array();
+    for (const auto& w : in.plan->solid_walls()) {
+      pts.push_back(Point(w.a));
+      pts.push_back(Point(w.b));
+      pts.push_back(nullptr);
+      box.Extend(w.a);
+      box.Extend(w.b);
+    }
+    datasets.push_back({{"label", "walls"}, {"data", pts}, {"showLine", true}, {"pointRadius", 0},
+                        {"borderColor", "#888"}, {"borderWidth", 1.5}, {"spanGaps", false}});
+  }
+  // Truth per node.
+  std::map<std::string, std::vector<TruthSample>> truth_by_id;
+  std::vector<std::string> ids;
+  for (const auto& s : in.truth) {
+    if (truth_by_id[s.id].empty()) ids.push_back(s.id);
+    truth_by_id[s.id].push_back(s);
+    box.Extend(s.position_n.head<2>());
+  }
+  auto kind_of = [&](const std::string& id) {
+    const NodeInfo* n = in.info.Find(id);
+    return n ? n->kind : NodeKind::kCrumb;
+  };
+  json static_truth = json::array();
+  for (const auto& id : ids) {
+    const auto& rows = truth_by_id[id];
+    if (kind_of(id) == NodeKind::kAgent) {
+      datasets.push_back({{"label", "truth " + id},
+                          {"data", Decimated(rows, in.max_points_per_series,
+                                             [](const TruthSample& s) { return Point(s.position_n.head<2>()); })},
+                          {"showLine", true}, {"pointRadius", 0}, {"borderColor", "#000"},
+                          {"borderWidth", 2}});
+    } else {
+      json p = Point(rows.back().position_n.head<2>());
+      p["id"] = id;
+      static_truth.push_back(p);
+    }
+  }
+  if (!static_truth.empty()) {
+    datasets.push_back({{"label", "truth crumbs/landmarks"}, {"data", static_truth},
+                        {"pointStyle", "rect"}, {"pointRadius", 5}, {"borderColor", "#000"},
+                        {"backgroundColor", "#000"}});
+  }
+  json error_sets = json::array(), cdf_sets = json::array();
+  std::string table;
+  for (std::size_t r = 0; r < in.runs.size(); ++r) {
+    const ReportRun& run = in.runs[r];
+    const std::string color = kPalette[r % std::size(kPalette)];
+    std::map<std::string, std::vector<Estimate>> by_id;
+    std::vector<std::string> order;
+    for (const auto& e : run.estimates) {
+      if (by_id[e.id].empty()) order.push_back(e.id);
+      by_id[e.id].push_back(e);
+    }
+    json static_est = json::array();
+    json ellipses = json::array();
+    for (const auto& id : order) {
+      const auto& rows = by_id[id];
+      if (kind_of(id) == NodeKind::kAgent) {
+        datasets.push_back({{"label", run.pipeline + " " + id},
+                            {"data", Decimated(rows, in.max_points_per_series,
+                                               [](const Estimate& e) { return Point(e.position_n.head<2>()); })},
+                            {"showLine", true}, {"pointRadius", 0}, {"borderColor", color},
+                            {"borderWidth", 1.5}});
+        const Estimate& last = rows.back();
+        for (const auto& p : ConfidenceEllipse(last.position_n.head<2>(), last.sxx, last.sxy, last.syy)) {
+          ellipses.push_back(Point(p));
+        }
+        ellipses.push_back(nullptr);
+      } else if (kind_of(id) != NodeKind::kBase) {
+        const Estimate& last = rows.back();
+        json p = Point(last.position_n.head<2>());
+        p["id"] = id;
+        static_est.push_back(p);
+        for (const auto& q : ConfidenceEllipse(last.position_n.head<2>(), last.sxx, last.sxy, last.syy)) {
+          ellipses.push_back(Point(q));
+        }
+        ellipses.push_back(nullptr);
+      }
+    }
+    if (!static_est.empty()) {
+      datasets.push_back({{"label", run.pipeline + " crumbs/landmarks"}, {"data", static_est},
+                          {"pointStyle", "triangle"}, {"pointRadius", 6}, {"borderColor", color},
+                          {"backgroundColor", color}});
+    }
+    if (!ellipses.empty()) {
+      datasets.push_back({{"label", run.pipeline + " 95% ellipses (final)"}, {"data", ellipses},
+                          {"showLine", true}, {"pointRadius", 0}, {"borderColor", color},
+                          {"borderDash", {4, 3}}, {"borderWidth", 1}, {"spanGaps", false}});
+    }
+    const NodeMetrics& a = run.metrics.agents;
+    error_sets.push_back({{"label", run.pipeline},
+                          {"data", Decimated(a.series, in.max_points_per_series,
+                                             [](const ErrorSample& s) { return json{{"x", Round3(s.t)}, {"y", Round3(s.error_m)}}; })},
+                          {"showLine", true}, {"pointRadius", 0}, {"borderColor", color},
+                          {"borderWidth", 1.5}});
+    std::vector<double> errors;
+    for (const auto& s : a.series) errors.push_back(s.error_m);
+    std::sort(errors.begin(), errors.end());
+    json cdf = json::array();
+    const std::size_t n = errors.size();
+    const std::size_t stride = n <= 1000 ? 1 : n / 1000;
+    for (std::size_t i = 0; i < n; i += stride) {
+      cdf.push_back({{"x", Round3(errors[i])}, {"y", Round3(double(i + 1) / n)}});
+    }
+    if (n > 0) cdf.push_back({{"x", Round3(errors.back())}, {"y", 1.0}});
+    cdf_sets.push_back({{"label", run.pipeline}, {"data", cdf}, {"showLine", true},
+                        {"pointRadius", 0}, {"borderColor", color}, {"borderWidth", 1.5}});
+    const NodeMetrics& s = run.metrics.static_nodes;
+    table += fmt::format(
+        "<tr><td><span class=sw style='background:{}'></span>{}</td><td>{}</td><td>{:.2f}</td>"
+        "<td>{:.2f}</td><td>{:.2f}</td><td>{:.2f}</td><td>{:.2f}</td><td>{:.2f}</td><td>{}</td>"
+        "<td>{}</td><td>{}</td><td>{:.3f}</td></tr>\n",
+        color, Escape(run.pipeline), a.stats.samples, a.stats.mean_m, a.stats.median_m,
+        a.stats.p95_m, a.stats.max_m, a.stats.rmse_m, a.stats.final_m,
+        Cell(a.mean_pct_of_distance), Cell(a.max_pct_of_distance),
+        s.stats.samples > 0 ? fmt::format("{:.2f}", s.stats.mean_m) : "&ndash;", run.wall_time_s);
+  }
+  if (box.Empty()) {
+    box.Extend(Vec2(-1, -1));
+    box.Extend(Vec2(1, 1));
+  }
+  const Vec2 pad = Vec2::Constant(2.0);
+  json map_bounds = {{"xmin", Round3(box.min.x() - pad.x())}, {"xmax", Round3(box.max.x() + pad.x())},
+                     {"ymin", Round3(box.min.y() - pad.y())}, {"ymax", Round3(box.max.y() + pad.y())}};
+  json data = {{"map", datasets}, {"bounds", map_bounds}, {"error", error_sets}, {"cdf", cdf_sets}};
+  std::string dump = data.dump();
+  // Keep "</script>" out of the embedded data.
+  for (std::size_t p = 0; (p = dump.find("</", p)) != std::string::npos; p += 3) dump.replace(p, 2, "<\\/");
+
+  std::string chartjs;
+  for (auto part : generated::kChartJsParts) chartjs += part;
+
+  std::string html;
+  html += "<!doctype html>\n<html lang=en><head><meta charset=utf-8>\n";
+  html += "<meta name=viewport content='width=device-width, initial-scale=1'>\n";
+  html += "<title>trailmark report: " + Escape(in.info.name) + "</title>\n";
+  html += R"(<style>
+body{font-family:system-ui,sans-serif;margin:1.5em;color:#222;max-width:1200px}
+table{border-collapse:collapse;font-size:0.9em}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
+td:first-child,th:first-child{text-align:left}.sw{display:inline-block;width:10px;height:10px;margin-right:6px}
+.charts{display:flex;flex-wrap:wrap;gap:1em}.half{flex:1 1 480px;min-width:320px}
+.note{color:#666;font-size:0.85em}
+</style>
+)";
+  html += "<script>\n";
+  html += chartjs;
+  html += "\n</script>\n</head><body>\n";
+  html += "<h1>trailmark report &mdash; " + Escape(in.info.name) + "</h1>\n";
+  html += "<p>" + Escape(in.info.description) + "</p>\n";
+  html += "<h2>Metrics (agents; horizontal error, online semantics)</h2>\n";
+  html += "<table><tr><th>pipeline</th><th>samples</th><th>mean m</th><th>median m</th>"
+          "<th>p95 m</th><th>max m</th><th>RMSE m</th><th>final m</th><th>mean % dist</th>"
+          "<th>max % dist</th><th>crumbs mean m</th><th>run time s</th></tr>\n";
+  html += table + "</table>\n";
+  html += "<h2>Trajectories</h2><p class=note>Black: truth. Dashed: 95% ellipses of the final "
+          "estimates. Click a legend entry to hide it.</p>\n";
+  html += "<div><canvas id=map></canvas></div>\n";
+  html += "<div class=charts><div class=half><h2>Error over time</h2><canvas id=err></canvas></div>"
+          "<div class=half><h2>Error CDF</h2><canvas id=cdf></canvas></div></div>\n";
+  html += "<p class=note>Generated by trailmark. Charts: Chart.js (MIT), embedded.</p>\n";
+  html += "<script>\nconst D = " + dump + ";\n";
+  html += R"(
+const b = D.bounds;
+new Chart(document.getElementById('map'), {type: 'scatter', data: {datasets: D.map},
+  options: {aspectRatio: Math.max(0.5, Math.min(3, (b.xmax - b.xmin) / (b.ymax - b.ymin))),
+    animation: false, parsing: true,
+    scales: {x: {type: 'linear', min: b.xmin, max: b.xmax, title: {display: true, text: 'x east (m)'}},
+             y: {type: 'linear', min: b.ymin, max: b.ymax, title: {display: true, text: 'y north (m)'}}},
+    plugins: {tooltip: {callbacks: {label: (c) => (c.raw.id ? c.raw.id + ' ' : '') + c.dataset.label +
+      ' (' + c.raw.x + ', ' + c.raw.y + ')'}}}}});
+new Chart(document.getElementById('err'), {type: 'scatter', data: {datasets: D.error},
+  options: {animation: false, scales: {x: {title: {display: true, text: 'time (s)'}},
+    y: {min: 0, title: {display: true, text: 'horizontal error (m)'}}}}});
+new Chart(document.getElementById('cdf'), {type: 'scatter', data: {datasets: D.cdf},
+  options: {animation: false, scales: {x: {min: 0, title: {display: true, text: 'horizontal error (m)'}},
+    y: {min: 0, max: 1, title: {display: true, text: 'fraction of time'}}}}});
+</script>
+</body></html>
+)";
+  return html;
+}
+
+}  // namespace trailmark
