@@ -29,8 +29,16 @@ else
   echo "[install] all Debian packages present"
 fi
 
-# Node.js is only needed to rebuild the report's bundled chart script; the bundle is
-# committed, so a missing node is not an error.
-if ! command -v node >/dev/null 2>&1; then
-  echo "[install] node not found; the committed report bundle will be used"
+# npm packages of the web front end (the report embeds Chart.js). Node.js from Debian only
+# where no node is installed (a newer Node.js conflicts with Debian's nodejs/npm packages).
+if ! command -v npm >/dev/null 2>&1; then
+  echo "[install] installing nodejs and npm from Debian"
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends nodejs npm
+fi
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [ ! -f "$here/web/report/node_modules/chart.js/dist/chart.umd.js" ]; then
+  echo "[install] npm ci in web/report"
+  (cd "$here/web/report" && npm ci --no-audit --no-fund --loglevel=error)
 fi

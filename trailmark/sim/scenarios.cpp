@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <stdexcept>
 
 namespace trailmark {
@@ -116,6 +117,7 @@ SimulatedMission SimulateOfficeLoop(const OfficeLoopOptions& o, std::uint64_t se
   Vec2 last_drop = Vec2::Zero();
   double next_packet = walk.truth.front().t;
   double next_crumb_packet = next_packet;
+  std::optional<double> weak_since;
   std::size_t stop_idx = 0;
   for (const auto& sample : walk.truth) {
     while (stop_idx < walk.stops.size() && walk.stops[stop_idx].t_stop <= sample.t) {
@@ -157,8 +159,15 @@ SimulatedMission SimulateOfficeLoop(const OfficeLoopOptions& o, std::uint64_t se
         }
       }
     }
-    if (best < o.dispenser.drop_threshold_dbm && dropped < o.dispenser.capacity &&
+    if (best >= o.dispenser.drop_threshold_dbm) {
+      weak_since.reset();
+    } else if (!weak_since) {
+      weak_since = sample.t;
+    }
+    if (weak_since && sample.t - *weak_since >= o.dispenser.below_for_s &&
+        dropped < o.dispenser.capacity &&
         (sample.position - last_drop).norm() >= o.dispenser.min_spacing_m) {
+      weak_since.reset();
       const std::string id = "c" + std::to_string(++dropped);
       const Vec2 where = sample.position + Vec2(drop_rng.Normal(0, o.dispenser.drop_scatter_m),
                                                 drop_rng.Normal(0, o.dispenser.drop_scatter_m));

@@ -24,6 +24,7 @@ struct DispenserOptions {
   double drop_threshold_dbm = -72.0;  ///< smoothed RSSI below which a crumb is dropped
   double smoothing = 0.3;             ///< EMA weight of a new packet
   double min_spacing_m = 4.0;         ///< no two drops closer than this along the walk
+  double below_for_s = 1.5;           ///< the link must stay weak this long (fading hysteresis)
   int capacity = 12;                  ///< crumbs carried
   double drop_scatter_m = 0.2;        ///< where the crumb lands around the foot (1 sigma)
 };

@@ -1,0 +1,98 @@
+// Google Benchmark: I/O throughput per stream kind (rows/s), the wall index, and the pdr
+// pipeline on the default mission. `trailmark bench` prints the same figures as a table.
+#include <benchmark/benchmark.h>
+
+#include <filesystem>
+
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/synthetic_streams.h"
+
+namespace {
+
+using namespace trailmark;
+namespace fs = std::filesystem;
+
+fs::path BenchDir() {
+  static const fs::path dir = [] {
+    auto d = fs::temp_directory_path() / "trailmark-gbench";
+    fs::create_directories(d);
+    return d;
+  }();
+  return dir;
+}
+
+template <class Row>
+void BM_Write(benchmark::State& state, std::vector<Row> (*make)(std::size_t, std::uint64_t)) {
+  const auto rows = make(static_cast<std::size_t>(state.range(0)), 1);
+  const auto path = (BenchDir() / StreamFileName<Row>()).string();
+  for (auto _ : state) WriteAll(path, rows);
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(rows.size()));
+}
+
+template <class Row>
+void BM_Read(benchmark::State& state, std::vector<Row> (*make)(std::size_t, std::uint64_t)) {
+  const auto rows = make(static_cast<std::size_t>(state.range(0)), 1);
+  const auto path = (BenchDir() / StreamFileName<Row>()).string();
+  WriteAll(path, rows);
+  for (auto _ : state) {
+    RowReader<Row> reader(path);
+    Row row;
+    std::size_t n = 0;
+    while (reader.Next(row)) ++n;
+    benchmark::DoNotOptimize(n);
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(rows.size()));
+}
+
+std::vector<ImuSample> Imu(std::size_t n, std::uint64_t s) { return SyntheticImu(n, s); }
+
+BENCHMARK_CAPTURE(BM_Write, imu, &Imu)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Read, imu, &Imu)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Write, steps, &SyntheticSteps)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Read, steps, &SyntheticSteps)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Write, rssi, &SyntheticRssi)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Read, rssi, &SyntheticRssi)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Write, truth, &SyntheticTruth)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Read, truth, &SyntheticTruth)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Write, estimates, &SyntheticEstimates)->Arg(200000)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_Read, estimates, &SyntheticEstimates)->Arg(200000)->Unit(benchmark::kMillisecond);
+
+void BM_WallCrossingQuery(benchmark::State& state) {
+  const FloorPlan plan = BuildOfficeFloor({});
+  Random rng(1);
+  std::vector<Segment2> queries;
+  for (int i = 0; i < 4096; ++i) {
+    const Vec2 a(rng.Uniform(-37, 7), rng.Uniform(-27, 7));
+    queries.push_back({a, a + Vec2(rng.Normal(0, 0.5), rng.Normal(0, 0.5))});
+  }
+  std::size_t i = 0, hits = 0;
+  for (auto _ : state) hits += plan.Crosses(queries[i++ & 4095].a, queries[i & 4095].b);
+  benchmark::DoNotOptimize(hits);
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_WallCrossingQuery);
+
+void BM_PdrPipelineOfficeLoop(benchmark::State& state) {
+  const fs::path dir = BenchDir() / "mission";
+  const SimulatedMission sim = SimulateScenario("office-loop", 1);
+  WriteMissionDirectory(dir, sim.data, &sim.plan);
+  const MissionDirectory mission(dir);
+  const double duration = sim.data.truth.back().t - sim.data.truth.front().t;
+  for (auto _ : state) {
+    RunPipeline(PdrPipeline(), {mission, {}}, BenchDir() / "run");
+  }
+  state.counters["x_real_time"] = benchmark::Counter(duration * state.iterations(),
+                                                     benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_PdrPipelineOfficeLoop)->Unit(benchmark::kMillisecond);
+
+void BM_SimulateOfficeLoop(benchmark::State& state) {
+  for (auto _ : state) benchmark::DoNotOptimize(SimulateScenario("office-loop", 1));
+}
+BENCHMARK(BM_SimulateOfficeLoop)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

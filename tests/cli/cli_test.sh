@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# End-to-end: the command-line contract on a fresh simulated mission, and bad input gives a
+# clear error with a non-zero exit code (never a crash).
+set -euo pipefail
+TM="$1"
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+fail() { echo "FAIL: $*"; exit 1; }
+
+"$TM" --help | grep -q simulate || fail "--help"
+for c in simulate run eval report pipelines demo bench scenarios; do
+  "$TM" "$c" --help > /dev/null || fail "$c --help"
+done
+"$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
+"$TM" simulate office-loop-1lap --seed 5 --out "$dir/m2" > /dev/null
+cmp "$dir/m/steps.csv" "$dir/m2/steps.csv" || fail "not deterministic per seed"
+cmp "$dir/m/rssi.csv" "$dir/m2/rssi.csv" || fail "not deterministic per seed"
+"$TM" pipelines | grep -q "^pdr" || fail pipelines
+"$TM" run --pipeline pdr "$dir/m" --out "$dir/run" | grep -q estimates || fail run
+head -1 "$dir/run/estimates.csv" | grep -q "^t,id,x,y,z,sxx,sxy,syy$" || fail "estimates header"
+"$TM" eval "$dir/m" "$dir/run/estimates.csv" | grep -q "^ff1" || fail eval
+test -s "$dir/run/metrics.json" || fail "metrics.json"
+grep -q '"mean_pct_of_distance"' "$dir/run/metrics.json" || fail "metrics keys"
+"$TM" report "$dir/run" --out "$dir/r.html" > /dev/null || fail report
+grep -q "new Chart" "$dir/r.html" || fail "report content"
+
+# Bad input: clear message naming file and line, exit code 2.
+set +e
+"$TM" run --pipeline nope "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
+set -e
+[ $rc -ne 0 ] && grep -q "unknown pipeline 'nope'" "$dir/err" || fail "unknown pipeline"
+printf 't0,t1,agent,dx,dy\n0,1,ff1,1,0\n0.5,2,ff1,abc,0\n' > "$dir/m/steps.csv"
+set +e
+"$TM" run --pipeline pdr "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
+set -e
+[ $rc -eq 2 ] || fail "bad steps exit code $rc"
+grep -q "steps.csv:3: column 'dx': 'abc' is not a finite number" "$dir/err" || { cat "$dir/err"; fail "bad steps message"; }
+rm "$dir/m/steps.csv"
+set +e
+"$TM" run --pipeline pdr "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
+set -e
+[ $rc -eq 2 ] && grep -q "steps.csv: missing" "$dir/err" || fail "missing steps"
+echo '{"nodes": [' > "$dir/m/mission.json"
+set +e
+"$TM" eval "$dir/m" "$dir/run/estimates.csv" 2> "$dir/err"; rc=$?
+set -e
+[ $rc -eq 2 ] && grep -q "mission.json:.*invalid JSON" "$dir/err" || fail "bad mission.json"
+echo "cli: 1 passed, 0 failed"

@@ -1,0 +1,73 @@
+// Metrics against hand-computed cases.
+#include <gtest/gtest.h>
+
+#include "trailmark/eval/metrics.h"
+
+namespace trailmark {
+namespace {
+
+MissionInfo Info() {
+  MissionInfo info;
+  info.nodes.push_back({.id = "ff1", .kind = NodeKind::kAgent});
+  info.nodes.push_back({.id = "base", .kind = NodeKind::kBase, .position = Vec3::Zero()});
+  return info;
+}
+
+TEST(Percentile, LinearInterpolationLikeNumpy) {
+  EXPECT_DOUBLE_EQ(Percentile({1, 2, 3, 4}, 50), 2.5);
+  EXPECT_DOUBLE_EQ(Percentile({1, 2, 3, 4}, 75), 3.25);
+  EXPECT_DOUBLE_EQ(Percentile({4, 1, 3, 2}, 95), 3.85);
+  EXPECT_DOUBLE_EQ(Percentile({5}, 95), 5.0);
+  EXPECT_DOUBLE_EQ(Percentile({}, 50), 0.0);
+}
+
+TEST(Evaluate, AgentOnlineSemanticsHandComputed) {
+  // Truth walks along x at 1 m/s; samples at t = 0..4.
+  std::vector<TruthSample> truth;
+  for (int t = 0; t <= 4; ++t) truth.push_back({double(t), "ff1", Vec3(t, 0, 0)});
+  // Estimates: none before t=1; at t=1 says (1, 1); at t=2.5 says (3, 0) (z ignored: 7).
+  std::vector<Estimate> est{{1.0, "ff1", Vec3(1, 1, 0), 1, 0, 1},
+                            {2.5, "ff1", Vec3(3, 0, 7), 1, 0, 1}};
+  const Metrics m = Evaluate(Info(), truth, est);
+  ASSERT_EQ(m.nodes.size(), 1u);
+  const NodeMetrics& n = m.nodes[0];
+  EXPECT_EQ(n.uncovered, 1u);  // t = 0
+  // t=1: |(1,1)-(1,0)| = 1; t=2: |(1,1)-(2,0)| = sqrt2; t=3: 0; t=4: 1.
+  ASSERT_EQ(n.stats.samples, 4u);
+  const double s2 = std::sqrt(2.0);
+  EXPECT_NEAR(n.stats.mean_m, (1 + s2 + 0 + 1) / 4, 1e-12);
+  EXPECT_NEAR(n.stats.max_m, s2, 1e-12);
+  EXPECT_NEAR(n.stats.final_m, 1.0, 1e-12);
+  EXPECT_NEAR(n.stats.rmse_m, std::sqrt((1 + 2 + 0 + 1) / 4.0), 1e-12);
+  EXPECT_NEAR(n.stats.median_m, 1.0, 1e-12);
+  EXPECT_NEAR(n.distance_m, 4.0, 1e-12);
+  EXPECT_NEAR(*n.mean_pct_of_distance, 100 * (1 + s2 + 1) / 4 / 4.0, 1e-9);
+  EXPECT_NEAR(*n.max_pct_of_distance, 100 * s2 / 4.0, 1e-9);
+  EXPECT_EQ(m.agents.stats.samples, 4u);
+}
+
+TEST(Evaluate, StaticNodesAtEstimatesAndEndAgainstTruthInForce) {
+  // Crumb c1 dropped at (5,0) at t=1, kicked to (6,0) at t=3. Mission ends at t=4 (agent truth).
+  std::vector<TruthSample> truth{{0, "ff1", Vec3(0, 0, 0)}, {1, "c1", Vec3(5, 0, 0)},
+                                 {3, "c1", Vec3(6, 0, 0)},  {4, "ff1", Vec3(4, 0, 0)}};
+  std::vector<Estimate> est{{1, "c1", Vec3(5, 2, 0), 1, 0, 1}, {2, "c1", Vec3(5, 1, 0), 1, 0, 1},
+                            {9, "ghost", Vec3(0, 0, 0), 1, 0, 1}};
+  const Metrics m = Evaluate(Info(), truth, est);
+  EXPECT_EQ(m.estimates_without_truth, 1u);
+  const NodeMetrics* c1 = nullptr;
+  for (const auto& n : m.nodes) if (n.id == "c1") c1 = &n;
+  ASSERT_NE(c1, nullptr);
+  EXPECT_EQ(c1->kind, NodeKind::kCrumb);
+  // t=1: 2; t=2: 1; end t=4: |(5,1)-(6,0)| = sqrt2.
+  ASSERT_EQ(c1->stats.samples, 3u);
+  EXPECT_NEAR(c1->stats.mean_m, (2 + 1 + std::sqrt(2.0)) / 3, 1e-12);
+  EXPECT_NEAR(c1->stats.final_m, std::sqrt(2.0), 1e-12);
+  EXPECT_FALSE(c1->mean_pct_of_distance.has_value());
+  EXPECT_EQ(m.static_nodes.stats.samples, 3u);
+  // The agent has no estimates at all: every instant uncovered.
+  EXPECT_EQ(m.agents.stats.samples, 0u);
+  EXPECT_EQ(m.agents.uncovered, 2u);
+}
+
+}  // namespace
+}  // namespace trailmark

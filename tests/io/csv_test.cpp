@@ -1,0 +1,228 @@
+// Every reader rejects bad input with file, line and problem; good input in any column order.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "test_util.h"
+#include "trailmark/core/error.h"
+#include "trailmark/io/streams.h"
+#include "trailmark/sim/synthetic_streams.h"
+
+namespace trailmark {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using testing::TempDir;
+
+// Reads all rows and returns the error message ("" when the file is accepted).
+template <class Row>
+std::string ErrorOf(const std::string& path, const NodeRegistry* reg = nullptr) {
+  try {
+    ReadAll<Row>(path, reg);
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(CsvReader, ReadsColumnsInAnyOrderWithExtrasCommentsAndCrlf) {
+  TempDir dir;
+  const auto path = dir.File("steps.csv",
+                             "\xEF\xBB\xBFnote,agent,t1,t0,dy,dx,sxx,syy,szz,dz\r\n"
+                             "# a comment\r\n"
+                             "\"hello, world\",ff1,1.5,1.0,0.25,+0.5,0.01,0.02,,\r\n"
+                             "\r\n"
+                             "x,ff1,2.0,1.5, 1e-1 ,-0.5,,,,0.1");  // no final newline, complete
+  const auto rows = ReadAll<Step>(path);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].agent, "ff1");
+  EXPECT_DOUBLE_EQ(rows[0].t0, 1.0);
+  EXPECT_DOUBLE_EQ(rows[0].t1, 1.5);
+  EXPECT_DOUBLE_EQ(rows[0].delta_n.x(), 0.5);
+  EXPECT_DOUBLE_EQ(rows[0].delta_n.y(), 0.25);
+  ASSERT_TRUE(rows[0].variance_m2.has_value());
+  EXPECT_DOUBLE_EQ(rows[0].variance_m2->y(), 0.02);
+  EXPECT_DOUBLE_EQ(rows[1].delta_n.y(), 0.1);
+  EXPECT_DOUBLE_EQ(rows[1].delta_n.z(), 0.1);
+  EXPECT_FALSE(rows[1].variance_m2.has_value());  // empty cells = unknown
+}
+
+TEST(CsvReader, MissingColumnNamesTheColumnAndFile) {
+  TempDir dir;
+  const auto path = dir.File("rssi.csv", "t,rx,rssi_dbm\n1,a,-50\n");
+  EXPECT_THAT(ErrorOf<RssiPacket>(path),
+              AllOf(HasSubstr("rssi.csv:1:"), HasSubstr("missing column 'tx'")));
+}
+
+TEST(CsvReader, NonNumericCellNamesLineAndColumn) {
+  TempDir dir;
+  const auto path = dir.File("rssi.csv", "t,rx,tx,rssi_dbm\n1,a,b,-50\n2,a,b,loud\n");
+  EXPECT_THAT(ErrorOf<RssiPacket>(path),
+              AllOf(HasSubstr("rssi.csv:3:"), HasSubstr("'rssi_dbm'"), HasSubstr("'loud'")));
+}
+
+TEST(CsvReader, RejectsNanAndInfinity) {
+  TempDir dir;
+  for (const char* bad : {"nan", "NaN", "inf", "-inf", "1e999"}) {
+    const auto path = dir.File("truth.csv", std::string("t,id,x,y\n0,a,1,2\n1,a,") + bad + ",2\n");
+    EXPECT_THAT(ErrorOf<TruthSample>(path),
+                AllOf(HasSubstr("truth.csv:3:"), HasSubstr("not a finite number")))
+        << bad;
+  }
+}
+
+TEST(CsvReader, EmptyRequiredCellIsAnError) {
+  TempDir dir;
+  const auto path = dir.File("truth.csv", "t,id,x,y\n0,a,,2\n");
+  EXPECT_THAT(ErrorOf<TruthSample>(path), AllOf(HasSubstr(":2:"), HasSubstr("empty cell")));
+}
+
+TEST(CsvReader, UnknownNodeIdIsRejectedWithRegistry) {
+  TempDir dir;
+  const auto path = dir.File("rssi.csv", "t,rx,tx,rssi_dbm\n1,ff1,c1,-50\n2,ff1,ghost,-60\n");
+  NodeRegistry reg;
+  reg.Add("ff1");
+  reg.Add("c1");
+  EXPECT_THAT(ErrorOf<RssiPacket>(path, &reg),
+              AllOf(HasSubstr("rssi.csv:3:"), HasSubstr("unknown node id 'ghost'")));
+  EXPECT_EQ(ErrorOf<RssiPacket>(path), "");  // without a registry only the syntax is checked
+}
+
+TEST(CsvReader, MalformedNodeIdIsRejected) {
+  TempDir dir;
+  const auto path = dir.File("rssi.csv", "t,rx,tx,rssi_dbm\n1,ff 1,c1,-50\n");
+  EXPECT_THAT(ErrorOf<RssiPacket>(path), AllOf(HasSubstr(":2:"), HasSubstr("not a node id")));
+}
+
+TEST(CsvReader, RowsOutOfTimeOrderAreRejectedNamingBothLines) {
+  TempDir dir;
+  const auto path = dir.File("truth.csv", "t,id,x,y\n0,a,0,0\n2,a,0,0\n1,a,0,0\n");
+  EXPECT_THAT(ErrorOf<TruthSample>(path),
+              AllOf(HasSubstr("truth.csv:4:"), HasSubstr("out of time order"),
+                    HasSubstr("line 3")));
+}
+
+TEST(CsvReader, StepsAreOrderedByT1AndT1MustNotPrecedeT0) {
+  TempDir dir;
+  EXPECT_EQ(ErrorOf<Step>(dir.File("a.csv", "t0,t1,agent,dx,dy\n0,2,a,0,0\n1,2,a,0,0\n")), "");
+  EXPECT_THAT(ErrorOf<Step>(dir.File("b.csv", "t0,t1,agent,dx,dy\n3,2,a,0,0\n")),
+              HasSubstr("before t0"));
+}
+
+TEST(CsvReader, TruncatedLastLineIsReported) {
+  TempDir dir;
+  const auto path = dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n0.01,ff1,0,");
+  EXPECT_THAT(ErrorOf<ImuSample>(path), AllOf(HasSubstr("imu.csv:3:"), HasSubstr("truncated")));
+}
+
+TEST(CsvReader, WrongFieldCountInTheMiddle) {
+  TempDir dir;
+  const auto path = dir.File("truth.csv", "t,id,x,y\n0,a,0,0,5\n");
+  EXPECT_THAT(ErrorOf<TruthSample>(path), AllOf(HasSubstr(":2:"), HasSubstr("expected 4 fields")));
+}
+
+TEST(CsvReader, EmptyFileAndMissingFile) {
+  TempDir dir;
+  EXPECT_THAT(ErrorOf<TruthSample>(dir.File("truth.csv", "")), HasSubstr("empty file"));
+  EXPECT_THAT(ErrorOf<TruthSample>(dir.File("c.csv", "# only a comment\n\n")),
+              HasSubstr("empty file"));
+  EXPECT_THAT(ErrorOf<TruthSample>((dir.path() / "nope.csv").string()),
+              HasSubstr("does not exist"));
+  EXPECT_EQ(ReadAll<TruthSample>(dir.File("h.csv", "t,id,x,y\n")).size(), 0u);  // header only
+}
+
+TEST(CsvReader, DuplicateHeaderColumn) {
+  TempDir dir;
+  EXPECT_THAT(ErrorOf<TruthSample>(dir.File("truth.csv", "t,id,x,x,y\n")),
+              HasSubstr("'x' appears twice"));
+}
+
+TEST(CsvReader, HugeBinaryFileFailsFastWithoutReadingItAll) {
+  // A 2 GB file of NUL bytes (sparse: costs no disk) after a valid header.
+  TempDir dir;
+  const auto path = dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n");
+  std::filesystem::resize_file(path, 2ull << 30);
+  const std::string error = ErrorOf<ImuSample>(path);
+  EXPECT_THAT(error, AllOf(HasSubstr("imu.csv:2:"), HasSubstr("not a CSV text file")));
+}
+
+TEST(CsvReader, HugeSingleLineIsRejected) {
+  TempDir dir;
+  const auto path = dir.File("truth.csv", "t,id,x,y\n0,a,0," + std::string(3u << 20, '1') + "\n");
+  EXPECT_THAT(ErrorOf<TruthSample>(path), HasSubstr("line longer than"));
+}
+
+TEST(CsvReader, StreamsAcrossChunkBoundaries) {
+  // A tiny chunk size forces every refill path; rows must come out identical.
+  TempDir dir;
+  const auto truth = SyntheticTruth(2000, 7);
+  const auto path = (dir.path() / "truth.csv").string();
+  WriteAll(path, truth);
+  RowReader<TruthSample> reader(path, nullptr, {.max_line_bytes = 256, .chunk_bytes = 64});
+  TruthSample row;
+  std::size_t i = 0;
+  while (reader.Next(row)) {
+    ASSERT_LT(i, truth.size());
+    EXPECT_EQ(row.position_n, truth[i].position_n);
+    ++i;
+  }
+  EXPECT_EQ(i, truth.size());
+}
+
+template <class Row>
+void ExpectRoundTrip(const std::vector<Row>& rows, auto&& equal) {
+  TempDir dir;
+  const auto path = (dir.path() / StreamFileName<Row>()).string();
+  WriteAll(path, rows);
+  const auto back = ReadAll<Row>(path);
+  ASSERT_EQ(back.size(), rows.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) ASSERT_TRUE(equal(rows[i], back[i])) << i;
+}
+
+TEST(Streams, EveryKindRoundTripsExactly) {
+  ExpectRoundTrip(SyntheticImu(500, 1), [](const ImuSample& a, const ImuSample& b) {
+    return a.t == b.t && a.agent == b.agent && a.accel_b == b.accel_b && a.gyro_b == b.gyro_b;
+  });
+  ExpectRoundTrip(SyntheticSteps(500, 2), [](const Step& a, const Step& b) {
+    return a.t0 == b.t0 && a.t1 == b.t1 && a.delta_n == b.delta_n && *a.variance_m2 == *b.variance_m2;
+  });
+  ExpectRoundTrip(SyntheticRssi(500, 3), [](const RssiPacket& a, const RssiPacket& b) {
+    return a.t == b.t && a.rx == b.rx && a.tx == b.tx && a.rssi_dbm == b.rssi_dbm;
+  });
+  ExpectRoundTrip(SyntheticEstimates(500, 4), [](const Estimate& a, const Estimate& b) {
+    return a.t == b.t && a.id == b.id && a.position_n == b.position_n && a.sxx == b.sxx &&
+           a.sxy == b.sxy && a.syy == b.syy;
+  });
+  ExpectRoundTrip(std::vector<RangeMeasurement>{{0.5, "a", "b", 3.25, 0.1, "uwb"},
+                                                {0.7, "a", "c", 1.0, std::nullopt, ""}},
+                  [](const RangeMeasurement& a, const RangeMeasurement& b) {
+                    return a.t == b.t && a.range_m == b.range_m && a.sigma_m == b.sigma_m &&
+                           a.kind == b.kind;
+                  });
+  ExpectRoundTrip(std::vector<BearingMeasurement>{{0.5, "a", "b", -1.25, 0.3}},
+                  [](const BearingMeasurement& a, const BearingMeasurement& b) {
+                    return a.bearing_rad == b.bearing_rad && a.sigma_rad == b.sigma_rad;
+                  });
+  ExpectRoundTrip(std::vector<MissionEvent>{{0, "ff1", "enter", ""}, {1, "ff1", "drop", "c1"}},
+                  [](const MissionEvent& a, const MissionEvent& b) {
+                    return a.t == b.t && a.event == b.event && a.node == b.node;
+                  });
+}
+
+TEST(CsvWriter, RefusesNonFiniteNumbers) {
+  TempDir dir;
+  RowWriter<Estimate> w((dir.path() / "estimates.csv").string());
+  Estimate e{0, "ff1", Vec3(std::nan(""), 0, 0), 1, 0, 1};
+  EXPECT_THROW(w.Write(e), std::logic_error);
+}
+
+TEST(CsvReader, DropEventNeedsNode) {
+  TempDir dir;
+  EXPECT_THAT(ErrorOf<MissionEvent>(dir.File("events.csv", "t,agent,event,node\n0,ff1,drop,\n")),
+              HasSubstr("needs the dropped node"));
+}
+
+}  // namespace
+}  // namespace trailmark

@@ -1,0 +1,174 @@
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "test_util.h"
+#include "trailmark/core/error.h"
+#include "trailmark/io/mission_io.h"
+
+namespace trailmark {
+namespace {
+
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using testing::TempDir;
+
+std::string ErrorOfMission(const std::string& text) {
+  try {
+    ParseMissionInfo(text, "mission.json");
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// The example of the spec, verbatim in content (extra keys allowed).
+constexpr const char* kSpecExample = R"({
+  "format": "trailmark-mission/1",
+  "name": "office-loop-400m",
+  "description": "free text",
+  "provenance": {"recorded_by": "someone else"},
+  "nodes": [
+    {"id": "base", "kind": "base", "position": [0, 0, 0]},
+    {"id": "ff1", "kind": "agent", "start": [0, 0, 0], "start_heading": 1.5708},
+    {"id": "lm3", "kind": "landmark", "position": [4.0, 2.5, 0], "position_sigma": 0.5}
+  ],
+  "radio": {"model": "log-distance", "alpha_dbm": -40.0, "path_loss_exponent": 2.3,
+            "shadowing_sigma_db": 4.0},
+  "floorplan": "floorplan.geojson"
+})";
+
+TEST(MissionJson, ParsesTheSpecExample) {
+  const MissionInfo info = ParseMissionInfo(kSpecExample, "mission.json");
+  ASSERT_EQ(info.nodes.size(), 3u);
+  EXPECT_EQ(info.nodes[1].kind, NodeKind::kAgent);
+  EXPECT_NEAR(*info.nodes[1].start_heading_rad, 1.5708, 1e-12);
+  EXPECT_EQ(info.nodes[2].position->y(), 2.5);
+  EXPECT_EQ(*info.nodes[2].position_sigma_m, 0.5);
+  EXPECT_EQ(info.radio->path_loss_exponent, 2.3);
+  EXPECT_EQ(*info.floorplan, "floorplan.geojson");
+}
+
+TEST(MissionJson, MinimalMissionAndAgentStartFromBase) {
+  const MissionInfo info = ParseMissionInfo(
+      R"({"nodes":[{"id":"b","kind":"base","position":[1,2]},{"id":"a","kind":"agent"}]})", "m");
+  EXPECT_EQ(*info.AgentStart(info.nodes[1]), Vec3(1, 2, 0));
+  EXPECT_EQ(ParseMissionInfo("{}", "m").nodes.size(), 0u);
+}
+
+TEST(MissionJson, RoundTrips) {
+  const MissionInfo a = ParseMissionInfo(kSpecExample, "m");
+  const MissionInfo b = ParseMissionInfo(MissionInfoToJson(a), "m");
+  ASSERT_EQ(a.nodes.size(), b.nodes.size());
+  for (std::size_t i = 0; i < a.nodes.size(); ++i) {
+    EXPECT_EQ(a.nodes[i].id, b.nodes[i].id);
+    EXPECT_EQ(a.nodes[i].position, b.nodes[i].position);
+    EXPECT_EQ(a.nodes[i].start_heading_rad, b.nodes[i].start_heading_rad);
+  }
+  EXPECT_EQ(a.radio->alpha_dbm, b.radio->alpha_dbm);
+}
+
+TEST(MissionJson, BadInputNamesTheProblem) {
+  EXPECT_THAT(ErrorOfMission("{\n  \"nodes\": [\n    {\"id\": \"a\",, }\n]}"),
+              AllOf(HasSubstr("mission.json:3:"), HasSubstr("invalid JSON")));
+  EXPECT_THAT(ErrorOfMission(""), HasSubstr("invalid JSON"));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"robot"}]})"),
+              AllOf(HasSubstr("/nodes/0/kind"), HasSubstr("unknown kind 'robot'")));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"agent"},{"id":"a","kind":"agent"}]})"),
+              HasSubstr("declared twice"));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a b","kind":"agent"}]})"),
+              HasSubstr("not a node id"));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"b","kind":"base"}]})"),
+              HasSubstr("needs its known 'position'"));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"agent","start":[1,"x"]}]})"),
+              AllOf(HasSubstr("/nodes/0/start/1"), HasSubstr("expected a number")));
+  EXPECT_THAT(ErrorOfMission(R"({"format":"trailmark-mission/2"})"), HasSubstr("newer"));
+  EXPECT_THAT(ErrorOfMission(R"({"radio":{"path_loss_exponent":-1}})"), HasSubstr("must be > 0"));
+  EXPECT_THAT(ErrorOfMission("[1,2]"), HasSubstr("expected a JSON object"));
+}
+
+TEST(MissionDirectory, DroppedCrumbsJoinTheRegistryAndUnknownIdsFail) {
+  TempDir dir;
+  dir.File("mission.json", R"({"nodes":[{"id":"base","kind":"base","position":[0,0,0]},
+                                         {"id":"ff1","kind":"agent"}]})");
+  dir.File("events.csv", "t,agent,event,node\n0,ff1,enter,\n5,ff1,drop,c1\n");
+  dir.File("rssi.csv", "t,rx,tx,rssi_dbm\n6,ff1,c1,-50\n7,ff1,c9,-50\n");
+  const MissionDirectory mission(dir.path());
+  EXPECT_TRUE(mission.registry().Contains("c1"));
+  EXPECT_FALSE(mission.registry().Contains("c9"));
+  EXPECT_EQ(mission.dropped_crumbs(), std::vector<std::string>{"c1"});
+  auto reader = mission.OpenStream<RssiPacket>();
+  RssiPacket p;
+  EXPECT_TRUE(reader.Next(p));
+  try {
+    reader.Next(p);
+    FAIL() << "expected an error for c9";
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("rssi.csv:3:"), HasSubstr("'c9'")));
+  }
+  EXPECT_THAT(
+      [&] {
+        try {
+          mission.Require("steps.csv", "the pdr pipeline");
+        } catch (const InputError& e) {
+          return std::string(e.what());
+        }
+        return std::string();
+      }(),
+      AllOf(HasSubstr("steps.csv"), HasSubstr("pdr pipeline")));
+}
+
+TEST(MissionDirectory, MissingDirectoryOrMissionJson) {
+  TempDir dir;
+  EXPECT_THROW(MissionDirectory(dir.path() / "nope"), InputError);
+  EXPECT_THROW(MissionDirectory{dir.path()}, InputError);  // no mission.json
+}
+
+TEST(FloorPlanGeoJson, ReadsWallsDoorsRoomsAndLevels) {
+  const char* text = R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"wall"},
+     "geometry":{"type":"LineString","coordinates":[[0,0],[10,0],[10,5]]}},
+    {"type":"Feature","properties":{"kind":"door"},
+     "geometry":{"type":"LineString","coordinates":[[4,0],[5,0]]}},
+    {"type":"Feature","properties":{"kind":"room","name":"r1"},
+     "geometry":{"type":"Polygon","coordinates":[[[0,0],[10,0],[10,5],[0,5],[0,0]]]}},
+    {"type":"Feature","properties":{"kind":"wall","level":1},
+     "geometry":{"type":"LineString","coordinates":[[0,0],[0,5]]}},
+    {"type":"Feature","properties":{"kind":"stairs"},"geometry":null}]})";
+  const FloorPlan all = ParseFloorPlanGeoJson(text, "plan.geojson");
+  EXPECT_EQ(all.walls().size(), 3u);
+  EXPECT_EQ(all.doors().size(), 1u);
+  ASSERT_EQ(all.rooms().size(), 1u);
+  EXPECT_EQ(all.rooms()[0].ring.size(), 4u);
+  EXPECT_EQ(all.solid_walls().size(), 4u);  // the door splits the first wall in two
+  EXPECT_FALSE(all.Crosses({4.5, -1}, {4.5, 1}));  // through the door
+  EXPECT_TRUE(all.Crosses({2, -1}, {2, 1}));
+  const FloorPlan ground = ParseFloorPlanGeoJson(text, "plan.geojson", 0);
+  EXPECT_EQ(ground.walls().size(), 2u);
+  // Round trip.
+  const FloorPlan back = ParseFloorPlanGeoJson(FloorPlanToGeoJson(all), "x");
+  EXPECT_EQ(back.solid_walls().size(), all.solid_walls().size());
+}
+
+TEST(FloorPlanGeoJson, BadGeometryIsNamed) {
+  auto error = [](const std::string& t) {
+    try {
+      ParseFloorPlanGeoJson(t, "plan.geojson");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_THAT(error(R"({"type":"Feature"})"), HasSubstr("FeatureCollection"));
+  EXPECT_THAT(error(R"({"type":"FeatureCollection","features":[{"type":"Feature",
+      "properties":{"kind":"wall"},"geometry":{"type":"LineString","coordinates":[[0,0]]}}]})"),
+              AllOf(HasSubstr("/features/0"), HasSubstr("at least two")));
+  EXPECT_THAT(error(R"({"type":"FeatureCollection","features":[{"type":"Feature",
+      "properties":{"kind":"wall"},"geometry":{"type":"Point","coordinates":[0,0]}}]})"),
+              HasSubstr("LineString"));
+}
+
+}  // namespace
+}  // namespace trailmark

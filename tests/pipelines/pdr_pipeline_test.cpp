@@ -1,0 +1,87 @@
+// The pdr pipeline against an exact reference: error-free steps must reproduce the truth.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "test_util.h"
+#include "trailmark/core/error.h"
+#include "trailmark/eval/metrics.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark {
+namespace {
+
+using testing::TempDir;
+
+class VectorSink : public EstimateSink {
+ public:
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
+
+TEST(PdrPipeline, ErrorFreeStepsReproduceTruthExactly) {
+  OfficeLoopOptions o;
+  o.laps = 1;
+  o.pdr = {.heading_random_walk_rad = 0, .heading_drift_sigma_rad_per_s = 0,
+           .turn_scale_error_sigma = 0, .scale_error_sigma = 0, .step_noise_m = 0};
+  const SimulatedMission sim = SimulateOfficeLoop(o, 11);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  VectorSink sink;
+  PdrPipeline().Run({mission, {}}, sink);
+  ASSERT_EQ(sink.rows.size(), sim.data.steps.size() + 1);
+  // Each estimate equals the true foot position at the end of its step (<1e-9 m).
+  // Truth samples are at 10 Hz, so compare against the step endpoints via the metrics instead:
+  // the final estimate is the start, as the loop closes.
+  EXPECT_NEAR((sink.rows.back().position_n - Vec3::Zero()).norm(), 0.0, 1e-9);
+  // Covariance grows monotonically and stays positive definite and symmetric.
+  for (std::size_t i = 1; i < sink.rows.size(); ++i) {
+    EXPECT_GE(sink.rows[i].sxx, sink.rows[i - 1].sxx);
+    EXPECT_GT(sink.rows[i].sxx * sink.rows[i].syy - sink.rows[i].sxy * sink.rows[i].sxy, 0.0);
+  }
+  // Against truth at 10 Hz, the online error is at most one step length.
+  const Metrics m = Evaluate(sim.data.info, sim.data.truth, sink.rows);
+  EXPECT_LT(m.agents.stats.max_m, 0.9);
+}
+
+TEST(DeadReckoning, SumsStepsAndVariances) {
+  DeadReckoning dr(Vec3(1, 2, 0), 0.5);
+  dr.AddStep({0, 1, "a", Vec3(0.5, 0, 0), Vec3(0.01, 0.02, 0)});
+  dr.AddStep({1, 2, "a", Vec3(0, -0.5, 0), Vec3(0.01, 0.02, 0)});
+  EXPECT_TRUE(dr.position_n().isApprox(Vec3(1.5, 1.5, 0)));
+  EXPECT_NEAR(dr.covariance()(0, 0), 0.25 + 0.02, 1e-15);
+  EXPECT_NEAR(dr.covariance()(1, 1), 0.25 + 0.04, 1e-15);
+  // Unknown variance: the documented default (5 cm + 3 % of 0.5 m)^2.
+  dr.AddStep({2, 3, "a", Vec3(0.5, 0, 0), std::nullopt});
+  EXPECT_NEAR(dr.covariance()(0, 0), 0.27 + std::pow(0.05 + 0.015, 2), 1e-15);
+}
+
+TEST(PdrPipeline, NeedsAStartAndAnAgent) {
+  TempDir dir;
+  dir.File("mission.json", R"({"nodes":[{"id":"ff1","kind":"agent"},{"id":"lm","kind":"landmark"}]})");
+  dir.File("steps.csv", "t0,t1,agent,dx,dy\n0,1,ff1,1,0\n");
+  const MissionDirectory mission(dir.path());
+  VectorSink sink;
+  try {
+    PdrPipeline().Run({mission, {}}, sink);
+    FAIL();
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("no 'start'"));
+  }
+  dir.File("steps.csv", "t0,t1,agent,dx,dy\n0,1,lm,1,0\n");
+  const MissionDirectory mission2(dir.path());
+  EXPECT_THROW(PdrPipeline().Run({mission2, {}}, sink), InputError);
+}
+
+TEST(Pipelines, RegistryListsPdrAndRunnableChecksFiles) {
+  ASSERT_NE(FindPipeline("pdr"), nullptr);
+  EXPECT_EQ(FindPipeline("nope"), nullptr);
+  TempDir dir;
+  dir.File("mission.json", "{}");
+  EXPECT_TRUE(RunnablePipelines(MissionDirectory(dir.path())).empty());
+}
+
+}  // namespace
+}  // namespace trailmark

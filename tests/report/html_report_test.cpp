@@ -1,0 +1,39 @@
+#include <gtest/gtest.h>
+
+#include "trailmark/report/html_report.h"
+
+namespace trailmark {
+namespace {
+
+TEST(ConfidenceEllipse, AxesFollowTheCovariance) {
+  // sxx = 4, syy = 1: semi-axes 2*sqrt(5.991) along x and sqrt(5.991) along y.
+  const auto pts = ConfidenceEllipse({1, 1}, 4, 0, 1, 4);
+  double max_x = 0, max_y = 0;
+  for (const auto& p : pts) {
+    max_x = std::max(max_x, std::abs(p.x() - 1));
+    max_y = std::max(max_y, std::abs(p.y() - 1));
+  }
+  EXPECT_NEAR(max_x, 2 * std::sqrt(5.991), 1e-9);
+  EXPECT_NEAR(max_y, std::sqrt(5.991), 1e-9);
+}
+
+TEST(HtmlReport, IsSelfContained) {
+  ReportInput in;
+  in.info.name = "t<1>";
+  in.truth = {{0, "ff1", Vec3(0, 0, 0)}, {1, "ff1", Vec3(1, 0, 0)}};
+  in.info.nodes.push_back({.id = "ff1", .kind = NodeKind::kAgent});
+  ReportRun run;
+  run.pipeline = "pdr";
+  run.estimates = {{0, "ff1", Vec3(0, 0, 0), 1, 0, 1}};
+  run.metrics = Evaluate(in.info, in.truth, run.estimates);
+  in.runs.push_back(run);
+  const std::string html = BuildHtmlReport(in);
+  EXPECT_NE(html.find("t&lt;1&gt;"), std::string::npos);      // escaped
+  EXPECT_NE(html.find("new Chart("), std::string::npos);
+  EXPECT_NE(html.find("Chart.js v4"), std::string::npos);      // library embedded
+  EXPECT_EQ(html.find("src=\"http"), std::string::npos);       // nothing fetched
+  EXPECT_EQ(html.find("https://cdn"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace trailmark

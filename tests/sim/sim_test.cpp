@@ -1,0 +1,165 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "trailmark/sim/pdr_error_model.h"
+#include "trailmark/sim/rssi_channel.h"
+#include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/walker.h"
+
+namespace trailmark {
+namespace {
+
+TEST(Walker, RealisticStepsAndSpeedAndStops) {
+  Route route{{{0, 0}, {10, 0}, {10, 10}}, {{5.0, 3.0}}};
+  Random rng(1);
+  const Walk walk = WalkRoute(route, {}, 0.0, rng);
+  double length = 0;
+  for (const auto& s : walk.steps) {
+    const double l = (s.to - s.from).norm();
+    length += l;
+    EXPECT_LT(l, 1.0);
+    EXPECT_GT(s.t1, s.t0);
+  }
+  EXPECT_NEAR(length, 20.0, 0.5);  // chords cut the corner slightly
+  ASSERT_EQ(walk.stops.size(), 1u);
+  EXPECT_NEAR(walk.stops[0].t_go - walk.stops[0].t_stop, 3.0, 1e-9);
+  // Duration = distance / speed + stop.
+  EXPECT_NEAR(walk.truth.back().t, 20.0 / 1.2 + 3.0, 0.2);
+  EXPECT_NEAR((walk.truth.back().position - Vec2(10, 10)).norm(), 0.0, 0.15);
+}
+
+TEST(Walker, WallFollowingGoesRoundARoomAndBack) {
+  // 10 x 6 room; right-hand search from the middle of the bottom wall heading east.
+  const FloorPlan room({{{0, 0}, {10, 0}}, {{10, 0}, {10, 6}}, {{10, 6}, {0, 6}}, {{0, 6}, {0, 0}}},
+                       {}, {});
+  for (Hand hand : {Hand::kLeft, Hand::kRight}) {
+    const Vec2 start = hand == Hand::kRight ? Vec2(5, 0.6) : Vec2(5, 5.4);
+    const Route r = FollowWall(room, start, 0.0, hand, {.max_length_m = 60});
+    bool back_near_start = false;
+    double walked = 0;
+    for (std::size_t i = 1; i < r.waypoints.size(); ++i) {
+      walked += (r.waypoints[i] - r.waypoints[i - 1]).norm();
+      // Never through a wall, always about an arm's length from the nearest wall.
+      ASSERT_FALSE(room.Crosses(r.waypoints[i - 1], r.waypoints[i]));
+      if (walked > 20 && (r.waypoints[i] - start).norm() < 0.5) back_near_start = true;
+    }
+    EXPECT_TRUE(back_near_start) << (hand == Hand::kLeft ? "left" : "right");
+  }
+}
+
+TEST(PdrErrorModel, ErrorFreeIsExactAndDriftRotates) {
+  PdrErrorOptions none{.heading_random_walk_rad = 0, .heading_drift_sigma_rad_per_s = 0,
+                       .turn_scale_error_sigma = 0, .scale_error_sigma = 0, .step_noise_m = 0};
+  PdrErrorModel exact(none, Random(1));
+  EXPECT_TRUE(exact.Apply({0.7, 0.1}, 0.5).isApprox(Vec2(0.7, 0.1), 1e-15));
+  PdrErrorOptions drift = none;
+  drift.heading_drift_rad_per_s = 0.1;
+  PdrErrorModel m(drift, Random(1));
+  const Vec2 d = m.Apply({1, 0}, 1.0);  // 0.1 rad of heading error after 1 s
+  EXPECT_NEAR(std::atan2(d.y(), d.x()), 0.1, 1e-12);
+}
+
+TEST(RssiChannel, MeanFollowsLogDistanceWallsAndBody) {
+  RssiChannelOptions o;
+  const FloorPlan wall({{{5, -10}, {5, 10}}}, {}, {});
+  RssiChannel free(o, nullptr, {}, Random(1));
+  EXPECT_NEAR(free.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt),
+              o.alpha_dbm - 10 * o.path_loss_exponent, 1e-12);
+  RssiChannel walled(o, &wall, {}, Random(1));
+  EXPECT_NEAR(walled.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt),
+              o.alpha_dbm - 10 * o.path_loss_exponent - o.wall_loss_db, 1e-12);
+  // The other node straight behind the wearer: full body loss; in front: none.
+  EXPECT_NEAR(free.MeanRssi({0, 0}, {10, 0}, std::numbers::pi, std::nullopt),
+              o.alpha_dbm - 10 * o.path_loss_exponent - o.body_loss_db, 1e-9);
+  EXPECT_NEAR(free.MeanRssi({0, 0}, {10, 0}, 0.0, std::nullopt),
+              o.alpha_dbm - 10 * o.path_loss_exponent, 1e-9);
+  // A fire zone across the link adds its loss per metre inside.
+  RssiChannel fire(o, nullptr, {{"fire", {{4, -1}, {6, -1}, {6, 1}, {4, 1}}, 3.0, 0.0}},
+                   Random(1));
+  EXPECT_NEAR(fire.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt),
+              o.alpha_dbm - 10 * o.path_loss_exponent - 2.0 * 3.0, 1e-9);
+}
+
+TEST(RssiChannel, SamplesAreUnbiasedWithTheStatedSpread) {
+  RssiChannelOptions o;
+  o.sensitivity_dbm = -200;
+  RssiChannel ch(o, nullptr, {}, Random(5));
+  double sum = 0, sum2 = 0;
+  const int n = 20000;
+  for (int i = 0; i < n; ++i) {
+    // Move the link so the slow shadowing decorrelates.
+    const Vec2 rx(10 + 0.0, 50.0 * i);
+    const double r = *ch.Sample("a", rx, "b", rx + Vec2(10, 0), std::nullopt, std::nullopt);
+    sum += r;
+    sum2 += r * r;
+  }
+  const double mean = sum / n;
+  const double sd = std::sqrt(sum2 / n - mean * mean);
+  EXPECT_NEAR(mean, o.alpha_dbm - 10 * o.path_loss_exponent, 0.15);
+  EXPECT_NEAR(sd, o.shadowing_sigma_db, 0.15);  // rounding to 1 dB adds ~0.01 dB^2
+}
+
+TEST(Scenario, OfficeLoopIsDeterministicAndLikeThePaper) {
+  const SimulatedMission a = SimulateScenario("office-loop", 3);
+  const SimulatedMission b = SimulateScenario("office-loop", 3);
+  const SimulatedMission c = SimulateScenario("office-loop", 4);
+  ASSERT_EQ(a.data.steps.size(), b.data.steps.size());
+  for (std::size_t i = 0; i < a.data.steps.size(); ++i) {
+    ASSERT_EQ(a.data.steps[i].delta_n, b.data.steps[i].delta_n);
+  }
+  ASSERT_EQ(a.data.rssi.size(), b.data.rssi.size());
+  EXPECT_NE(a.data.steps[10].delta_n, c.data.steps[10].delta_n);
+
+  // 400 m walked; crumbs dropped on the first lap only (paper: six).
+  double distance = 0;
+  Vec2 prev = Vec2::Zero();
+  bool first = true;
+  int crumbs = 0, crumbs_lap1 = 0;
+  for (const auto& t : a.data.truth) {
+    if (t.id != "ff1") continue;
+    if (!first) distance += (t.position_n.head<2>() - prev).norm();
+    prev = t.position_n.head<2>();
+    first = false;
+  }
+  for (const auto& e : a.data.events) {
+    if (e.event == "drop") {
+      ++crumbs;
+      crumbs_lap1 += e.t < a.data.truth.back().t / 4 + 5;
+    }
+  }
+  EXPECT_NEAR(distance, 400.0, 2.0);
+  EXPECT_GE(crumbs, 4);
+  EXPECT_LE(crumbs, 8);
+  // The chain is laid on the first lap; a later lap drops one only where shadowing makes
+  // every link weak at once.
+  EXPECT_GE(crumbs_lap1, crumbs - 1);
+
+  // The truth path never crosses a wall; rows are in time order.
+  prev = Vec2::Zero();
+  double t_prev = -1;
+  for (const auto& t : a.data.truth) {
+    EXPECT_GE(t.t, t_prev);
+    t_prev = t.t;
+    if (t.id != "ff1") continue;
+    EXPECT_FALSE(a.plan.Crosses(prev, t.position_n.head<2>()));
+    prev = t.position_n.head<2>();
+  }
+  // Encounters: passing a crumb gives RSSI above -40 dBm only nearby (paper Fig. 7).
+  int strong = 0;
+  for (const auto& p : a.data.rssi) strong += p.rssi_dbm > -40 && p.rx == "ff1";
+  EXPECT_GT(strong, 0);
+}
+
+TEST(Scenario, UnknownNameListsKnownOnes) {
+  try {
+    SimulateScenario("mars", 1);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("office-loop"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace trailmark
