@@ -35,5 +35,23 @@ TEST(HtmlReport, IsSelfContained) {
   EXPECT_EQ(html.find("https://cdn"), std::string::npos);
 }
 
+TEST(HtmlReport, LineBreaksAreNullPointsNotNullEntries) {
+  // Chart.js crashes on a bare null in object-parsed scatter data (seen in a browser).
+  ReportInput in;
+  in.plan = FloorPlan({{{0, 0}, {1, 0}}, {{0, 1}, {1, 1}}}, {}, {});
+  in.info.nodes.push_back({.id = "c1", .kind = NodeKind::kCrumb});
+  ReportRun run;
+  run.pipeline = "x";
+  run.estimates = {{0, "c1", Vec3(0, 0, 0), 1, 0, 1}};
+  in.runs.push_back(run);
+  const std::string html = BuildHtmlReport(in);
+  const auto data_at = html.find("const D = ");
+  ASSERT_NE(data_at, std::string::npos);
+  const std::string data = html.substr(data_at);  // our data, not the embedded library
+  EXPECT_EQ(data.find(",null"), std::string::npos);
+  EXPECT_EQ(data.find("[null"), std::string::npos);
+  EXPECT_NE(data.find(R"({"x":null,"y":null})"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace trailmark

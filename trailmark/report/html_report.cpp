@@ -22,6 +22,8 @@ const char* kPalette[] = {"#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e",
 double Round3(double v) { return std::round(v * 1000.0) / 1000.0; }
 
 json Point(const Vec2& p) { return {{"x", Round3(p.x())}, {"y", Round3(p.y())}}; }
+// A break in a line (Chart.js skips points whose coordinates are null).
+json Gap() { return {{"x", nullptr}, {"y", nullptr}}; }
 
 template <class T, class F>
 json Decimated(const std::vector<T>& rows, std::size_t max_points, F&& point) {
@@ -75,7 +77,7 @@ std::string BuildHtmlReport(const ReportInput& in) {
     for (const auto& w : in.plan->solid_walls()) {
       pts.push_back(Point(w.a));
       pts.push_back(Point(w.b));
-      pts.push_back(nullptr);
+      pts.push_back(Gap());
       box.Extend(w.a);
       box.Extend(w.b);
     }
@@ -124,6 +126,7 @@ std::string BuildHtmlReport(const ReportInput& in) {
     for (const auto& e : run.estimates) {
       if (by_id[e.id].empty()) order.push_back(e.id);
       by_id[e.id].push_back(e);
+      box.Extend(e.position_n.head<2>());  // show estimates that stray outside the building
     }
     json static_est = json::array();
     json ellipses = json::array();
@@ -139,7 +142,7 @@ std::string BuildHtmlReport(const ReportInput& in) {
         for (const auto& p : ConfidenceEllipse(last.position_n.head<2>(), last.sxx, last.sxy, last.syy)) {
           ellipses.push_back(Point(p));
         }
-        ellipses.push_back(nullptr);
+        ellipses.push_back(Gap());
       } else if (kind_of(id) != NodeKind::kBase) {
         const Estimate& last = rows.back();
         json p = Point(last.position_n.head<2>());
@@ -148,7 +151,7 @@ std::string BuildHtmlReport(const ReportInput& in) {
         for (const auto& q : ConfidenceEllipse(last.position_n.head<2>(), last.sxx, last.sxy, last.syy)) {
           ellipses.push_back(Point(q));
         }
-        ellipses.push_back(nullptr);
+        ellipses.push_back(Gap());
       }
     }
     if (!static_est.empty()) {
