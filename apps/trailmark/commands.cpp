@@ -141,6 +141,44 @@ void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows) {
   }
 }
 
+namespace {
+
+template <class Row>
+void ValidateStream(const MissionDirectory& mission, double (*time)(const Row&)) {
+  if (!mission.HasStream<Row>()) return;
+  auto reader = mission.OpenStream<Row>();
+  Row row;
+  double first = 0, last = 0;
+  while (reader.Next(row)) {
+    if (reader.rows() == 1) first = time(row);
+    last = time(row);
+  }
+  fmt::print("{:<14} {:>10} rows  t {:.3f} .. {:.3f}\n", StreamFileName<Row>(), reader.rows(),
+             first, last);
+}
+
+}  // namespace
+
+void Validate(const fs::path& mission_dir) {
+  const MissionDirectory mission(mission_dir);
+  fmt::print("mission.json   {} nodes, {} crumbs dropped in events.csv\n",
+             mission.info().nodes.size(), mission.dropped_crumbs().size());
+  ValidateStream<ImuSample>(mission, [](const ImuSample& r) { return r.t; });
+  ValidateStream<Step>(mission, [](const Step& r) { return r.t1; });
+  ValidateStream<RssiPacket>(mission, [](const RssiPacket& r) { return r.t; });
+  ValidateStream<RangeMeasurement>(mission, [](const RangeMeasurement& r) { return r.t; });
+  ValidateStream<BearingMeasurement>(mission, [](const BearingMeasurement& r) { return r.t; });
+  ValidateStream<MissionEvent>(mission, [](const MissionEvent& r) { return r.t; });
+  ValidateStream<TruthSample>(mission, [](const TruthSample& r) { return r.t; });
+  if (const auto plan = mission.LoadFloorPlan()) {
+    fmt::print("{:<14} {} walls, {} doors, {} rooms\n", *mission.info().floorplan,
+               plan->walls().size(), plan->doors().size(), plan->rooms().size());
+  }
+  fmt::print("valid; runnable pipelines:");
+  for (const auto& name : RunnablePipelines(mission)) fmt::print(" {}", name);
+  fmt::print("\n");
+}
+
 int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
   const fs::path mission_dir = out / "mission";
   Simulate(scenario, seed, mission_dir);

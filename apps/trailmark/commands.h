@@ -23,6 +23,8 @@ void Report(const std::vector<std::filesystem::path>& run_dirs,
 /// The main job: simulate the default mission, run every pipeline on it, print the summary
 /// table and write the HTML report.
 int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
+/// Reads every file of a mission with all checks; prints rows and time span per stream.
+void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows);

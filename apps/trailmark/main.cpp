@@ -3,7 +3,7 @@
 //   trailmark run --pipeline NAME MISSION --out DIR
 //   trailmark eval MISSION ESTIMATES.csv
 //   trailmark report RUN_DIR... --out report.html
-//   trailmark pipelines | scenarios | demo | bench
+//   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
 #include <fmt/format.h>
 
@@ -42,6 +42,9 @@ int main(int argc, char** argv) {
   run->add_option("--option", run_options, "pipeline option key=value (repeatable)");
 
   app.add_subcommand("pipelines", "list pipelines and the files each needs");
+
+  auto* validate = app.add_subcommand("validate", "check every file of a mission (all reader checks)");
+  validate->add_option("mission", mission, "mission directory")->required();
 
   std::string estimates, metrics_out;
   auto* eval = app.add_subcommand("eval", "score estimates against the mission's truth");
@@ -93,6 +96,8 @@ int main(int argc, char** argv) {
         fmt::print("{:<14} {}\n{:<14} needs: mission.json, {}{}\n", p->name(), p->description(),
                    "", req, opt.empty() ? "" : "; uses if present: " + opt);
       }
+    } else if (*validate) {
+      cli::Validate(mission);
     } else if (*eval) {
       const fs::path m = metrics_out.empty() ? fs::path(estimates).parent_path() / "metrics.json"
                                              : fs::path(metrics_out);

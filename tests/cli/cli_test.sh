@@ -8,7 +8,7 @@ trap 'rm -rf "$dir"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
 
 "$TM" --help | grep -q simulate || fail "--help"
-for c in simulate run eval report pipelines demo bench scenarios; do
+for c in simulate run eval report pipelines demo bench scenarios validate; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
@@ -16,6 +16,7 @@ done
 cmp "$dir/m/steps.csv" "$dir/m2/steps.csv" || fail "not deterministic per seed"
 cmp "$dir/m/rssi.csv" "$dir/m2/rssi.csv" || fail "not deterministic per seed"
 "$TM" pipelines | grep -q "^pdr" || fail pipelines
+"$TM" validate "$dir/m" | grep -q "runnable pipelines: pdr" || fail validate
 "$TM" run --pipeline pdr "$dir/m" --out "$dir/run" | grep -q estimates || fail run
 head -1 "$dir/run/estimates.csv" | grep -q "^t,id,x,y,z,sxx,sxy,syy$" || fail "estimates header"
 "$TM" eval "$dir/m" "$dir/run/estimates.csv" | grep -q "^ff1" || fail eval
@@ -35,6 +36,10 @@ set +e
 set -e
 [ $rc -eq 2 ] || fail "bad steps exit code $rc"
 grep -q "steps.csv:3: column 'dx': 'abc' is not a finite number" "$dir/err" || { cat "$dir/err"; fail "bad steps message"; }
+set +e
+"$TM" validate "$dir/m" 2> "$dir/err"; rc=$?
+set -e
+[ $rc -eq 2 ] && grep -q "steps.csv:3:" "$dir/err" || fail "validate bad steps"
 rm "$dir/m/steps.csv"
 set +e
 "$TM" run --pipeline pdr "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
