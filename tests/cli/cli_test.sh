@@ -6,6 +6,8 @@ TM="$1"
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
+# Runs a command that must fail; leaves its exit code in $rc and its stderr in $dir/err.
+run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
 "$TM" --help | grep -q simulate || fail "--help"
 for c in simulate run eval report pipelines demo bench scenarios validate; do
@@ -26,28 +28,18 @@ grep -q '"mean_pct_of_distance"' "$dir/run/metrics.json" || fail "metrics keys"
 grep -q "new Chart" "$dir/r.html" || fail "report content"
 
 # Bad input: clear message naming file and line, exit code 2.
-set +e
-"$TM" run --pipeline nope "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
-set -e
+run_failing "$TM" run --pipeline nope "$dir/m" --out "$dir/x"
 [ $rc -ne 0 ] && grep -q "unknown pipeline 'nope'" "$dir/err" || fail "unknown pipeline"
 printf 't0,t1,agent,dx,dy\n0,1,ff1,1,0\n0.5,2,ff1,abc,0\n' > "$dir/m/steps.csv"
-set +e
-"$TM" run --pipeline pdr "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
-set -e
+run_failing "$TM" run --pipeline pdr "$dir/m" --out "$dir/x"
 [ $rc -eq 2 ] || fail "bad steps exit code $rc"
 grep -q "steps.csv:3: column 'dx': 'abc' is not a finite number" "$dir/err" || { cat "$dir/err"; fail "bad steps message"; }
-set +e
-"$TM" validate "$dir/m" 2> "$dir/err"; rc=$?
-set -e
+run_failing "$TM" validate "$dir/m"
 [ $rc -eq 2 ] && grep -q "steps.csv:3:" "$dir/err" || fail "validate bad steps"
 rm "$dir/m/steps.csv"
-set +e
-"$TM" run --pipeline pdr "$dir/m" --out "$dir/x" 2> "$dir/err"; rc=$?
-set -e
+run_failing "$TM" run --pipeline pdr "$dir/m" --out "$dir/x"
 [ $rc -eq 2 ] && grep -q "steps.csv: missing" "$dir/err" || fail "missing steps"
 echo '{"nodes": [' > "$dir/m/mission.json"
-set +e
-"$TM" eval "$dir/m" "$dir/run/estimates.csv" 2> "$dir/err"; rc=$?
-set -e
+run_failing "$TM" eval "$dir/m" "$dir/run/estimates.csv"
 [ $rc -eq 2 ] && grep -q "mission.json:.*invalid JSON" "$dir/err" || fail "bad mission.json"
 echo "cli: 1 passed, 0 failed"
