@@ -4,6 +4,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline.h"
 
@@ -13,6 +14,7 @@ const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
   static const auto* pipelines = [] {
     auto* v = new std::vector<std::unique_ptr<Pipeline>>();
     v->push_back(std::make_unique<PdrPipeline>());
+    v->push_back(std::make_unique<BreadcrumbPipeline>());
     return v;
   }();
   return *pipelines;

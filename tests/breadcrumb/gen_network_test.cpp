@@ -1,0 +1,286 @@
+// The incremental GEN (breadcrumb paper sec. IV) against the batch references: BLUE from the
+// incidence matrix (eqs. (1)-(5)) on linear graphs, and dense Gauss-Newton with ranges.
+
+#include "trailmark/breadcrumb/gen_network.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+
+#include "trailmark/breadcrumb/batch_reference.h"
+#include "trailmark/core/random.h"
+
+namespace trailmark::breadcrumb {
+namespace {
+
+// Negligible regularization so that the incremental result can be compared at 1e-9.
+GenOptions ExactOptions() {
+  GenOptions o;
+  o.regularization_sigma_m = 1e9;
+  return o;
+}
+
+Mat2 RandomCov(Random& rng) {
+  Eigen::Matrix2d A;
+  A << rng.Uniform(0.2, 1.0), rng.Uniform(-0.3, 0.3), rng.Uniform(-0.3, 0.3), rng.Uniform(0.2, 1.0);
+  return A * A.transpose() + Mat2::Identity() * 0.05;
+}
+
+TEST(GenNetwork, PaperFigure4ExampleEqualsBlue) {
+  // Fig. 4: a base (anchor at the origin) and three breadcrumbs, five relative measurements.
+  GenNetwork gen(ExactOptions());
+  BatchProblem p;
+  p.num_nodes = 3;
+  Random rng(4);
+  const Vec2 truth[3] = {{2, 1}, {4, -1}, {5, 2}};
+  auto cov = [&] { return RandomCov(rng); };
+  struct E { int i, j; };
+  const E edges[] = {{0, -1}, {1, 0}, {2, 1}, {2, 0}, {1, -1}};
+  for (int k = 0; k < 3; ++k) gen.AddNode(Vec2::Zero());
+  for (const auto& e : edges) {
+    const Mat2 P = cov();
+    const Vec2 xj = e.j >= 0 ? truth[e.j] : Vec2::Zero();
+    const Vec2 zeta = truth[e.i] - xj + Vec2(rng.Normal(0, 0.3), rng.Normal(0, 0.3));
+    if (e.j >= 0) gen.AddRelative(e.i, e.j, zeta, P);
+    else gen.AddRelativeToAnchor(e.i, Vec2::Zero(), zeta, P);
+    p.relative.push_back({e.i, e.j, Vec2::Zero(), zeta, P});
+  }
+  ASSERT_TRUE(gen.Solve());
+  const BatchSolution blue = SolveBlue(p);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LT((gen.Estimate(i) - blue.Position(i)).norm(), 1e-9) << i;
+    EXPECT_LT((gen.Covariance(i) - blue.Covariance(i)).norm(), 1e-9) << i;
+  }
+  // Sigma_ij through the joint covariance too.
+  const Eigen::Matrix4d joint = gen.JointCovariance(0, 2);
+  EXPECT_LT((joint.block<2, 2>(0, 2) - blue.sigma.block<2, 2>(0, 4)).norm(), 1e-9);
+}
+
+// A mobile node walking among breadcrumbs: AddNode/AddMeasurement/DeleteNode (IV-E) must equal
+// BLUE over the full extended graph (nothing marginalized), restricted to the kept nodes.
+TEST(GenNetwork, MarginalizationEqualsFullBlueOnLinearGraph) {
+  for (std::uint64_t seed = 1; seed <= 5; ++seed) {
+    Random rng(seed);
+    GenNetwork gen(ExactOptions());
+    BatchProblem p;
+    const int crumbs = 6;
+    std::vector<Vec2> crumb_truth;
+    for (int c = 0; c < crumbs; ++c) {
+      crumb_truth.emplace_back(rng.Uniform(-10, 10), rng.Uniform(-10, 10));
+      gen.AddNode(Vec2::Zero());
+    }
+    p.num_nodes = crumbs;
+    // Anchor two crumbs loosely so that the problem is observable.
+    for (int c : {0, 3}) {
+      const Mat2 P = RandomCov(rng);
+      gen.AddPrior(c, crumb_truth[c], P);
+      p.relative.push_back({c, -1, Vec2::Zero(), crumb_truth[c], P});
+    }
+    Vec2 pos(0, 0);
+    NodeIndex state = gen.AddNode(Vec2::Zero());
+    int batch_state = p.num_nodes++;
+    gen.AddPrior(state, pos, Mat2::Identity() * 0.01);
+    p.relative.push_back({batch_state, -1, Vec2::Zero(), pos, Mat2::Identity() * 0.01});
+    for (int k = 0; k < 40; ++k) {
+      const Vec2 step(rng.Normal(0.5, 0.3), rng.Normal(0.0, 0.5));
+      pos += step;
+      const Mat2 Q = RandomCov(rng) * 0.1;
+      const NodeIndex next = gen.AddNode(Vec2::Zero());  // AddNode, eq. (13)
+      gen.AddRelative(next, state, step, Q);             // eq. (11)
+      gen.DeleteNode(state);                             // eqs. (14)-(17)
+      state = next;
+      const int next_batch = p.num_nodes++;
+      p.relative.push_back({next_batch, batch_state, Vec2::Zero(), step, Q});
+      batch_state = next_batch;
+      // A relative observation of a random crumb.
+      const int c = static_cast<int>(rng.Uniform(0, crumbs - 1e-9));
+      const Mat2 R = RandomCov(rng);
+      const Vec2 zeta = pos - crumb_truth[c] + Vec2(rng.Normal(0, 0.5), rng.Normal(0, 0.5));
+      gen.AddRelative(state, c, zeta, R);
+      p.relative.push_back({batch_state, c, Vec2::Zero(), zeta, R});
+    }
+    ASSERT_TRUE(gen.Solve());
+    EXPECT_EQ(gen.active_nodes(), crumbs + 1);
+    const BatchSolution blue = SolveBlue(p);
+    for (int c = 0; c < crumbs; ++c) {
+      EXPECT_LT((gen.Estimate(c) - blue.Position(c)).norm(), 1e-9) << "seed " << seed;
+      EXPECT_LT((gen.Covariance(c) - blue.Covariance(c)).norm(), 1e-9) << "seed " << seed;
+    }
+    EXPECT_LT((gen.Estimate(state) - blue.Position(batch_state)).norm(), 1e-9);
+    EXPECT_LT((gen.Covariance(state) - blue.Covariance(batch_state)).norm(), 1e-9);
+  }
+}
+
+// With ranges, the incremental estimator linearizes each edge once (AddMeasurement+, eqs.
+// (18)-(19)) while the batch re-linearizes everything: equal within a stated tolerance when the
+// linearization points are good (here: PDR-quality predictions), and persistent edges are
+// re-linearized exactly.
+TEST(GenNetwork, RangesCloseToBatchNonlinear) {
+  Random rng(11);
+  GenNetwork gen;
+  BatchProblem p;
+  const std::vector<Vec2> beacons = {{0, 8}, {12, -4}, {-6, -6}, {15, 10}};
+  p.num_nodes = 4;
+  for (int b = 0; b < 4; ++b) {
+    const Vec2 start = beacons[b] + Vec2(rng.Normal(0, 1), rng.Normal(0, 1));
+    const Vec2 prior = beacons[b] + Vec2(rng.Normal(0, 1), rng.Normal(0, 1));
+    const NodeIndex i = gen.AddNode(start);
+    gen.AddPrior(i, prior, Mat2::Identity() * 4.0);
+    p.relative.push_back({b, -1, Vec2::Zero(), prior, Mat2::Identity() * 4.0});
+  }
+  // A persistent (re-linearized) edge between two beacons.
+  ScalarModel range;
+  const int edge = gen.AddPersistent(0, 1, range);
+  for (int k = 0; k < 5; ++k) {
+    const double z = (beacons[0] - beacons[1]).norm() + rng.Normal(0, 0.1);
+    gen.AccumulatePersistent(edge, z, 0.01);
+    p.scalar.push_back({0, 1, Vec2::Zero(), Vec2::Zero(), z, 0.01, range});
+  }
+  Vec2 pos(1, 1);
+  NodeIndex state = gen.AddNode(pos);
+  gen.AddPrior(state, pos, Mat2::Identity() * 0.01);
+  int bs = p.num_nodes++;
+  p.relative.push_back({bs, -1, Vec2::Zero(), pos, Mat2::Identity() * 0.01});
+  for (int k = 0; k < 60; ++k) {
+    const Vec2 step(0.3 * std::cos(k * 0.1), 0.3 * std::sin(k * 0.1));
+    pos += step;
+    const Vec2 meas = step + Vec2(rng.Normal(0, 0.02), rng.Normal(0, 0.02));
+    const Mat2 Q = Mat2::Identity() * 4e-4;
+    gen.Solve();
+    const NodeIndex next = gen.AddNode(gen.Estimate(state) + meas);
+    gen.AddRelative(next, state, meas, Q);
+    gen.DeleteNode(state);
+    state = next;
+    const int nb = p.num_nodes++;
+    p.relative.push_back({nb, bs, Vec2::Zero(), meas, Q});
+    bs = nb;
+    const int b = k % 4;
+    const double z = (pos - beacons[b]).norm() + rng.Normal(0, 0.2);
+    gen.AddScalar(state, b, z, 0.04, range);
+    p.scalar.push_back({bs, b, Vec2::Zero(), Vec2::Zero(), z, 0.04, range});
+  }
+  ASSERT_TRUE(gen.Solve());
+  Eigen::VectorXd init = Eigen::VectorXd::Zero(2 * p.num_nodes);
+  for (int b = 0; b < 4; ++b) init.segment<2>(2 * b) = beacons[b];
+  Vec2 walk(1, 1);
+  for (int k = 4; k < p.num_nodes; ++k) {
+    init.segment<2>(2 * k) = walk;
+    if (k + 1 < p.num_nodes) walk += Vec2(0.3 * std::cos((k - 4) * 0.1), 0.3 * std::sin((k - 4) * 0.1));
+  }
+  const BatchSolution nls = SolveNonlinear(p, init);
+  ASSERT_TRUE(nls.converged);
+  // Stated tolerance: the beacons start 1-2 m off, so their first range edges are linearized
+  // at poor points; the incremental estimate must stay within half a standard deviation of the
+  // batch optimum, and its covariance trace within 30 % of the batch one.
+  for (int b = 0; b < 4; ++b) {
+    const double sigma = std::sqrt(nls.Covariance(b).trace() / 2);
+    EXPECT_LT((gen.Estimate(b) - nls.Position(b)).norm(), 0.5 * sigma) << b;
+    EXPECT_NEAR(gen.Covariance(b).trace(), nls.Covariance(b).trace(),
+                0.3 * nls.Covariance(b).trace());
+  }
+  const int last = p.num_nodes - 1;
+  EXPECT_LT((gen.Estimate(state) - nls.Position(last)).norm(),
+            0.5 * std::sqrt(nls.Covariance(last).trace() / 2));
+}
+
+TEST(GenNetwork, DeleteNodeKeepsCovarianceSymmetricPositiveDefinite) {
+  Random rng(3);
+  GenNetwork gen;
+  std::vector<NodeIndex> live;
+  for (int k = 0; k < 8; ++k) {
+    live.push_back(gen.AddNode(Vec2(k, 0)));
+    gen.AddPrior(live.back(), Vec2(k, 0), Mat2::Identity());
+  }
+  for (int round = 0; round < 300; ++round) {
+    const int a = static_cast<int>(rng.Uniform(0, live.size() - 1e-9));
+    const int b = static_cast<int>(rng.Uniform(0, live.size() - 1e-9));
+    if (a != b) gen.AddRelative(live[a], live[b], Vec2(rng.Normal(0, 3), rng.Normal(0, 3)), RandomCov(rng));
+    if (round % 7 == 0) {
+      gen.DeleteNode(live.front());
+      live.erase(live.begin());
+      live.push_back(gen.AddNode(Vec2::Zero()));
+      gen.AddRelative(live.back(), live.front(), Vec2(1, 1), RandomCov(rng));
+    }
+    ASSERT_TRUE(gen.Solve());
+    for (NodeIndex i : live) {
+      const Mat2 S = gen.Covariance(i);
+      ASSERT_TRUE(S.allFinite());
+      ASSERT_NEAR(S(0, 1), S(1, 0), 1e-12);
+      ASSERT_GT(S.determinant(), 0);
+      ASSERT_GT(S(0, 0), 0);
+      ASSERT_TRUE(gen.Estimate(i).allFinite());
+    }
+  }
+  EXPECT_EQ(gen.active_nodes(), 8);
+}
+
+TEST(GenNetwork, RssiModelSlopeMatchesFiniteDifference) {
+  ScalarModel m;
+  m.kind = ScalarModel::Kind::kRssiDb;
+  for (double d : {0.5, 1.0, 3.0, 20.0}) {
+    const double fd = (m.Predict(d + 1e-6) - m.Predict(d - 1e-6)) / 2e-6;
+    EXPECT_NEAR(m.Slope(d), fd, 1e-6);
+  }
+  EXPECT_NEAR(m.Predict(1.0), -40.0, 1e-12);
+  EXPECT_NEAR(m.Predict(10.0), -63.0, 1e-12);
+}
+
+}  // namespace
+}  // namespace trailmark::breadcrumb
+
+namespace trailmark::breadcrumb {
+namespace {
+
+// The general linear edge over three nodes (a PDR displacement rotated by an agent's
+// heading/scale node) with marginalization of the old states equals BLUE over everything.
+TEST(GenNetwork, GeneralLinearEdgesWithMarginalizationEqualBlue) {
+  Random rng(21);
+  GenNetwork gen(ExactOptions());
+  BatchProblem p;
+  const NodeIndex crumb = gen.AddNode(Vec2::Zero());
+  gen.AddPrior(crumb, Vec2(5, 5), Mat2::Identity() * 0.5);
+  p.relative.push_back({0, -1, Vec2::Zero(), Vec2(5, 5), Mat2::Identity() * 0.5});
+  NodeIndex x = gen.AddNode(Vec2::Zero()), th = gen.AddNode(Vec2::Zero());
+  gen.AddPrior(x, Vec2::Zero(), Mat2::Identity() * 0.01);
+  gen.AddPrior(th, Vec2::Zero(), Mat2::Identity() * 0.02);
+  p.relative.push_back({1, -1, Vec2::Zero(), Vec2::Zero(), Mat2::Identity() * 0.01});
+  p.relative.push_back({2, -1, Vec2::Zero(), Vec2::Zero(), Mat2::Identity() * 0.02});
+  int bx = 1, bth = 2;
+  p.num_nodes = 3;
+  for (int k = 0; k < 30; ++k) {
+    Mat2 Jth;
+    Jth << rng.Normal(0, 1), rng.Normal(0, 1), rng.Normal(0, 1), rng.Normal(0, 1);
+    const Vec2 z(rng.Normal(0.5, 0.1), rng.Normal(0, 0.1));
+    const Mat2 Q = RandomCov(rng) * 0.05;
+    const NodeIndex xn = gen.AddNode(Vec2::Zero()), thn = gen.AddNode(Vec2::Zero());
+    gen.AddRelative(thn, th, Vec2::Zero(), Mat2::Identity() * 1e-3);
+    gen.AddLinear({xn, x, th}, {Mat2::Identity(), -Mat2::Identity(), -Jth}, z, Q);
+    gen.DeleteNode(x);
+    gen.DeleteNode(th);
+    x = xn;
+    th = thn;
+    const int nbx = p.num_nodes++, nbth = p.num_nodes++;
+    p.relative.push_back({nbth, bth, Vec2::Zero(), Vec2::Zero(), Mat2::Identity() * 1e-3});
+    p.linear.push_back({{nbx, bx, bth}, {Mat2::Identity(), -Mat2::Identity(), -Jth}, z, Q});
+    bx = nbx;
+    bth = nbth;
+    if (k % 5 == 4) {
+      const Vec2 zeta(rng.Normal(-5, 1), rng.Normal(-5, 1));
+      gen.AddRelative(x, crumb, zeta, Mat2::Identity());
+      p.relative.push_back({bx, 0, Vec2::Zero(), zeta, Mat2::Identity()});
+    }
+  }
+  ASSERT_TRUE(gen.Solve());
+  const BatchSolution blue = SolveBlue(p);
+  const Eigen::VectorXd init = Eigen::VectorXd::Zero(2 * p.num_nodes);
+  const BatchSolution gn = SolveNonlinear(p, init);
+  EXPECT_LT((blue.x - gn.x).norm(), 1e-8);  // the two references agree on a linear problem
+  for (auto [inc, ref] : {std::pair{crumb, 0}, std::pair{x, bx}, std::pair{th, bth}}) {
+    EXPECT_LT((gen.Estimate(inc) - blue.Position(ref)).norm(), 1e-9);
+    EXPECT_LT((gen.Covariance(inc) - blue.Covariance(ref)).norm(), 1e-9);
+  }
+}
+
+}  // namespace
+}  // namespace trailmark::breadcrumb

@@ -1,0 +1,431 @@
+#include "trailmark/breadcrumb/gen_network.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace trailmark::breadcrumb {
+
+namespace {
+constexpr double kLn10 = 2.302585092994046;
+}
+
+double ScalarModel::Predict(double d) const {
+  d = std::max(d, min_distance_m);
+  if (kind == Kind::kRange) return d;
+  return alpha_dbm - 10.0 * path_loss_exponent * std::log10(d);
+}
+
+double ScalarModel::Slope(double d) const {
+  d = std::max(d, min_distance_m);
+  if (kind == Kind::kRange) return 1.0;
+  return -10.0 * path_loss_exponent / (kLn10 * d);
+}
+
+GenNetwork::GenNetwork(GenOptions options) : options_(options) {}
+
+NodeIndex GenNetwork::AddNode(const Vec2& initial_estimate) {
+  NodeIndex i;
+  if (!free_.empty()) {
+    i = free_.back();
+    free_.pop_back();
+  } else {
+    i = static_cast<NodeIndex>(nodes_.size());
+    nodes_.emplace_back();
+    pattern_dirty_ = true;
+  }
+  Node& n = nodes_[i];
+  n = Node{};
+  n.active = true;
+  n.x_hat = initial_estimate;
+  ++active_count_;
+  // A recycled slot keeps its compact index only if the pattern is rebuilt anyway; a new
+  // node always changes the pattern unless it reuses a slot whose blocks get recreated.
+  pattern_dirty_ = true;
+  const double w = 1.0 / (options_.regularization_sigma_m * options_.regularization_sigma_m);
+  n.L_ii = Mat2::Identity() * w;  // eq. (13) plus a negligible prior
+  n.b = w * initial_estimate;
+  dirty_ = true;
+  return i;
+}
+
+Mat2& GenNetwork::OffBlock(NodeIndex i, NodeIndex j) {
+  for (auto& blk : nodes_[i].off) {
+    if (blk.j == j) return blk.L;
+  }
+  nodes_[i].off.push_back({j, Mat2::Zero()});
+  nodes_[j].off.push_back({i, Mat2::Zero()});
+  pattern_dirty_ = true;
+  return nodes_[i].off.back().L;
+}
+
+void GenNetwork::AddPrior(NodeIndex i, const Vec2& mean, const Mat2& cov) {
+  AddRelativeToAnchor(i, Vec2::Zero(), mean, cov);
+}
+
+void GenNetwork::AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const Mat2& cov) {
+  if (!IsActive(i) || !IsActive(j) || i == j) throw std::invalid_argument("AddRelative: bad nodes");
+  const Mat2 W = cov.inverse();  // conductance = 1 / resistance, R_k = P_k
+  // eq. (11)
+  nodes_[i].L_ii += W;
+  nodes_[j].L_ii += W;
+  OffBlock(i, j) -= W;
+  for (auto& blk : nodes_[j].off) {
+    if (blk.j == i) blk.L -= W;  // W symmetric: L_ji = L_ij^T
+  }
+  nodes_[i].b += W * zeta;
+  nodes_[j].b -= W * zeta;
+  dirty_ = true;
+}
+
+void GenNetwork::AddLinear(const std::vector<NodeIndex>& nodes, const std::vector<Mat2>& J,
+                           const Vec2& z, const Mat2& cov) {
+  if (nodes.size() != J.size() || nodes.empty()) throw std::invalid_argument("AddLinear: sizes");
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    if (!IsActive(nodes[a])) throw std::invalid_argument("AddLinear: inactive node");
+    for (std::size_t c = a + 1; c < nodes.size(); ++c) {
+      if (nodes[a] == nodes[c]) throw std::invalid_argument("AddLinear: repeated node");
+    }
+  }
+  const Mat2 W = cov.inverse();
+  for (std::size_t a = 0; a < nodes.size(); ++a) {
+    const Mat2 JtW = J[a].transpose() * W;
+    nodes_[nodes[a]].L_ii += JtW * J[a];
+    nodes_[nodes[a]].b += JtW * z;
+    for (std::size_t c = a + 1; c < nodes.size(); ++c) {
+      const Mat2 block = JtW * J[c];  // L_ac; L_ca = L_ac^T
+      OffBlock(nodes[a], nodes[c]) += block;
+      for (auto& blk : nodes_[nodes[c]].off) {
+        if (blk.j == nodes[a]) blk.L += block.transpose();
+      }
+    }
+  }
+  dirty_ = true;
+}
+
+void GenNetwork::AddRelativeToAnchor(NodeIndex i, const Vec2& anchor, const Vec2& zeta,
+                                     const Mat2& cov) {
+  if (!IsActive(i)) throw std::invalid_argument("AddRelativeToAnchor: bad node");
+  const Mat2 W = cov.inverse();
+  // eq. (12)
+  nodes_[i].L_ii += W;
+  nodes_[i].b += W * (zeta + anchor);
+  dirty_ = true;
+}
+
+void GenNetwork::AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z,
+                                     double variance, const ScalarModel& model,
+                                     const Vec2& offset) {
+  const Vec2 xi = nodes_[i].x_hat;
+  const Vec2 xj = j >= 0 ? nodes_[j].x_hat : anchor;
+  Vec2 diff = xi + offset - xj;
+  double d = diff.norm();
+  const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
+  // h_ij = (x_i - x_j)^T / (|x_i - x_j| + eps_ij), breadcrumb paper after eq. (19)
+  const double slope = model.Slope(d);
+  const Vec2 h = slope * u;  // dh/dx_i; dh/dx_j = -h
+  const double w = 1.0 / variance;
+  const Mat2 W = w * h * h.transpose();
+  // eq. (19): b += H^T P^-1 (z - h(x_hat) + H x_hat)
+  const double hx = h.dot(xi) - (j >= 0 ? h.dot(xj) : 0.0);
+  const double r = z - model.Predict(d) + hx;
+  nodes_[i].L_ii += W;  // eq. (18)
+  nodes_[i].b += w * h * r;
+  if (j >= 0) {
+    nodes_[j].L_ii += W;
+    OffBlock(i, j) -= W;
+    for (auto& blk : nodes_[j].off) {
+      if (blk.j == i) blk.L -= W;
+    }
+    nodes_[j].b -= w * h * r;
+  }
+  dirty_ = true;
+}
+
+void GenNetwork::AddScalar(NodeIndex i, NodeIndex j, double z, double variance,
+                           const ScalarModel& model, const Vec2& offset) {
+  if (!IsActive(i) || !IsActive(j) || i == j || !(variance > 0)) {
+    throw std::invalid_argument("AddScalar: bad nodes or variance");
+  }
+  AddLinearizedScalar(i, j, Vec2::Zero(), z, variance, model, offset);
+}
+
+void GenNetwork::AddScalarToAnchor(NodeIndex i, const Vec2& anchor, double z, double variance,
+                                   const ScalarModel& model, const Vec2& offset) {
+  if (!IsActive(i) || !(variance > 0)) throw std::invalid_argument("AddScalarToAnchor: bad input");
+  AddLinearizedScalar(i, -1, anchor, z, variance, model, offset);
+}
+
+int GenNetwork::AddPersistent(NodeIndex i, NodeIndex j, const ScalarModel& model) {
+  if (!IsActive(i) || !IsActive(j) || i == j) throw std::invalid_argument("AddPersistent: bad nodes");
+  const int id = static_cast<int>(persistent_.size());
+  Persistent e;
+  e.i = i;
+  e.j = j;
+  e.model = model;
+  e.active = true;
+  persistent_.push_back(e);
+  nodes_[i].persistent.push_back(id);
+  nodes_[j].persistent.push_back(id);
+  OffBlock(i, j);  // reserve the pattern
+  return id;
+}
+
+void GenNetwork::AccumulatePersistent(int edge, double z, double variance) {
+  Persistent& e = persistent_.at(edge);
+  if (!e.active || !(variance > 0)) throw std::invalid_argument("AccumulatePersistent: bad edge");
+  e.information += 1.0 / variance;
+  e.weighted_z += z / variance;
+  dirty_ = true;
+}
+
+void GenNetwork::SetPersistentFloor(int edge, double floor_variance) {
+  persistent_.at(edge).floor_variance = std::max(0.0, floor_variance);
+  dirty_ = true;
+}
+
+void GenNetwork::SetPersistentWeight(int edge, double w) {
+  persistent_.at(edge).weight = std::clamp(w, 1e-6, 1.0);
+  dirty_ = true;
+}
+
+double GenNetwork::PersistentResidual(int edge) const {
+  const Persistent& e = persistent_.at(edge);
+  if (!e.active || e.information <= 0) return 0;
+  const double d = (nodes_[e.i].x_hat - nodes_[e.j].x_hat).norm();
+  return (e.Mean() - e.model.Predict(d)) / std::sqrt(e.Variance());
+}
+
+void GenNetwork::FoldPersistent(int edge) {
+  Persistent& e = persistent_[edge];
+  if (!e.active) return;
+  e.active = false;
+  if (e.information > 0) {
+    AddLinearizedScalar(e.i, e.j, Vec2::Zero(), e.Mean(), e.Variance(), e.model, Vec2::Zero());
+  }
+  for (NodeIndex n : {e.i, e.j}) {
+    auto& list = nodes_[n].persistent;
+    list.erase(std::remove(list.begin(), list.end(), edge), list.end());
+  }
+}
+
+void GenNetwork::DeleteNode(NodeIndex k) {
+  if (!IsActive(k)) throw std::invalid_argument("DeleteNode: inactive node");
+  while (!nodes_[k].persistent.empty()) FoldPersistent(nodes_[k].persistent.back());
+  Node& nk = nodes_[k];
+  const Mat2 Lkk_inv = nk.L_ii.inverse();
+  // eq. (17): L = L_pp - L_p1 L_11^-1 L_p1^T,  b = b_p - L_p1 L_11^-1 b_1
+  const std::vector<Block> neighbours = nk.off;
+  for (std::size_t a = 0; a < neighbours.size(); ++a) {
+    const NodeIndex m = neighbours[a].j;
+    const Mat2 Lmk = neighbours[a].L.transpose();  // block (m, k)
+    const Mat2 G = Lmk * Lkk_inv;
+    nodes_[m].b -= G * nk.b;
+    nodes_[m].L_ii -= G * Lmk.transpose();
+    nodes_[m].L_ii = 0.5 * (nodes_[m].L_ii + nodes_[m].L_ii.transpose());
+    for (std::size_t c = a + 1; c < neighbours.size(); ++c) {
+      const NodeIndex n = neighbours[c].j;
+      const Mat2 Lkn = neighbours[c].L;  // block (k, n)
+      const Mat2 fill = G * Lkn;          // block (m, n)
+      OffBlock(m, n) -= fill;
+      for (auto& blk : nodes_[n].off) {
+        if (blk.j == m) blk.L -= fill.transpose();
+      }
+    }
+  }
+  for (const auto& blk : neighbours) {
+    auto& list = nodes_[blk.j].off;
+    list.erase(std::remove_if(list.begin(), list.end(), [k](const Block& x) { return x.j == k; }),
+               list.end());
+  }
+  nodes_[k] = Node{};
+  free_.push_back(k);
+  --active_count_;
+  pattern_dirty_ = true;
+  dirty_ = true;
+}
+
+std::size_t GenNetwork::off_diagonal_blocks() const {
+  std::size_t n = 0;
+  for (const auto& node : nodes_) n += node.off.size();
+  return n / 2;
+}
+
+void GenNetwork::CompactIndices() {
+  order_.clear();
+  for (NodeIndex i = 0; i < static_cast<NodeIndex>(nodes_.size()); ++i) {
+    nodes_[i].compact = -1;
+    if (nodes_[i].active) {
+      nodes_[i].compact = static_cast<int>(order_.size());
+      order_.push_back(i);
+    }
+  }
+}
+
+bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L,
+                           const Eigen::VectorXd& extra_b) {
+  (void)extra_b;
+  const int n = static_cast<int>(order_.size()) * 2;
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(order_.size() * 4 + off_diagonal_blocks() * 4 + extra_L.size());
+  for (NodeIndex slot : order_) {
+    const Node& node = nodes_[slot];
+    const int r = node.compact * 2;
+    triplets.emplace_back(r, r, node.L_ii(0, 0));
+    triplets.emplace_back(r + 1, r, node.L_ii(1, 0));
+    triplets.emplace_back(r + 1, r + 1, node.L_ii(1, 1));
+    for (const auto& blk : node.off) {
+      const int c = nodes_[blk.j].compact * 2;
+      if (c > r) continue;  // lower triangle only (SimplicialLDLT reads the lower part)
+      for (int a = 0; a < 2; ++a) {
+        for (int bb = 0; bb < 2; ++bb) triplets.emplace_back(r + a, c + bb, blk.L(a, bb));
+      }
+    }
+  }
+  triplets.insert(triplets.end(), extra_L.begin(), extra_L.end());
+  matrix_.resize(n, n);
+  matrix_.setFromTriplets(triplets.begin(), triplets.end());
+  if (pattern_dirty_) {
+    solver_.analyzePattern(matrix_);
+    ++analyses_;
+    pattern_dirty_ = false;
+  }
+  solver_.factorize(matrix_);
+  ++factorizations_;
+  factor_valid_ = solver_.info() == Eigen::Success && (solver_.vectorD().array() > 0).all();
+  return factor_valid_;
+}
+
+bool GenNetwork::Solve() {
+  if (!dirty_) return factor_valid_;
+  if (order_.size() != static_cast<std::size_t>(active_count_) || pattern_dirty_) CompactIndices();
+  if (order_.empty()) {
+    dirty_ = false;
+    return true;
+  }
+  const int n = static_cast<int>(order_.size()) * 2;
+  bool have_persistent = false;
+  for (NodeIndex slot : order_) have_persistent = have_persistent || !nodes_[slot].persistent.empty();
+  const int iterations = have_persistent ? std::max(1, options_.max_relinearization_iterations) : 1;
+  for (int it = 0; it < iterations; ++it) {
+    std::vector<Eigen::Triplet<double>> extra;
+    Eigen::VectorXd rhs(n);
+    for (NodeIndex slot : order_) rhs.segment<2>(nodes_[slot].compact * 2) = nodes_[slot].b;
+    if (have_persistent) {
+      for (const auto& e : persistent_) {
+        if (!e.active || e.information <= 0) continue;
+        const Vec2 xi = nodes_[e.i].x_hat, xj = nodes_[e.j].x_hat;
+        const Vec2 diff = xi - xj;
+        const double d = diff.norm();
+        const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
+        const Vec2 h = e.model.Slope(d) * u;
+        const double z = e.Mean();
+        const double w = 1.0 / e.Variance();
+        const double r = z - e.model.Predict(d) + h.dot(xi - xj);  // eq. (19)
+        const Mat2 W = w * h * h.transpose();                      // eq. (18)
+        const int ci = nodes_[e.i].compact * 2, cj = nodes_[e.j].compact * 2;
+        auto add = [&](int r0, int c0, const Mat2& m) {
+          for (int a = 0; a < 2; ++a) {
+            for (int bb = 0; bb < 2; ++bb) {
+              if (r0 + a >= c0 + bb) extra.emplace_back(r0 + a, c0 + bb, m(a, bb));
+            }
+          }
+        };
+        add(ci, ci, W);
+        add(cj, cj, W);
+        if (ci > cj) add(ci, cj, -W); else add(cj, ci, -W);
+        rhs.segment<2>(ci) += w * h * r;
+        rhs.segment<2>(cj) -= w * h * r;
+      }
+    }
+    if (!Factorize(extra, rhs)) return false;
+    const Eigen::VectorXd x = solver_.solve(rhs);
+    if (!x.allFinite()) {
+      factor_valid_ = false;
+      return false;
+    }
+    double change = 0;
+    for (NodeIndex slot : order_) {
+      const Vec2 nx = x.segment<2>(nodes_[slot].compact * 2);
+      change = std::max(change, (nx - nodes_[slot].x_hat).norm());
+      nodes_[slot].x_hat = nx;
+    }
+    if (change < options_.relinearization_tolerance_m) break;
+  }
+  dirty_ = false;
+  return true;
+}
+
+Mat2 GenNetwork::Covariance(NodeIndex i) {
+  if (!IsActive(i)) throw std::invalid_argument("Covariance: inactive node");
+  if (dirty_) Solve();
+  if (!factor_valid_) return Mat2::Identity() * 1e12;
+  const int n = static_cast<int>(order_.size()) * 2;
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, 2);
+  const int c = nodes_[i].compact * 2;
+  E(c, 0) = 1;
+  E(c + 1, 1) = 1;
+  const Eigen::MatrixXd X = solver_.solve(E);
+  Mat2 S = X.block<2, 2>(c, 0);
+  return 0.5 * (S + S.transpose());
+}
+
+Eigen::Matrix4d GenNetwork::JointCovariance(NodeIndex i, NodeIndex j) {
+  if (!IsActive(i) || !IsActive(j)) throw std::invalid_argument("JointCovariance: inactive node");
+  if (dirty_) Solve();
+  if (!factor_valid_) return Eigen::Matrix4d::Identity() * 1e12;
+  const int n = static_cast<int>(order_.size()) * 2;
+  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, 4);
+  const int ci = nodes_[i].compact * 2, cj = nodes_[j].compact * 2;
+  E(ci, 0) = 1;
+  E(ci + 1, 1) = 1;
+  E(cj, 2) = 1;
+  E(cj + 1, 3) = 1;
+  const Eigen::MatrixXd X = solver_.solve(E);
+  Eigen::Matrix4d S;
+  S.block<2, 4>(0, 0) = X.block(ci, 0, 2, 4);
+  S.block<2, 4>(2, 0) = X.block(cj, 0, 2, 4);
+  return 0.5 * (S + S.transpose());
+}
+
+void GenNetwork::DenseSystem(Eigen::MatrixXd* L, Eigen::VectorXd* b,
+                             std::vector<NodeIndex>* order) const {
+  std::vector<NodeIndex> ord;
+  std::vector<int> pos(nodes_.size(), -1);
+  for (NodeIndex i = 0; i < static_cast<NodeIndex>(nodes_.size()); ++i) {
+    if (nodes_[i].active) {
+      pos[i] = static_cast<int>(ord.size());
+      ord.push_back(i);
+    }
+  }
+  const int n = static_cast<int>(ord.size()) * 2;
+  L->setZero(n, n);
+  b->setZero(n);
+  for (NodeIndex i : ord) {
+    L->block<2, 2>(pos[i] * 2, pos[i] * 2) = nodes_[i].L_ii;
+    b->segment<2>(pos[i] * 2) = nodes_[i].b;
+    for (const auto& blk : nodes_[i].off) L->block<2, 2>(pos[i] * 2, pos[blk.j] * 2) = blk.L;
+  }
+  for (const auto& e : persistent_) {
+    if (!e.active || e.information <= 0) continue;
+    const Vec2 xi = nodes_[e.i].x_hat, xj = nodes_[e.j].x_hat;
+    const Vec2 diff = xi - xj;
+    const double d = diff.norm();
+    const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
+    const Vec2 h = e.model.Slope(d) * u;
+    const double w = 1.0 / e.Variance();
+    const double r = e.Mean() - e.model.Predict(d) + h.dot(xi - xj);
+    const Mat2 W = w * h * h.transpose();
+    const int ci = pos[e.i] * 2, cj = pos[e.j] * 2;
+    L->block<2, 2>(ci, ci) += W;
+    L->block<2, 2>(cj, cj) += W;
+    L->block<2, 2>(ci, cj) -= W;
+    L->block<2, 2>(cj, ci) -= W;
+    b->segment<2>(ci) += w * h * r;
+    b->segment<2>(cj) -= w * h * r;
+  }
+  if (order) *order = ord;
+}
+
+}  // namespace trailmark::breadcrumb

@@ -1,0 +1,179 @@
+#pragma once
+/// The generalized electrical network (GEN) of the breadcrumb paper, section IV: the
+/// information form of a relative-measurement graph, kept incrementally.
+///
+///   L x = b                                   eq. (4)-(5):  Sigma = L^-1, x_hat = L^-1 b
+///   L = Kirchhoff matrix (block Laplacian)    eq. (7)-(9)   resistances R_k = P_k
+///   b = injected "currents"                   eq. (10)
+///
+/// Operations (section IV-C, IV-D): AddMeasurement (11), with an anchor (12), AddNode (13),
+/// DeleteNode by marginalization (14)-(17), AddMeasurement+ for non-linear scalar measurements
+/// (18)-(19). Mobile nodes (IV-E) are a chain AddNode -> AddMeasurement -> DeleteNode done by the
+/// caller (breadcrumb/localizer.h).
+///
+/// Beyond the paper (issue 8):
+///  - sparse 2x2-block storage; solving by sparse LDL^T (Eigen, AMD ordering) instead of the
+///    paper's dense inverse; the symbolic analysis is reused while the sparsity pattern is
+///    unchanged (slots of deleted nodes are recycled, so a mobile node replacing its previous
+///    state keeps the pattern);
+///  - marginal covariances Sigma_ii from two solves with the factor, never a full inverse;
+///  - "persistent" scalar edges between nodes that never leave the network (crumb-crumb
+///    ranges): kept as factors and re-linearized at every solve (Gauss-Newton), instead of
+///    being linearized once. They are folded into L (linearized at the current estimate) only
+///    when one of their nodes is deleted.
+///
+/// State: horizontal position (x, y) per node, metres, navigation frame. The paper writes R^3;
+/// floors are separate levels in our missions and z is carried by the PDR, not estimated here.
+/// Not thread-safe.
+
+#include <Eigen/Core>
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark::breadcrumb {
+
+/// Index of a node in the network; slots are recycled after DeleteNode.
+using NodeIndex = int;
+
+/// A scalar measurement model of the distance d between two positions: z = h(d) + noise.
+struct ScalarModel {
+  enum class Kind { kRange, kRssiDb } kind = Kind::kRange;
+  double alpha_dbm = -40.0;  ///< kRssiDb: rssi = alpha - 10 n log10(d)
+  double path_loss_exponent = 2.3;
+  double min_distance_m = 0.3;  ///< linearization guard (eq. (19)'s epsilon_ij in h_ij)
+
+  double Predict(double distance_m) const;
+  /// dh/dd at distance_m.
+  double Slope(double distance_m) const;
+};
+
+struct GenOptions {
+  /// Every new node gets this weak prior around its initial estimate so that L stays positive
+  /// definite even before the node is observed (information 1/sigma^2 = 1e-8 /m^2: negligible).
+  double regularization_sigma_m = 1e4;
+  /// Gauss-Newton iterations over the persistent edges per Solve().
+  int max_relinearization_iterations = 3;
+  double relinearization_tolerance_m = 1e-4;
+};
+
+class GenNetwork {
+ public:
+  explicit GenNetwork(GenOptions options = {});
+
+  /// AddNode, eq. (13): new zero rows/columns, plus the weak regularization prior.
+  NodeIndex AddNode(const Vec2& initial_estimate);
+  /// A Gaussian prior x_i ~ N(mean, cov): an edge to the ground (an anchor at `mean`), eq. (12).
+  void AddPrior(NodeIndex i, const Vec2& mean, const Mat2& cov);
+  /// AddMeasurement, eq. (11): zeta = x_i - x_j + e, e ~ N(0, cov).
+  void AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const Mat2& cov);
+  /// The general linear edge of the information filter (eqs. (18)-(19) with a linear h):
+  ///   z = sum_k J_k x_k + e,  e ~ N(0, cov),
+  /// for any number of distinct nodes (e.g. a PDR displacement rotated and scaled by an agent's
+  /// heading/scale node). AddRelative is the case J = (I, -I).
+  void AddLinear(const std::vector<NodeIndex>& nodes, const std::vector<Mat2>& jacobians,
+                 const Vec2& z, const Mat2& cov);
+  /// Eq. (12): zeta = x_i - anchor + e with a known anchor position.
+  void AddRelativeToAnchor(NodeIndex i, const Vec2& anchor, const Vec2& zeta, const Mat2& cov);
+  /// AddMeasurement+, eqs. (18)-(19): z = h(|x_i - x_j + offset|) + e, e ~ N(0, variance),
+  /// linearized at the current estimate. `offset` is a known displacement (e.g. the PDR
+  /// displacement between the measurement time and the node's state time).
+  void AddScalar(NodeIndex i, NodeIndex j, double z, double variance, const ScalarModel& model,
+                 const Vec2& offset = Vec2::Zero());
+  /// The same with a known point instead of node j.
+  void AddScalarToAnchor(NodeIndex i, const Vec2& anchor, double z, double variance,
+                         const ScalarModel& model, const Vec2& offset = Vec2::Zero());
+  /// A persistent scalar edge between two nodes (re-linearized at each Solve). Repeated
+  /// measurements of the same edge should be accumulated with AccumulatePersistent.
+  int AddPersistent(NodeIndex i, NodeIndex j, const ScalarModel& model);
+  /// Adds one measurement z with variance to persistent edge `edge` (information-weighted mean).
+  /// The edge's variance is floor_variance + 1 / sum(1 / variance): a static link's slow
+  /// shadowing does not average out over packets, only the fast fading does.
+  void AccumulatePersistent(int edge, double z, double variance);
+  void SetPersistentFloor(int edge, double floor_variance);
+  /// Scales the information of a persistent edge by w in (0, 1] (robust re-weighting).
+  void SetPersistentWeight(int edge, double w);
+  /// Normalized residual (z_bar - h(x_hat)) / sigma of a persistent edge at the estimate.
+  double PersistentResidual(int edge) const;
+  /// DeleteNode(+), eqs. (14)-(17): marginalizes node i out (Schur complement).
+  void DeleteNode(NodeIndex i);
+
+  /// Solves L x = b (with Gauss-Newton over persistent edges). Cheap when nothing changed.
+  /// Returns false (and keeps the previous estimate) if L is not positive definite.
+  bool Solve();
+  /// Current estimate (the initial estimate until the first Solve()).
+  const Vec2& Estimate(NodeIndex i) const { return nodes_[i].x_hat; }
+  /// Sets the linearization point of a node before measurements are added (e.g. after a
+  /// delayed initialization). Does not change L or b.
+  void SetEstimate(NodeIndex i, const Vec2& x) { nodes_[i].x_hat = x; }
+  /// Marginal covariance Sigma_ii = (L^-1)_ii (solves with the current factor).
+  Mat2 Covariance(NodeIndex i);
+  /// Joint covariance of two nodes, 4x4.
+  Eigen::Matrix4d JointCovariance(NodeIndex i, NodeIndex j);
+
+  bool IsActive(NodeIndex i) const {
+    return i >= 0 && i < static_cast<int>(nodes_.size()) && nodes_[i].active;
+  }
+  int active_nodes() const { return active_count_; }
+  std::size_t off_diagonal_blocks() const;  ///< counted once per pair
+  std::size_t factorizations() const { return factorizations_; }
+  std::size_t symbolic_analyses() const { return analyses_; }
+  bool dirty() const { return dirty_; }
+
+  /// Dense L and b over the active nodes in slot order (tests, small graphs only); persistent
+  /// edges linearized at the current estimate are included.
+  void DenseSystem(Eigen::MatrixXd* L, Eigen::VectorXd* b, std::vector<NodeIndex>* order) const;
+
+ private:
+  struct Block {
+    NodeIndex j;
+    Mat2 L;
+  };
+  struct Node {
+    bool active = false;
+    Mat2 L_ii = Mat2::Zero();
+    Vec2 b = Vec2::Zero();
+    Vec2 x_hat = Vec2::Zero();
+    std::vector<Block> off;           ///< L_ij, j != i
+    std::vector<int> persistent;      ///< persistent edges touching the node
+    int compact = -1;                 ///< index into the solver's vectors
+  };
+  struct Persistent {
+    NodeIndex i = -1, j = -1;
+    ScalarModel model;
+    double information = 0;  ///< sum 1/var
+    double weighted_z = 0;   ///< sum z/var
+    double floor_variance = 0;
+    double weight = 1.0;
+    bool active = false;
+    double Variance() const { return (floor_variance + 1.0 / information) / weight; }
+    double Mean() const { return weighted_z / information; }
+  };
+
+  Mat2& OffBlock(NodeIndex i, NodeIndex j);  ///< creates when missing (pattern change)
+  void AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z,
+                           double variance, const ScalarModel& model, const Vec2& offset);
+  void FoldPersistent(int edge);
+  bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L, const Eigen::VectorXd& extra_b);
+  void CompactIndices();
+
+  GenOptions options_;
+  std::vector<Node> nodes_;
+  std::vector<NodeIndex> free_;
+  std::vector<Persistent> persistent_;
+  int active_count_ = 0;
+  bool pattern_dirty_ = true;
+  bool dirty_ = true;
+  std::vector<NodeIndex> order_;  ///< compact index -> slot
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
+  Eigen::SparseMatrix<double> matrix_;
+  bool factor_valid_ = false;
+  std::size_t factorizations_ = 0;
+  std::size_t analyses_ = 0;
+};
+
+}  // namespace trailmark::breadcrumb

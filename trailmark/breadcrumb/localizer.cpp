@@ -1,0 +1,673 @@
+#include "trailmark/breadcrumb/localizer.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Dense>
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace trailmark::breadcrumb {
+
+namespace {
+
+Mat2 Diag(const Vec2& v) { return v.asDiagonal(); }
+
+double Huber(double r, double k) {
+  const double a = std::abs(r);
+  return a <= k ? 0.5 * r * r : k * (a - 0.5 * k);
+}
+
+}  // namespace
+
+BreadcrumbLocalizer::BreadcrumbLocalizer(LocalizerOptions options)
+    : options_(options), gen_(options.gen) {}
+
+ScalarModel BreadcrumbLocalizer::RssiModel() const {
+  ScalarModel m;
+  m.kind = ScalarModel::Kind::kRssiDb;
+  m.alpha_dbm = options_.radio.alpha_dbm;
+  m.path_loss_exponent = options_.radio.path_loss_exponent;
+  return m;
+}
+
+double BreadcrumbLocalizer::AgentRssiVariance() const {
+  const double s = options_.agent_rssi_sigma_db > 0
+                       ? options_.agent_rssi_sigma_db
+                       : options_.agent_rssi_sigma_factor * options_.radio.sigma_db;
+  return s * s;
+}
+
+void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
+  if (!options_.calibrate_online || t < next_calibration_) return;
+  if (calibration_pairs_.size() < options_.calibration_min_pairs) return;
+  next_calibration_ = t + options_.calibration_period_s;
+  try {
+    const radio::PathLossFit fit = radio::FitLogDistance(calibration_pairs_, 0.05, 1.0);
+    // Physically plausible indoor fits only (n between free space-ish and heavy clutter).
+    if (fit.model.path_loss_exponent < 1.2 || fit.model.path_loss_exponent > 6.0) return;
+    options_.radio = fit.model;
+    summary_.calibration = fit;
+    ++summary_.calibrations;
+    calibrated_ = true;
+  } catch (const std::invalid_argument&) {
+  }
+}
+
+void BreadcrumbLocalizer::AddKnownNode(const std::string& id, const Vec2& position_n,
+                                       double sigma_m) {
+  StaticNode node;
+  node.id = id;
+  node.known = true;
+  node.index = gen_.AddNode(position_n);
+  const double s = std::max(sigma_m, 1e-3);
+  gen_.AddPrior(node.index, position_n, Mat2::Identity() * s * s);
+  node.cached_cov = Mat2::Identity() * s * s;
+  static_[id] = node;
+  static_order_.push_back(id);
+}
+
+void BreadcrumbLocalizer::AddUnknownNode(const std::string& id) {
+  if (static_.count(id) || agents_.count(id)) return;
+  StaticNode node;
+  node.id = id;
+  static_[id] = node;
+}
+
+void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Vec2>& start,
+                                   double start_sigma_m,
+                                   std::optional<double> start_heading_sigma_rad) {
+  Agent a;
+  a.id = id;
+  const Vec2 x0 = start.value_or(Vec2::Zero());
+  const double s = start ? std::max(start_sigma_m, 1e-3) : options_.unknown_start_sigma_m;
+  a.state = gen_.AddNode(x0);
+  gen_.AddPrior(a.state, x0, Mat2::Identity() * s * s);
+  a.cached_cov = Mat2::Identity() * s * s;
+  if (options_.estimate_heading_scale) {
+    const double sh = std::max(start_heading_sigma_rad.value_or(options_.heading_sigma0_rad), 1e-4);
+    a.theta = gen_.AddNode(Vec2::Zero());
+    gen_.AddPrior(a.theta, Vec2::Zero(),
+                  Vec2(sh * sh, options_.scale_sigma0 * options_.scale_sigma0).asDiagonal());
+  }
+  agents_[id] = std::move(a);
+  ++summary_.agent_states;
+}
+
+BreadcrumbLocalizer::StaticNode* BreadcrumbLocalizer::FindStatic(const std::string& id) {
+  auto it = static_.find(id);
+  return it == static_.end() ? nullptr : &it->second;
+}
+
+BreadcrumbLocalizer::Agent& BreadcrumbLocalizer::StartedAgent(const std::string& id, TimeS t) {
+  auto it = agents_.find(id);
+  if (it == agents_.end()) throw std::invalid_argument("'" + id + "' is not a known agent");
+  Agent& a = it->second;
+  if (!a.started) {
+    a.started = true;
+    a.state_t = t;
+    a.knots.push_back({t, Vec2::Zero(), Vec2::Zero()});
+    a.state_cum = Vec2::Zero();
+    a.state_cum_var = Vec2::Zero();
+  }
+  return a;
+}
+
+Vec2 BreadcrumbLocalizer::Corrected(const Agent& a, const Vec2& raw) const {
+  if (a.theta < 0) return raw;
+  const Vec2 th = gen_.Estimate(a.theta);
+  return (1.0 + th.y()) * (Eigen::Rotation2Dd(th.x()) * raw);
+}
+
+std::optional<Vec2> BreadcrumbLocalizer::HeadingScale(const std::string& id) const {
+  auto it = agents_.find(id);
+  if (it == agents_.end() || it->second.theta < 0) return std::nullopt;
+  return gen_.Estimate(it->second.theta);
+}
+
+Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn) const {
+  const auto& k = a.knots;
+  if (t >= k.back().t) {
+    if (cum_var) *cum_var = k.back().cum_var;
+    if (cum_turn) *cum_turn = k.back().cum_turn;
+    return k.back().cum;
+  }
+  if (t <= k.front().t) {
+    if (cum_var) *cum_var = k.front().cum_var;
+    if (cum_turn) *cum_turn = k.front().cum_turn;
+    return k.front().cum;
+  }
+  auto hi = std::upper_bound(k.begin(), k.end(), t,
+                             [](TimeS v, const Knot& knot) { return v < knot.t; });
+  auto lo = hi - 1;
+  const double span = hi->t - lo->t;
+  const double f = span > 0 ? (t - lo->t) / span : 1.0;
+  if (cum_var) *cum_var = lo->cum_var + f * (hi->cum_var - lo->cum_var);
+  if (cum_turn) *cum_turn = lo->cum_turn + f * (hi->cum_turn - lo->cum_turn);
+  return lo->cum + f * (hi->cum - lo->cum);
+}
+
+void BreadcrumbLocalizer::AddStep(const Step& step) {
+  Agent& a = StartedAgent(step.agent, step.t0);
+  ++summary_.steps;
+  const Vec2 d = step.delta_n.head<2>();
+  const double dt = step.t1 - step.t0;
+  // IV-F: a displacement no firefighter can make is dropped, not trusted.
+  if (!(d.allFinite()) || d.norm() > options_.max_speed_mps * std::max(dt, 0.1)) {
+    ++summary_.steps_rejected;
+    if (summary_.steps_rejected <= 5) {
+      summary_.notes.push_back(fmt::format("step of {} at t={:.3f} rejected: {:.2f} m in {:.3f} s",
+                                           step.agent, step.t1, d.norm(), dt));
+    }
+    AdvanceTo(step.t1);
+    return;
+  }
+  Knot last = a.knots.back();
+  TimeS t0 = std::max(step.t0, last.t);
+  if (t0 > last.t) a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn});  // stationary
+  double turn = 0;
+  if (d.norm() > 0.2) {
+    const double h = std::atan2(d.y(), d.x());
+    if (a.last_heading) turn = std::abs(WrapAngle(h - *a.last_heading));
+    a.last_heading = h;
+  }
+  Vec2 var;
+  if (step.variance_m2) {
+    var = step.variance_m2->head<2>();
+  } else {
+    const double s = options_.default_step_sigma_m + options_.default_step_relative_sigma * d.norm();
+    var = Vec2::Constant(s * s);
+  }
+  const double floor = options_.step_sigma_floor_m + options_.step_sigma_floor_relative * d.norm();
+  var = var.cwiseMax(std::max(options_.min_step_variance_m2, floor * floor));
+  const TimeS t1 = std::max(step.t1, t0);
+  if (t1 > a.knots.back().t) {
+    a.knots.push_back({t1, last.cum + d, last.cum_var + var, last.cum_turn + turn});
+  } else {  // zero-duration step: fold into the last knot
+    a.knots.back().cum += d;
+    a.knots.back().cum_var += var;
+    a.knots.back().cum_turn += turn;
+  }
+  AdvanceTo(step.t1);
+}
+
+void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
+  ++summary_.rssi_packets;
+  now_ = std::max(now_, p.t);
+  if (p.rssi_dbm < options_.min_rssi_dbm) {
+    ++summary_.rssi_weak;
+    return;
+  }
+  const bool rx_agent = agents_.count(p.rx) != 0, tx_agent = agents_.count(p.tx) != 0;
+  if (!rx_agent && !tx_agent) {
+    if (options_.use_static_rssi) StaticPacket(p);
+    return;
+  }
+  const std::string& agent = rx_agent ? p.rx : p.tx;
+  const std::string& other = rx_agent ? p.tx : p.rx;
+  Agent& a = StartedAgent(agent, p.t);
+  if (!agents_.count(other)) AddUnknownNode(other);
+  if (options_.use_agent_rssi) {
+    Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0};
+    a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
+                                      [](TimeS v, const Pending& x) { return v < x.t; }),
+                     q);
+  }
+  if (options_.use_encounters && !agents_.count(other)) {
+    auto& det = encounter_.try_emplace({agent, other}, options_.encounter).first->second;
+    if (auto peak = det.Add(p.t, p.rssi_dbm)) {
+      Pending q{*peak, Kind::kEncounter, other, 0, 0};
+      a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
+                                        [](TimeS v, const Pending& x) { return v < x.t; }),
+                       q);
+    }
+  }
+  AdvanceTo(p.t);
+}
+
+void BreadcrumbLocalizer::AddRange(const RangeMeasurement& r) {
+  now_ = std::max(now_, r.t);
+  const double sigma = r.sigma_m.value_or(options_.default_range_sigma_m);
+  const bool a_agent = agents_.count(r.a) != 0, b_agent = agents_.count(r.b) != 0;
+  if (!(r.range_m >= 0) || !(sigma > 0)) {
+    ++summary_.unusable;
+    return;
+  }
+  if (!a_agent && !b_agent) {
+    StaticNode* na = FindStatic(r.a);
+    StaticNode* nb = FindStatic(r.b);
+    if (!na) { AddUnknownNode(r.a); na = FindStatic(r.a); }
+    if (!nb) { AddUnknownNode(r.b); nb = FindStatic(r.b); }
+    if (na->index >= 0 && nb->index >= 0) {
+      ScalarModel m;
+      AddScalarRobust(na->index, nb->index, na->cached_cov, nb->cached_cov, r.range_m,
+                      sigma * sigma, m, Vec2::Zero(), options_.huber_k);
+      ++summary_.ranges_used;
+    } else if (na->index >= 0) {
+      ObserveUninitialized(*nb, gen_.Estimate(na->index), r.range_m, sigma);
+    } else if (nb->index >= 0) {
+      ObserveUninitialized(*na, gen_.Estimate(nb->index), r.range_m, sigma);
+    } else {
+      ++summary_.unusable;
+    }
+    return;
+  }
+  const std::string& agent = a_agent ? r.a : r.b;
+  const std::string& other = a_agent ? r.b : r.a;
+  if (!agents_.count(other)) AddUnknownNode(other);
+  Agent& a = StartedAgent(agent, r.t);
+  Pending q{r.t, Kind::kRange, other, r.range_m, sigma};
+  a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
+                                    [](TimeS v, const Pending& x) { return v < x.t; }),
+                   q);
+  AdvanceTo(r.t);
+}
+
+void BreadcrumbLocalizer::AddEvent(const MissionEvent& e) {
+  now_ = std::max(now_, e.t);
+  if (e.event == "drop" && !e.node.empty() && agents_.count(e.agent)) {
+    if (agents_.count(e.node)) {
+      summary_.notes.push_back(fmt::format("drop of agent '{}' ignored", e.node));
+      ++summary_.unusable;
+      return;
+    }
+    AddUnknownNode(e.node);
+    Agent& a = StartedAgent(e.agent, e.t);
+    Pending q{e.t, Kind::kDrop, e.node, 0, 0};
+    a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
+                                      [](TimeS v, const Pending& x) { return v < x.t; }),
+                     q);
+  }
+  AdvanceTo(e.t);
+}
+
+void BreadcrumbLocalizer::AdvanceTo(TimeS t) {
+  now_ = std::max(now_, t);
+  for (auto& [id, a] : agents_) {
+    if (!a.started || a.pending.empty()) continue;
+    ProcessAgent(a, std::max(a.knots.back().t, now_ - options_.max_latency_s));
+  }
+}
+
+void BreadcrumbLocalizer::Finish() {
+  for (auto& [id, a] : agents_) {
+    if (a.started) ProcessAgent(a, std::numeric_limits<double>::infinity());
+  }
+}
+
+void BreadcrumbLocalizer::ProcessAgent(Agent& a, TimeS covered) {
+  while (!a.pending.empty() && a.pending.front().t <= covered) {
+    const Pending p = a.pending.front();
+    a.pending.pop_front();
+    ApplyPending(a, p);
+  }
+}
+
+void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
+  if (t < a.state_t + options_.state_period_s) return;
+  // IV-E: AddNode+(new state) -> AddMeasurement(PDR) -> DeleteNode+(old state)
+  Vec2 var_t;
+  double turn_t = 0;
+  const Vec2 cum_t = CumAt(a, t, &var_t, &turn_t);
+  const Vec2 delta = cum_t - a.state_cum;
+  const Vec2 q = (var_t - a.state_cum_var).cwiseMax(options_.min_step_variance_m2);
+  const Vec2 predicted = Corrected(a, delta);
+  const NodeIndex next = gen_.AddNode(gen_.Estimate(a.state) + predicted);
+  if (a.theta < 0) {
+    gen_.AddRelative(next, a.state, delta, Diag(q));
+  } else {
+    // x_new - x_old - J_theta theta_old = (1 + s) R(psi) delta - J_theta theta_hat (linearized)
+    const Vec2 th = gen_.Estimate(a.theta);
+    const Eigen::Rotation2Dd R(th.x());
+    Mat2 dR;
+    dR << -std::sin(th.x()), -std::cos(th.x()), std::cos(th.x()), -std::sin(th.x());
+    Mat2 J_theta;
+    J_theta.col(0) = (1.0 + th.y()) * (dR * delta);
+    J_theta.col(1) = R * delta;
+    const Mat2 Rm = R.toRotationMatrix();
+    const Mat2 cov = Rm * Diag(q) * Rm.transpose();
+    const double dt = t - a.state_t;
+    const double turn = turn_t - a.state_cum_turn;
+    const double q_psi = options_.heading_rw_rad_per_sqrt_s * options_.heading_rw_rad_per_sqrt_s * dt +
+                         std::pow(options_.heading_per_turn_sigma * turn, 2);
+    const double q_s = options_.scale_rw_per_sqrt_s * options_.scale_rw_per_sqrt_s * dt;
+    const NodeIndex next_theta = gen_.AddNode(th);
+    gen_.AddRelative(next_theta, a.theta, Vec2::Zero(),
+                     Vec2(std::max(q_psi, 1e-12), std::max(q_s, 1e-14)).asDiagonal());
+    gen_.AddLinear({next, a.state, a.theta}, {Mat2::Identity(), -Mat2::Identity(), -J_theta},
+                   predicted - J_theta * th, cov);
+    gen_.DeleteNode(a.theta);
+    a.theta = next_theta;
+  }
+  gen_.DeleteNode(a.state);
+  a.state = next;
+  a.state_t = t;
+  a.state_cum = cum_t;
+  a.state_cum_var = var_t;
+  a.state_cum_turn = turn_t;
+  a.cached_cov += Diag(q);
+  ++summary_.agent_states;
+  // Keep ~30 s of PDR history behind the state for late (encounter) measurements.
+  while (a.knots.size() > 2 && a.knots[1].t < t - 30.0) a.knots.pop_front();
+}
+
+void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i,
+                                          const Mat2& cov_j, double z, double variance,
+                                          const ScalarModel& model, const Vec2& offset,
+                                          double k_negative) {
+  const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
+  const double d = diff.norm();
+  const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
+  const double slope = model.Slope(d);
+  const double S = variance + slope * slope * u.dot((cov_i + cov_j) * u);
+  const double nu = z - model.Predict(d);
+  const double normalized = std::abs(nu) / std::sqrt(S);
+  if (!std::isfinite(normalized) || normalized > options_.gate_sigma) {
+    ++summary_.gated;
+    return;
+  }
+  const double k = nu < 0 ? k_negative : options_.huber_k;
+  if (normalized > k) {
+    variance *= normalized / k;  // IV-F: lessen a noisy measurement's effect (Huber weight)
+    ++summary_.downweighted;
+  }
+  gen_.AddScalar(i, j, z, variance, model, offset);
+}
+
+void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
+  AttachState(a, p.t);
+  Vec2 var_t;
+  const Vec2 cum_t = CumAt(a, p.t, &var_t);
+  const Vec2 offset = Corrected(a, cum_t - a.state_cum);
+  const Vec2 offset_var = (var_t - a.state_cum_var).cwiseAbs();
+  const Vec2 here = gen_.Estimate(a.state) + offset;
+  const Mat2 cov_here = a.cached_cov + Diag(offset_var);
+
+  if (p.kind == Kind::kDrop) {
+    StaticNode& node = static_[p.other];
+    node.id = p.other;
+    if (node.index >= 0) gen_.DeleteNode(node.index);  // picked up and dropped again
+    else static_order_.push_back(p.other);
+    node.index = gen_.AddNode(here);
+    // x_crumb - x_state = offset + e, e ~ N(0, drop^2 + PDR variance since the state)
+    gen_.AddRelative(node.index, a.state, offset,
+                     Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m +
+                         Diag(offset_var));
+    node.cached_cov = cov_here;
+    node.init.clear();
+    ++summary_.drops;
+    for (auto it = links_.begin(); it != links_.end();) {
+      it = (it->first.first == p.other || it->first.second == p.other) ? links_.erase(it) : ++it;
+    }
+    return;
+  }
+
+  if (auto ait = agents_.find(p.other); ait != agents_.end()) {  // agent <-> agent
+    Agent& b = ait->second;
+    if (!b.started || &b == &a) {
+      ++summary_.unusable;
+      return;
+    }
+    Vec2 var_b;
+    const Vec2 off_b = Corrected(b, CumAt(b, p.t, &var_b) - b.state_cum);
+    const Mat2 cov_b = b.cached_cov + Diag((var_b - b.state_cum_var).cwiseAbs());
+    ScalarModel model = p.kind == Kind::kRssi ? RssiModel() : ScalarModel{};
+    double var = p.kind == Kind::kRssi ? AgentRssiVariance() : p.sigma * p.sigma;
+    AddScalarRobust(a.state, b.state, cov_here, cov_b, p.value, var, model, offset - off_b,
+                    p.kind == Kind::kRssi ? options_.rssi_nlos_k : options_.huber_k);
+    p.kind == Kind::kRssi ? ++summary_.rssi_agent_used : ++summary_.ranges_used;
+    return;
+  }
+
+  StaticNode* node = FindStatic(p.other);
+  if (!node) {
+    ++summary_.unusable;
+    return;
+  }
+  if (node->index < 0) {
+    if (p.kind == Kind::kRssi) {
+      const auto r = radio::ToRange(options_.radio, p.value);
+      ObserveUninitialized(*node, here, r.range_m, r.sigma_m);
+    } else if (p.kind == Kind::kRange) {
+      ObserveUninitialized(*node, here, p.value, p.sigma);
+    }
+    return;
+  }
+  switch (p.kind) {
+    case Kind::kRssi: {
+      if (options_.calibrate_online) {
+        const double d = (here - gen_.Estimate(node->index)).norm();
+        const double lim = options_.calibration_max_sigma_m * options_.calibration_max_sigma_m;
+        if (d >= options_.calibration_min_distance_m && cov_here.trace() < 2 * lim &&
+            node->cached_cov.trace() < 2 * lim && calibration_pairs_.size() < 200000) {
+          calibration_pairs_.push_back({d, p.value});
+          ++summary_.calibration_pairs;
+        }
+        MaybeCalibrate(p.t);
+        if (!calibrated_) break;
+      }
+      const ScalarModel model = RssiModel();
+      const double d = std::max((here - gen_.Estimate(node->index)).norm(), model.min_distance_m);
+      const double slope = model.Slope(d);
+      const double var = AgentRssiVariance() + slope * slope * offset_var.mean();
+      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value, var, model,
+                      offset, options_.rssi_nlos_k);
+      ++summary_.rssi_agent_used;
+      break;
+    }
+    case Kind::kRange: {
+      const double var = p.sigma * p.sigma + offset_var.mean();
+      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value, var,
+                      ScalarModel{}, offset, options_.huber_k);
+      ++summary_.ranges_used;
+      break;
+    }
+    case Kind::kEncounter: {
+      // x_state + offset - x_node = 0 + e: passed within ~1 m (sec. V-A)
+      const double s = options_.encounter_sigma_m;
+      const Vec2 innovation = gen_.Estimate(node->index) - here;
+      const Mat2 S = Mat2::Identity() * s * s + cov_here + node->cached_cov;
+      if (innovation.dot(S.ldlt().solve(innovation)) >
+          options_.gate_sigma * options_.gate_sigma) {
+        ++summary_.gated;
+        break;
+      }
+      gen_.AddRelative(a.state, node->index, -offset,
+                       Mat2::Identity() * s * s + Diag(offset_var));
+      ++summary_.encounters;
+      break;
+    }
+    case Kind::kDrop:
+      break;
+  }
+}
+
+void BreadcrumbLocalizer::StaticPacket(const RssiPacket& p) {
+  StaticNode* rx = FindStatic(p.rx);
+  StaticNode* tx = FindStatic(p.tx);
+  if (!rx) { AddUnknownNode(p.rx); rx = FindStatic(p.rx); }
+  if (!tx) { AddUnknownNode(p.tx); tx = FindStatic(p.tx); }
+  if (rx->index < 0 || tx->index < 0) {
+    if (rx->index >= 0 || tx->index >= 0) {
+      StaticNode& unknown = rx->index < 0 ? *rx : *tx;
+      const StaticNode& known = rx->index < 0 ? *tx : *rx;
+      const auto r = radio::ToRange(options_.radio, p.rssi_dbm);
+      ObserveUninitialized(unknown, gen_.Estimate(known.index), r.range_m, r.sigma_m);
+    }
+    return;
+  }
+  const auto key = p.rx < p.tx ? std::make_pair(p.rx, p.tx) : std::make_pair(p.tx, p.rx);
+  auto [it, fresh] = links_.try_emplace(key);
+  Link& link = it->second;
+  if (fresh) {
+    link.change = radio::LinkChangeDetector(options_.link_change);
+    link.edge = gen_.AddPersistent(rx->index, tx->index, RssiModel());
+    gen_.SetPersistentFloor(link.edge, options_.static_link_floor_fraction *
+                                           options_.radio.sigma_db * options_.radio.sigma_db);
+  }
+  gen_.AccumulatePersistent(link.edge, p.rssi_dbm, options_.radio.sigma_db * options_.radio.sigma_db);
+  ++summary_.rssi_static_used;
+  if (!options_.detect_moved) return;
+  if (link.change.Add(p.rssi_dbm)) {
+    link.flagged_t = p.t;
+    // Which end moved? The one whose other links changed too (sec. V-C); a known node never.
+    for (StaticNode* end : {rx, tx}) {
+      if (end->known) continue;
+      int eligible = 0, flagged = 0;
+      bool other_end_has_steady_link = false;
+      for (const auto& [k, l] : links_) {
+        if (k.first != end->id && k.second != end->id) continue;
+        if (l.change.packets() < options_.link_change.reference) continue;
+        ++eligible;
+        if (p.t - l.flagged_t < 30.0) ++flagged;
+      }
+      const std::string& other_id = end == rx ? tx->id : rx->id;
+      const StaticNode* other = FindStatic(other_id);
+      for (const auto& [k, l] : links_) {
+        if (k.first != other_id && k.second != other_id) continue;
+        if (k == key || l.change.packets() < options_.link_change.reference) continue;
+        if (p.t - l.flagged_t >= 30.0) other_end_has_steady_link = true;
+      }
+      const bool moved = eligible >= 2 ? 3 * flagged >= 2 * eligible
+                                       : (other->known || other_end_has_steady_link);
+      if (moved) {
+        MarkMoved(end->id, p.t);
+        return;
+      }
+    }
+  }
+}
+
+void BreadcrumbLocalizer::MarkMoved(const std::string& id, TimeS t) {
+  StaticNode& node = static_.at(id);
+  // The crumb becomes a new state tied to its old one by a kick-sized covariance: old
+  // measurements stay valid for the old position (marginalized, eq. (17)).
+  const NodeIndex next = gen_.AddNode(gen_.Estimate(node.index));
+  gen_.AddRelative(next, node.index, Vec2::Zero(),
+                   Mat2::Identity() * options_.moved_sigma_m * options_.moved_sigma_m);
+  gen_.DeleteNode(node.index);
+  node.index = next;
+  node.cached_cov += Mat2::Identity() * options_.moved_sigma_m * options_.moved_sigma_m;
+  for (auto it = links_.begin(); it != links_.end();) {
+    it = (it->first.first == id || it->first.second == id) ? links_.erase(it) : ++it;
+  }
+  moved_.emplace_back(t, id);
+  ++summary_.moved_detected;
+}
+
+void BreadcrumbLocalizer::ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m,
+                                               double sigma_m) {
+  if (!(range_m >= 0) || !(sigma_m > 0) || !from.allFinite()) return;
+  if (node.init.size() >= 2000) return;  // plenty: keep memory bounded
+  node.init.push_back({from, range_m, sigma_m});
+  TryInitialize(node);
+}
+
+void BreadcrumbLocalizer::TryInitialize(StaticNode& node) {
+  const int n = static_cast<int>(node.init.size());
+  if (n < options_.init_min_measurements) return;
+  if (n < node.next_try) return;
+  node.next_try = std::max(n + 1, static_cast<int>(n * 1.25));
+  Vec2 lo = node.init[0].from, hi = lo, mean = Vec2::Zero();
+  double max_range = 0;
+  for (const auto& o : node.init) {
+    lo = lo.cwiseMin(o.from);
+    hi = hi.cwiseMax(o.from);
+    mean += o.from;
+    max_range = std::max(max_range, o.range_m);
+  }
+  mean /= n;
+  if ((hi - lo).norm() < options_.init_min_spread_m) return;
+  const double reach = std::min(max_range, 150.0) + 2.0;
+  lo.array() -= reach;
+  hi.array() += reach;
+  const double step = std::max(options_.init_grid_m, (hi - lo).maxCoeff() / 200.0);
+  auto cost = [&](const Vec2& x) {
+    double c = 0;
+    for (const auto& o : node.init) c += Huber(((x - o.from).norm() - o.range_m) / o.sigma_m, 1.5);
+    return c;
+  };
+  Vec2 best = mean;
+  double best_cost = std::numeric_limits<double>::infinity();
+  std::vector<std::pair<Vec2, double>> cells;
+  for (double x = lo.x(); x <= hi.x(); x += step) {
+    for (double y = lo.y(); y <= hi.y(); y += step) {
+      const Vec2 c(x, y);
+      const double v = cost(c);
+      cells.emplace_back(c, v);
+      if (v < best_cost) best_cost = v, best = c;
+    }
+  }
+  // Gauss-Newton with Huber weights (IRLS) from the best cell.
+  Mat2 H = Mat2::Identity();
+  for (int it = 0; it < 20; ++it) {
+    H.setZero();
+    Vec2 g = Vec2::Zero();
+    for (const auto& o : node.init) {
+      const Vec2 diff = best - o.from;
+      const double d = std::max(diff.norm(), 1e-6);
+      const Vec2 J = diff / d;
+      const double r = (o.range_m - d) / o.sigma_m;
+      const double w = (std::abs(r) <= 1.5 ? 1.0 : 1.5 / std::abs(r)) / (o.sigma_m * o.sigma_m);
+      H += w * J * J.transpose();
+      g += w * J * (o.range_m - d);
+    }
+    H += Mat2::Identity() * 1e-9;
+    const Vec2 dx = H.ldlt().solve(g);
+    best += dx;
+    if (dx.norm() < 1e-4) break;
+  }
+  best_cost = cost(best);
+  double mirror = std::numeric_limits<double>::infinity();
+  const double exclusion = std::max(3.0, 3.0 * step);
+  for (const auto& [c, v] : cells) {
+    if ((c - best).norm() > exclusion) mirror = std::min(mirror, v);
+  }
+  if (mirror - best_cost < options_.init_ambiguity_chi2) return;  // still ambiguous
+  const Mat2 cov = H.inverse() * options_.init_covariance_inflation;
+  if (!cov.allFinite() || cov.trace() > 1e4) return;
+  node.index = gen_.AddNode(best);
+  gen_.AddPrior(node.index, best, cov);
+  node.cached_cov = cov;
+  node.init.clear();
+  node.init.shrink_to_fit();
+  static_order_.push_back(node.id);
+  ++summary_.delayed_initializations;
+}
+
+std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id) {
+  if (auto it = agents_.find(id); it != agents_.end()) {
+    Agent& a = it->second;
+    gen_.Solve();
+    a.cached_cov = gen_.Covariance(a.state);
+    Vec2 var;
+    Vec2 cum = a.started ? CumAt(a, a.knots.back().t, &var) : Vec2::Zero();
+    if (!a.started) var = Vec2::Zero();
+    NodeEstimate e;
+    e.id = id;
+    e.position_n = gen_.Estimate(a.state) + Corrected(a, cum - a.state_cum);
+    e.covariance = a.cached_cov + Diag((var - a.state_cum_var).cwiseAbs());
+    return e;
+  }
+  StaticNode* node = FindStatic(id);
+  if (!node || node->index < 0) return std::nullopt;
+  gen_.Solve();
+  node->cached_cov = gen_.Covariance(node->index);
+  return NodeEstimate{id, gen_.Estimate(node->index), node->cached_cov};
+}
+
+TimeS BreadcrumbLocalizer::AgentTime(const std::string& id) const {
+  const Agent& a = agents_.at(id);
+  return a.started ? a.knots.back().t : -std::numeric_limits<double>::infinity();
+}
+
+const LocalizerSummary& BreadcrumbLocalizer::summary() {
+  summary_.factorizations = gen_.factorizations();
+  summary_.pending_uninitialized = 0;
+  for (const auto& [id, n] : static_) summary_.pending_uninitialized += n.index < 0 ? 1 : 0;
+  return summary_;
+}
+
+}  // namespace trailmark::breadcrumb

@@ -1,0 +1,256 @@
+#pragma once
+/// Collaborative localization of firefighters and breadcrumbs (breadcrumb paper, sections
+/// IV-E and IV-F) on top of the GEN (gen_network.h).
+///
+/// Mobile nodes, IV-E: each agent is one state of the extended graph at a time. A measurement
+/// involving the agent at time t moves the agent to a new state: AddNode(new), AddMeasurement
+/// (new - old = PDR displacement, covariance from the PDR), DeleteNode(old) (marginalization).
+/// Measurements closer in time than `state_period_s` share a state; the small PDR displacement
+/// between the measurement time and the state time is applied as a known offset and its
+/// variance added to the measurement's. Radio measurements wait (at most `max_latency_s`) until
+/// the agent's PDR covers their time, so they are attached to an interpolated position.
+///
+/// Static nodes: anchors and surveyed landmarks (a prior), dropped crumbs (a `drop` event: the
+/// crumb is where the dropping agent's foot is, within drop_sigma_m), and nodes of unknown
+/// position (landmarks without `position`, crumbs heard before any drop): those are initialized
+/// after enough ranges from distinct positions (grid search + Gauss-Newton, the mirror ambiguity
+/// checked) and then enter the GEN with that prior.
+///
+/// Radio: agent<->node RSSI packets are scalar edges in the dB domain,
+///   z = alpha - 10 n log10 |x_i - x_j| + e,   e ~ N(0, sigma_db^2)
+/// which is the range measurement with the distance-dependent variance of the log-distance
+/// model. Node<->node links are persistent edges (averaged, re-linearized). Encounters (a local
+/// RSSI maximum above -40 dBm, sec. V-A) are relative-position edges of ~1 m. A lasting jump
+/// on a crumb's links marks the crumb as moved (sec. V-C): it gets a new state tied to the old
+/// one by a kick-sized covariance, so it can move.
+///
+/// Outliers, IV-F: steps faster than max_speed_mps are dropped; every scalar measurement is
+/// gated on its normalized innovation and down-weighted (Huber) beyond huber_k sigma.
+
+#include <deque>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/breadcrumb/gen_network.h"
+#include "trailmark/core/measurements.h"
+#include "trailmark/radio/path_loss.h"
+
+namespace trailmark::breadcrumb {
+
+struct LocalizerOptions {
+  GenOptions gen;
+  // PDR
+  double default_step_sigma_m = 0.03;        ///< steps without variance: sigma = a + b * length
+  double default_step_relative_sigma = 0.05;
+  double min_step_variance_m2 = 1e-6;
+  /// Floor of a step's per-axis sigma: floor_a + floor_b * length. PDR heading error is a
+  /// drift (gyro bias and scale factor), not white noise; a positions-only graph can only cover
+  /// it by not trusting short-term PDR beyond this (IV-F: lessen the effect of noisy data).
+  double step_sigma_floor_m = 0.03;
+  double step_sigma_floor_relative = 0.15;
+  double max_speed_mps = 5.0;                ///< IV-F: a firefighter never exceeds 5 m/s
+  // heading/scale correction of the PDR (beyond the paper; the ultrasound paper's EKF does the
+  // same with psi and scale): each agent carries a node theta = (psi, s) and every PDR edge is
+  // x_new - x_old = (1 + s) R(psi) delta_pdr + e. psi is a random walk (gyro bias drift plus a
+  // gyro scale-factor error that accrues with every turn), s nearly constant.
+  bool estimate_heading_scale = true;
+  double heading_sigma0_rad = 0.05;          ///< when mission.json gives no start_heading_sigma
+  double scale_sigma0 = 0.05;
+  double heading_rw_rad_per_sqrt_s = 0.003;
+  double heading_per_turn_sigma = 0.05;      ///< fraction of each turn's angle (gyro scale factor)
+  double scale_rw_per_sqrt_s = 1e-4;
+  // mobile states, IV-E
+  double state_period_s = 0.4;
+  double max_latency_s = 2.0;
+  // radio
+  radio::LogDistanceModel radio;             ///< replaced by mission.json's calibration
+  double min_rssi_dbm = -88.0;               ///< weaker packets carry ~no range information
+  bool use_agent_rssi = true;
+  /// Per-packet sigma of agent<->node RSSI edges = factor x the calibrated sigma: packets of one
+  /// link are correlated over the shadowing correlation distance (a few metres, ~10 packets at
+  /// walking speed), so each carries far less than sigma_db's information. > 0 overrides.
+  double agent_rssi_sigma_db = 0;
+  double agent_rssi_sigma_factor = 4.0;
+  /// Online calibration of the log-distance model (issue 8, item 3): the effective channel
+  /// (walls, body shadowing, antenna on the floor) differs from a line-of-sight calibration.
+  /// Until the first fit, agent RSSI only feeds encounters and the calibration; then pairs
+  /// (rssi, estimated distance) of well-localized nodes are re-fitted every period (trimmed
+  /// least squares, radio/path_loss.h) and the RSSI edges use the fit.
+  bool calibrate_online = true;
+  std::size_t calibration_min_pairs = 300;
+  double calibration_period_s = 30.0;
+  double calibration_max_sigma_m = 2.0;   ///< both ends' position sigma below this
+  double calibration_min_distance_m = 1.0;
+  bool use_static_rssi = true;
+  bool use_encounters = true;
+  radio::EncounterOptions encounter;
+  double encounter_sigma_m = 1.0;
+  double drop_sigma_m = 0.5;
+  double default_range_sigma_m = 0.5;        ///< ranges.csv rows without sigma
+  // robustness
+  double gate_sigma = 5.0;                   ///< reject when |innovation| > gate * sigma_S
+  double huber_k = 1.5;                      ///< variance x (|nu| / (k sigma_S)) beyond k
+  /// RSSI is attenuated by walls, bodies and smoke, seldom amplified: a packet weaker than
+  /// predicted (nu < 0) is down-weighted beyond this many sigma (one-sided NLOS robustness).
+  double rssi_nlos_k = 0.5;
+  /// Static links: slow shadowing does not average out (variance floor, dB^2 = sigma^2 x this).
+  double static_link_floor_fraction = 0.75;
+  // moved crumbs, sec. V-C
+  bool detect_moved = true;
+  radio::LinkChangeOptions link_change;
+  double moved_sigma_m = 1.5;                ///< "within 1 to 2 meters"
+  // delayed initialization of nodes with unknown positions
+  int init_min_measurements = 8;
+  double init_min_spread_m = 3.0;            ///< measuring positions must span this (2nd axis)
+  double init_ambiguity_chi2 = 10.0;         ///< mirror solution must be this much worse
+  double init_covariance_inflation = 4.0;
+  double init_grid_m = 1.0;
+  // agents
+  double known_start_sigma_m = 0.01;         ///< `start` without `start_sigma`
+  double unknown_start_sigma_m = 1000.0;
+};
+
+struct LocalizerSummary {
+  std::size_t steps = 0, steps_rejected = 0;
+  std::size_t rssi_packets = 0, rssi_weak = 0, rssi_agent_used = 0, rssi_static_used = 0;
+  std::size_t ranges_used = 0;
+  std::size_t gated = 0, downweighted = 0;
+  std::size_t encounters = 0, drops = 0, moved_detected = 0;
+  std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
+  std::size_t unusable = 0;  ///< measurements that could not be attached (with reasons in notes)
+  std::size_t solves = 0, factorizations = 0;
+  std::size_t calibrations = 0, calibration_pairs = 0;
+  std::optional<radio::PathLossFit> calibration;  ///< the latest online fit
+  std::vector<std::string> notes;
+};
+
+struct NodeEstimate {
+  std::string id;
+  Vec2 position_n = Vec2::Zero();
+  Mat2 covariance = Mat2::Identity();
+};
+
+class BreadcrumbLocalizer {
+ public:
+  explicit BreadcrumbLocalizer(LocalizerOptions options = {});
+
+  /// Base stations and surveyed landmarks.
+  void AddKnownNode(const std::string& id, const Vec2& position_n, double sigma_m);
+  /// A static node whose position is unknown (initialized from ranges).
+  void AddUnknownNode(const std::string& id);
+  /// An agent; `start` empty when unknown; heading sigma for the heading/scale node (empty:
+  /// options.heading_sigma0_rad).
+  void AddAgent(const std::string& id, const std::optional<Vec2>& start, double start_sigma_m,
+                std::optional<double> start_heading_sigma_rad = std::nullopt);
+  /// Estimated PDR heading correction (rad) and scale error of an agent.
+  std::optional<Vec2> HeadingScale(const std::string& id) const;
+
+  /// Inputs, each stream in non-decreasing time (steps by t1); streams interleaved by time.
+  void AddStep(const Step& step);
+  void AddRssi(const RssiPacket& packet);
+  void AddRange(const RangeMeasurement& range);
+  void AddEvent(const MissionEvent& event);
+  /// Processes every buffered measurement the PDR now covers (or that waited max_latency_s).
+  void AdvanceTo(TimeS t);
+  /// End of data: processes everything still buffered.
+  void Finish();
+
+  bool IsAgent(const std::string& id) const { return agents_.count(id) != 0; }
+  /// Latest estimate: agents at their latest PDR time; static nodes once they exist.
+  std::optional<NodeEstimate> Estimate(const std::string& id);
+  /// Time of an agent's latest PDR knot.
+  TimeS AgentTime(const std::string& id) const;
+  /// Static nodes that exist in the network (known, dropped, initialized), in creation order.
+  const std::vector<std::string>& StaticNodes() const { return static_order_; }
+  /// Ids of crumbs detected as moved, with the detection time.
+  const std::vector<std::pair<TimeS, std::string>>& MovedNodes() const { return moved_; }
+
+  const LocalizerSummary& summary();
+  const GenNetwork& network() const { return gen_; }
+  const LocalizerOptions& options() const { return options_; }
+
+ private:
+  struct Knot {
+    TimeS t;
+    Vec2 cum;      ///< PDR displacement since the agent's first knot
+    Vec2 cum_var;  ///< accumulated per-axis variance
+    double cum_turn = 0;  ///< accumulated |turn| of the step directions, rad
+  };
+  enum class Kind { kRssi, kRange, kEncounter, kDrop };
+  struct Pending {
+    TimeS t;
+    Kind kind;
+    std::string other;  ///< the other node
+    double value = 0;   ///< rssi_dbm or range_m
+    double sigma = 0;   ///< range sigma
+  };
+  struct Agent {
+    std::string id;
+    NodeIndex state = -1;
+    NodeIndex theta = -1;  ///< heading/scale node (-1 when not estimated)
+    std::optional<double> last_heading;
+    double state_cum_turn = 0;
+    TimeS state_t = 0;
+    Vec2 state_cum = Vec2::Zero();      ///< PDR displacement at the state's time
+    Vec2 state_cum_var = Vec2::Zero();
+    bool started = false;
+    std::deque<Knot> knots;
+    std::deque<Pending> pending;  ///< sorted by t
+    Mat2 cached_cov = Mat2::Identity() * 100.0;
+  };
+  struct InitObservation {
+    Vec2 from;
+    double range_m;
+    double sigma_m;
+  };
+  struct StaticNode {
+    std::string id;
+    NodeIndex index = -1;  ///< -1 while uninitialized
+    bool known = false;
+    Mat2 cached_cov = Mat2::Identity() * 100.0;
+    std::vector<InitObservation> init;
+    int next_try = 0;
+  };
+  struct Link {
+    int edge = -1;
+    radio::LinkChangeDetector change;
+    TimeS flagged_t = -1e300;
+  };
+
+  Agent& StartedAgent(const std::string& id, TimeS t);
+  Vec2 CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn = nullptr) const;
+  /// The PDR displacement `raw` corrected by the agent's current heading/scale estimate.
+  Vec2 Corrected(const Agent& a, const Vec2& raw) const;
+  void ProcessAgent(Agent& a, TimeS covered);
+  void AttachState(Agent& a, TimeS t);
+  void ApplyPending(Agent& a, const Pending& p);
+  void AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j,
+                       double z, double variance, const ScalarModel& model, const Vec2& offset,
+                       double k_negative);
+  void ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m, double sigma_m);
+  void TryInitialize(StaticNode& node);
+  void StaticPacket(const RssiPacket& packet);
+  void MarkMoved(const std::string& id, TimeS t);
+  StaticNode* FindStatic(const std::string& id);
+  ScalarModel RssiModel() const;
+  double AgentRssiVariance() const;
+
+  LocalizerOptions options_;
+  GenNetwork gen_;
+  std::map<std::string, Agent> agents_;
+  std::map<std::string, StaticNode> static_;
+  std::vector<std::string> static_order_;
+  std::map<std::pair<std::string, std::string>, Link> links_;
+  std::map<std::pair<std::string, std::string>, radio::EncounterDetector> encounter_;
+  std::vector<std::pair<TimeS, std::string>> moved_;
+  TimeS now_ = -1e300;
+  LocalizerSummary summary_;
+  std::vector<radio::CalibrationPair> calibration_pairs_;
+  bool calibrated_ = false;
+  TimeS next_calibration_ = -1e300;
+  void MaybeCalibrate(TimeS t);
+};
+
+}  // namespace trailmark::breadcrumb

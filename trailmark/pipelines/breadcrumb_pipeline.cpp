@@ -1,0 +1,193 @@
+#include "trailmark/pipelines/breadcrumb_pipeline.h"
+
+#include <fmt/format.h>
+
+#include <map>
+
+#include "trailmark/core/error.h"
+#include "trailmark/pipelines/merged_stream.h"
+#include "trailmark/pipelines/pipeline_options.h"
+
+namespace trailmark {
+
+using breadcrumb::BreadcrumbLocalizer;
+using breadcrumb::LocalizerOptions;
+
+LocalizerOptions BreadcrumbOptionsFrom(const std::map<std::string, std::string>& values,
+                                       double* static_period_s) {
+  PipelineOptions o(values, "breadcrumb");
+  LocalizerOptions l;
+  l.state_period_s = o.Double("state_period_s", l.state_period_s);
+  l.step_sigma_floor_m = o.Double("step_sigma_floor_m", l.step_sigma_floor_m);
+  l.step_sigma_floor_relative = o.Double("step_sigma_floor_relative", l.step_sigma_floor_relative);
+  l.estimate_heading_scale = o.Bool("heading_scale", l.estimate_heading_scale);
+  l.heading_per_turn_sigma = o.Double("heading_per_turn_sigma", l.heading_per_turn_sigma);
+  l.heading_rw_rad_per_sqrt_s = o.Double("heading_rw", l.heading_rw_rad_per_sqrt_s);
+  l.max_latency_s = o.Double("max_latency_s", l.max_latency_s);
+  l.min_rssi_dbm = o.Double("min_rssi_dbm", l.min_rssi_dbm);
+  l.use_agent_rssi = o.Bool("agent_rssi", l.use_agent_rssi);
+  l.use_static_rssi = o.Bool("static_rssi", l.use_static_rssi);
+  l.use_encounters = o.Bool("encounters", l.use_encounters);
+  l.encounter.threshold_dbm = o.Double("encounter_dbm", l.encounter.threshold_dbm);
+  l.encounter_sigma_m = o.Double("encounter_sigma_m", l.encounter_sigma_m);
+  l.drop_sigma_m = o.Double("drop_sigma_m", l.drop_sigma_m);
+  l.default_range_sigma_m = o.Double("range_sigma_m", l.default_range_sigma_m);
+  l.agent_rssi_sigma_db = o.Double("agent_rssi_sigma_db", l.agent_rssi_sigma_db);
+  l.agent_rssi_sigma_factor = o.Double("agent_rssi_sigma_factor", l.agent_rssi_sigma_factor);
+  l.calibrate_online = o.Bool("calibrate", l.calibrate_online);
+  l.rssi_nlos_k = o.Double("rssi_nlos_k", l.rssi_nlos_k);
+  l.static_link_floor_fraction = o.Double("static_link_floor", l.static_link_floor_fraction);
+  l.gate_sigma = o.Double("gate_sigma", l.gate_sigma);
+  l.huber_k = o.Double("huber_k", l.huber_k);
+  l.detect_moved = o.Bool("detect_moved", l.detect_moved);
+  l.moved_sigma_m = o.Double("moved_sigma_m", l.moved_sigma_m);
+  l.max_speed_mps = o.Double("max_speed_mps", l.max_speed_mps);
+  const double period = o.Double("static_period_s", 1.0);
+  if (static_period_s) *static_period_s = period;
+  o.RejectUnknown();
+  if (!(l.state_period_s >= 0) || !(l.max_latency_s >= 0) || !(l.encounter_sigma_m > 0) ||
+      !(l.drop_sigma_m > 0) || !(l.default_range_sigma_m > 0) || !(l.gate_sigma > 0) ||
+      !(l.huber_k > 0) || !(l.moved_sigma_m > 0) || !(l.max_speed_mps > 0) || !(period >= 0)) {
+    throw std::invalid_argument("pipeline breadcrumb: sigmas, gates and periods must be positive");
+  }
+  return l;
+}
+
+PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
+  const MissionDirectory& mission = context.mission;
+  mission.Require("steps.csv", "the breadcrumb pipeline");
+  double static_period_s = 1.0;
+  LocalizerOptions options = BreadcrumbOptionsFrom(context.options, &static_period_s);
+  PipelineSummary summary;
+  if (mission.info().radio) {
+    options.radio = radio::LogDistanceModel::From(*mission.info().radio);
+  } else {
+    summary.notes.push_back(
+        "mission.json has no radio calibration: default log-distance model (alpha -40 dBm at "
+        "1 m, n 2.3, sigma 4 dB)");
+  }
+  BreadcrumbLocalizer loc(options);
+  std::map<std::string, double> agent_z;
+  for (const NodeInfo& n : mission.info().nodes) {
+    switch (n.kind) {
+      case NodeKind::kAgent: {
+        const auto start = mission.info().AgentStart(n);
+        loc.AddAgent(n.id, start ? std::optional<Vec2>(start->head<2>()) : std::nullopt,
+                     n.start_sigma_m.value_or(options.known_start_sigma_m),
+                     n.start_heading_sigma_rad);
+        agent_z[n.id] = start ? start->z() : 0.0;
+        if (!start) {
+          summary.notes.push_back(fmt::format(
+              "agent '{}' has no start: it is localized from its ranges only (1 km prior)", n.id));
+        }
+        break;
+      }
+      default:
+        if (n.position) {
+          loc.AddKnownNode(n.id, n.position->head<2>(), n.position_sigma_m.value_or(0.0));
+        } else {
+          loc.AddUnknownNode(n.id);
+        }
+    }
+  }
+
+  std::map<std::string, Vec2> last_static;  // last emitted static positions
+  auto emit_agent = [&](const std::string& id) {
+    if (auto e = loc.Estimate(id)) {
+      const Mat2& c = e->covariance;
+      sink.Add({loc.AgentTime(id), id, Vec3(e->position_n.x(), e->position_n.y(), agent_z[id]),
+                c(0, 0), c(0, 1), c(1, 1)});
+    }
+  };
+  auto emit_static = [&](TimeS t, bool all) {
+    for (const auto& id : loc.StaticNodes()) {
+      auto e = loc.Estimate(id);
+      if (!e) continue;
+      auto it = last_static.find(id);
+      if (!all && it != last_static.end() && (it->second - e->position_n).norm() < 0.02) continue;
+      last_static[id] = e->position_n;
+      const Mat2& c = e->covariance;
+      sink.Add({t, id, Vec3(e->position_n.x(), e->position_n.y(), 0.0), c(0, 0), c(0, 1), c(1, 1)});
+    }
+  };
+
+  MergedStream stream(mission, {.events = true, .steps = true, .ranges = true, .bearings = false,
+                                .rssi = true});
+  MissionRow row;
+  std::size_t rows = 0;
+  TimeS t_last = 0, next_static = -1e300;
+  bool any = false;
+  while (stream.Next(row)) {
+    const TimeS t = RowTime(row);
+    if (!any) {
+      // Emit the known nodes (base, surveyed landmarks) once at the start.
+      emit_static(t, true);
+      next_static = t + static_period_s;
+      any = true;
+    }
+    t_last = std::max(t_last, t);
+    try {
+      if (const auto* step = std::get_if<Step>(&row)) {
+        if (!loc.IsAgent(step->agent)) {
+          throw std::invalid_argument(fmt::format(
+              "'{}' has steps but is not an agent in mission.json", step->agent));
+        }
+        loc.AddStep(*step);
+        emit_agent(step->agent);
+      } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
+        loc.AddRssi(*p);
+      } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
+        loc.AddRange(*r);
+      } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
+        loc.AddEvent(*e);
+      }
+    } catch (const std::invalid_argument& e) {
+      throw InputError(mission.dir().string(), 0, e.what());
+    }
+    if (t >= next_static) {
+      emit_static(t, false);
+      next_static = t + static_period_s;
+    }
+    if ((++rows & 0xfff) == 0) context.progress(stream.Progress());
+  }
+  loc.Finish();
+  for (const NodeInfo& n : mission.info().nodes) {
+    if (n.kind == NodeKind::kAgent && std::isfinite(loc.AgentTime(n.id))) emit_agent(n.id);
+  }
+  emit_static(t_last, true);
+  context.progress(1.0);
+
+  const auto& s = loc.summary();
+  auto& num = summary.numbers;
+  num["steps"] = static_cast<double>(s.steps);
+  num["steps_rejected"] = static_cast<double>(s.steps_rejected);
+  num["rssi_packets"] = static_cast<double>(s.rssi_packets);
+  num["rssi_below_min"] = static_cast<double>(s.rssi_weak);
+  num["rssi_agent_edges"] = static_cast<double>(s.rssi_agent_used);
+  num["rssi_static_packets"] = static_cast<double>(s.rssi_static_used);
+  num["range_edges"] = static_cast<double>(s.ranges_used);
+  num["gated"] = static_cast<double>(s.gated);
+  num["downweighted"] = static_cast<double>(s.downweighted);
+  num["encounters"] = static_cast<double>(s.encounters);
+  num["drops"] = static_cast<double>(s.drops);
+  num["moved_detected"] = static_cast<double>(s.moved_detected);
+  num["agent_states"] = static_cast<double>(s.agent_states);
+  num["delayed_initializations"] = static_cast<double>(s.delayed_initializations);
+  num["static_nodes_never_localized"] = static_cast<double>(s.pending_uninitialized);
+  num["unusable"] = static_cast<double>(s.unusable);
+  num["factorizations"] = static_cast<double>(s.factorizations);
+  num["calibrations"] = static_cast<double>(s.calibrations);
+  num["calibration_pairs"] = static_cast<double>(s.calibration_pairs);
+  if (s.calibration) {
+    num["calibrated_alpha_dbm"] = s.calibration->model.alpha_dbm;
+    num["calibrated_path_loss_exponent"] = s.calibration->model.path_loss_exponent;
+    num["calibrated_sigma_db"] = s.calibration->model.sigma_db;
+  }
+  for (const auto& n : s.notes) summary.notes.push_back(n);
+  for (const auto& [t, id] : loc.MovedNodes()) {
+    summary.notes.push_back(fmt::format("t={:.1f}: breadcrumb '{}' detected as moved", t, id));
+  }
+  return summary;
+}
+
+}  // namespace trailmark

@@ -1,0 +1,44 @@
+#include "trailmark/pipelines/pipeline_options.h"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "trailmark/io/csv.h"
+
+namespace trailmark {
+
+double PipelineOptions::Double(const std::string& key, double fallback) {
+  known_.insert(key);
+  auto it = values_.find(key);
+  if (it == values_.end()) return fallback;
+  const auto v = ParseFiniteDouble(it->second);
+  if (!v) {
+    throw std::invalid_argument("pipeline " + pipeline_ + ": option " + key + "='" + it->second +
+                                "' is not a finite number");
+  }
+  return *v;
+}
+
+bool PipelineOptions::Bool(const std::string& key, bool fallback) {
+  known_.insert(key);
+  auto it = values_.find(key);
+  if (it == values_.end()) return fallback;
+  const std::string& v = it->second;
+  if (v == "1" || v == "true" || v == "on" || v == "yes") return true;
+  if (v == "0" || v == "false" || v == "off" || v == "no") return false;
+  throw std::invalid_argument("pipeline " + pipeline_ + ": option " + key + "='" + v +
+                              "' is not a boolean (1/0, true/false, on/off)");
+}
+
+void PipelineOptions::RejectUnknown() const {
+  for (const auto& [k, v] : values_) {
+    if (!known_.count(k)) {
+      std::string list;
+      for (const auto& x : known_) list += (list.empty() ? "" : ", ") + x;
+      throw std::invalid_argument("pipeline " + pipeline_ + ": unknown option '" + k +
+                                  "' (known: " + list + ")");
+    }
+  }
+}
+
+}  // namespace trailmark

@@ -1,0 +1,105 @@
+#pragma once
+/// RSSI <-> distance with the log-distance path-loss model
+///   rssi = alpha - 10 n log10(d / 1 m) + X,  X ~ N(0, sigma^2) in dB
+/// (breadcrumb paper sec. V; radio-landmarks paper eq. (5), whose constants have the opposite
+/// sign convention: they write P = -(alpha + 10 n log10 d), i.e. alpha_paper = -alpha_here).
+/// No I/O.
+
+#include <deque>
+#include <optional>
+#include <vector>
+
+#include "trailmark/core/mission.h"
+#include "trailmark/core/types.h"
+
+namespace trailmark::radio {
+
+struct LogDistanceModel {
+  double alpha_dbm = -40.0;          ///< mean RSSI at 1 m
+  double path_loss_exponent = 2.3;   ///< n
+  double sigma_db = 4.0;             ///< shadowing, 1 sigma
+
+  static LogDistanceModel From(const RadioCalibration& c) {
+    return {c.alpha_dbm, c.path_loss_exponent, c.shadowing_sigma_db};
+  }
+  double MeanRssi(double distance_m) const;
+  /// The median distance for an RSSI value (unbiased in log-distance).
+  double Distance(double rssi_dbm) const;
+  /// 1-sigma of the distance at distance d from the dB noise (first order):
+  /// sigma_d = d ln(10) sigma / (10 n) — distance-dependent, as the issue requires.
+  double DistanceSigma(double distance_m) const;
+};
+
+struct RangeFromRssi {
+  double range_m = 0;
+  double sigma_m = 0;
+};
+RangeFromRssi ToRange(const LogDistanceModel& model, double rssi_dbm);
+
+/// One calibration pair: a packet received at a known distance.
+struct CalibrationPair {
+  double distance_m = 0;
+  double rssi_dbm = 0;
+};
+
+struct PathLossFit {
+  LogDistanceModel model;
+  double residual_sigma_db = 0;  ///< sigma of the residuals of the kept pairs
+  std::size_t pairs_used = 0;
+  std::size_t pairs_trimmed = 0;
+};
+
+/// Least-squares fit of alpha and n on log10(d). With trim_fraction > 0, pairs are grouped by
+/// distance (bins of bin_width_m) and the trim_fraction highest and lowest RSSI of each bin are
+/// dropped before the fit (radio-landmarks paper, Fig. 10: 5 %). Throws std::invalid_argument
+/// with fewer than 3 pairs or fewer than 2 distinct distances.
+PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double trim_fraction = 0.05,
+                           double bin_width_m = 0.5);
+
+/// Encounter detection (breadcrumb paper sec. V-A, Fig. 7; their ref. [31]): a local maximum of
+/// a link's RSSI above a threshold means the agent passed within about a metre of the node.
+struct EncounterOptions {
+  double threshold_dbm = -40.0;  ///< paper: > -40 dB implies <= ~1 m
+  int half_window = 3;           ///< the peak must be the maximum of 2 h + 1 packets
+  double max_gap_s = 3.0;        ///< packets further apart than this break the window
+  double refractory_s = 5.0;     ///< at most one encounter per link within this time
+};
+
+class EncounterDetector {
+ public:
+  explicit EncounterDetector(EncounterOptions options = {}) : options_(options) {}
+  /// Feeds one packet of the link; returns the time of a confirmed encounter (the peak,
+  /// half_window packets in the past) when there is one.
+  std::optional<TimeS> Add(TimeS t, double rssi_dbm);
+
+ private:
+  EncounterOptions options_;
+  std::deque<std::pair<TimeS, double>> window_;
+  TimeS last_encounter_ = -1e300;
+};
+
+/// Detects a lasting step in a static link's RSSI (a breadcrumb kicked or knocked over,
+/// breadcrumb paper sec. V-C): the mean of the last `recent` packets differs from the mean of
+/// everything before by more than threshold_db (after at least `reference` packets).
+struct LinkChangeOptions {
+  int reference = 8;
+  int recent = 5;
+  double threshold_db = 5.0;
+};
+
+class LinkChangeDetector {
+ public:
+  explicit LinkChangeDetector(LinkChangeOptions options = {}) : options_(options) {}
+  /// Returns the change in dB (recent - reference) when the step is detected.
+  std::optional<double> Add(double rssi_dbm);
+  void Reset();
+  int packets() const { return static_cast<int>(recent_.size()) + reference_count_; }
+
+ private:
+  LinkChangeOptions options_;
+  std::deque<double> recent_;
+  double reference_sum_ = 0;
+  int reference_count_ = 0;
+};
+
+}  // namespace trailmark::radio
