@@ -26,6 +26,10 @@ int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem:
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);
+/// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
+/// side with the published figures; results.md under out/NAME.
+int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,
+              const std::map<std::string, std::string>& options = {});
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows);
 

@@ -3,6 +3,7 @@
 //   trailmark run --pipeline NAME MISSION --out DIR
 //   trailmark eval MISSION ESTIMATES.csv
 //   trailmark report RUN_DIR... --out report.html
+//   trailmark reproduce breadcrumb [--seeds N]
 //   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
 #include <fmt/format.h>
@@ -16,6 +17,18 @@
 
 namespace fs = std::filesystem;
 using namespace trailmark;
+
+std::map<std::string, std::string> ParseKeyValues(const std::vector<std::string>& items) {
+  std::map<std::string, std::string> options;
+  for (const auto& kv : items) {
+    const auto eq = kv.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      throw std::invalid_argument("--option wants key=value, got '" + kv + "'");
+    }
+    options[kv.substr(0, eq)] = kv.substr(eq + 1);
+  }
+  return options;
+}
 
 int main(int argc, char** argv) {
   CLI::App app{"trailmark: where every firefighter is, without GPS or infrastructure"};
@@ -72,6 +85,19 @@ int main(int argc, char** argv) {
   bench->add_option("--rows", bench_rows, "rows per stream");
   bench->add_option("--json", bench_json, "write the results as JSON");
 
+  std::string reproduce_name;
+  int reproduce_seeds = 8;
+  std::string reproduce_out = "out/reproduce";
+  auto* reproduce = app.add_subcommand(
+      "reproduce", "a paper's experiment on simulated equivalents, side by side with the paper");
+  reproduce->add_option("name", reproduce_name, "breadcrumb")->required();
+  reproduce->add_option("--seeds", reproduce_seeds, "number of simulated runs (seeds 1..N)")
+      ->check(CLI::Range(1, 1000));
+  reproduce->add_option("--out", reproduce_out, "output directory (missions, runs, results.md)");
+  std::vector<std::string> reproduce_options;
+  reproduce->add_option("--option", reproduce_options,
+                        "key=value passed to the reproduced pipeline (ablations)");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
@@ -79,13 +105,7 @@ int main(int argc, char** argv) {
     } else if (app.got_subcommand("scenarios")) {
       for (const auto& s : Scenarios()) fmt::print("{:<18} {}\n", s.name, s.description);
     } else if (*run) {
-      std::map<std::string, std::string> options;
-      for (const auto& kv : run_options) {
-        const auto eq = kv.find('=');
-        if (eq == std::string::npos) throw std::invalid_argument("--option wants key=value, got " + kv);
-        options[kv.substr(0, eq)] = kv.substr(eq + 1);
-      }
-      const RunResult r = cli::Run(pipeline, mission, out, options);
+      const RunResult r = cli::Run(pipeline, mission, out, ParseKeyValues(run_options));
       fmt::print("{}: {} estimates in {:.3f} s -> {}\n", r.pipeline, r.estimates, r.wall_time_s,
                  (fs::path(out) / "estimates.csv").string());
     } else if (app.got_subcommand("pipelines")) {
@@ -109,6 +129,9 @@ int main(int argc, char** argv) {
       return cli::Demo(scenario, seed, demo_out);
     } else if (*bench) {
       return cli::Bench(bench_rows, bench_json);
+    } else if (*reproduce) {
+      return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
+                            ParseKeyValues(reproduce_options));
     }
   } catch (const InputError& e) {
     fmt::print(stderr, "error: {}\n", e.what());

@@ -185,6 +185,11 @@ void GenNetwork::SetPersistentFloor(int edge, double floor_variance) {
   dirty_ = true;
 }
 
+void GenNetwork::SetPersistentModel(int edge, const ScalarModel& model) {
+  persistent_.at(edge).model = model;
+  dirty_ = true;
+}
+
 void GenNetwork::SetPersistentWeight(int edge, double w) {
   persistent_.at(edge).weight = std::clamp(w, 1e-6, 1.0);
   dirty_ = true;

@@ -95,6 +95,8 @@ class GenNetwork {
   /// shadowing does not average out over packets, only the fast fading does.
   void AccumulatePersistent(int edge, double z, double variance);
   void SetPersistentFloor(int edge, double floor_variance);
+  /// Replaces the measurement model of a persistent edge (e.g. after a radio re-calibration).
+  void SetPersistentModel(int edge, const ScalarModel& model);
   /// Scales the information of a persistent edge by w in (0, 1] (robust re-weighting).
   void SetPersistentWeight(int edge, double w);
   /// Normalized residual (z_bar - h(x_hat)) / sigma of a persistent edge at the estimate.

@@ -45,10 +45,19 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
   if (calibration_pairs_.size() < options_.calibration_min_pairs) return;
   next_calibration_ = t + options_.calibration_period_s;
   try {
-    const radio::PathLossFit fit = radio::FitLogDistance(calibration_pairs_, 0.05, 1.0);
+    radio::PathLossFit fit;
+    try {
+      fit = radio::FitLogDistanceWithBody(calibration_pairs_, 0.05, 1.0);
+      if (fit.model.body_loss_db < 0 || fit.model.body_loss_db > 20) throw std::invalid_argument("");
+    } catch (const std::invalid_argument&) {
+      fit = radio::FitLogDistance(calibration_pairs_, 0.05, 1.0);
+    }
     // Physically plausible indoor fits only (n between free space-ish and heavy clutter).
     if (fit.model.path_loss_exponent < 1.2 || fit.model.path_loss_exponent > 6.0) return;
     options_.radio = fit.model;
+    for (auto& [key, link] : links_) {
+      if (link.edge >= 0) gen_.SetPersistentModel(link.edge, RssiModel());
+    }
     summary_.calibration = fit;
     ++summary_.calibrations;
     calibrated_ = true;
@@ -121,6 +130,50 @@ Vec2 BreadcrumbLocalizer::Corrected(const Agent& a, const Vec2& raw) const {
   return (1.0 + th.y()) * (Eigen::Rotation2Dd(th.x()) * raw);
 }
 
+double BreadcrumbLocalizer::HeadingAt(const Agent& a, TimeS t) const {
+  const auto& k = a.knots;
+  auto hi = std::upper_bound(k.begin(), k.end(), t,
+                             [](TimeS v, const Knot& knot) { return v < knot.t; });
+  if (hi == k.end()) return k.back().heading;
+  return hi->heading;
+}
+
+void BreadcrumbLocalizer::CalibrationPacket(Agent& a, const std::string& node, TimeS t,
+                                            double rssi_dbm) {
+  auto& history = a.link_history[node];
+  history.emplace_back(t, rssi_dbm);
+  while (!history.empty() && history.front().first < t - options_.calibration_window_s) {
+    history.pop_front();
+  }
+  auto anchor = a.link_anchor.find(node);
+  if (anchor == a.link_anchor.end() || std::abs(t - anchor->second) > options_.calibration_window_s) {
+    return;
+  }
+  // The node sits where the foot was at the anchor time (drop or encounter): its position
+  // relative to the agent is the PDR displacement in between.
+  const Vec2 to = CumAt(a, anchor->second, nullptr) - CumAt(a, t, nullptr);
+  const double d = to.norm();
+  if (d < options_.calibration_min_distance_m || calibration_pairs_.size() >= 200000) return;
+  calibration_pairs_.push_back({d, rssi_dbm, radio::BodyFactor(Vec2::Zero(), HeadingAt(a, t), to)});
+  ++summary_.calibration_pairs;
+}
+
+void BreadcrumbLocalizer::SetCalibrationAnchor(Agent& a, const std::string& node, TimeS t) {
+  if (!options_.calibrate_online) return;
+  a.link_anchor[node] = t;
+  // Packets heard before the anchor (approaching an encounter) were buffered.
+  auto it = a.link_history.find(node);
+  if (it == a.link_history.end()) return;
+  const auto history = it->second;
+  it->second.clear();
+  for (const auto& [tp, rssi] : history) CalibrationPacket(a, node, tp, rssi);
+}
+
+double BreadcrumbLocalizer::AgentHeading(const Agent& a) const {
+  const double psi = a.theta >= 0 ? gen_.Estimate(a.theta).x() : 0.0;
+  return a.last_heading.value_or(0.0) + psi;
+}
+
 std::optional<Vec2> BreadcrumbLocalizer::HeadingScale(const std::string& id) const {
   auto it = agents_.find(id);
   if (it == agents_.end() || it->second.theta < 0) return std::nullopt;
@@ -166,7 +219,9 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   }
   Knot last = a.knots.back();
   TimeS t0 = std::max(step.t0, last.t);
-  if (t0 > last.t) a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn});  // stationary
+  if (t0 > last.t) {  // stationary gap
+    a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn, last.heading});
+  }
   double turn = 0;
   if (d.norm() > 0.2) {
     const double h = std::atan2(d.y(), d.x());
@@ -184,7 +239,8 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   var = var.cwiseMax(std::max(options_.min_step_variance_m2, floor * floor));
   const TimeS t1 = std::max(step.t1, t0);
   if (t1 > a.knots.back().t) {
-    a.knots.push_back({t1, last.cum + d, last.cum_var + var, last.cum_turn + turn});
+    a.knots.push_back({t1, last.cum + d, last.cum_var + var, last.cum_turn + turn,
+                       a.last_heading.value_or(0.0)});
   } else {  // zero-duration step: fold into the last knot
     a.knots.back().cum += d;
     a.knots.back().cum_var += var;
@@ -196,13 +252,13 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
 void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   ++summary_.rssi_packets;
   now_ = std::max(now_, p.t);
-  if (p.rssi_dbm < options_.min_rssi_dbm) {
-    ++summary_.rssi_weak;
+  const bool rx_agent = agents_.count(p.rx) != 0, tx_agent = agents_.count(p.tx) != 0;
+  if (!rx_agent && !tx_agent) {  // weak static packets still feed the moved-crumb detector
+    StaticPacket(p);
     return;
   }
-  const bool rx_agent = agents_.count(p.rx) != 0, tx_agent = agents_.count(p.tx) != 0;
-  if (!rx_agent && !tx_agent) {
-    if (options_.use_static_rssi) StaticPacket(p);
+  if (p.rssi_dbm < options_.min_rssi_dbm) {
+    ++summary_.rssi_weak;
     return;
   }
   const std::string& agent = rx_agent ? p.rx : p.tx;
@@ -398,6 +454,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     node.cached_cov = cov_here;
     node.init.clear();
     ++summary_.drops;
+    SetCalibrationAnchor(a, p.other, p.t);
     for (auto it = links_.begin(); it != links_.end();) {
       it = (it->first.first == p.other || it->first.second == p.other) ? links_.erase(it) : ++it;
     }
@@ -437,14 +494,11 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
   }
   switch (p.kind) {
     case Kind::kRssi: {
+      const double body = a.last_heading ? radio::BodyFactor(here, AgentHeading(a),
+                                                              gen_.Estimate(node->index))
+                                         : 0.0;
       if (options_.calibrate_online) {
-        const double d = (here - gen_.Estimate(node->index)).norm();
-        const double lim = options_.calibration_max_sigma_m * options_.calibration_max_sigma_m;
-        if (d >= options_.calibration_min_distance_m && cov_here.trace() < 2 * lim &&
-            node->cached_cov.trace() < 2 * lim && calibration_pairs_.size() < 200000) {
-          calibration_pairs_.push_back({d, p.value});
-          ++summary_.calibration_pairs;
-        }
+        CalibrationPacket(a, p.other, p.t, p.value);
         MaybeCalibrate(p.t);
         if (!calibrated_) break;
       }
@@ -452,8 +506,9 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const double d = std::max((here - gen_.Estimate(node->index)).norm(), model.min_distance_m);
       const double slope = model.Slope(d);
       const double var = AgentRssiVariance() + slope * slope * offset_var.mean();
-      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value, var, model,
-                      offset, options_.rssi_nlos_k);
+      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov,
+                      p.value + options_.radio.body_loss_db * body, var, model, offset,
+                      options_.rssi_nlos_k);
       ++summary_.rssi_agent_used;
       break;
     }
@@ -477,6 +532,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       gen_.AddRelative(a.state, node->index, -offset,
                        Mat2::Identity() * s * s + Diag(offset_var));
       ++summary_.encounters;
+      SetCalibrationAnchor(a, p.other, p.t);
       break;
     }
     case Kind::kDrop:
@@ -501,37 +557,55 @@ void BreadcrumbLocalizer::StaticPacket(const RssiPacket& p) {
   const auto key = p.rx < p.tx ? std::make_pair(p.rx, p.tx) : std::make_pair(p.tx, p.rx);
   auto [it, fresh] = links_.try_emplace(key);
   Link& link = it->second;
-  if (fresh) {
-    link.change = radio::LinkChangeDetector(options_.link_change);
-    link.edge = gen_.AddPersistent(rx->index, tx->index, RssiModel());
-    gen_.SetPersistentFloor(link.edge, options_.static_link_floor_fraction *
-                                           options_.radio.sigma_db * options_.radio.sigma_db);
+  if (fresh) link.change = radio::LinkChangeDetector(options_.link_change);
+  const bool use = options_.use_static_rssi && p.rssi_dbm >= options_.min_rssi_dbm &&
+                   (calibrated_ || !options_.calibrate_online);
+  if (use) {
+    if (link.edge < 0) {
+      link.edge = gen_.AddPersistent(rx->index, tx->index, RssiModel());
+      gen_.SetPersistentFloor(link.edge, options_.static_link_floor_fraction *
+                                             options_.radio.sigma_db * options_.radio.sigma_db);
+    }
+    gen_.AccumulatePersistent(link.edge, p.rssi_dbm,
+                              options_.radio.sigma_db * options_.radio.sigma_db);
+    ++summary_.rssi_static_used;
+  } else {
+    ++summary_.rssi_weak;
   }
-  gen_.AccumulatePersistent(link.edge, p.rssi_dbm, options_.radio.sigma_db * options_.radio.sigma_db);
-  ++summary_.rssi_static_used;
   if (!options_.detect_moved) return;
   if (link.change.Add(p.rssi_dbm)) {
-    link.flagged_t = p.t;
-    // Which end moved? The one whose other links changed too (sec. V-C); a known node never.
+    // Which end moved (sec. V-C)? A knocked-over crumb's antenna changes all its links the same
+    // way: the mean change over the crumb's links must pass the threshold with one sign on
+    // every link; a crumb with one link only is blamed when the other end's links are steady.
+    // A known node (base, surveyed landmark) never moves.
+    const double threshold = options_.link_change.threshold_db;
     for (StaticNode* end : {rx, tx}) {
       if (end->known) continue;
-      int eligible = 0, flagged = 0;
-      bool other_end_has_steady_link = false;
+      int eligible = 0, positive = 0, negative = 0;
+      double sum = 0;
       for (const auto& [k, l] : links_) {
-        if (k.first != end->id && k.second != end->id) continue;
-        if (l.change.packets() < options_.link_change.reference) continue;
+        if ((k.first != end->id && k.second != end->id) || !l.change.Ready()) continue;
+        const double c = l.change.CurrentChange();
         ++eligible;
-        if (p.t - l.flagged_t < 30.0) ++flagged;
+        sum += c;
+        positive += c > 0.5 * threshold;
+        negative += c < -0.5 * threshold;
       }
-      const std::string& other_id = end == rx ? tx->id : rx->id;
-      const StaticNode* other = FindStatic(other_id);
-      for (const auto& [k, l] : links_) {
-        if (k.first != other_id && k.second != other_id) continue;
-        if (k == key || l.change.packets() < options_.link_change.reference) continue;
-        if (p.t - l.flagged_t >= 30.0) other_end_has_steady_link = true;
+      if (eligible == 0) continue;
+      const double mean = sum / eligible;
+      bool moved = false;
+      if (eligible >= 2) {
+        moved = std::abs(mean) > threshold && (positive == eligible || negative == eligible);
+      } else {
+        const std::string& other_id = end == rx ? tx->id : rx->id;
+        const StaticNode* other = FindStatic(other_id);
+        bool other_steady = other->known;
+        for (const auto& [k, l] : links_) {
+          if ((k.first != other_id && k.second != other_id) || k == key || !l.change.Ready()) continue;
+          if (std::abs(l.change.CurrentChange()) < 0.5 * threshold) other_steady = true;
+        }
+        moved = other_steady;
       }
-      const bool moved = eligible >= 2 ? 3 * flagged >= 2 * eligible
-                                       : (other->known || other_end_has_steady_link);
       if (moved) {
         MarkMoved(end->id, p.t);
         return;

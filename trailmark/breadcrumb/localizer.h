@@ -66,22 +66,24 @@ struct LocalizerOptions {
   double max_latency_s = 2.0;
   // radio
   radio::LogDistanceModel radio;             ///< replaced by mission.json's calibration
-  double min_rssi_dbm = -88.0;               ///< weaker packets carry ~no range information
+  double min_rssi_dbm = -65.0;  ///< weaker packets are mostly NLOS (walls): biased, dropped
   bool use_agent_rssi = true;
   /// Per-packet sigma of agent<->node RSSI edges = factor x the calibrated sigma: packets of one
   /// link are correlated over the shadowing correlation distance (a few metres, ~10 packets at
   /// walking speed), so each carries far less than sigma_db's information. > 0 overrides.
   double agent_rssi_sigma_db = 0;
   double agent_rssi_sigma_factor = 4.0;
-  /// Online calibration of the log-distance model (issue 8, item 3): the effective channel
-  /// (walls, body shadowing, antenna on the floor) differs from a line-of-sight calibration.
-  /// Until the first fit, agent RSSI only feeds encounters and the calibration; then pairs
-  /// (rssi, estimated distance) of well-localized nodes are re-fitted every period (trimmed
-  /// least squares, radio/path_loss.h) and the RSSI edges use the fit.
+  /// Online calibration of the log-distance model with body shadowing (issue 8, item 3): the
+  /// effective channel (walls, the wearer's body, antennas on the floor) differs from a
+  /// line-of-sight calibration. Pairs come from local geometry only: packets within
+  /// calibration_window_s of a drop or an encounter of that node, whose distance and bearing
+  /// are the agent's PDR displacement since/until then (precise over seconds, and the heading
+  /// error cancels). Until the first fit agent RSSI only feeds encounters; then the pairs are
+  /// re-fitted every period (trimmed least squares, radio/path_loss.h).
   bool calibrate_online = true;
-  std::size_t calibration_min_pairs = 300;
+  std::size_t calibration_min_pairs = 150;
   double calibration_period_s = 30.0;
-  double calibration_max_sigma_m = 2.0;   ///< both ends' position sigma below this
+  double calibration_window_s = 15.0;
   double calibration_min_distance_m = 1.0;
   bool use_static_rssi = true;
   bool use_encounters = true;
@@ -177,6 +179,7 @@ class BreadcrumbLocalizer {
     Vec2 cum;      ///< PDR displacement since the agent's first knot
     Vec2 cum_var;  ///< accumulated per-axis variance
     double cum_turn = 0;  ///< accumulated |turn| of the step directions, rad
+    double heading = 0;   ///< raw PDR direction of the step ending here
   };
   enum class Kind { kRssi, kRange, kEncounter, kDrop };
   struct Pending {
@@ -198,6 +201,9 @@ class BreadcrumbLocalizer {
     bool started = false;
     std::deque<Knot> knots;
     std::deque<Pending> pending;  ///< sorted by t
+    /// Calibration: recent packets per static node, and the last drop/encounter time.
+    std::map<std::string, std::deque<std::pair<TimeS, double>>> link_history;
+    std::map<std::string, TimeS> link_anchor;
     Mat2 cached_cov = Mat2::Identity() * 100.0;
   };
   struct InitObservation {
@@ -216,13 +222,14 @@ class BreadcrumbLocalizer {
   struct Link {
     int edge = -1;
     radio::LinkChangeDetector change;
-    TimeS flagged_t = -1e300;
   };
 
   Agent& StartedAgent(const std::string& id, TimeS t);
   Vec2 CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn = nullptr) const;
   /// The PDR displacement `raw` corrected by the agent's current heading/scale estimate.
   Vec2 Corrected(const Agent& a, const Vec2& raw) const;
+  /// Walking direction: the last step's direction corrected by the heading estimate.
+  double AgentHeading(const Agent& a) const;
   void ProcessAgent(Agent& a, TimeS covered);
   void AttachState(Agent& a, TimeS t);
   void ApplyPending(Agent& a, const Pending& p);
@@ -251,6 +258,9 @@ class BreadcrumbLocalizer {
   bool calibrated_ = false;
   TimeS next_calibration_ = -1e300;
   void MaybeCalibrate(TimeS t);
+  void CalibrationPacket(Agent& a, const std::string& node, TimeS t, double rssi_dbm);
+  void SetCalibrationAnchor(Agent& a, const std::string& node, TimeS t);
+  double HeadingAt(const Agent& a, TimeS t) const;
 };
 
 }  // namespace trailmark::breadcrumb

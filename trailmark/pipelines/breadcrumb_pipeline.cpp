@@ -182,6 +182,7 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
     num["calibrated_alpha_dbm"] = s.calibration->model.alpha_dbm;
     num["calibrated_path_loss_exponent"] = s.calibration->model.path_loss_exponent;
     num["calibrated_sigma_db"] = s.calibration->model.sigma_db;
+    num["calibrated_body_loss_db"] = s.calibration->model.body_loss_db;
   }
   for (const auto& n : s.notes) summary.notes.push_back(n);
   for (const auto& [t, id] : loc.MovedNodes()) {

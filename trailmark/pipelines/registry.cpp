@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
@@ -42,16 +43,30 @@ namespace {
 class CsvEstimateSink : public EstimateSink {
  public:
   explicit CsvEstimateSink(const std::string& path) : writer_(path) {}
+  // estimates.csv is in non-decreasing time (spec). An estimate is known when it is written:
+  // a row stamped earlier than one already written (e.g. an agent's start, emitted with its
+  // first step, after another agent's rows) is stamped with the latest time instead.
   void Add(const Estimate& e) override {
-    writer_.Write(e);
+    if (e.t < last_t_) {
+      Estimate copy = e;
+      copy.t = last_t_;
+      writer_.Write(copy);
+      ++restamped_;
+    } else {
+      writer_.Write(e);
+      last_t_ = e.t;
+    }
     ++count_;
   }
+  std::size_t restamped() const { return restamped_; }
   void Close() { writer_.Close(); }
   std::size_t count() const { return count_; }
 
  private:
   RowWriter<Estimate> writer_;
   std::size_t count_ = 0;
+  std::size_t restamped_ = 0;
+  double last_t_ = -std::numeric_limits<double>::infinity();
 };
 
 }  // namespace
@@ -73,6 +88,7 @@ RunResult RunPipeline(const Pipeline& pipeline, const PipelineContext& context,
   diag["mission"] = context.mission.dir().string();
   diag["estimates"] = result.estimates;
   diag["wall_time_s"] = result.wall_time_s;
+  diag["rows_restamped"] = sink.restamped();
   diag["numbers"] = result.summary.numbers;
   diag["notes"] = result.summary.notes;
   diag["options"] = context.options;

@@ -1,5 +1,6 @@
 #include "trailmark/radio/path_loss.h"
 
+#include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -28,24 +29,70 @@ RangeFromRssi ToRange(const LogDistanceModel& model, double rssi_dbm) {
   return {d, model.DistanceSigma(d)};
 }
 
-PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double trim_fraction,
-                           double bin_width_m) {
+double BodyFactor(const Vec2& wearer, double heading_rad, const Vec2& other) {
+  const Vec2 to = other - wearer;
+  const double n = to.norm();
+  if (n < 1e-9) return 0.0;
+  const double c = (to.x() * std::cos(heading_rad) + to.y() * std::sin(heading_rad)) / n;
+  return std::clamp(-c, 0.0, 1.0);
+}
+
+namespace {
+
+std::vector<CalibrationPair> Trimmed(const std::vector<CalibrationPair>& pairs,
+                                     double trim_fraction, double bin_width_m,
+                                     std::size_t* trimmed) {
   std::map<long, std::vector<CalibrationPair>> bins;
   for (const auto& p : pairs) {
-    if (!(p.distance_m > 0) || !std::isfinite(p.rssi_dbm)) {
+    if (!(p.distance_m > 0) || !std::isfinite(p.rssi_dbm) || !std::isfinite(p.body_factor)) {
       throw std::invalid_argument("FitLogDistance: distances must be > 0 and RSSI finite");
     }
     bins[std::lround(p.distance_m / bin_width_m)].push_back(p);
   }
   std::vector<CalibrationPair> kept;
-  PathLossFit fit;
+  *trimmed = 0;
   for (auto& [key, v] : bins) {
     std::sort(v.begin(), v.end(),
               [](const auto& a, const auto& b) { return a.rssi_dbm < b.rssi_dbm; });
     const auto drop = static_cast<std::size_t>(std::floor(trim_fraction * v.size()));
     for (std::size_t k = drop; k + drop < v.size(); ++k) kept.push_back(v[k]);
-    fit.pairs_trimmed += 2 * drop;
+    *trimmed += 2 * drop;
   }
+  return kept;
+}
+
+}  // namespace
+
+PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
+                                   double trim_fraction, double bin_width_m) {
+  PathLossFit fit;
+  const auto kept = Trimmed(pairs, trim_fraction, bin_width_m, &fit.pairs_trimmed);
+  if (kept.size() < 10) throw std::invalid_argument("FitLogDistanceWithBody: fewer than 10 pairs");
+  // rssi = alpha - 10 n log10(d) - L_body * body_factor
+  Eigen::MatrixXd A(kept.size(), 3);
+  Eigen::VectorXd y(kept.size());
+  for (std::size_t k = 0; k < kept.size(); ++k) {
+    A(k, 0) = 1.0;
+    A(k, 1) = -10.0 * std::log10(kept[k].distance_m);
+    A(k, 2) = -kept[k].body_factor;
+    y(k) = kept[k].rssi_dbm;
+  }
+  const Eigen::Matrix3d N = A.transpose() * A;
+  if (Eigen::JacobiSVD<Eigen::Matrix3d>(N).singularValues()(2) < 1e-9 * N.trace()) {
+    throw std::invalid_argument("FitLogDistanceWithBody: degenerate geometry");
+  }
+  const Eigen::Vector3d x = N.ldlt().solve(A.transpose() * y);
+  const double ss = (A * x - y).squaredNorm();
+  fit.model = {x(0), x(1), std::sqrt(ss / std::max(1.0, kept.size() - 3.0)), x(2)};
+  fit.residual_sigma_db = fit.model.sigma_db;
+  fit.pairs_used = kept.size();
+  return fit;
+}
+
+PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double trim_fraction,
+                           double bin_width_m) {
+  PathLossFit fit;
+  const auto kept = Trimmed(pairs, trim_fraction, bin_width_m, &fit.pairs_trimmed);
   if (kept.size() < 3) throw std::invalid_argument("FitLogDistance: fewer than 3 pairs");
   // rssi = alpha + slope * log10(d), slope = -10 n
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
@@ -66,7 +113,7 @@ PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double tri
     const double r = p.rssi_dbm - (alpha + slope * std::log10(p.distance_m));
     ss += r * r;
   }
-  fit.model = {alpha, -slope / 10.0, std::sqrt(ss / std::max(1.0, n - 2))};
+  fit.model = {alpha, -slope / 10.0, std::sqrt(ss / std::max(1.0, n - 2)), 0.0};
   fit.residual_sigma_db = fit.model.sigma_db;
   fit.pairs_used = kept.size();
   return fit;
@@ -100,14 +147,17 @@ std::optional<double> LinkChangeDetector::Add(double rssi_dbm) {
     ++reference_count_;
     recent_.pop_front();
   }
-  if (reference_count_ < options_.reference || static_cast<int>(recent_.size()) < options_.recent) {
-    return std::nullopt;
-  }
-  double recent_sum = 0;
-  for (double v : recent_) recent_sum += v;
-  const double change = recent_sum / recent_.size() - reference_sum_ / reference_count_;
+  if (!Ready()) return std::nullopt;
+  const double change = CurrentChange();
   if (std::abs(change) > options_.threshold_db) return change;
   return std::nullopt;
+}
+
+double LinkChangeDetector::CurrentChange() const {
+  if (!Ready()) return 0.0;
+  double recent_sum = 0;
+  for (double v : recent_) recent_sum += v;
+  return recent_sum / recent_.size() - reference_sum_ / reference_count_;
 }
 
 void LinkChangeDetector::Reset() {

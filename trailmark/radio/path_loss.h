@@ -18,6 +18,10 @@ struct LogDistanceModel {
   double alpha_dbm = -40.0;          ///< mean RSSI at 1 m
   double path_loss_exponent = 2.3;   ///< n
   double sigma_db = 4.0;             ///< shadowing, 1 sigma
+  /// Body shadowing of a body-worn radio: extra loss body_loss_db * max(0, -cos(angle between
+  /// the wearer's walking direction and the direction to the other node)), i.e. full loss when
+  /// the other node is straight behind (breadcrumb paper ref. [12]). 0 for static links.
+  double body_loss_db = 0.0;
 
   static LogDistanceModel From(const RadioCalibration& c) {
     return {c.alpha_dbm, c.path_loss_exponent, c.shadowing_sigma_db};
@@ -40,7 +44,11 @@ RangeFromRssi ToRange(const LogDistanceModel& model, double rssi_dbm);
 struct CalibrationPair {
   double distance_m = 0;
   double rssi_dbm = 0;
+  double body_factor = 0;  ///< max(0, -cos(angle)) for a body-worn end, else 0
 };
+
+/// max(0, -cos) of the angle between a wearer's heading and the direction to the other node.
+double BodyFactor(const Vec2& wearer, double heading_rad, const Vec2& other);
 
 struct PathLossFit {
   LogDistanceModel model;
@@ -55,6 +63,9 @@ struct PathLossFit {
 /// with fewer than 3 pairs or fewer than 2 distinct distances.
 PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double trim_fraction = 0.05,
                            double bin_width_m = 0.5);
+/// The same with the body-shadowing term as a third regressor (needs body factors that vary).
+PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
+                                   double trim_fraction = 0.05, double bin_width_m = 0.5);
 
 /// Encounter detection (breadcrumb paper sec. V-A, Fig. 7; their ref. [31]): a local maximum of
 /// a link's RSSI above a threshold means the agent passed within about a metre of the node.
@@ -84,7 +95,7 @@ class EncounterDetector {
 struct LinkChangeOptions {
   int reference = 8;
   int recent = 5;
-  double threshold_db = 5.0;
+  double threshold_db = 3.0;
 };
 
 class LinkChangeDetector {
@@ -93,6 +104,11 @@ class LinkChangeDetector {
   /// Returns the change in dB (recent - reference) when the step is detected.
   std::optional<double> Add(double rssi_dbm);
   void Reset();
+  /// recent mean - reference mean (0 until both windows are filled).
+  double CurrentChange() const;
+  bool Ready() const {
+    return reference_count_ >= options_.reference && static_cast<int>(recent_.size()) >= options_.recent;
+  }
   int packets() const { return static_cast<int>(recent_.size()) + reference_count_; }
 
  private:

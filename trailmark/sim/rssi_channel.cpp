@@ -76,7 +76,11 @@ std::optional<double> RssiChannel::Sample(const std::string& rx_id, const Vec2& 
   double extra_sigma = 0;
   ZoneLoss(rx, tx, &extra_sigma);
   const double fast = rng_.Normal(0.0, std::hypot(options_.fast_fading_sigma_db, extra_sigma));
-  const double rssi = mean + link.shadow_db + fast;
+  double gain = 0;
+  for (const std::string* id : {&rx_id, &tx_id}) {
+    if (auto it = node_gain_db_.find(*id); it != node_gain_db_.end()) gain += it->second;
+  }
+  const double rssi = mean + gain + link.shadow_db + fast;
   if (rssi < options_.sensitivity_dbm) return std::nullopt;
   return std::round(rssi);  // radios report integer dBm
 }

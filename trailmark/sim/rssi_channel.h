@@ -52,6 +52,9 @@ class RssiChannel {
                                std::optional<double> wearer_heading_tx);
 
   const RssiChannelOptions& options() const { return options_; }
+  /// Antenna gain offset of a node (dB, added on every link of the node): a breadcrumb knocked
+  /// over lies with its antenna at another angle (breadcrumb paper sec. V-C).
+  void SetNodeGain(const std::string& id, double gain_db) { node_gain_db_[id] = gain_db; }
 
  private:
   double BodyLoss(const Vec2& self, const Vec2& other, std::optional<double> heading) const;
@@ -67,6 +70,7 @@ class RssiChannel {
     bool init = false;
   };
   std::map<std::pair<std::string, std::string>, LinkState> links_;
+  std::map<std::string, double> node_gain_db_;
 };
 
 }  // namespace trailmark

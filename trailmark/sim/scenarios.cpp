@@ -57,32 +57,6 @@ FloorPlan BuildOfficeFloor(const OfficeLoopOptions& o) {
 }
 
 SimulatedMission SimulateOfficeLoop(const OfficeLoopOptions& o, std::uint64_t seed) {
-  Random rng(seed);
-  Random walk_rng = rng.Fork();
-  Random pdr_rng = rng.Fork();
-  Random radio_rng = rng.Fork();
-  Random drop_rng = rng.Fork();
-
-  SimulatedMission sim;
-  sim.plan = BuildOfficeFloor(o);
-  MissionData& m = sim.data;
-  const std::string agent = "ff1";
-  m.info.name = "office-loop";
-  m.info.description = "Office floor, 100 m corridor loop walked " + std::to_string(o.laps) +
-                       " times anti-clockwise from the base (breadcrumb paper sec. V-A); "
-                       "breadcrumbs dropped by a dispenser; simulated, seed " +
-                       std::to_string(seed);
-  m.info.nodes.push_back({.id = "base", .kind = NodeKind::kBase, .position = Vec3::Zero()});
-  m.info.nodes.push_back({.id = agent,
-                          .kind = NodeKind::kAgent,
-                          .start = Vec3::Zero(),
-                          .start_sigma_m = 0.1,
-                          .start_heading_rad = std::numbers::pi,
-                          .start_heading_sigma_rad = 0.02});
-  m.info.radio = RadioCalibration{"log-distance", o.radio.alpha_dbm, o.radio.path_loss_exponent,
-                                  o.radio.shadowing_sigma_db};
-  m.info.floorplan = "floorplan.geojson";
-
   Route route;
   const double W = o.loop_width_m, H = o.loop_height_m;
   route.waypoints.push_back({0, 0});
@@ -91,104 +65,120 @@ SimulatedMission SimulateOfficeLoop(const OfficeLoopOptions& o, std::uint64_t se
       route.waypoints.push_back(p);
     }
   }
-  const Walk walk = WalkRoute(route, o.walker, 0.0, walk_rng);
+  MissionSimOptions sim;
+  sim.packet_period_s = o.packet_period_s;
+  sim.crumb_packet_period_s = o.crumb_packet_period_s;
+  sim.walker = o.walker;
+  sim.pdr = o.pdr;
+  sim.radio = o.radio;
+  sim.dispenser = o.dispenser;
+  sim.kick = o.kick;
+  SimulatedMission mission = SimulateAgents(BuildOfficeFloor(o), Vec2::Zero(),
+                                            {{"ff1", route, 0.0, std::numbers::pi}}, sim, seed);
+  mission.data.info.name = "office-loop";
+  mission.data.info.description =
+      "Office floor, 100 m corridor loop walked " + std::to_string(o.laps) +
+      " times anti-clockwise from the base (breadcrumb paper sec. V-A); breadcrumbs dropped by "
+      "a dispenser; simulated, seed " + std::to_string(seed);
+  return mission;
+}
 
-  // PDR steps.
-  PdrErrorModel pdr(o.pdr, pdr_rng);
-  for (const auto& s : walk.steps) {
-    const Vec2 measured = pdr.Apply(s.to - s.from, s.t1 - s.t0);
-    const double var = pdr.ReportedVariance((s.to - s.from).norm());
-    m.steps.push_back({s.t0, s.t1, agent, Vec3(measured.x(), measured.y(), 0.0),
-                       Vec3(var, var, 1e-4)});
+TrainingBuildingOptions::TrainingBuildingOptions() {
+  sim.walker.speed_mps = 0.8;  // smoke: slow "trail step" walking (sec. V-C)
+  sim.walker.step_length_m = 0.6;
+  sim.kick.probability = 0.3;
+  sim.kick.max_kicks = 2;
+}
+
+FloorPlan BuildTrainingFloor(const TrainingBuildingOptions& o) {
+  const double L = o.rooms_per_side * o.room_width_m, h = o.corridor_width_m / 2,
+               D = o.room_depth_m;
+  std::vector<Segment2> walls, doors;
+  std::vector<Room> rooms;
+  AddRect(walls, {0, -h - D}, {L, h + D});  // exterior
+  walls.push_back({{0, h}, {L, h}});        // corridor walls
+  walls.push_back({{0, -h}, {L, -h}});
+  rooms.push_back({"corridor", {{0, -h}, {L, -h}, {L, h}, {0, h}}, 0});
+  for (int k = 0; k < o.rooms_per_side; ++k) {
+    const double x0 = k * o.room_width_m, x1 = x0 + o.room_width_m;
+    if (k > 0) {
+      walls.push_back({{x0, h}, {x0, h + D}});
+      walls.push_back({{x0, -h}, {x0, -h - D}});
+    }
+    const double door = x0 + o.room_width_m / 2;
+    doors.push_back({{door - 0.5, h}, {door + 0.5, h}});
+    doors.push_back({{door - 0.5, -h}, {door + 0.5, -h}});
+    rooms.push_back({"north-" + std::to_string(k + 1), {{x0, h}, {x1, h}, {x1, h + D}, {x0, h + D}}, 0});
+    rooms.push_back({"south-" + std::to_string(k + 1), {{x0, -h}, {x1, -h}, {x1, -h - D}, {x0, -h - D}}, 0});
   }
+  doors.push_back({{L, -0.5}, {L, 0.5}});  // the right entrance
+  return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
+}
 
-  // Radio and the dispenser, ticking with the agent's beacons.
-  RssiChannel channel(o.radio, &sim.plan, {}, radio_rng);
-  struct Deployed {
-    std::string id;
-    Vec2 position;
-    double ema = 0;
-    bool heard = false;
+SimulatedMission SimulateTrainingBuilding(const TrainingBuildingOptions& o, std::uint64_t seed) {
+  const double L = o.rooms_per_side * o.room_width_m, h = o.corridor_width_m / 2,
+               D = o.room_depth_m;
+  const Vec2 base(L + 2.0, 0.0);
+  auto search = [&](double side) {  // side +1: north rooms, -1: south rooms
+    Route r;
+    r.waypoints.push_back(base);
+    r.waypoints.push_back({L - 1.0, 0.0});
+    for (int k = o.rooms_per_side - 1; k >= 0; --k) {
+      const double x0 = k * o.room_width_m, x1 = x0 + o.room_width_m;
+      const double door = x0 + o.room_width_m / 2, m = 0.8;
+      const double in = side * (h + m), back = side * (h + D - m);
+      r.waypoints.push_back({door, 0.0});
+      r.waypoints.push_back({door, in});
+      // A directional search around the room, an arm's length off the walls.
+      r.waypoints.push_back({x1 - m, in});
+      r.waypoints.push_back({x1 - m, back});
+      r.waypoints.push_back({x0 + m, back});
+      r.waypoints.push_back({x0 + m, in});
+      r.waypoints.push_back({door, in});
+      Route::Stop stop;
+      double length = 0;
+      for (std::size_t i = 1; i < r.waypoints.size(); ++i) {
+        length += (r.waypoints[i] - r.waypoints[i - 1]).norm();
+      }
+      stop.at_distance_m = length - (x1 - x0 - 2 * m) / 2;  // at the back wall's middle
+      stop.duration_s = o.room_pause_s;
+      r.stops.push_back(stop);
+      r.waypoints.push_back({door, 0.0});
+    }
+    r.waypoints.push_back({L - 1.0, 0.0});
+    r.waypoints.push_back(base);
+    return r;
   };
-  std::vector<Deployed> chain{{"base", Vec2::Zero()}};
-  m.truth.push_back({walk.truth.front().t, "base", Vec3::Zero()});
-  m.events.push_back({walk.truth.front().t, agent, "enter", ""});
-  int dropped = 0;
-  Vec2 last_drop = Vec2::Zero();
-  double next_packet = walk.truth.front().t;
-  double next_crumb_packet = next_packet;
-  std::optional<double> weak_since;
-  std::size_t stop_idx = 0;
-  for (const auto& sample : walk.truth) {
-    while (stop_idx < walk.stops.size() && walk.stops[stop_idx].t_stop <= sample.t) {
-      m.events.push_back({walk.stops[stop_idx].t_stop, agent, "stop", ""});
-      m.events.push_back({walk.stops[stop_idx].t_go, agent, "go", ""});
-      ++stop_idx;
-    }
-    m.truth.push_back({sample.t, agent, Vec3(sample.position.x(), sample.position.y(), 0.0)});
-    if (sample.t + 1e-9 < next_packet) continue;
-    next_packet += o.packet_period_s;
-    double best = -1e9;
-    for (auto& node : chain) {
-      // Node -> agent (the dispenser hears the chain) and agent -> node.
-      if (auto r = channel.Sample(agent, sample.position, node.id, node.position,
-                                  sample.heading_rad, std::nullopt)) {
-        m.rssi.push_back({sample.t, agent, node.id, *r});
-        node.ema = node.heard ? (1 - o.dispenser.smoothing) * node.ema + o.dispenser.smoothing * *r
-                              : *r;
-        node.heard = true;
-      } else if (node.heard) {
-        node.ema = (1 - o.dispenser.smoothing) * node.ema +
-                   o.dispenser.smoothing * o.radio.sensitivity_dbm;
-      }
-      if (auto r = channel.Sample(node.id, node.position, agent, sample.position, std::nullopt,
-                                  sample.heading_rad)) {
-        m.rssi.push_back({sample.t, node.id, agent, *r});
-      }
-      if (node.heard) best = std::max(best, node.ema);
-    }
-    if (sample.t + 1e-9 >= next_crumb_packet) {
-      next_crumb_packet += o.crumb_packet_period_s;
-      for (const auto& rx : chain) {
-        for (const auto& tx : chain) {
-          if (rx.id == tx.id) continue;
-          if (auto r = channel.Sample(rx.id, rx.position, tx.id, tx.position, std::nullopt,
-                                      std::nullopt)) {
-            m.rssi.push_back({sample.t, rx.id, tx.id, *r});
-          }
-        }
-      }
-    }
-    if (best >= o.dispenser.drop_threshold_dbm) {
-      weak_since.reset();
-    } else if (!weak_since) {
-      weak_since = sample.t;
-    }
-    if (weak_since && sample.t - *weak_since >= o.dispenser.below_for_s &&
-        dropped < o.dispenser.capacity &&
-        (sample.position - last_drop).norm() >= o.dispenser.min_spacing_m) {
-      weak_since.reset();
-      const std::string id = "c" + std::to_string(++dropped);
-      const Vec2 where = sample.position + Vec2(drop_rng.Normal(0, o.dispenser.drop_scatter_m),
-                                                drop_rng.Normal(0, o.dispenser.drop_scatter_m));
-      chain.push_back({id, where});
-      last_drop = sample.position;
-      m.events.push_back({sample.t, agent, "drop", id});
-      m.truth.push_back({sample.t, id, Vec3(where.x(), where.y(), 0.0)});
-    }
-  }
-  m.events.push_back({walk.truth.back().t, agent, "exit", ""});
-  auto by_time = [](const auto& a, const auto& b) { return a.t < b.t; };
-  std::stable_sort(m.events.begin(), m.events.end(), by_time);
-  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
-  return sim;
+  TrainingBuildingOptions opts = o;
+  // The fire: the third north room from the entrance and the corridor in front of it.
+  const double fx0 = (o.rooms_per_side - 3) * o.room_width_m;
+  opts.sim.zones.push_back({"fire",
+                            {{fx0, -h}, {fx0 + o.room_width_m, -h}, {fx0 + o.room_width_m, h + D},
+                             {fx0, h + D}},
+                            2.0,
+                            3.0});
+  SimulatedMission mission = SimulateAgents(
+      BuildTrainingFloor(o), base,
+      {{"ff1", search(+1), 0.0, std::numbers::pi}, {"ff2", search(-1), o.second_start_s, std::numbers::pi}},
+      opts.sim, seed);
+  mission.data.info.name = "training-building";
+  mission.data.info.description =
+      "Fire-training building, 3rd floor (breadcrumb paper sec. V-B): two firefighters search "
+      "the rooms on both sides of a corridor from the right entrance, a fire attenuates links "
+      "through one room, crumbs may be kicked; simulated, seed " + std::to_string(seed);
+  return mission;
 }
 
 std::vector<ScenarioInfo> Scenarios() {
   return {{"office-loop",
            "default: office floor, 100 m corridor loop x 4 (400 m), one firefighter, base at the "
            "start, dispenser-dropped breadcrumbs, RSSI between all nodes in range"},
-          {"office-loop-1lap", "the same floor, one lap (100 m): quick tests"}};
+          {"office-loop-1lap", "the same floor, one lap (100 m): quick tests"},
+          {"office-loop-kicked",
+           "office loop x 4 where a walked-past breadcrumb may be kicked 1-2 m (sec. V-C)"},
+          {"training-building",
+           "two firefighters search the rooms of a fire-training floor from the right entrance, "
+           "a fire zone, kicked crumbs (sec. V-B)"}};
 }
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
@@ -200,6 +190,15 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
     sim.data.info.name = name;
     return sim;
   }
+  if (name == "office-loop-kicked") {
+    OfficeLoopOptions o;
+    o.kick.probability = 0.5;
+    o.kick.max_kicks = 2;
+    SimulatedMission sim = SimulateOfficeLoop(o, seed);
+    sim.data.info.name = name;
+    return sim;
+  }
+  if (name == "training-building") return SimulateTrainingBuilding({}, seed);
   std::string known;
   for (const auto& s : Scenarios()) known += (known.empty() ? "" : ", ") + s.name;
   throw std::invalid_argument("unknown scenario '" + name + "' (known: " + known + ")");

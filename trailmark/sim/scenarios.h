@@ -9,25 +9,10 @@
 #include "trailmark/geometry/floor_plan.h"
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/rssi_channel.h"
+#include "trailmark/sim/mission_sim.h"
 #include "trailmark/sim/walker.h"
 
 namespace trailmark {
-
-struct SimulatedMission {
-  MissionData data;
-  FloorPlan plan;
-};
-
-/// Breadcrumb dispenser (breadcrumb paper sec. III; Liu et al. MobiSys'10): drop a crumb when
-/// the best smoothed link from the wearer to any node of the chain falls below a threshold.
-struct DispenserOptions {
-  double drop_threshold_dbm = -72.0;  ///< smoothed RSSI below which a crumb is dropped
-  double smoothing = 0.3;             ///< EMA weight of a new packet
-  double min_spacing_m = 4.0;         ///< no two drops closer than this along the walk
-  double below_for_s = 1.5;           ///< the link must stay weak this long (fading hysteresis)
-  int capacity = 12;                  ///< crumbs carried
-  double drop_scatter_m = 0.2;        ///< where the crumb lands around the foot (1 sigma)
-};
 
 struct OfficeLoopOptions {
   int laps = 4;                       ///< breadcrumb paper sec. V-A: 100 m loop walked 4 times
@@ -40,6 +25,7 @@ struct OfficeLoopOptions {
   PdrErrorOptions pdr;
   RssiChannelOptions radio;
   DispenserOptions dispenser;
+  KickOptions kick;
 };
 
 /// The office floor of the breadcrumb paper's experiment (sec. V-A, Fig. 9a): a rectangular
@@ -49,6 +35,24 @@ FloorPlan BuildOfficeFloor(const OfficeLoopOptions& options);
 /// One firefighter walks the loop anti-clockwise `laps` times from the base; a dispenser drops
 /// crumbs; RSSI between all nodes in range; PDR steps with errors; truth at 10 Hz.
 SimulatedMission SimulateOfficeLoop(const OfficeLoopOptions& options, std::uint64_t seed);
+
+/// The two-firefighter experiment of the breadcrumb paper (sec. V-B, Fig. 10): the 3rd floor
+/// of a fire-training building, a corridor with rooms on both sides, the base at the right
+/// entrance; ff1 searches the north rooms, ff2 the south rooms, slowly (smoke); a fire in one
+/// room attenuates the links through it (Fig. 8); a crumb may be kicked.
+struct TrainingBuildingOptions {
+  int rooms_per_side = 6;
+  double room_width_m = 6.0;
+  double room_depth_m = 7.0;
+  double corridor_width_m = 2.0;
+  double second_start_s = 20.0;
+  double room_pause_s = 15.0;
+  MissionSimOptions sim;
+  TrainingBuildingOptions();
+};
+FloorPlan BuildTrainingFloor(const TrainingBuildingOptions& options);
+SimulatedMission SimulateTrainingBuilding(const TrainingBuildingOptions& options,
+                                          std::uint64_t seed);
 
 struct ScenarioInfo {
   std::string name;
