@@ -82,16 +82,16 @@ BatchSolution SolveNonlinear(const BatchProblem& p, const Eigen::VectorXd& initi
       const Vec2 diff = s.x.segment<2>(2 * sc.i) + sc.offset - xj;
       const double d = diff.norm();
       const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
-      const Vec2 J = sc.model.Slope(d) * u;
+      const Vec2 bias = sc.bias >= 0 ? Vec2(s.x.segment<2>(2 * sc.bias)) : Vec2::Zero();
+      const Vec2 J = (1.0 + bias.y()) * sc.model.Slope(d) * u;
       const double w = 1.0 / sc.variance;
-      const double res = sc.z - sc.model.Predict(d);
-      H.block<2, 2>(2 * sc.i, 2 * sc.i) += w * J * J.transpose();
-      g.segment<2>(2 * sc.i) += w * J * res;
-      if (sc.j >= 0) {
-        H.block<2, 2>(2 * sc.j, 2 * sc.j) += w * J * J.transpose();
-        H.block<2, 2>(2 * sc.i, 2 * sc.j) -= w * J * J.transpose();
-        H.block<2, 2>(2 * sc.j, 2 * sc.i) -= w * J * J.transpose();
-        g.segment<2>(2 * sc.j) -= w * J * res;
+      const double res = sc.z - (1.0 + bias.y()) * sc.model.Predict(d) - bias.x();
+      std::vector<std::pair<int, Vec2>> rows{{sc.i, J}};
+      if (sc.j >= 0) rows.emplace_back(sc.j, -J);
+      if (sc.bias >= 0) rows.emplace_back(sc.bias, Vec2(1.0, sc.model.Predict(d)));
+      for (const auto& [a, Ja] : rows) {
+        g.segment<2>(2 * a) += w * Ja * res;
+        for (const auto& [c, Jc] : rows) H.block<2, 2>(2 * a, 2 * c) += w * Ja * Jc.transpose();
       }
     }
     const Eigen::LDLT<Eigen::MatrixXd> ldlt(H);

@@ -32,6 +32,7 @@ struct BatchProblem {
     Vec2 offset = Vec2::Zero();
     double z = 0, variance = 1;
     ScalarModel model;
+    int bias = -1;  ///< node (offset, scale): z = (1 + scale) h + offset
   };
   /// z = sum_k J_k x_k + e (the general linear edge).
   struct Linear {

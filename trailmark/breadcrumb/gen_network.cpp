@@ -116,39 +116,49 @@ void GenNetwork::AddRelativeToAnchor(NodeIndex i, const Vec2& anchor, const Vec2
 
 void GenNetwork::AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z,
                                      double variance, const ScalarModel& model,
-                                     const Vec2& offset) {
+                                     const Vec2& offset, NodeIndex bias) {
   const Vec2 xi = nodes_[i].x_hat;
   const Vec2 xj = j >= 0 ? nodes_[j].x_hat : anchor;
-  Vec2 diff = xi + offset - xj;
-  double d = diff.norm();
+  const Vec2 diff = xi + offset - xj;
+  const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
   // h_ij = (x_i - x_j)^T / (|x_i - x_j| + eps_ij), breadcrumb paper after eq. (19)
-  const double slope = model.Slope(d);
-  const Vec2 h = slope * u;  // dh/dx_i; dh/dx_j = -h
+  const Vec2 bias_hat = bias >= 0 ? nodes_[bias].x_hat : Vec2::Zero();
+  const double gain = 1.0 + bias_hat.y();
+  const Vec2 h = gain * model.Slope(d) * u;  // dh/dx_i; dh/dx_j = -h
+  NodeIndex nodes[3];
+  Vec2 rows[3];
+  int n = 0;
+  nodes[n] = i, rows[n++] = h;
+  if (j >= 0) nodes[n] = j, rows[n++] = -h;
+  if (bias >= 0) nodes[n] = bias, rows[n++] = Vec2(1.0, model.Predict(d));  // d/d(offset, scale)
+  // eq. (19): b += H^T P^-1 (z - h(x_hat) + H x_hat); eq. (18): L += H^T P^-1 H
+  const double predicted = gain * model.Predict(d) + bias_hat.x();
+  double hx = 0;
+  for (int k = 0; k < n; ++k) hx += rows[k].dot(nodes_[nodes[k]].x_hat);
   const double w = 1.0 / variance;
-  const Mat2 W = w * h * h.transpose();
-  // eq. (19): b += H^T P^-1 (z - h(x_hat) + H x_hat)
-  const double hx = h.dot(xi) - (j >= 0 ? h.dot(xj) : 0.0);
-  const double r = z - model.Predict(d) + hx;
-  nodes_[i].L_ii += W;  // eq. (18)
-  nodes_[i].b += w * h * r;
-  if (j >= 0) {
-    nodes_[j].L_ii += W;
-    OffBlock(i, j) -= W;
-    for (auto& blk : nodes_[j].off) {
-      if (blk.j == i) blk.L -= W;
+  const double r = z - predicted + hx;
+  for (int a = 0; a < n; ++a) {
+    nodes_[nodes[a]].L_ii += w * rows[a] * rows[a].transpose();
+    nodes_[nodes[a]].b += w * rows[a] * r;
+    for (int c = a + 1; c < n; ++c) {
+      const Mat2 block = w * rows[a] * rows[c].transpose();  // L_ac
+      OffBlock(nodes[a], nodes[c]) += block;
+      for (auto& blk : nodes_[nodes[c]].off) {
+        if (blk.j == nodes[a]) blk.L += block.transpose();
+      }
     }
-    nodes_[j].b -= w * h * r;
   }
   dirty_ = true;
 }
 
 void GenNetwork::AddScalar(NodeIndex i, NodeIndex j, double z, double variance,
-                           const ScalarModel& model, const Vec2& offset) {
-  if (!IsActive(i) || !IsActive(j) || i == j || !(variance > 0)) {
+                           const ScalarModel& model, const Vec2& offset, NodeIndex bias) {
+  if (!IsActive(i) || !IsActive(j) || i == j || !(variance > 0) ||
+      (bias >= 0 && (!IsActive(bias) || bias == i || bias == j))) {
     throw std::invalid_argument("AddScalar: bad nodes or variance");
   }
-  AddLinearizedScalar(i, j, Vec2::Zero(), z, variance, model, offset);
+  AddLinearizedScalar(i, j, Vec2::Zero(), z, variance, model, offset, bias);
 }
 
 void GenNetwork::AddScalarToAnchor(NodeIndex i, const Vec2& anchor, double z, double variance,

@@ -82,8 +82,10 @@ class GenNetwork {
   /// AddMeasurement+, eqs. (18)-(19): z = h(|x_i - x_j + offset|) + e, e ~ N(0, variance),
   /// linearized at the current estimate. `offset` is a known displacement (e.g. the PDR
   /// displacement between the measurement time and the node's state time).
+  /// `bias` (optional): a node (offset, scale) of the measurement, z = (1 + scale) h(d) + offset
+  /// + e, e.g. a UWB radio's range offset and clock/propagation scale, estimated with the rest.
   void AddScalar(NodeIndex i, NodeIndex j, double z, double variance, const ScalarModel& model,
-                 const Vec2& offset = Vec2::Zero());
+                 const Vec2& offset = Vec2::Zero(), NodeIndex bias = -1);
   /// The same with a known point instead of node j.
   void AddScalarToAnchor(NodeIndex i, const Vec2& anchor, double z, double variance,
                          const ScalarModel& model, const Vec2& offset = Vec2::Zero());
@@ -158,7 +160,8 @@ class GenNetwork {
 
   Mat2& OffBlock(NodeIndex i, NodeIndex j);  ///< creates when missing (pattern change)
   void AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z,
-                           double variance, const ScalarModel& model, const Vec2& offset);
+                           double variance, const ScalarModel& model, const Vec2& offset,
+                           NodeIndex bias = -1);
   void FoldPersistent(int edge);
   bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L, const Eigen::VectorXd& extra_b);
   void CompactIndices();

@@ -314,7 +314,7 @@ void BreadcrumbLocalizer::AddRange(const RangeMeasurement& r) {
   const std::string& other = a_agent ? r.b : r.a;
   if (!agents_.count(other)) AddUnknownNode(other);
   Agent& a = StartedAgent(agent, r.t);
-  Pending q{r.t, Kind::kRange, other, r.range_m, sigma};
+  Pending q{r.t, Kind::kRange, other, r.range_m, sigma, r.kind};
   a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
                                     [](TimeS v, const Pending& x) { return v < x.t; }),
                    q);
@@ -412,13 +412,14 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
 void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i,
                                           const Mat2& cov_j, double z, double variance,
                                           const ScalarModel& model, const Vec2& offset,
-                                          double k_negative) {
+                                          double k_negative, NodeIndex bias) {
   const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
   const double slope = model.Slope(d);
   const double S = variance + slope * slope * u.dot((cov_i + cov_j) * u);
-  const double nu = z - model.Predict(d);
+  const Vec2 bias_hat = bias >= 0 ? gen_.Estimate(bias) : Vec2::Zero();
+  const double nu = z - (1.0 + bias_hat.y()) * model.Predict(d) - bias_hat.x();
   const double normalized = std::abs(nu) / std::sqrt(S);
   if (!std::isfinite(normalized) || normalized > options_.gate_sigma) {
     ++summary_.gated;
@@ -429,7 +430,25 @@ void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& 
     variance *= normalized / k;  // IV-F: lessen a noisy measurement's effect (Huber weight)
     ++summary_.downweighted;
   }
-  gen_.AddScalar(i, j, z, variance, model, offset);
+  gen_.AddScalar(i, j, z, variance, model, offset, bias);
+}
+
+NodeIndex BreadcrumbLocalizer::RangeBiasNode(const std::string& kind) {
+  if (!options_.estimate_range_bias) return -1;
+  auto it = range_bias_.find(kind);
+  if (it != range_bias_.end()) return it->second;
+  const NodeIndex n = gen_.AddNode(Vec2::Zero());
+  const double s = options_.range_bias_sigma0_m;
+  const double ss = std::max(options_.range_scale_sigma0, 1e-6);
+  gen_.AddPrior(n, Vec2::Zero(), Vec2(s * s, ss * ss).asDiagonal());
+  range_bias_[kind] = n;
+  return n;
+}
+
+std::optional<Vec2> BreadcrumbLocalizer::RangeBias(const std::string& kind) const {
+  auto it = range_bias_.find(kind);
+  if (it == range_bias_.end()) return std::nullopt;
+  return gen_.Estimate(it->second);
 }
 
 void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
@@ -488,7 +507,9 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const auto r = radio::ToRange(options_.radio, p.value);
       ObserveUninitialized(*node, here, r.range_m, r.sigma_m);
     } else if (p.kind == Kind::kRange) {
-      ObserveUninitialized(*node, here, p.value, p.sigma);
+      const Vec2 bias = RangeBias(p.range_kind).value_or(Vec2::Zero());
+      ObserveUninitialized(*node, here, (p.value - bias.x()) / (1.0 + bias.y()), p.sigma,
+                           options_.estimate_range_bias);
     }
     return;
   }
@@ -515,7 +536,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     case Kind::kRange: {
       const double var = p.sigma * p.sigma + offset_var.mean();
       AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value, var,
-                      ScalarModel{}, offset, options_.huber_k);
+                      ScalarModel{}, offset, options_.huber_k, RangeBiasNode(p.range_kind));
       ++summary_.ranges_used;
       break;
     }
@@ -632,10 +653,10 @@ void BreadcrumbLocalizer::MarkMoved(const std::string& id, TimeS t) {
 }
 
 void BreadcrumbLocalizer::ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m,
-                                               double sigma_m) {
+                                               double sigma_m, bool biased) {
   if (!(range_m >= 0) || !(sigma_m > 0) || !from.allFinite()) return;
   if (node.init.size() >= 2000) return;  // plenty: keep memory bounded
-  node.init.push_back({from, range_m, sigma_m});
+  node.init.push_back({from, range_m, sigma_m, biased});
   TryInitialize(node);
 }
 
@@ -700,7 +721,25 @@ void BreadcrumbLocalizer::TryInitialize(StaticNode& node) {
     if ((c - best).norm() > exclusion) mirror = std::min(mirror, v);
   }
   if (mirror - best_cost < options_.init_ambiguity_chi2) return;  // still ambiguous
-  const Mat2 cov = H.inverse() * options_.init_covariance_inflation;
+  // With an unknown range offset, the prior is the (x, y) marginal of the (x, y, offset)
+  // information at the solution, the offset having its prior sigma: radial directions, which
+  // trade off against the offset, stay loose.
+  Eigen::Matrix4d H4 = Eigen::Matrix4d::Zero();
+  bool any_biased = false;
+  for (const auto& o : node.init) {
+    const Vec2 diff = best - o.from;
+    const double d = std::max(diff.norm(), 1e-6);
+    const double r = (o.range_m - d) / o.sigma_m;
+    const double w = (std::abs(r) <= 1.5 ? 1.0 : 1.5 / std::abs(r)) / (o.sigma_m * o.sigma_m);
+    const Eigen::Vector4d J(diff.x() / d, diff.y() / d, o.biased ? 1.0 : 0.0, o.biased ? d : 0.0);
+    H4 += w * J * J.transpose();
+    any_biased = any_biased || o.biased;
+  }
+  H4(2, 2) += 1.0 / (options_.range_bias_sigma0_m * options_.range_bias_sigma0_m);
+  H4(3, 3) += 1.0 / std::pow(std::max(options_.range_scale_sigma0, 1e-6), 2);
+  H4 += Eigen::Matrix4d::Identity() * 1e-9;
+  const Mat2 cov = (any_biased ? Mat2(H4.inverse().topLeftCorner<2, 2>()) : Mat2(H.inverse())) *
+                   options_.init_covariance_inflation;
   if (!cov.allFinite() || cov.trace() > 1e4) return;
   node.index = gen_.AddNode(best);
   gen_.AddPrior(node.index, best, cov);

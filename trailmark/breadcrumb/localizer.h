@@ -91,6 +91,13 @@ struct LocalizerOptions {
   double encounter_sigma_m = 1.0;
   double drop_sigma_m = 0.5;
   double default_range_sigma_m = 0.5;        ///< ranges.csv rows without sigma
+  /// Range offset and scale per range kind (UWB antenna/hardware delay and clock: the recorded
+  /// Plaza ranges are ~1.05 d + 0.8 m), estimated as a node (offset, scale) of the network.
+  bool estimate_range_bias = true;
+  double range_bias_sigma0_m = 5.0;
+  /// 0 keeps the scale at 0: with a PDR scale also estimated (heading/scale node) the two trade
+  /// off and are poorly observable; enable it when the odometry scale is trusted.
+  double range_scale_sigma0 = 0.0;
   // robustness
   double gate_sigma = 5.0;                   ///< reject when |innovation| > gate * sigma_S
   double huber_k = 1.5;                      ///< variance x (|nu| / (k sigma_S)) beyond k
@@ -166,6 +173,8 @@ class BreadcrumbLocalizer {
   TimeS AgentTime(const std::string& id) const;
   /// Static nodes that exist in the network (known, dropped, initialized), in creation order.
   const std::vector<std::string>& StaticNodes() const { return static_order_; }
+  /// Estimated (offset m, scale) of a range kind (empty when not estimated).
+  std::optional<Vec2> RangeBias(const std::string& kind) const;
   /// Ids of crumbs detected as moved, with the detection time.
   const std::vector<std::pair<TimeS, std::string>>& MovedNodes() const { return moved_; }
 
@@ -188,6 +197,7 @@ class BreadcrumbLocalizer {
     std::string other;  ///< the other node
     double value = 0;   ///< rssi_dbm or range_m
     double sigma = 0;   ///< range sigma
+    std::string range_kind;
   };
   struct Agent {
     std::string id;
@@ -210,6 +220,7 @@ class BreadcrumbLocalizer {
     Vec2 from;
     double range_m;
     double sigma_m;
+    bool biased = false;  ///< a range whose kind has an estimated offset
   };
   struct StaticNode {
     std::string id;
@@ -235,8 +246,10 @@ class BreadcrumbLocalizer {
   void ApplyPending(Agent& a, const Pending& p);
   void AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j,
                        double z, double variance, const ScalarModel& model, const Vec2& offset,
-                       double k_negative);
-  void ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m, double sigma_m);
+                       double k_negative, NodeIndex bias = -1);
+  NodeIndex RangeBiasNode(const std::string& kind);
+  void ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m, double sigma_m,
+                            bool biased = false);
   void TryInitialize(StaticNode& node);
   void StaticPacket(const RssiPacket& packet);
   void MarkMoved(const std::string& id, TimeS t);
@@ -255,6 +268,7 @@ class BreadcrumbLocalizer {
   TimeS now_ = -1e300;
   LocalizerSummary summary_;
   std::vector<radio::CalibrationPair> calibration_pairs_;
+  std::map<std::string, NodeIndex> range_bias_;
   bool calibrated_ = false;
   TimeS next_calibration_ = -1e300;
   void MaybeCalibrate(TimeS t);

@@ -37,6 +37,8 @@ LocalizerOptions BreadcrumbOptionsFrom(const std::map<std::string, std::string>&
   l.calibrate_online = o.Bool("calibrate", l.calibrate_online);
   l.rssi_nlos_k = o.Double("rssi_nlos_k", l.rssi_nlos_k);
   l.static_link_floor_fraction = o.Double("static_link_floor", l.static_link_floor_fraction);
+  l.estimate_range_bias = o.Bool("range_bias", l.estimate_range_bias);
+  l.range_scale_sigma0 = o.Double("range_scale_sigma", l.range_scale_sigma0);
   l.gate_sigma = o.Double("gate_sigma", l.gate_sigma);
   l.huber_k = o.Double("huber_k", l.huber_k);
   l.detect_moved = o.Bool("detect_moved", l.detect_moved);
@@ -183,6 +185,12 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
     num["calibrated_path_loss_exponent"] = s.calibration->model.path_loss_exponent;
     num["calibrated_sigma_db"] = s.calibration->model.sigma_db;
     num["calibrated_body_loss_db"] = s.calibration->model.body_loss_db;
+  }
+  for (const char* kind : {"uwb", "ultrasound", "rssi", ""}) {
+    if (auto b = loc.RangeBias(kind)) {
+      num[std::string("range_offset_m_") + (*kind ? kind : "unknown")] = b->x();
+      num[std::string("range_scale_") + (*kind ? kind : "unknown")] = b->y();
+    }
   }
   for (const auto& n : s.notes) summary.notes.push_back(n);
   for (const auto& [t, id] : loc.MovedNodes()) {
