@@ -122,8 +122,16 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   while (stream.Next(row)) {
     const TimeS t = RowTime(row);
     if (!any) {
-      // Emit the known nodes (base, surveyed landmarks) once at the start.
+      // Emit the known nodes (base, surveyed landmarks) and the agents' starts once.
       emit_static(t, true);
+      for (const NodeInfo& n : mission.info().nodes) {
+        if (n.kind != NodeKind::kAgent || !mission.info().AgentStart(n)) continue;
+        if (auto e = loc.Estimate(n.id)) {
+          const Mat2& c = e->covariance;
+          sink.Add({t, n.id, Vec3(e->position_n.x(), e->position_n.y(), agent_z[n.id]), c(0, 0),
+                    c(0, 1), c(1, 1)});
+        }
+      }
       next_static = t + static_period_s;
       any = true;
     }

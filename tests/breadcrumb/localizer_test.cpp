@@ -1,0 +1,250 @@
+// The breadcrumb localizer: exact on a PDR-only chain, end to end on the simulated office loop
+// (the targets), two firefighters sharing a network, kicked crumbs, and never a NaN or
+// a non-PSD covariance under fuzzed measurement streams.
+#include "trailmark/breadcrumb/localizer.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+
+#include <cmath>
+#include <map>
+
+#include "test_util.h"
+#include "trailmark/core/random.h"
+#include "trailmark/eval/metrics.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/breadcrumb_pipeline.h"
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark::breadcrumb {
+namespace {
+
+using testing::TempDir;
+
+void ExpectValidCovariance(const Mat2& c) {
+  ASSERT_TRUE(c.allFinite());
+  ASSERT_NEAR(c(0, 1), c(1, 0), 1e-9 * (1 + c.norm()));
+  ASSERT_GT(c(0, 0), 0);
+  ASSERT_GT(c.determinant(), 0);
+}
+
+// With no radio and no heading/scale node, the GEN chain of mobile states is dead reckoning:
+// the estimate is the sum of the steps and the covariance the sum of their variances.
+TEST(BreadcrumbLocalizer, PdrOnlyChainEqualsDeadReckoning) {
+  LocalizerOptions o;
+  o.estimate_heading_scale = false;
+  o.step_sigma_floor_m = 0;
+  o.step_sigma_floor_relative = 0;
+  o.state_period_s = 0;  // a new state for every step
+  o.gen.regularization_sigma_m = 1e9;
+  BreadcrumbLocalizer loc(o);
+  loc.AddAgent("ff1", Vec2(1, 2), 0.1);
+  Random rng(1);
+  Vec2 sum(1, 2);
+  Vec2 var(0.01, 0.01);
+  for (int k = 0; k < 200; ++k) {
+    Step s{k * 0.6, (k + 1) * 0.6, "ff1", Vec3(rng.Normal(0.5, 0.2), rng.Normal(0, 0.3), 0),
+           Vec3(0.01 + 0.001 * k, 0.02, 1e-4)};
+    loc.AddStep(s);
+    // Radio-free steps create no state; an encounter-free range-free run still must agree.
+    sum += s.delta_n.head<2>();
+    var += s.variance_m2->head<2>();
+    const auto e = loc.Estimate("ff1");
+    ASSERT_TRUE(e);
+    EXPECT_LT((e->position_n - sum).norm(), 1e-9);
+    EXPECT_NEAR(e->covariance(0, 0), var.x(), 1e-9);
+    EXPECT_NEAR(e->covariance(1, 1), var.y(), 1e-9);
+    EXPECT_NEAR(e->covariance(0, 1), 0.0, 1e-12);
+  }
+  EXPECT_EQ(loc.summary().steps, 200u);
+}
+
+// IV-F: a displacement no firefighter can make is dropped.
+TEST(BreadcrumbLocalizer, RejectsStepsBeyondTheSpeedLimit) {
+  BreadcrumbLocalizer loc;
+  loc.AddAgent("ff1", Vec2::Zero(), 0.1);
+  loc.AddStep({0.0, 0.6, "ff1", Vec3(0.7, 0, 0), std::nullopt});
+  loc.AddStep({0.6, 1.2, "ff1", Vec3(40.0, 0, 0), std::nullopt});  // 67 m/s
+  loc.AddStep({1.2, 1.8, "ff1", Vec3(0.7, 0, 0), std::nullopt});
+  EXPECT_EQ(loc.summary().steps_rejected, 1u);
+  EXPECT_NEAR(loc.Estimate("ff1")->position_n.x(), 1.4, 1e-6);
+  EXPECT_THROW(loc.AddStep({2, 3, "nobody", Vec3::Zero(), std::nullopt}), std::invalid_argument);
+}
+
+Metrics RunPipeline(const Pipeline& p, const SimulatedMission& sim, const TempDir& dir,
+                    std::vector<Estimate>* rows = nullptr,
+                    std::map<std::string, std::string> options = {}) {
+  struct Sink : EstimateSink {
+    void Add(const Estimate& e) override { rows.push_back(e); }
+    std::vector<Estimate> rows;
+  } sink;
+  const MissionDirectory mission(dir.path());
+  p.Run({mission, options}, sink);
+  if (rows) *rows = sink.rows;
+  return Evaluate(sim.data.info, sim.data.truth, sink.rows);
+}
+
+// The targets on the breadcrumb paper's 400 m office experiment (sec. V-A), one seed
+// (the 8-seed table is `trailmark reproduce breadcrumb`).
+TEST(BreadcrumbPipeline, OfficeLoopMeetsTheTargets) {
+  const SimulatedMission sim = SimulateScenario("office-loop", 3);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  std::vector<Estimate> rows;
+  const Metrics gen = RunPipeline(BreadcrumbPipeline(), sim, dir, &rows);
+  const Metrics pdr = RunPipeline(PdrPipeline(), sim, dir);
+  const double dist = gen.agents.distance_m;
+  ASSERT_GT(dist, 390);
+  EXPECT_LT(gen.agents.stats.mean_m, 0.01 * dist);  // mean <= 1 % of distance
+  EXPECT_LT(gen.agents.stats.max_m, 0.02 * dist);   // max <= 2 %
+  EXPECT_LT(gen.agents.stats.final_m * 5, pdr.agents.stats.final_m);  // >= 5x lower end error
+  EXPECT_EQ(gen.agents.uncovered, 0u);
+  for (const auto& e : rows) {
+    ASSERT_TRUE(e.position_n.allFinite());
+    Mat2 c;
+    c << e.sxx, e.sxy, e.sxy, e.syy;
+    ExpectValidCovariance(c);
+  }
+  // Every dropped crumb is estimated, within a few metres.
+  for (const auto& n : gen.nodes) {
+    if (n.kind == NodeKind::kCrumb) {
+      EXPECT_GT(n.stats.samples, 0u) << n.id;
+      EXPECT_LT(n.stats.final_m, 5.0) << n.id;
+    }
+  }
+}
+
+// Sec. V-B: two firefighters share one breadcrumb network in a training building with a fire.
+TEST(BreadcrumbPipeline, TwoFirefightersShareTheNetwork) {
+  const SimulatedMission sim = SimulateScenario("training-building", 1);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  std::vector<Estimate> rows;
+  const Metrics gen = RunPipeline(BreadcrumbPipeline(), sim, dir, &rows);
+  const Metrics pdr = RunPipeline(PdrPipeline(), sim, dir);
+  std::map<std::string, const NodeMetrics*> by_id;
+  for (const auto& n : gen.nodes) by_id[n.id] = &n;
+  for (const std::string id : {"ff1", "ff2"}) {
+    ASSERT_TRUE(by_id.count(id));
+    const NodeMetrics* p = nullptr;
+    for (const auto& n : pdr.nodes) p = n.id == id ? &n : p;
+    ASSERT_NE(p, nullptr);
+    EXPECT_LT(by_id[id]->stats.mean_m, 0.75 * p->stats.mean_m) << id;
+    EXPECT_EQ(by_id[id]->uncovered, 0u) << id;
+  }
+  // Crumbs dropped by either firefighter are estimated.
+  std::size_t crumbs = 0;
+  for (const auto& n : gen.nodes) crumbs += n.kind == NodeKind::kCrumb && n.stats.samples > 0;
+  EXPECT_GE(crumbs, 4u);
+  // Spec: static nodes get a final row at the end of the mission, agents their last estimate.
+  ASSERT_FALSE(rows.empty());
+  const double t_end = rows.back().t;
+  std::map<std::string, double> last;
+  for (const auto& e : rows) last[e.id] = std::max(last[e.id], e.t);
+  for (const auto& [id, t] : last) {
+    if (id.rfind("c", 0) == 0 || id == "base") EXPECT_EQ(t, t_end) << id;
+  }
+}
+
+// Sec. V-C: a kicked crumb is detected from the jump on its links and allowed to move; no
+// detection without a kick (seeds checked: office-loop-kicked 4 and 8, office-loop 2).
+TEST(BreadcrumbPipeline, KickedCrumbIsDetected) {
+  for (std::uint64_t seed : {4u, 8u}) {
+    const SimulatedMission sim = SimulateScenario("office-loop-kicked", seed);
+    std::map<std::string, double> kicked;  // second truth row of a crumb = its kick
+    std::map<std::string, int> seen;
+    for (const auto& t : sim.data.truth) {
+      if (t.id.rfind("c", 0) == 0 && seen[t.id]++ == 1) kicked[t.id] = t.t;
+    }
+    ASSERT_FALSE(kicked.empty());
+    TempDir dir;
+    WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+    const MissionDirectory mission(dir.path());
+    struct Null : EstimateSink {
+      void Add(const Estimate&) override {}
+    } sink;
+    const PipelineSummary s = BreadcrumbPipeline().Run({mission, {}}, sink);
+    ASSERT_GE(s.numbers.at("moved_detected"), 1.0) << "seed " << seed;
+    for (const auto& note : s.notes) {
+      if (note.find("detected as moved") == std::string::npos) continue;
+      const double t = std::stod(note.substr(2));
+      const auto q1 = note.find('\''), q2 = note.find('\'', q1 + 1);
+      const std::string id = note.substr(q1 + 1, q2 - q1 - 1);
+      ASSERT_TRUE(kicked.count(id)) << note;
+      EXPECT_GE(t, kicked[id]) << note;
+      EXPECT_LE(t, kicked[id] + 40.0) << note;
+    }
+  }
+  const SimulatedMission calm = SimulateScenario("office-loop", 2);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), calm.data, &calm.plan);
+  const MissionDirectory mission(dir.path());
+  struct Null : EstimateSink {
+    void Add(const Estimate&) override {}
+  } sink;
+  EXPECT_EQ(BreadcrumbPipeline().Run({mission, {}}, sink).numbers.at("moved_detected"), 0.0);
+}
+
+// Fuzzed streams: random steps (some impossible), RSSI anywhere from -100 to -10 dBm between any
+// nodes, ranges with gross outliers, drops, unknown landmarks. Estimates stay finite and every
+// covariance symmetric positive definite.
+TEST(BreadcrumbLocalizer, FuzzedStreamsNeverGiveNaNOrNonPsdCovariance) {
+  for (std::uint64_t seed = 1; seed <= 12; ++seed) {
+    Random rng(seed);
+    BreadcrumbLocalizer loc;
+    loc.AddKnownNode("base", Vec2::Zero(), 0.0);
+    loc.AddUnknownNode("lm1");
+    loc.AddAgent("a", Vec2::Zero(), 0.1);
+    loc.AddAgent("b", std::nullopt, 0.0);
+    std::vector<std::string> nodes{"base", "lm1", "a", "b"};
+    double t = 0;
+    int crumbs = 0;
+    for (int k = 0; k < 1500; ++k) {
+      t += rng.Uniform(0, 0.3);
+      const double u = rng.Uniform(0, 1);
+      const std::string agent = rng.Uniform(0, 1) < 0.5 ? "a" : "b";
+      if (u < 0.4) {
+        const double scale = rng.Uniform(0, 1) < 0.02 ? 100.0 : 0.8;
+        loc.AddStep({t - 0.5, t, agent, Vec3(rng.Normal(0, scale), rng.Normal(0, scale), 0),
+                     rng.Uniform(0, 1) < 0.5 ? std::optional<Vec3>() : Vec3(1e-4, 1e-2, 1e-4)});
+      } else if (u < 0.75) {
+        const auto& rx = nodes[static_cast<std::size_t>(rng.Uniform(0, nodes.size() - 1e-9))];
+        const auto& tx = nodes[static_cast<std::size_t>(rng.Uniform(0, nodes.size() - 1e-9))];
+        if (rx != tx) loc.AddRssi({t, rx, tx, rng.Uniform(-100, -10)});
+      } else if (u < 0.9) {
+        const auto& other = nodes[static_cast<std::size_t>(rng.Uniform(0, nodes.size() - 1e-9))];
+        const double range = rng.Uniform(0, 1) < 0.1 ? rng.Uniform(0, 1e4) : rng.Uniform(0, 30);
+        if (other != agent) {
+          loc.AddRange({t, agent, other, range,
+                        rng.Uniform(0, 1) < 0.5 ? std::optional<double>() : 0.3, "uwb"});
+        }
+      } else if (u < 0.95 && crumbs < 30) {
+        const std::string id = "c" + std::to_string(++crumbs);
+        loc.AddEvent({t, agent, "drop", id});
+        nodes.push_back(id);
+      } else {
+        loc.AdvanceTo(t);
+      }
+      if (k % 50 == 0) {
+        for (const auto& id : nodes) {
+          if (auto e = loc.Estimate(id)) {
+            ASSERT_TRUE(e->position_n.allFinite()) << id << " seed " << seed;
+            ExpectValidCovariance(e->covariance);
+          }
+        }
+      }
+    }
+    loc.Finish();
+    for (const auto& id : nodes) {
+      if (auto e = loc.Estimate(id)) {
+        ASSERT_TRUE(e->position_n.allFinite());
+        ExpectValidCovariance(e->covariance);
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace trailmark::breadcrumb
