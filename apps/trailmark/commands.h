@@ -9,6 +9,7 @@
 
 #include "trailmark/eval/metrics.h"
 #include "trailmark/pipelines/pipeline.h"
+#include "trailmark/sim/synthetic_incident.h"
 
 namespace trailmark::cli {
 
@@ -26,6 +27,9 @@ int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem:
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);
+/// `trailmark bench breadcrumb`: the large-incident benchmark of the breadcrumb localizer.
+int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
+                    double covariance_period_s, const std::filesystem::path& json_out);
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
 /// side with the published figures; results.md under out/NAME.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,

@@ -84,6 +84,19 @@ int main(int argc, char** argv) {
   auto* bench = app.add_subcommand("bench", "I/O throughput per stream and pipeline speed");
   bench->add_option("--rows", bench_rows, "rows per stream");
   bench->add_option("--json", bench_json, "write the results as JSON");
+  std::string bench_what;
+  bench->add_option("what", bench_what,
+                    "empty: I/O and pdr; 'breadcrumb': the large-incident benchmark (issue 8)");
+  IncidentOptions incident;
+  double solve_period = 1.0, covariance_period = 5.0;
+  bench->add_option("--agents", incident.agents, "breadcrumb: firefighters");
+  bench->add_option("--crumbs", incident.crumbs, "breadcrumb: breadcrumbs");
+  bench->add_option("--hours", incident.duration_s, "breadcrumb: incident length (s)")
+      ->transform([](std::string v) { return std::to_string(std::stod(v) * 3600.0); });
+  bench->add_option("--measurements", incident.measurements, "breadcrumb: total measurements");
+  bench->add_option("--solve-period", solve_period, "breadcrumb: re-solve at most every S s");
+  bench->add_option("--covariance-period", covariance_period,
+                    "breadcrumb: refresh marginal covariances every S s");
 
   std::string reproduce_name;
   int reproduce_seeds = 8;
@@ -128,6 +141,10 @@ int main(int argc, char** argv) {
     } else if (*demo) {
       return cli::Demo(scenario, seed, demo_out);
     } else if (*bench) {
+      if (bench_what == "breadcrumb") {
+        return cli::BenchBreadcrumb(incident, solve_period, covariance_period, bench_json);
+      }
+      if (!bench_what.empty()) throw std::invalid_argument("unknown benchmark '" + bench_what + "'");
       return cli::Bench(bench_rows, bench_json);
     } else if (*reproduce) {
       return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,

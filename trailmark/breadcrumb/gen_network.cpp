@@ -40,8 +40,7 @@ NodeIndex GenNetwork::AddNode(const Vec2& initial_estimate) {
   n.active = true;
   n.x_hat = initial_estimate;
   ++active_count_;
-  // A recycled slot keeps its compact index only if the pattern is rebuilt anyway; a new
-  // node always changes the pattern unless it reuses a slot whose blocks get recreated.
+  // Factorize() compares the block pattern with the analysed one before re-analysing.
   pattern_dirty_ = true;
   const double w = 1.0 / (options_.regularization_sigma_m * options_.regularization_sigma_m);
   n.L_ii = Mat2::Identity() * w;  // eq. (13) plus a negligible prior
@@ -261,6 +260,29 @@ void GenNetwork::DeleteNode(NodeIndex k) {
   dirty_ = true;
 }
 
+NodeIndex GenNetwork::MoveNode(NodeIndex from, NodeIndex to) {
+  if (!IsActive(from) || to < 0 || to >= static_cast<NodeIndex>(nodes_.size()) ||
+      nodes_[to].active) {
+    throw std::invalid_argument("MoveNode: needs an active node and a free slot");
+  }
+  free_.erase(std::remove(free_.begin(), free_.end(), to), free_.end());
+  nodes_[to] = std::move(nodes_[from]);
+  for (auto& blk : nodes_[to].off) {
+    for (auto& back : nodes_[blk.j].off) {
+      if (back.j == from) back.j = to;
+    }
+  }
+  for (int e : nodes_[to].persistent) {
+    if (persistent_[e].i == from) persistent_[e].i = to;
+    if (persistent_[e].j == from) persistent_[e].j = to;
+  }
+  nodes_[from] = Node{};
+  free_.push_back(from);
+  pattern_dirty_ = true;
+  dirty_ = true;
+  return to;
+}
+
 std::size_t GenNetwork::off_diagonal_blocks() const {
   std::size_t n = 0;
   for (const auto& node : nodes_) n += node.off.size();
@@ -302,8 +324,24 @@ bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L,
   matrix_.resize(n, n);
   matrix_.setFromTriplets(triplets.begin(), triplets.end());
   if (pattern_dirty_) {
-    solver_.analyzePattern(matrix_);
-    ++analyses_;
+    // Re-analyse (AMD ordering, elimination tree) only when the block pattern really changed.
+    std::vector<std::pair<int, int>> pattern;
+    pattern.reserve(off_diagonal_blocks() + order_.size());
+    for (NodeIndex slot : order_) {
+      const int r = nodes_[slot].compact;
+      pattern.emplace_back(r, r);
+      for (const auto& blk : nodes_[slot].off) {
+        const int c = nodes_[blk.j].compact;
+        if (c < r) pattern.emplace_back(r, c);
+      }
+    }
+    std::sort(pattern.begin(), pattern.end());
+    // (Persistent edges add entries inside blocks that are already in the pattern.)
+    if (pattern != analysed_pattern_) {
+      solver_.analyzePattern(matrix_);
+      ++analyses_;
+      analysed_pattern_ = std::move(pattern);
+    }
     pattern_dirty_ = false;
   }
   solver_.factorize(matrix_);

@@ -105,6 +105,10 @@ class GenNetwork {
   double PersistentResidual(int edge) const;
   /// DeleteNode(+), eqs. (14)-(17): marginalizes node i out (Schur complement).
   void DeleteNode(NodeIndex i);
+  /// Moves active node `from` into the free slot `to` (a mobile node's new state taking its
+  /// deleted predecessor's slot keeps the sparsity pattern, so the symbolic analysis of the
+  /// factorization is reused). Returns `to`.
+  NodeIndex MoveNode(NodeIndex from, NodeIndex to);
 
   /// Solves L x = b (with Gauss-Newton over persistent edges). Cheap when nothing changed.
   /// Returns false (and keeps the previous estimate) if L is not positive definite.
@@ -177,6 +181,7 @@ class GenNetwork {
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
   Eigen::SparseMatrix<double> matrix_;
   bool factor_valid_ = false;
+  std::vector<std::pair<int, int>> analysed_pattern_;  ///< block pattern of the last analysis
   std::size_t factorizations_ = 0;
   std::size_t analyses_ = 0;
 };

@@ -394,11 +394,13 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
                      Vec2(std::max(q_psi, 1e-12), std::max(q_s, 1e-14)).asDiagonal());
     gen_.AddLinear({next, a.state, a.theta}, {Mat2::Identity(), -Mat2::Identity(), -J_theta},
                    predicted - J_theta * th, cov);
-    gen_.DeleteNode(a.theta);
-    a.theta = next_theta;
+    const NodeIndex old_theta = a.theta;
+    gen_.DeleteNode(old_theta);
+    a.theta = gen_.MoveNode(next_theta, old_theta);
   }
-  gen_.DeleteNode(a.state);
-  a.state = next;
+  const NodeIndex old_state = a.state;
+  gen_.DeleteNode(old_state);
+  a.state = gen_.MoveNode(next, old_state);
   a.state_t = t;
   a.state_cum = cum_t;
   a.state_cum_var = var_t;
@@ -750,11 +752,27 @@ void BreadcrumbLocalizer::TryInitialize(StaticNode& node) {
   ++summary_.delayed_initializations;
 }
 
+bool BreadcrumbLocalizer::SolveThrottled() {
+  if (!gen_.dirty()) return true;
+  if (options_.solve_period_s > 0 && now_ - last_solve_t_ < options_.solve_period_s) return false;
+  gen_.Solve();
+  last_solve_t_ = now_;
+  return true;
+}
+
 std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id) {
   if (auto it = agents_.find(id); it != agents_.end()) {
     Agent& a = it->second;
-    gen_.Solve();
-    a.cached_cov = gen_.Covariance(a.state);
+    const bool fresh = SolveThrottled();
+    if (options_.covariance_period_s <= 0 ||
+        (fresh && now_ - a.cov_t >= options_.covariance_period_s)) {
+      a.cached_cov = gen_.Covariance(a.state);
+      a.cov_t = now_;
+      a.cov_cum_var = a.state_cum_var;
+    } else if (a.state_cum_var != a.cov_cum_var) {  // the state moved on: add its PDR variance
+      a.cached_cov += Diag((a.state_cum_var - a.cov_cum_var).cwiseAbs());
+      a.cov_cum_var = a.state_cum_var;
+    }
     Vec2 var;
     Vec2 cum = a.started ? CumAt(a, a.knots.back().t, &var) : Vec2::Zero();
     if (!a.started) var = Vec2::Zero();
@@ -766,8 +784,12 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
   }
   StaticNode* node = FindStatic(id);
   if (!node || node->index < 0) return std::nullopt;
-  gen_.Solve();
-  node->cached_cov = gen_.Covariance(node->index);
+  const bool fresh = SolveThrottled();
+  if (options_.covariance_period_s <= 0 ||
+      (fresh && now_ - node->cov_t >= options_.covariance_period_s)) {
+    node->cached_cov = gen_.Covariance(node->index);
+    node->cov_t = now_;
+  }
   return NodeEstimate{id, gen_.Estimate(node->index), node->cached_cov};
 }
 

@@ -116,6 +116,9 @@ struct LocalizerOptions {
   double init_ambiguity_chi2 = 10.0;         ///< mirror solution must be this much worse
   double init_covariance_inflation = 4.0;
   double init_grid_m = 1.0;
+  // throttling for large incidents (0 = exact online behaviour: solve at every request)
+  double solve_period_s = 0.0;       ///< re-solve L x = b at most this often (mission time)
+  double covariance_period_s = 0.0;  ///< refresh a node's marginal covariance this often
   // agents
   double known_start_sigma_m = 0.01;         ///< `start` without `start_sigma`
   double unknown_start_sigma_m = 1000.0;
@@ -215,6 +218,8 @@ class BreadcrumbLocalizer {
     std::map<std::string, std::deque<std::pair<TimeS, double>>> link_history;
     std::map<std::string, TimeS> link_anchor;
     Mat2 cached_cov = Mat2::Identity() * 100.0;
+    TimeS cov_t = -1e300;  ///< when cached_cov was computed
+    Vec2 cov_cum_var = Vec2::Zero();  ///< PDR variance at that time
   };
   struct InitObservation {
     Vec2 from;
@@ -227,6 +232,7 @@ class BreadcrumbLocalizer {
     NodeIndex index = -1;  ///< -1 while uninitialized
     bool known = false;
     Mat2 cached_cov = Mat2::Identity() * 100.0;
+    TimeS cov_t = -1e300;
     std::vector<InitObservation> init;
     int next_try = 0;
   };
@@ -266,6 +272,9 @@ class BreadcrumbLocalizer {
   std::map<std::pair<std::string, std::string>, radio::EncounterDetector> encounter_;
   std::vector<std::pair<TimeS, std::string>> moved_;
   TimeS now_ = -1e300;
+  TimeS last_solve_t_ = -1e300;
+  /// Solves unless throttled; true when the factor matches the current network.
+  bool SolveThrottled();
   LocalizerSummary summary_;
   std::vector<radio::CalibrationPair> calibration_pairs_;
   std::map<std::string, NodeIndex> range_bias_;
