@@ -5,7 +5,10 @@
 #include <filesystem>
 
 #include "trailmark/io/mission_io.h"
+#include "trailmark/breadcrumb/localizer.h"
+#include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/synthetic_incident.h"
 #include "trailmark/sim/scenarios.h"
 #include "trailmark/sim/synthetic_streams.h"
 
@@ -92,6 +95,53 @@ void BM_SimulateOfficeLoop(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(SimulateScenario("office-loop", 1));
 }
 BENCHMARK(BM_SimulateOfficeLoop)->Unit(benchmark::kMillisecond);
+
+void BM_BreadcrumbPipelineOfficeLoop(benchmark::State& state) {
+  const fs::path dir = BenchDir() / "mission-bc";
+  const SimulatedMission sim = SimulateScenario("office-loop", 1);
+  WriteMissionDirectory(dir, sim.data, &sim.plan);
+  const MissionDirectory mission(dir);
+  const double duration = sim.data.truth.back().t - sim.data.truth.front().t;
+  for (auto _ : state) {
+    RunPipeline(BreadcrumbPipeline(), {mission, {}}, BenchDir() / "run-bc");
+  }
+  state.counters["x_real_time"] = benchmark::Counter(duration * state.iterations(),
+                                                     benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_BreadcrumbPipelineOfficeLoop)->Unit(benchmark::kMillisecond);
+
+// The incremental GEN localizer on a synthetic incident (arg: firefighters; 25 crumbs each,
+// 30 min, ~2,000 measurements per firefighter-minute), exact online solves at every output.
+void BM_BreadcrumbIncident(benchmark::State& state) {
+  IncidentOptions o;
+  o.agents = static_cast<int>(state.range(0));
+  o.crumbs = 25 * o.agents;
+  o.duration_s = 1800;
+  o.measurements = static_cast<std::size_t>(o.agents) * 6000;
+  const SyntheticIncident inc = MakeSyntheticIncident(o, 1);
+  for (auto _ : state) {
+    breadcrumb::LocalizerOptions lo;
+    lo.calibrate_online = false;
+    breadcrumb::BreadcrumbLocalizer loc(lo);
+    for (const auto& n : inc.info.nodes) {
+      if (n.kind == NodeKind::kAgent) loc.AddAgent(n.id, n.start->head<2>(), 0.1);
+    }
+    for (const auto& e : inc.events) {
+      if (e.kind == IncidentEvent::Kind::kStep) {
+        loc.AddStep(e.step);
+        benchmark::DoNotOptimize(loc.Estimate(e.step.agent));
+      } else if (e.kind == IncidentEvent::Kind::kRssi) {
+        loc.AddRssi(e.rssi);
+      } else {
+        loc.AddEvent(e.drop);
+      }
+    }
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(inc.events.size()));
+  state.counters["x_real_time"] =
+      benchmark::Counter(o.duration_s * state.iterations(), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_BreadcrumbIncident)->Arg(1)->Arg(4)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

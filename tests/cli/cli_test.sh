@@ -10,7 +10,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
 "$TM" --help | grep -q simulate || fail "--help"
-for c in simulate run eval report pipelines demo bench scenarios validate; do
+for c in simulate run eval report pipelines demo bench scenarios validate reproduce; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
@@ -26,6 +26,20 @@ test -s "$dir/run/metrics.json" || fail "metrics.json"
 grep -q '"mean_pct_of_distance"' "$dir/run/metrics.json" || fail "metrics keys"
 "$TM" report "$dir/run" --out "$dir/r.html" > /dev/null || fail report
 grep -q "new Chart" "$dir/r.html" || fail "report content"
+"$TM" validate "$dir/m" | grep -q "breadcrumb" || fail "breadcrumb runnable"
+"$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/bc" --option state_period_s=0.5 > /dev/null \
+  || fail "run breadcrumb"
+grep -q '"encounters"' "$dir/bc/diagnostics.json" || fail "breadcrumb diagnostics"
+"$TM" eval "$dir/m" "$dir/bc/estimates.csv" | grep -q "^c1 " || fail "breadcrumb crumbs estimated"
+run_failing "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/x" --option nope=1
+[ $rc -eq 1 ] && grep -q "unknown option 'nope'" "$dir/err" || fail "unknown pipeline option"
+run_failing "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/x" --option gate_sigma=abc
+[ $rc -eq 1 ] && grep -q "gate_sigma='abc' is not a finite number" "$dir/err" || fail "bad option value"
+"$TM" reproduce breadcrumb --seeds 1 --out "$dir/rep" | grep -q "| mean error | 5.6 m" || fail reproduce
+test -s "$dir/rep/breadcrumb/results.md" || fail "reproduce results.md"
+"$TM" simulate training-building --seed 2 --out "$dir/tb" > /dev/null || fail "simulate training"
+"$TM" run --pipeline breadcrumb "$dir/tb" --out "$dir/tbr" > /dev/null || fail "run training"
+"$TM" eval "$dir/tb" "$dir/tbr/estimates.csv" | grep -q "^ff2 " || fail "two firefighters"
 
 # Bad input: clear message naming file and line, exit code 2.
 run_failing "$TM" run --pipeline nope "$dir/m" --out "$dir/x"

@@ -100,6 +100,11 @@ void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Ve
     a.theta = gen_.AddNode(Vec2::Zero());
     gen_.AddPrior(a.theta, Vec2::Zero(),
                   Vec2(sh * sh, options_.scale_sigma0 * options_.scale_sigma0).asDiagonal());
+    if (options_.estimate_gyro_scale) {
+      a.gyro = gen_.AddNode(Vec2::Zero());
+      const double g = options_.gyro_scale_sigma0;
+      gen_.AddPrior(a.gyro, Vec2::Zero(), Vec2(g * g, 1.0).asDiagonal());
+    }
   }
   agents_[id] = std::move(a);
   ++summary_.agent_states;
@@ -180,16 +185,19 @@ std::optional<Vec2> BreadcrumbLocalizer::HeadingScale(const std::string& id) con
   return gen_.Estimate(it->second.theta);
 }
 
-Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn) const {
+Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn,
+                                double* cum_turn_signed) const {
   const auto& k = a.knots;
   if (t >= k.back().t) {
     if (cum_var) *cum_var = k.back().cum_var;
     if (cum_turn) *cum_turn = k.back().cum_turn;
+    if (cum_turn_signed) *cum_turn_signed = k.back().cum_turn_signed;
     return k.back().cum;
   }
   if (t <= k.front().t) {
     if (cum_var) *cum_var = k.front().cum_var;
     if (cum_turn) *cum_turn = k.front().cum_turn;
+    if (cum_turn_signed) *cum_turn_signed = k.front().cum_turn_signed;
     return k.front().cum;
   }
   auto hi = std::upper_bound(k.begin(), k.end(), t,
@@ -199,6 +207,9 @@ Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* 
   const double f = span > 0 ? (t - lo->t) / span : 1.0;
   if (cum_var) *cum_var = lo->cum_var + f * (hi->cum_var - lo->cum_var);
   if (cum_turn) *cum_turn = lo->cum_turn + f * (hi->cum_turn - lo->cum_turn);
+  if (cum_turn_signed) {
+    *cum_turn_signed = lo->cum_turn_signed + f * (hi->cum_turn_signed - lo->cum_turn_signed);
+  }
   return lo->cum + f * (hi->cum - lo->cum);
 }
 
@@ -220,12 +231,16 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   Knot last = a.knots.back();
   TimeS t0 = std::max(step.t0, last.t);
   if (t0 > last.t) {  // stationary gap
-    a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn, last.heading});
+    a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn, last.heading,
+                       last.cum_turn_signed});
   }
-  double turn = 0;
+  double turn = 0, turn_signed = 0;
   if (d.norm() > 0.2) {
     const double h = std::atan2(d.y(), d.x());
-    if (a.last_heading) turn = std::abs(WrapAngle(h - *a.last_heading));
+    if (a.last_heading) {
+      turn_signed = WrapAngle(h - *a.last_heading);
+      turn = std::abs(turn_signed);
+    }
     a.last_heading = h;
   }
   Vec2 var;
@@ -240,11 +255,12 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   const TimeS t1 = std::max(step.t1, t0);
   if (t1 > a.knots.back().t) {
     a.knots.push_back({t1, last.cum + d, last.cum_var + var, last.cum_turn + turn,
-                       a.last_heading.value_or(0.0)});
+                       a.last_heading.value_or(0.0), last.cum_turn_signed + turn_signed});
   } else {  // zero-duration step: fold into the last knot
     a.knots.back().cum += d;
     a.knots.back().cum_var += var;
     a.knots.back().cum_turn += turn;
+    a.knots.back().cum_turn_signed += turn_signed;
   }
   AdvanceTo(step.t1);
 }
@@ -365,8 +381,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   if (t < a.state_t + options_.state_period_s) return;
   // IV-E: AddNode+(new state) -> AddMeasurement(PDR) -> DeleteNode+(old state)
   Vec2 var_t;
-  double turn_t = 0;
-  const Vec2 cum_t = CumAt(a, t, &var_t, &turn_t);
+  double turn_t = 0, turn_signed_t = 0;
+  const Vec2 cum_t = CumAt(a, t, &var_t, &turn_t, &turn_signed_t);
   const Vec2 delta = cum_t - a.state_cum;
   const Vec2 q = (var_t - a.state_cum_var).cwiseMax(options_.min_step_variance_m2);
   const Vec2 predicted = Corrected(a, delta);
@@ -389,9 +405,19 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
     const double q_psi = options_.heading_rw_rad_per_sqrt_s * options_.heading_rw_rad_per_sqrt_s * dt +
                          std::pow(options_.heading_per_turn_sigma * turn, 2);
     const double q_s = options_.scale_rw_per_sqrt_s * options_.scale_rw_per_sqrt_s * dt;
-    const NodeIndex next_theta = gen_.AddNode(th);
-    gen_.AddRelative(next_theta, a.theta, Vec2::Zero(),
-                     Vec2(std::max(q_psi, 1e-12), std::max(q_s, 1e-14)).asDiagonal());
+    const double turned = turn_signed_t - a.state_cum_turn_signed;
+    const double k_hat = a.gyro >= 0 ? gen_.Estimate(a.gyro).x() : 0.0;
+    const NodeIndex next_theta = gen_.AddNode(th + Vec2(k_hat * turned, 0.0));
+    const Mat2 Q_theta = Vec2(std::max(q_psi, 1e-12), std::max(q_s, 1e-14)).asDiagonal();
+    if (a.gyro >= 0) {
+      // theta_new - theta_old - (k Delta, 0) = 0: the gyro scale factor turns psi at each turn
+      Mat2 G = Mat2::Zero();
+      G(0, 0) = turned;
+      gen_.AddLinear({next_theta, a.theta, a.gyro}, {Mat2::Identity(), -Mat2::Identity(), -G},
+                     Vec2::Zero(), Q_theta);
+    } else {
+      gen_.AddRelative(next_theta, a.theta, Vec2::Zero(), Q_theta);
+    }
     gen_.AddLinear({next, a.state, a.theta}, {Mat2::Identity(), -Mat2::Identity(), -J_theta},
                    predicted - J_theta * th, cov);
     const NodeIndex old_theta = a.theta;
@@ -405,6 +431,7 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   a.state_cum = cum_t;
   a.state_cum_var = var_t;
   a.state_cum_turn = turn_t;
+  a.state_cum_turn_signed = turn_signed_t;
   a.cached_cov += Diag(q);
   ++summary_.agent_states;
   // Keep ~30 s of PDR history behind the state for late (encounter) measurements.

@@ -59,8 +59,12 @@ struct LocalizerOptions {
   double heading_sigma0_rad = 0.05;          ///< when mission.json gives no start_heading_sigma
   double scale_sigma0 = 0.05;
   double heading_rw_rad_per_sqrt_s = 0.003;
-  double heading_per_turn_sigma = 0.05;      ///< fraction of each turn's angle (gyro scale factor)
+  double heading_per_turn_sigma = 0.01;      ///< random part per turn, fraction of its angle
   double scale_rw_per_sqrt_s = 1e-4;
+  /// The gyro scale-factor error as a constant per agent (a node (k, -)): every turn of Delta
+  /// (rad, signed, as the PDR measured it) adds k Delta to psi. MEMS gyros: 1-3 % (sigma0 5 %).
+  bool estimate_gyro_scale = true;
+  double gyro_scale_sigma0 = 0.05;
   // mobile states, IV-E
   double state_period_s = 0.4;
   double max_latency_s = 2.0;
@@ -192,6 +196,7 @@ class BreadcrumbLocalizer {
     Vec2 cum_var;  ///< accumulated per-axis variance
     double cum_turn = 0;  ///< accumulated |turn| of the step directions, rad
     double heading = 0;   ///< raw PDR direction of the step ending here
+    double cum_turn_signed = 0;
   };
   enum class Kind { kRssi, kRange, kEncounter, kDrop };
   struct Pending {
@@ -206,8 +211,10 @@ class BreadcrumbLocalizer {
     std::string id;
     NodeIndex state = -1;
     NodeIndex theta = -1;  ///< heading/scale node (-1 when not estimated)
+    NodeIndex gyro = -1;   ///< gyro scale-factor node (-1 when not estimated)
     std::optional<double> last_heading;
     double state_cum_turn = 0;
+    double state_cum_turn_signed = 0;
     TimeS state_t = 0;
     Vec2 state_cum = Vec2::Zero();      ///< PDR displacement at the state's time
     Vec2 state_cum_var = Vec2::Zero();
@@ -242,7 +249,8 @@ class BreadcrumbLocalizer {
   };
 
   Agent& StartedAgent(const std::string& id, TimeS t);
-  Vec2 CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn = nullptr) const;
+  Vec2 CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn = nullptr,
+             double* cum_turn_signed = nullptr) const;
   /// The PDR displacement `raw` corrected by the agent's current heading/scale estimate.
   Vec2 Corrected(const Agent& a, const Vec2& raw) const;
   /// Walking direction: the last step's direction corrected by the heading estimate.

@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <chrono>
 #include <map>
 
 #include "trailmark/core/error.h"
@@ -22,6 +24,7 @@ LocalizerOptions BreadcrumbOptionsFrom(const std::map<std::string, std::string>&
   l.step_sigma_floor_relative = o.Double("step_sigma_floor_relative", l.step_sigma_floor_relative);
   l.estimate_heading_scale = o.Bool("heading_scale", l.estimate_heading_scale);
   l.heading_per_turn_sigma = o.Double("heading_per_turn_sigma", l.heading_per_turn_sigma);
+  l.estimate_gyro_scale = o.Bool("gyro_scale", l.estimate_gyro_scale);
   l.heading_rw_rad_per_sqrt_s = o.Double("heading_rw", l.heading_rw_rad_per_sqrt_s);
   l.max_latency_s = o.Double("max_latency_s", l.max_latency_s);
   l.min_rssi_dbm = o.Double("min_rssi_dbm", l.min_rssi_dbm);
@@ -117,6 +120,7 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
                                 .rssi = true});
   MissionRow row;
   std::size_t rows = 0;
+  std::vector<float> latency_us;
   TimeS t_last = 0, next_static = -1e300;
   bool any = false;
   while (stream.Next(row)) {
@@ -136,6 +140,7 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
       any = true;
     }
     t_last = std::max(t_last, t);
+    const auto clock0 = std::chrono::steady_clock::now();
     try {
       if (const auto* step = std::get_if<Step>(&row)) {
         if (!loc.IsAgent(step->agent)) {
@@ -158,6 +163,10 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
       emit_static(t, false);
       next_static = t + static_period_s;
     }
+    // Per-row latency: the row's processing plus any estimate it produced.
+    latency_us.push_back(static_cast<float>(
+        std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0)
+            .count()));
     if ((++rows & 0xfff) == 0) context.progress(stream.Progress());
   }
   loc.Finish();
@@ -186,6 +195,16 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   num["static_nodes_never_localized"] = static_cast<double>(s.pending_uninitialized);
   num["unusable"] = static_cast<double>(s.unusable);
   num["factorizations"] = static_cast<double>(s.factorizations);
+  if (!latency_us.empty()) {
+    auto pct = [&](double q) {
+      const auto k = static_cast<std::size_t>(q / 100.0 * (latency_us.size() - 1));
+      std::nth_element(latency_us.begin(), latency_us.begin() + k, latency_us.end());
+      return static_cast<double>(latency_us[k]);
+    };
+    num["update_latency_us_p50"] = pct(50);
+    num["update_latency_us_p99"] = pct(99);
+    num["update_latency_us_max"] = pct(100);
+  }
   num["calibrations"] = static_cast<double>(s.calibrations);
   num["calibration_pairs"] = static_cast<double>(s.calibration_pairs);
   if (s.calibration) {
