@@ -41,8 +41,18 @@ double BreadcrumbLocalizer::AgentRssiVariance() const {
 }
 
 void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
+  first_agent_rssi_t_ = std::min(first_agent_rssi_t_, t);
   if (!options_.calibrate_online || t < next_calibration_) return;
-  if (calibration_pairs_.size() < options_.calibration_min_pairs) return;
+  if (calibration_pairs_.size() < options_.calibration_min_pairs) {
+    if (!calibrated_ && options_.calibration_timeout_s > 0 &&
+        t - first_agent_rssi_t_ > options_.calibration_timeout_s) {
+      calibrated_ = true;  // fall back to the given model; keep collecting pairs
+      summary_.notes.push_back(fmt::format(
+          "t={:.1f}: too few local calibration pairs ({}): using the given radio model", t,
+          calibration_pairs_.size()));
+    }
+    return;
+  }
   next_calibration_ = t + options_.calibration_period_s;
   try {
     radio::PathLossFit fit;

@@ -89,6 +89,10 @@ struct LocalizerOptions {
   double calibration_period_s = 30.0;
   double calibration_window_s = 15.0;
   double calibration_min_distance_m = 1.0;
+  /// > 0: without enough local pairs after this long (no encounters, say), the given model is
+  /// used. 0 (default): agent RSSI ranges wait for a fit (a mission.json model made in line of
+  /// sight misleads in walled rooms: measured on training-building).
+  double calibration_timeout_s = 0.0;
   bool use_static_rssi = true;
   bool use_encounters = true;
   radio::EncounterOptions encounter;
@@ -288,6 +292,7 @@ class BreadcrumbLocalizer {
   std::map<std::string, NodeIndex> range_bias_;
   bool calibrated_ = false;
   TimeS next_calibration_ = -1e300;
+  TimeS first_agent_rssi_t_ = 1e300;
   void MaybeCalibrate(TimeS t);
   void CalibrationPacket(Agent& a, const std::string& node, TimeS t, double rssi_dbm);
   void SetCalibrationAnchor(Agent& a, const std::string& node, TimeS t);

@@ -38,6 +38,7 @@ LocalizerOptions BreadcrumbOptionsFrom(const std::map<std::string, std::string>&
   l.agent_rssi_sigma_db = o.Double("agent_rssi_sigma_db", l.agent_rssi_sigma_db);
   l.agent_rssi_sigma_factor = o.Double("agent_rssi_sigma_factor", l.agent_rssi_sigma_factor);
   l.calibrate_online = o.Bool("calibrate", l.calibrate_online);
+  l.calibration_timeout_s = o.Double("calibration_timeout_s", l.calibration_timeout_s);
   l.rssi_nlos_k = o.Double("rssi_nlos_k", l.rssi_nlos_k);
   l.static_link_floor_fraction = o.Double("static_link_floor", l.static_link_floor_fraction);
   l.estimate_range_bias = o.Bool("range_bias", l.estimate_range_bias);
