@@ -227,31 +227,51 @@ void GenNetwork::FoldPersistent(int edge) {
 void GenNetwork::DeleteNode(NodeIndex k) {
   if (!IsActive(k)) throw std::invalid_argument("DeleteNode: inactive node");
   while (!nodes_[k].persistent.empty()) FoldPersistent(nodes_[k].persistent.back());
-  Node& nk = nodes_[k];
-  const Mat2 Lkk_inv = nk.L_ii.inverse();
+  const Mat2 Lkk_inv = nodes_[k].L_ii.inverse();
+  const Vec2 bk = nodes_[k].b;
   // eq. (17): L = L_pp - L_p1 L_11^-1 L_p1^T,  b = b_p - L_p1 L_11^-1 b_1
-  const std::vector<Block> neighbours = nk.off;
-  for (std::size_t a = 0; a < neighbours.size(); ++a) {
-    const NodeIndex m = neighbours[a].j;
-    const Mat2 Lmk = neighbours[a].L.transpose();  // block (m, k)
-    const Mat2 G = Lmk * Lkk_inv;
-    nodes_[m].b -= G * nk.b;
-    nodes_[m].L_ii -= G * Lmk.transpose();
-    nodes_[m].L_ii = 0.5 * (nodes_[m].L_ii + nodes_[m].L_ii.transpose());
-    for (std::size_t c = a + 1; c < neighbours.size(); ++c) {
-      const NodeIndex n = neighbours[c].j;
-      const Mat2 Lkn = neighbours[c].L;  // block (k, n)
-      const Mat2 fill = G * Lkn;          // block (m, n)
-      OffBlock(m, n) -= fill;
-      for (auto& blk : nodes_[n].off) {
-        if (blk.j == m) blk.L -= fill.transpose();
-      }
+  scratch_blocks_ = nodes_[k].off;  // the neighbours m and L_km
+  const std::size_t N = scratch_blocks_.size();
+  scratch_gain_.resize(N);
+  scratch_fill_.resize(N * N);
+  for (std::size_t a = 0; a < N; ++a) {
+    const Mat2 Lmk = scratch_blocks_[a].L.transpose();
+    scratch_gain_[a] = Lmk * Lkk_inv;  // G_m = L_mk L_kk^-1
+    Node& m = nodes_[scratch_blocks_[a].j];
+    m.b -= scratch_gain_[a] * bk;
+    m.L_ii -= scratch_gain_[a] * scratch_blocks_[a].L;
+    m.L_ii = 0.5 * (m.L_ii + m.L_ii.transpose());
+    for (std::size_t c = a + 1; c < N; ++c) {
+      scratch_fill_[a * N + c] = scratch_gain_[a] * scratch_blocks_[c].L;  // fill of (m, n)
     }
   }
-  for (const auto& blk : neighbours) {
-    auto& list = nodes_[blk.j].off;
-    list.erase(std::remove_if(list.begin(), list.end(), [k](const Block& x) { return x.j == k; }),
-               list.end());
+  if (mark_.size() < nodes_.size()) mark_.assign(nodes_.size(), -1);
+  for (std::size_t a = 0; a < N; ++a) {
+    auto& list = nodes_[scratch_blocks_[a].j].off;
+    for (std::size_t p = 0; p < list.size();) {  // drop the block to k
+      if (list[p].j == k) {
+        list[p] = list.back();
+        list.pop_back();
+      } else {
+        mark_[list[p].j] = static_cast<int>(p);
+        ++p;
+      }
+    }
+    for (std::size_t c = 0; c < N; ++c) {
+      if (c == a) continue;
+      // (m, n) and (n, m) = (m, n)^T from the same product: L stays exactly symmetric.
+      const Mat2 fill = a < c ? scratch_fill_[a * N + c] : Mat2(scratch_fill_[c * N + a].transpose());
+      const NodeIndex n = scratch_blocks_[c].j;
+      const int p = mark_[n];
+      if (p < 0) {
+        list.push_back({n, -fill});
+        mark_[n] = static_cast<int>(list.size()) - 1;
+        pattern_dirty_ = true;
+      } else {
+        list[p].L -= fill;
+      }
+    }
+    for (const auto& blk : list) mark_[blk.j] = -1;
   }
   nodes_[k] = Node{};
   free_.push_back(k);
@@ -300,49 +320,82 @@ void GenNetwork::CompactIndices() {
   }
 }
 
-bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L,
-                           const Eigen::VectorXd& extra_b) {
-  (void)extra_b;
+bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L) {
   const int n = static_cast<int>(order_.size()) * 2;
-  std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(order_.size() * 4 + off_diagonal_blocks() * 4 + extra_L.size());
-  for (NodeIndex slot : order_) {
-    const Node& node = nodes_[slot];
-    const int r = node.compact * 2;
-    triplets.emplace_back(r, r, node.L_ii(0, 0));
-    triplets.emplace_back(r + 1, r, node.L_ii(1, 0));
-    triplets.emplace_back(r + 1, r + 1, node.L_ii(1, 1));
-    for (const auto& blk : node.off) {
-      const int c = nodes_[blk.j].compact * 2;
-      if (c > r) continue;  // lower triangle only (SimplicialLDLT reads the lower part)
-      for (int a = 0; a < 2; ++a) {
-        for (int bb = 0; bb < 2; ++bb) triplets.emplace_back(r + a, c + bb, blk.L(a, bb));
-      }
-    }
-  }
-  triplets.insert(triplets.end(), extra_L.begin(), extra_L.end());
-  matrix_.resize(n, n);
-  matrix_.setFromTriplets(triplets.begin(), triplets.end());
+  bool same_pattern = !pattern_dirty_ && matrix_.rows() == n && analyses_ > 0;
   if (pattern_dirty_) {
-    // Re-analyse (AMD ordering, elimination tree) only when the block pattern really changed.
+    // The block pattern (lower triangle, compact indices, row by row): the symbolic analysis
+    // (AMD ordering, elimination tree) and the matrix structure are reused while it holds.
+    // (Persistent edges add entries inside blocks that are already in the pattern.)
     std::vector<std::pair<int, int>> pattern;
-    pattern.reserve(off_diagonal_blocks() + order_.size());
+    pattern.reserve(analysed_pattern_.size() + 16);
     for (NodeIndex slot : order_) {
       const int r = nodes_[slot].compact;
-      pattern.emplace_back(r, r);
+      const std::size_t row_start = pattern.size();
       for (const auto& blk : nodes_[slot].off) {
         const int c = nodes_[blk.j].compact;
         if (c < r) pattern.emplace_back(r, c);
       }
+      std::sort(pattern.begin() + static_cast<std::ptrdiff_t>(row_start), pattern.end());
+      pattern.emplace_back(r, r);
     }
-    std::sort(pattern.begin(), pattern.end());
-    // (Persistent edges add entries inside blocks that are already in the pattern.)
-    if (pattern != analysed_pattern_) {
-      solver_.analyzePattern(matrix_);
-      ++analyses_;
-      analysed_pattern_ = std::move(pattern);
-    }
+    same_pattern = analyses_ > 0 && matrix_.rows() == n && pattern == analysed_pattern_;
+    if (!same_pattern) analysed_pattern_ = std::move(pattern);
     pattern_dirty_ = false;
+  }
+  if (same_pattern) {
+    // Values only, in place, column by column (no triplets, no sort, no search): block (r, c)
+    // of the lower triangle is the transpose of block (c, r) kept in column node c's list.
+    double* val = matrix_.valuePtr();
+    const int* inner = matrix_.innerIndexPtr();
+    const int* outer = matrix_.outerIndexPtr();
+    if (row_pos_.size() < static_cast<std::size_t>(n)) row_pos_.assign(n, -1);
+    for (NodeIndex slot : order_) {
+      const Node& node = nodes_[slot];
+      const int c = node.compact * 2;
+      for (int cc = 0; cc < 2; ++cc) {
+        const int col = c + cc;
+        for (int p = outer[col]; p < outer[col + 1]; ++p) {
+          row_pos_[inner[p]] = p;
+          val[p] = 0.0;
+        }
+        if (cc == 0) {
+          val[row_pos_[c]] = node.L_ii(0, 0);
+          val[row_pos_[c + 1]] = node.L_ii(1, 0);
+        } else {
+          val[row_pos_[c + 1]] = node.L_ii(1, 1);
+        }
+        for (const auto& blk : node.off) {
+          const int r = nodes_[blk.j].compact * 2;
+          if (r < c) continue;
+          val[row_pos_[r]] = blk.L(cc, 0);      // (r, col) = L_cr(cc, 0)
+          val[row_pos_[r + 1]] = blk.L(cc, 1);  // (r + 1, col) = L_cr(cc, 1)
+        }
+      }
+    }
+    for (const auto& t : extra_L) matrix_.coeffRef(t.row(), t.col()) += t.value();
+  } else {
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(order_.size() * 3 + off_diagonal_blocks() * 4 + extra_L.size());
+    for (NodeIndex slot : order_) {
+      const Node& node = nodes_[slot];
+      const int r = node.compact * 2;
+      triplets.emplace_back(r, r, node.L_ii(0, 0));
+      triplets.emplace_back(r + 1, r, node.L_ii(1, 0));
+      triplets.emplace_back(r + 1, r + 1, node.L_ii(1, 1));
+      for (const auto& blk : node.off) {
+        const int c = nodes_[blk.j].compact * 2;
+        if (c > r) continue;  // lower triangle only (SimplicialLDLT reads the lower part)
+        for (int a = 0; a < 2; ++a) {
+          for (int bb = 0; bb < 2; ++bb) triplets.emplace_back(r + a, c + bb, blk.L(a, bb));
+        }
+      }
+    }
+    triplets.insert(triplets.end(), extra_L.begin(), extra_L.end());
+    matrix_.resize(n, n);
+    matrix_.setFromTriplets(triplets.begin(), triplets.end());
+    solver_.analyzePattern(matrix_);
+    ++analyses_;
   }
   solver_.factorize(matrix_);
   ++factorizations_;
@@ -392,7 +445,7 @@ bool GenNetwork::Solve() {
         rhs.segment<2>(cj) -= w * h * r;
       }
     }
-    if (!Factorize(extra, rhs)) return false;
+    if (!Factorize(extra)) return false;
     const Eigen::VectorXd x = solver_.solve(rhs);
     if (!x.allFinite()) {
       factor_valid_ = false;

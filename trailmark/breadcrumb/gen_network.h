@@ -167,7 +167,7 @@ class GenNetwork {
                            double variance, const ScalarModel& model, const Vec2& offset,
                            NodeIndex bias = -1);
   void FoldPersistent(int edge);
-  bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L, const Eigen::VectorXd& extra_b);
+  bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L);
   void CompactIndices();
 
   GenOptions options_;
@@ -182,6 +182,11 @@ class GenNetwork {
   Eigen::SparseMatrix<double> matrix_;
   bool factor_valid_ = false;
   std::vector<std::pair<int, int>> analysed_pattern_;  ///< block pattern of the last analysis
+  // DeleteNode scratch (no allocation per marginalization)
+  std::vector<Block> scratch_blocks_;
+  std::vector<Mat2> scratch_gain_, scratch_fill_;
+  std::vector<int> mark_;
+  std::vector<int> row_pos_;  ///< Factorize scratch: row -> position in the current column
   std::size_t factorizations_ = 0;
   std::size_t analyses_ = 0;
 };

@@ -292,7 +292,7 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   Agent& a = StartedAgent(agent, p.t);
   if (!agents_.count(other)) AddUnknownNode(other);
   if (options_.use_agent_rssi) {
-    Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0};
+    Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0, {}};
     a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
                                       [](TimeS v, const Pending& x) { return v < x.t; }),
                      q);
@@ -300,7 +300,7 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   if (options_.use_encounters && !agents_.count(other)) {
     auto& det = encounter_.try_emplace({agent, other}, options_.encounter).first->second;
     if (auto peak = det.Add(p.t, p.rssi_dbm)) {
-      Pending q{*peak, Kind::kEncounter, other, 0, 0};
+      Pending q{*peak, Kind::kEncounter, other, 0, 0, {}};
       a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
                                         [](TimeS v, const Pending& x) { return v < x.t; }),
                        q);
@@ -357,7 +357,7 @@ void BreadcrumbLocalizer::AddEvent(const MissionEvent& e) {
     }
     AddUnknownNode(e.node);
     Agent& a = StartedAgent(e.agent, e.t);
-    Pending q{e.t, Kind::kDrop, e.node, 0, 0};
+    Pending q{e.t, Kind::kDrop, e.node, 0, 0, {}};
     a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
                                       [](TimeS v, const Pending& x) { return v < x.t; }),
                      q);

@@ -18,6 +18,28 @@ struct NodeInfo {
   std::optional<double> start_sigma_m;
   std::optional<double> start_heading_rad;  ///< radians from +x, counter-clockwise
   std::optional<double> start_heading_sigma_rad;
+
+  /// A base station at a known position.
+  static NodeInfo Base(std::string id, const Vec3& position) {
+    NodeInfo n;
+    n.id = std::move(id);
+    n.kind = NodeKind::kBase;
+    n.position = position;
+    return n;
+  }
+  /// An agent with a known start (and optionally heading).
+  static NodeInfo Agent(std::string id, const Vec3& start, double start_sigma_m,
+                        std::optional<double> heading_rad = std::nullopt,
+                        std::optional<double> heading_sigma_rad = std::nullopt) {
+    NodeInfo n;
+    n.id = std::move(id);
+    n.kind = NodeKind::kAgent;
+    n.start = start;
+    n.start_sigma_m = start_sigma_m;
+    n.start_heading_rad = heading_rad;
+    n.start_heading_sigma_rad = heading_sigma_rad;
+    return n;
+  }
 };
 
 /// Log-distance path-loss calibration: rssi = alpha - 10 n log10(d / 1 m) + N(0, sigma^2).

@@ -78,7 +78,8 @@ PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
     y(k) = kept[k].rssi_dbm;
   }
   const Eigen::Matrix3d N = A.transpose() * A;
-  if (Eigen::JacobiSVD<Eigen::Matrix3d>(N).singularValues()(2) < 1e-9 * N.trace()) {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(N);
+  if (eig.eigenvalues().minCoeff() < 1e-9 * N.trace()) {
     throw std::invalid_argument("FitLogDistanceWithBody: degenerate geometry");
   }
   const Eigen::Vector3d x = N.ldlt().solve(A.transpose() * y);

@@ -45,8 +45,7 @@ SimulatedMission SimulateAgents(FloorPlan plan, const Vec2& base_n,
   SimulatedMission sim;
   sim.plan = std::move(plan);
   MissionData& m = sim.data;
-  m.info.nodes.push_back({.id = "base", .kind = NodeKind::kBase,
-                          .position = Vec3(base_n.x(), base_n.y(), 0.0)});
+  m.info.nodes.push_back(NodeInfo::Base("base", Vec3(base_n.x(), base_n.y(), 0.0)));
   m.info.radio = RadioCalibration{"log-distance", o.radio.alpha_dbm, o.radio.path_loss_exponent,
                                   o.radio.shadowing_sigma_db};
   m.info.floorplan = "floorplan.geojson";
@@ -62,12 +61,8 @@ SimulatedMission SimulateAgents(FloorPlan plan, const Vec2& base_n,
     t_begin = std::min(t_begin, r.walk.truth.front().t);
     t_end = std::max(t_end, r.walk.truth.back().t);
     const Vec2 start = a.route.waypoints.front();
-    m.info.nodes.push_back({.id = a.id,
-                            .kind = NodeKind::kAgent,
-                            .start = Vec3(start.x(), start.y(), 0.0),
-                            .start_sigma_m = 0.1,
-                            .start_heading_rad = a.start_heading_rad,
-                            .start_heading_sigma_rad = 0.02});
+    m.info.nodes.push_back(NodeInfo::Agent(a.id, Vec3(start.x(), start.y(), 0.0), 0.1,
+                                           a.start_heading_rad, 0.02));
     PdrErrorModel pdr(o.pdr, pdr_rng.Fork());
     for (const auto& s : r.walk.steps) {
       const Vec2 measured = pdr.Apply(s.to - s.from, s.t1 - s.t0);

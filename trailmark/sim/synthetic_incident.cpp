@@ -11,7 +11,7 @@ SyntheticIncident MakeSyntheticIncident(const IncidentOptions& o, std::uint64_t 
   Random rng(seed);
   SyntheticIncident inc;
   inc.info.name = "synthetic-incident";
-  inc.info.nodes.push_back({.id = "base", .kind = NodeKind::kBase, .position = Vec3::Zero()});
+  inc.info.nodes.push_back(NodeInfo::Base("base", Vec3::Zero()));
   inc.info.radio = RadioCalibration{"log-distance", o.alpha_dbm, o.path_loss_exponent, o.sigma_db};
   const int cols = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(o.agents))));
   const double steps_per_agent = o.duration_s / o.step_period_s;
@@ -31,8 +31,7 @@ SyntheticIncident MakeSyntheticIncident(const IncidentOptions& o, std::uint64_t 
     const std::string id = "ff" + std::to_string(a + 1);
     const Vec2 origin((a % cols) * (o.sector_m + 5.0) + 5.0, (a / cols) * (o.sector_m + 5.0) + 5.0);
     Vec2 pos = origin + Vec2(o.sector_m / 2, o.sector_m / 2);
-    inc.info.nodes.push_back({.id = id, .kind = NodeKind::kAgent, .start = Vec3(pos.x(), pos.y(), 0),
-                              .start_sigma_m = 0.1});
+    inc.info.nodes.push_back(NodeInfo::Agent(id, Vec3(pos.x(), pos.y(), 0), 0.1));
     Vec2 target = pos;
     double next_packet = packet_period, next_drop = 5.0;
     for (double t = o.step_period_s; t <= o.duration_s; t += o.step_period_s) {
