@@ -64,9 +64,8 @@ IncidentRun RunIncident(const SyntheticIncident& inc, const breadcrumb::Localize
         break;
     }
     run.latency_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
-    if (k + 1 == next_mark || k + 1 == inc.events.size()) {
-      const double f = static_cast<double>(k + 1) / inc.events.size();
-      if (run.memory.empty() || run.memory.back().first < f) run.memory.emplace_back(f, ResidentMb());
+    if ((k + 1 == next_mark && run.memory.size() < 3) || k + 1 == inc.events.size()) {
+      run.memory.emplace_back(static_cast<double>(k + 1) / inc.events.size(), ResidentMb());
       next_mark += inc.events.size() / 4;
     }
   }
