@@ -396,6 +396,7 @@ bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L) {
     matrix_.setFromTriplets(triplets.begin(), triplets.end());
     solver_.analyzePattern(matrix_);
     ++analyses_;
+    etree_valid_ = false;
   }
   solver_.factorize(matrix_);
   ++factorizations_;
@@ -463,35 +464,87 @@ bool GenNetwork::Solve() {
   return true;
 }
 
+Eigen::MatrixXd GenNetwork::MarginalOfRows(const std::vector<int>& rows) {
+  // A = P^T L D L^T P  =>  A^-1 = P^T L^-T D^-1 L^-1 P, so for unit vectors e_a, e_b:
+  // (A^-1)_ab = y_a^T D^-1 y_b with y = L^-1 P e. L^-1 of a unit vector is non-zero only on the
+  // path from its position to the root of the elimination tree: a forward solve along the union
+  // of those paths, not a full solve (the rows of column j of L are ancestors of j).
+  const auto& Lm = solver_.matrixL().nestedExpression();
+  const Eigen::VectorXd& D = solver_.vectorD();
+  const int n = static_cast<int>(Lm.rows());
+  const int K = static_cast<int>(rows.size());
+  if (!Lm.isCompressed()) {  // never with Eigen's simplicial factor; kept for safety
+    Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, K);
+    for (int k = 0; k < K; ++k) E(rows[k], k) = 1.0;
+    const Eigen::MatrixXd X = solver_.solve(E);
+    Eigen::MatrixXd S(K, K);
+    for (int a = 0; a < K; ++a) {
+      for (int b = 0; b < K; ++b) S(a, b) = X(rows[a], b);
+    }
+    return S;
+  }
+  const int* outer = Lm.outerIndexPtr();
+  const int* inner = Lm.innerIndexPtr();
+  const double* value = Lm.valuePtr();
+  if (!etree_valid_) {
+    etree_parent_.assign(n, -1);
+    for (int col = 0; col < n; ++col) {
+      for (int p = outer[col]; p < outer[col + 1]; ++p) {
+        if (inner[p] > col) {
+          etree_parent_[col] = inner[p];
+          break;
+        }
+      }
+    }
+    etree_valid_ = true;
+  }
+  if (work_.rows() < n || work_.cols() < K) work_ = Eigen::MatrixXd::Zero(n, std::max(K, 4));
+  if (visited_.size() < static_cast<std::size_t>(n)) visited_.assign(n, 0);
+  path_.clear();
+  const auto& perm = solver_.permutationP().indices();
+  for (int k = 0; k < K; ++k) {
+    const int start = perm(rows[k]);
+    work_(start, k) = 1.0;
+    for (int v = start; v >= 0 && !visited_[v]; v = etree_parent_[v]) {
+      visited_[v] = 1;
+      path_.push_back(v);
+    }
+  }
+  std::sort(path_.begin(), path_.end());
+  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(K, K);
+  for (int col : path_) {
+    for (int p = outer[col]; p < outer[col + 1]; ++p) {
+      const int r = inner[p];
+      if (r <= col) continue;
+      for (int k = 0; k < K; ++k) work_(r, k) -= value[p] * work_(col, k);
+    }
+    for (int a = 0; a < K; ++a) {
+      for (int b = 0; b < K; ++b) S(a, b) += work_(col, a) * work_(col, b) / D(col);
+    }
+  }
+  for (int col : path_) {
+    visited_[col] = 0;
+    for (int k = 0; k < K; ++k) work_(col, k) = 0.0;
+  }
+  return S;
+}
+
 Mat2 GenNetwork::Covariance(NodeIndex i) {
   if (!IsActive(i)) throw std::invalid_argument("Covariance: inactive node");
   if (dirty_) Solve();
   if (!factor_valid_) return Mat2::Identity() * 1e12;
-  const int n = static_cast<int>(order_.size()) * 2;
-  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, 2);
   const int c = nodes_[i].compact * 2;
-  E(c, 0) = 1;
-  E(c + 1, 1) = 1;
-  const Eigen::MatrixXd X = solver_.solve(E);
-  Mat2 S = X.block<2, 2>(c, 0);
-  return 0.5 * (S + S.transpose());
+  const Eigen::MatrixXd S = MarginalOfRows({c, c + 1});
+  const Mat2 M = S;
+  return 0.5 * (M + M.transpose());
 }
 
 Eigen::Matrix4d GenNetwork::JointCovariance(NodeIndex i, NodeIndex j) {
   if (!IsActive(i) || !IsActive(j)) throw std::invalid_argument("JointCovariance: inactive node");
   if (dirty_) Solve();
   if (!factor_valid_) return Eigen::Matrix4d::Identity() * 1e12;
-  const int n = static_cast<int>(order_.size()) * 2;
-  Eigen::MatrixXd E = Eigen::MatrixXd::Zero(n, 4);
   const int ci = nodes_[i].compact * 2, cj = nodes_[j].compact * 2;
-  E(ci, 0) = 1;
-  E(ci + 1, 1) = 1;
-  E(cj, 2) = 1;
-  E(cj + 1, 3) = 1;
-  const Eigen::MatrixXd X = solver_.solve(E);
-  Eigen::Matrix4d S;
-  S.block<2, 4>(0, 0) = X.block(ci, 0, 2, 4);
-  S.block<2, 4>(2, 0) = X.block(cj, 0, 2, 4);
+  const Eigen::Matrix4d S = MarginalOfRows({ci, ci + 1, cj, cj + 1});
   return 0.5 * (S + S.transpose());
 }
 

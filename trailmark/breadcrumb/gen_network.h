@@ -187,6 +187,13 @@ class GenNetwork {
   std::vector<Mat2> scratch_gain_, scratch_fill_;
   std::vector<int> mark_;
   std::vector<int> row_pos_;  ///< Factorize scratch: row -> position in the current column
+  // Marginals from the factor (MarginalOfRows)
+  Eigen::MatrixXd MarginalOfRows(const std::vector<int>& rows);
+  std::vector<int> etree_parent_;
+  bool etree_valid_ = false;
+  Eigen::MatrixXd work_;
+  std::vector<char> visited_;
+  std::vector<int> path_;
   std::size_t factorizations_ = 0;
   std::size_t analyses_ = 0;
 };
