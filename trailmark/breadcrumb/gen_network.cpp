@@ -273,7 +273,9 @@ void GenNetwork::DeleteNode(NodeIndex k) {
     }
     for (const auto& blk : list) mark_[blk.j] = -1;
   }
+  const int compact = nodes_[k].compact;  // the slot keeps its number for a MoveNode into it
   nodes_[k] = Node{};
+  nodes_[k].compact = compact;
   free_.push_back(k);
   --active_count_;
   pattern_dirty_ = true;
@@ -286,7 +288,9 @@ NodeIndex GenNetwork::MoveNode(NodeIndex from, NodeIndex to) {
     throw std::invalid_argument("MoveNode: needs an active node and a free slot");
   }
   free_.erase(std::remove(free_.begin(), free_.end(), to), free_.end());
+  const int compact = nodes_[to].compact;
   nodes_[to] = std::move(nodes_[from]);
+  nodes_[to].compact = compact;
   for (auto& blk : nodes_[to].off) {
     for (auto& back : nodes_[blk.j].off) {
       if (back.j == from) back.j = to;
@@ -310,6 +314,13 @@ std::size_t GenNetwork::off_diagonal_blocks() const {
 }
 
 void GenNetwork::CompactIndices() {
+  // Keep the current numbering (the fill-reducing one of the last analysis) while the set of
+  // active slots is the same; renumber in slot order otherwise.
+  bool same_set = order_.size() == static_cast<std::size_t>(active_count_);
+  for (std::size_t k = 0; same_set && k < order_.size(); ++k) {
+    same_set = nodes_[order_[k]].active && nodes_[order_[k]].compact == static_cast<int>(k);
+  }
+  if (same_set) return;
   order_.clear();
   for (NodeIndex i = 0; i < static_cast<NodeIndex>(nodes_.size()); ++i) {
     nodes_[i].compact = -1;
@@ -320,29 +331,58 @@ void GenNetwork::CompactIndices() {
   }
 }
 
+std::vector<std::pair<int, int>> GenNetwork::BlockPattern() const {
+  std::vector<std::pair<int, int>> pattern;
+  pattern.reserve(analysed_pattern_.size() + 16);
+  std::vector<std::size_t> row_start(order_.size());
+  for (std::size_t r = 0; r < order_.size(); ++r) {
+    const std::size_t start = pattern.size();
+    for (const auto& blk : nodes_[order_[r]].off) {
+      const int c = nodes_[blk.j].compact;
+      if (c < static_cast<int>(r)) pattern.emplace_back(static_cast<int>(r), c);
+    }
+    std::sort(pattern.begin() + static_cast<std::ptrdiff_t>(start), pattern.end());
+    pattern.emplace_back(static_cast<int>(r), static_cast<int>(r));
+  }
+  return pattern;
+}
+
+void GenNetwork::FillReducingOrder() {
+  // Approximate minimum degree on the graph of 2x2 blocks (4x smaller than the scalar one);
+  // the numbering becomes the compact indices, so the factorization needs no permutation.
+  const int nb = static_cast<int>(order_.size());
+  std::vector<Eigen::Triplet<int>> t;
+  for (const auto& [r, c] : BlockPattern()) t.emplace_back(r, c, 1);
+  Eigen::SparseMatrix<int> B(nb, nb);
+  B.setFromTriplets(t.begin(), t.end());
+  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> pinv;
+  Eigen::AMDOrdering<int>()(B, pinv);  // pinv: new position -> old position
+  std::vector<NodeIndex> ordered(order_.size());
+  for (int k = 0; k < nb; ++k) ordered[k] = order_[pinv.indices()(k)];
+  order_ = std::move(ordered);
+  for (int k = 0; k < nb; ++k) nodes_[order_[k]].compact = k;
+}
+
+void GenNetwork::PreparePattern() {
+  // The block pattern (lower triangle, compact indices, row by row): the symbolic analysis
+  // (elimination tree) and the matrix structure are reused while it holds; when it changes, a
+  // new fill-reducing numbering is computed. Runs before any right-hand side is built, as it
+  // may renumber. (Persistent edges add entries inside blocks that are already in the pattern.)
+  if (!pattern_dirty_) {
+    pattern_same_ = true;
+    return;
+  }
+  pattern_same_ = analyses_ > 0 && BlockPattern() == analysed_pattern_;
+  if (!pattern_same_) {
+    FillReducingOrder();
+    analysed_pattern_ = BlockPattern();
+  }
+  pattern_dirty_ = false;
+}
+
 bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L) {
   const int n = static_cast<int>(order_.size()) * 2;
-  bool same_pattern = !pattern_dirty_ && matrix_.rows() == n && analyses_ > 0;
-  if (pattern_dirty_) {
-    // The block pattern (lower triangle, compact indices, row by row): the symbolic analysis
-    // (AMD ordering, elimination tree) and the matrix structure are reused while it holds.
-    // (Persistent edges add entries inside blocks that are already in the pattern.)
-    std::vector<std::pair<int, int>> pattern;
-    pattern.reserve(analysed_pattern_.size() + 16);
-    for (NodeIndex slot : order_) {
-      const int r = nodes_[slot].compact;
-      const std::size_t row_start = pattern.size();
-      for (const auto& blk : nodes_[slot].off) {
-        const int c = nodes_[blk.j].compact;
-        if (c < r) pattern.emplace_back(r, c);
-      }
-      std::sort(pattern.begin() + static_cast<std::ptrdiff_t>(row_start), pattern.end());
-      pattern.emplace_back(r, r);
-    }
-    same_pattern = analyses_ > 0 && matrix_.rows() == n && pattern == analysed_pattern_;
-    if (!same_pattern) analysed_pattern_ = std::move(pattern);
-    pattern_dirty_ = false;
-  }
+  const bool same_pattern = pattern_same_ && matrix_.rows() == n && analyses_ > 0;
   if (same_pattern) {
     // Values only, in place, column by column (no triplets, no sort, no search): block (r, c)
     // of the lower triangle is the transpose of block (c, r) kept in column node c's list.
@@ -407,6 +447,7 @@ bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L) {
 bool GenNetwork::Solve() {
   if (!dirty_) return factor_valid_;
   if (order_.size() != static_cast<std::size_t>(active_count_) || pattern_dirty_) CompactIndices();
+  PreparePattern();
   if (order_.empty()) {
     dirty_ = false;
     return true;
@@ -501,9 +542,9 @@ Eigen::MatrixXd GenNetwork::MarginalOfRows(const std::vector<int>& rows) {
   if (work_.rows() < n || work_.cols() < K) work_ = Eigen::MatrixXd::Zero(n, std::max(K, 4));
   if (visited_.size() < static_cast<std::size_t>(n)) visited_.assign(n, 0);
   path_.clear();
-  const auto& perm = solver_.permutationP().indices();
+  const auto& perm = solver_.permutationP().indices();  // empty: natural ordering
   for (int k = 0; k < K; ++k) {
-    const int start = perm(rows[k]);
+    const int start = perm.size() > 0 ? perm(rows[k]) : rows[k];
     work_(start, k) = 1.0;
     for (int v = start; v >= 0 && !visited_[v]; v = etree_parent_[v]) {
       visited_[v] = 1;

@@ -169,6 +169,10 @@ class GenNetwork {
   void FoldPersistent(int edge);
   bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L);
   void CompactIndices();
+  std::vector<std::pair<int, int>> BlockPattern() const;
+  void FillReducingOrder();
+  void PreparePattern();
+  bool pattern_same_ = false;
 
   GenOptions options_;
   std::vector<Node> nodes_;
@@ -178,7 +182,9 @@ class GenNetwork {
   bool pattern_dirty_ = true;
   bool dirty_ = true;
   std::vector<NodeIndex> order_;  ///< compact index -> slot
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver_;
+  /// Natural ordering: the compact numbering is already fill-reducing (FillReducingOrder).
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>, Eigen::Lower, Eigen::NaturalOrdering<int>>
+      solver_;
   Eigen::SparseMatrix<double> matrix_;
   bool factor_valid_ = false;
   std::vector<std::pair<int, int>> analysed_pattern_;  ///< block pattern of the last analysis
