@@ -224,32 +224,77 @@ void GenNetwork::FoldPersistent(int edge) {
   }
 }
 
-void GenNetwork::DeleteNode(NodeIndex k) {
-  if (!IsActive(k)) throw std::invalid_argument("DeleteNode: inactive node");
-  while (!nodes_[k].persistent.empty()) FoldPersistent(nodes_[k].persistent.back());
-  const Mat2 Lkk_inv = nodes_[k].L_ii.inverse();
-  const Vec2 bk = nodes_[k].b;
-  // eq. (17): L = L_pp - L_p1 L_11^-1 L_p1^T,  b = b_p - L_p1 L_11^-1 b_1
-  scratch_blocks_ = nodes_[k].off;  // the neighbours m and L_km
-  const std::size_t N = scratch_blocks_.size();
-  scratch_gain_.resize(N);
-  scratch_fill_.resize(N * N);
-  for (std::size_t a = 0; a < N; ++a) {
-    const Mat2 Lmk = scratch_blocks_[a].L.transpose();
-    scratch_gain_[a] = Lmk * Lkk_inv;  // G_m = L_mk L_kk^-1
-    Node& m = nodes_[scratch_blocks_[a].j];
-    m.b -= scratch_gain_[a] * bk;
-    m.L_ii -= scratch_gain_[a] * scratch_blocks_[a].L;
-    m.L_ii = 0.5 * (m.L_ii + m.L_ii.transpose());
-    for (std::size_t c = a + 1; c < N; ++c) {
-      scratch_fill_[a * N + c] = scratch_gain_[a] * scratch_blocks_[c].L;  // fill of (m, n)
+void GenNetwork::DeleteNode(NodeIndex k) { Marginalize<1>({k}); }
+
+void GenNetwork::DeleteNodes(NodeIndex a, NodeIndex b) {
+  if (a == b) throw std::invalid_argument("DeleteNodes: the same node twice");
+  Marginalize<2>({a, b});
+}
+
+template <int K>
+void GenNetwork::Marginalize(const std::array<NodeIndex, K>& ks) {
+  constexpr int D = 2 * K;
+  using MatKK = Eigen::Matrix<double, D, D>;
+  using MatMK = Eigen::Matrix<double, 2, D>;
+  for (NodeIndex k : ks) {
+    if (!IsActive(k)) throw std::invalid_argument("DeleteNode: inactive node");
+  }
+  for (NodeIndex k : ks) {
+    while (!nodes_[k].persistent.empty()) FoldPersistent(nodes_[k].persistent.back());
+  }
+  // eq. (17) for the set K at once: L = L_pp - L_pK L_KK^-1 L_Kp,  b = b_p - L_pK L_KK^-1 b_K
+  MatKK L_KK = MatKK::Zero();
+  Eigen::Matrix<double, D, 1> b_K;
+  if (mark_.size() < nodes_.size()) mark_.assign(nodes_.size(), -1);
+  // Per-instantiation scratch (no allocation per marginalization once warm).
+  thread_local std::vector<MatMK, Eigen::aligned_allocator<MatMK>> scratch_lmk, scratch_gain;
+  scratch_neighbours_.clear();
+  scratch_lmk.clear();
+  for (int a = 0; a < K; ++a) {
+    const Node& na = nodes_[ks[a]];
+    L_KK.template block<2, 2>(2 * a, 2 * a) = na.L_ii;
+    b_K.template segment<2>(2 * a) = na.b;
+    for (const auto& blk : na.off) {
+      int in_k = -1;
+      for (int c = 0; c < K; ++c) in_k = blk.j == ks[c] ? c : in_k;
+      if (in_k >= 0) {
+        L_KK.template block<2, 2>(2 * a, 2 * in_k) = blk.L;  // L_{k_a k_c}
+        continue;
+      }
+      int pos = mark_[blk.j];
+      if (pos < 0) {
+        pos = static_cast<int>(scratch_neighbours_.size());
+        mark_[blk.j] = pos;
+        scratch_neighbours_.push_back(blk.j);
+        scratch_lmk.push_back(MatMK::Zero());
+      }
+      scratch_lmk[pos].template block<2, 2>(0, 2 * a) = blk.L.transpose();  // L_{m k_a}
     }
   }
-  if (mark_.size() < nodes_.size()) mark_.assign(nodes_.size(), -1);
+  for (NodeIndex m : scratch_neighbours_) mark_[m] = -1;
+  const MatKK L_KK_inv = L_KK.inverse();
+  const std::size_t N = scratch_neighbours_.size();
+  scratch_gain.resize(N);
+  scratch_fill_.resize(N * N);
   for (std::size_t a = 0; a < N; ++a) {
-    auto& list = nodes_[scratch_blocks_[a].j].off;
-    for (std::size_t p = 0; p < list.size();) {  // drop the block to k
-      if (list[p].j == k) {
+    const MatMK G = scratch_lmk[a] * L_KK_inv;  // L_mK L_KK^-1
+    scratch_gain[a] = G;
+    Node& m = nodes_[scratch_neighbours_[a]];
+    m.b -= G * b_K;
+    m.L_ii -= G * scratch_lmk[a].transpose();
+    m.L_ii = 0.5 * (m.L_ii + m.L_ii.transpose());
+  }
+  for (std::size_t a = 0; a < N; ++a) {
+    for (std::size_t c = a + 1; c < N; ++c) {
+      scratch_fill_[a * N + c] = scratch_gain[a] * scratch_lmk[c].transpose();  // (m, n)
+    }
+  }
+  for (std::size_t a = 0; a < N; ++a) {
+    auto& list = nodes_[scratch_neighbours_[a]].off;
+    for (std::size_t p = 0; p < list.size();) {  // drop the blocks to K
+      bool to_k = false;
+      for (NodeIndex k : ks) to_k = to_k || list[p].j == k;
+      if (to_k) {
         list[p] = list.back();
         list.pop_back();
       } else {
@@ -261,7 +306,7 @@ void GenNetwork::DeleteNode(NodeIndex k) {
       if (c == a) continue;
       // (m, n) and (n, m) = (m, n)^T from the same product: L stays exactly symmetric.
       const Mat2 fill = a < c ? scratch_fill_[a * N + c] : Mat2(scratch_fill_[c * N + a].transpose());
-      const NodeIndex n = scratch_blocks_[c].j;
+      const NodeIndex n = scratch_neighbours_[c];
       const int p = mark_[n];
       if (p < 0) {
         list.push_back({n, -fill});
@@ -273,11 +318,13 @@ void GenNetwork::DeleteNode(NodeIndex k) {
     }
     for (const auto& blk : list) mark_[blk.j] = -1;
   }
-  const int compact = nodes_[k].compact;  // the slot keeps its number for a MoveNode into it
-  nodes_[k] = Node{};
-  nodes_[k].compact = compact;
-  free_.push_back(k);
-  --active_count_;
+  for (NodeIndex k : ks) {
+    const int compact = nodes_[k].compact;  // the slot keeps its number for a MoveNode into it
+    nodes_[k] = Node{};
+    nodes_[k].compact = compact;
+    free_.push_back(k);
+    --active_count_;
+  }
   pattern_dirty_ = true;
   dirty_ = true;
 }

@@ -29,6 +29,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -105,6 +106,9 @@ class GenNetwork {
   double PersistentResidual(int edge) const;
   /// DeleteNode(+), eqs. (14)-(17): marginalizes node i out (Schur complement).
   void DeleteNode(NodeIndex i);
+  /// Marginalizes two nodes at once (a mobile agent's old position and heading states): one
+  /// Schur complement with a 4x4 pivot instead of two with fill in between.
+  void DeleteNodes(NodeIndex a, NodeIndex b);
   /// Moves active node `from` into the free slot `to` (a mobile node's new state taking its
   /// deleted predecessor's slot keeps the sparsity pattern, so the symbolic analysis of the
   /// factorization is reused). Returns `to`.
@@ -189,8 +193,10 @@ class GenNetwork {
   bool factor_valid_ = false;
   std::vector<std::pair<int, int>> analysed_pattern_;  ///< block pattern of the last analysis
   // DeleteNode scratch (no allocation per marginalization)
-  std::vector<Block> scratch_blocks_;
-  std::vector<Mat2> scratch_gain_, scratch_fill_;
+  template <int K>
+  void Marginalize(const std::array<NodeIndex, K>& nodes);
+  std::vector<NodeIndex> scratch_neighbours_;
+  std::vector<Mat2> scratch_fill_;
   std::vector<int> mark_;
   std::vector<int> row_pos_;  ///< Factorize scratch: row -> position in the current column
   // Marginals from the factor (MarginalOfRows)

@@ -399,6 +399,9 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   const NodeIndex next = gen_.AddNode(gen_.Estimate(a.state) + predicted);
   if (a.theta < 0) {
     gen_.AddRelative(next, a.state, delta, Diag(q));
+    const NodeIndex old_state = a.state;
+    gen_.DeleteNode(old_state);
+    a.state = gen_.MoveNode(next, old_state);
   } else {
     // x_new - x_old - J_theta theta_old = (1 + s) R(psi) delta - J_theta theta_hat (linearized)
     const Vec2 th = gen_.Estimate(a.theta);
@@ -430,13 +433,12 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
     }
     gen_.AddLinear({next, a.state, a.theta}, {Mat2::Identity(), -Mat2::Identity(), -J_theta},
                    predicted - J_theta * th, cov);
-    const NodeIndex old_theta = a.theta;
-    gen_.DeleteNode(old_theta);
+    // DeleteNode+ of the old position and heading states together (one 4x4 Schur pivot).
+    const NodeIndex old_theta = a.theta, old_state = a.state;
+    gen_.DeleteNodes(old_state, old_theta);
     a.theta = gen_.MoveNode(next_theta, old_theta);
+    a.state = gen_.MoveNode(next, old_state);
   }
-  const NodeIndex old_state = a.state;
-  gen_.DeleteNode(old_state);
-  a.state = gen_.MoveNode(next, old_state);
   a.state_t = t;
   a.state_cum = cum_t;
   a.state_cum_var = var_t;
