@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <cstdlib>
 #include <random>
 #include <string>
 
@@ -30,5 +31,23 @@ class TempDir {
  private:
   std::filesystem::path path_;
 };
+
+}  // namespace trailmark::testing
+
+namespace trailmark::testing {
+
+/// The recorded data folder (../shared/data next to the repository, or $TRAILMARK_SHARED_DATA);
+/// empty when absent (tests using it then skip).
+inline std::filesystem::path SharedData(const std::string& sub) {
+  const char* env = std::getenv("TRAILMARK_SHARED_DATA");
+#ifdef TRAILMARK_SHARED_DIR
+  const std::filesystem::path base =
+      env ? std::filesystem::path(env) : std::filesystem::path(TRAILMARK_SHARED_DIR) / "data";
+#else
+  const std::filesystem::path base = env ? env : "";
+#endif
+  const auto p = base / sub;
+  return std::filesystem::exists(p) ? p : std::filesystem::path();
+}
 
 }  // namespace trailmark::testing

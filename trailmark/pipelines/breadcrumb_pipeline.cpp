@@ -127,14 +127,17 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   while (stream.Next(row)) {
     const TimeS t = RowTime(row);
     if (!any) {
-      // Emit the known nodes (base, surveyed landmarks) and the agents' starts once.
-      emit_static(t, true);
+      // Emit the known nodes (base, surveyed landmarks) and the agents' starts once, at the
+      // first time in the data (a first step's t0: the start is known a priori).
+      const auto* first_step = std::get_if<Step>(&row);
+      const TimeS t_start = first_step ? std::min(first_step->t0, t) : t;
+      emit_static(t_start, true);
       for (const NodeInfo& n : mission.info().nodes) {
         if (n.kind != NodeKind::kAgent || !mission.info().AgentStart(n)) continue;
         if (auto e = loc.Estimate(n.id)) {
           const Mat2& c = e->covariance;
-          sink.Add({t, n.id, Vec3(e->position_n.x(), e->position_n.y(), agent_z[n.id]), c(0, 0),
-                    c(0, 1), c(1, 1)});
+          sink.Add({t_start, n.id, Vec3(e->position_n.x(), e->position_n.y(), agent_z[n.id]),
+                    c(0, 0), c(0, 1), c(1, 1)});
         }
       }
       next_static = t + static_period_s;
