@@ -30,10 +30,14 @@ int Bench(std::size_t rows, const std::filesystem::path& json_out);
 /// `trailmark bench breadcrumb`: the large-incident benchmark of the breadcrumb localizer.
 int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
                     double covariance_period_s, const std::filesystem::path& json_out);
+/// `trailmark reproduce ins`: the INS on the recorded foot-IMU sets under data_dir.
+int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::path& out,
+                 const std::map<std::string, std::string>& options = {});
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
 /// side with the published figures; results.md under out/NAME.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,
-              const std::map<std::string, std::string>& options = {});
+              const std::map<std::string, std::string>& options = {},
+              const std::filesystem::path& data_dir = "../shared/data");
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows);
 

@@ -9,10 +9,12 @@
 #include <fmt/format.h>
 
 #include <CLI/CLI.hpp>
+#include <cstdlib>
 #include <map>
 
 #include "commands.h"
 #include "trailmark/core/error.h"
+#include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace fs = std::filesystem;
@@ -103,13 +105,25 @@ int main(int argc, char** argv) {
   std::string reproduce_out = "out/reproduce";
   auto* reproduce = app.add_subcommand(
       "reproduce", "a paper's experiment on simulated equivalents, side by side with the paper");
-  reproduce->add_option("name", reproduce_name, "breadcrumb")->required();
+  reproduce->add_option("name", reproduce_name, "breadcrumb | ins")->required();
   reproduce->add_option("--seeds", reproduce_seeds, "number of simulated runs (seeds 1..N)")
       ->check(CLI::Range(1, 1000));
   reproduce->add_option("--out", reproduce_out, "output directory (missions, runs, results.md)");
+  std::string reproduce_data = std::getenv("TRAILMARK_SHARED_DATA") ? std::getenv("TRAILMARK_SHARED_DATA")
+                                                                    : "../shared/data";
+  reproduce->add_option("--data", reproduce_data,
+                        "recorded data folder (ins: holds pyshoe-vicon/; default ../shared/data "
+                        "or $TRAILMARK_SHARED_DATA)");
   std::vector<std::string> reproduce_options;
   reproduce->add_option("--option", reproduce_options,
                         "key=value passed to the reproduced pipeline (ablations)");
+
+  std::string convert_format, convert_src, convert_out;
+  auto* convert = app.add_subcommand(
+      "convert", "convert a recorded data file into a mission directory (formats: pyshoe-vicon)");
+  convert->add_option("format", convert_format, "pyshoe-vicon")->required();
+  convert->add_option("source", convert_src, "source file")->required()->check(CLI::ExistingFile);
+  convert->add_option("--out", convert_out, "mission directory to write")->required();
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -146,9 +160,16 @@ int main(int argc, char** argv) {
       }
       if (!bench_what.empty()) throw std::invalid_argument("unknown benchmark '" + bench_what + "'");
       return cli::Bench(bench_rows, bench_json);
+    } else if (*convert) {
+      if (convert_format != "pyshoe-vicon") {
+        throw std::invalid_argument("unknown format '" + convert_format + "' (known: pyshoe-vicon)");
+      }
+      const PyShoeTrial trial = ReadPyShoeTrial(convert_src);
+      WritePyShoeMission(trial, convert_out);
+      fmt::print("converted {} ({} IMU samples) into {}\n", convert_src, trial.imu.size(), convert_out);
     } else if (*reproduce) {
       return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
-                            ParseKeyValues(reproduce_options));
+                            ParseKeyValues(reproduce_options), reproduce_data);
     }
   } catch (const InputError& e) {
     fmt::print(stderr, "error: {}\n", e.what());

@@ -140,9 +140,10 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
 }  // namespace
 
 int Reproduce(const std::string& name, int seeds, const fs::path& out,
-              const std::map<std::string, std::string>& options) {
+              const std::map<std::string, std::string>& options, const fs::path& data_dir) {
   if (name == "breadcrumb") return ReproduceBreadcrumb(seeds, out / "breadcrumb", options);
-  throw std::invalid_argument("unknown reproduction '" + name + "' (known: breadcrumb)");
+  if (name == "ins") return ReproduceIns(data_dir, out / "ins", options);
+  throw std::invalid_argument("unknown reproduction '" + name + "' (known: breadcrumb, ins)");
 }
 
 }  // namespace trailmark::cli

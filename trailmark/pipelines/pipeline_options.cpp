@@ -30,6 +30,12 @@ bool PipelineOptions::Bool(const std::string& key, bool fallback) {
                               "' is not a boolean (1/0, true/false, on/off)");
 }
 
+std::string PipelineOptions::String(const std::string& key, const std::string& fallback) {
+  known_.insert(key);
+  auto it = values_.find(key);
+  return it == values_.end() ? fallback : it->second;
+}
+
 void PipelineOptions::RejectUnknown() const {
   for (const auto& [k, v] : values_) {
     if (!known_.count(k)) {

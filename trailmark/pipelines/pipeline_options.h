@@ -14,6 +14,7 @@ class PipelineOptions {
       : values_(values), pipeline_(std::move(pipeline)) {}
   double Double(const std::string& key, double fallback);
   bool Bool(const std::string& key, bool fallback);
+  std::string String(const std::string& key, const std::string& fallback);
   /// Throws if a given key was never asked for.
   void RejectUnknown() const;
 

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
+#include "trailmark/pipelines/ins_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline.h"
 
@@ -16,6 +17,7 @@ const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
     auto* v = new std::vector<std::unique_ptr<Pipeline>>();
     v->push_back(std::make_unique<PdrPipeline>());
     v->push_back(std::make_unique<BreadcrumbPipeline>());
+    v->push_back(std::make_unique<InsPipeline>());
     return v;
   }();
   return *pipelines;

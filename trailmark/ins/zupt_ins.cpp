@@ -1,0 +1,284 @@
+#include "trailmark/ins/zupt_ins.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <stdexcept>
+
+namespace trailmark::ins {
+
+namespace {
+
+Eigen::Matrix3d Skew(const Vec3& v) {
+  Eigen::Matrix3d m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+/// Quaternion of the rotation vector phi (exponential map).
+Eigen::Quaterniond Exp(const Vec3& phi) {
+  const double angle = phi.norm();
+  if (angle < 1e-12) return Eigen::Quaterniond(1.0, 0.5 * phi.x(), 0.5 * phi.y(), 0.5 * phi.z());
+  return Eigen::Quaterniond(Eigen::AngleAxisd(angle, phi / angle));
+}
+
+}  // namespace
+
+ZuptIns::ZuptIns(InsOptions options) : options_(options), detector_(options.detector) {
+  options_.detector.gravity_mps2 = options_.gravity_mps2;
+}
+
+void ZuptIns::Add(const ImuSample& s) {
+  if (!s.accel_b.allFinite() || !s.gyro_b.allFinite()) {
+    throw std::invalid_argument(fmt::format("IMU sample at t={} is not finite", s.t));
+  }
+  // 2000 deg/s is the largest range of MEMS gyros: beyond it the data is in deg/s.
+  if (s.gyro_b.cwiseAbs().maxCoeff() > 40.0) {
+    throw std::invalid_argument(fmt::format(
+        "gyro reads {:.1f} at t={}: above any MEMS range in rad/s (2000 deg/s = 34.9 rad/s); "
+        "the data looks like deg/s — convert to rad/s",
+        s.gyro_b.cwiseAbs().maxCoeff(), s.t));
+  }
+  if (agent_.empty()) agent_ = s.agent;
+  if (!aligned_) {
+    alignment_.push_back(s);
+    if (alignment_.size() >= 5 && s.t - alignment_.front().t >= options_.alignment_s) Align();
+    return;
+  }
+  const double dt = have_last_ || !delay_.empty() ? s.t - (delay_.empty() ? t_last_ : delay_.back().t)
+                                                  : 0.0;
+  delay_.push_back(s);
+  if (auto decision = detector_.Add(s.accel_b, s.gyro_b, dt)) {
+    const ImuSample front = delay_.front();
+    delay_.erase(delay_.begin());
+    Process(front, decision->stance);
+  }
+}
+
+void ZuptIns::AddWithStance(const ImuSample& s, bool stance) {
+  external_ = true;
+  if (!s.accel_b.allFinite() || !s.gyro_b.allFinite()) {
+    throw std::invalid_argument(fmt::format("IMU sample at t={} is not finite", s.t));
+  }
+  if (agent_.empty()) agent_ = s.agent;
+  if (!aligned_) {
+    alignment_.push_back(s);
+    alignment_stance_.push_back(stance);
+    if (alignment_.size() >= 5 && s.t - alignment_.front().t >= options_.alignment_s) Align();
+    return;
+  }
+  Process(s, stance);
+}
+
+void ZuptIns::Align() {
+  Vec3 f = Vec3::Zero(), w = Vec3::Zero();
+  for (const auto& s : alignment_) {
+    f += s.accel_b;
+    w += s.gyro_b;
+  }
+  f /= static_cast<double>(alignment_.size());
+  w /= static_cast<double>(alignment_.size());
+  const double m = f.norm();
+  if (m > 0.5 && m < 1.5) {
+    throw std::invalid_argument(fmt::format(
+        "specific force at rest is {:.3f}: the accelerometer is in g, not m/s^2 (multiply by "
+        "9.80665)", m));
+  }
+  if (std::abs(m - options_.gravity_mps2) > 2.0) {
+    throw std::invalid_argument(fmt::format(
+        "specific force over the first {:.2f} s is {:.2f} m/s^2, not ~{:.2f}: the IMU is not "
+        "at rest at the start (needed for alignment) or the units are wrong",
+        options_.alignment_s, m, options_.gravity_mps2));
+  }
+  if (w.norm() > 0.3) {
+    summary_.warnings.push_back(fmt::format(
+        "mean gyro over the alignment is {:.2f} rad/s: not at rest, or deg/s instead of rad/s",
+        w.norm()));
+  }
+  // Roll and pitch from gravity: at rest f_b = R_nb^T (0, 0, g).
+  const double roll = std::atan2(f.y(), f.z());
+  const double pitch = std::atan2(-f.x(), std::sqrt(f.y() * f.y() + f.z() * f.z()));
+  q_ = Eigen::AngleAxisd(options_.initial_yaw_rad, Vec3::UnitZ()) *
+       Eigen::AngleAxisd(pitch, Vec3::UnitY()) * Eigen::AngleAxisd(roll, Vec3::UnitX());
+  q_.normalize();
+  p_ = options_.initial_position_n;
+  v_.setZero();
+  ba_.setZero();
+  bg_ = w.norm() < 0.05 ? w : Vec3::Zero();  // a resting gyro reads its bias
+  P_.setZero();
+  P_.block<3, 3>(3, 3) = Eigen::Matrix3d::Identity() * 1e-4;
+  const double sa = options_.initial_attitude_sigma_rad, sy = options_.initial_yaw_sigma_rad;
+  P_.block<3, 3>(6, 6) = Vec3(sa * sa, sa * sa, sy * sy).asDiagonal();
+  if (options_.estimate_biases) {
+    P_.block<3, 3>(9, 9) = Eigen::Matrix3d::Identity() * std::pow(options_.accel_bias_sigma0, 2);
+    P_.block<3, 3>(12, 12) = Eigen::Matrix3d::Identity() * std::pow(options_.gyro_bias_sigma0, 2);
+  }
+  aligned_ = true;
+  const std::vector<ImuSample> buffered = std::move(alignment_);
+  const std::vector<bool> stance = std::move(alignment_stance_);
+  alignment_.clear();
+  alignment_stance_.clear();
+  for (std::size_t k = 0; k < buffered.size(); ++k) {
+    if (external_) {
+      Process(buffered[k], stance[k]);
+    } else {
+      Add(buffered[k]);
+    }
+  }
+}
+
+void ZuptIns::Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt) {
+  const Vec3 w = gyro_b - bg_;
+  const Vec3 f = accel_b - ba_;
+  const Eigen::Matrix3d R0 = q_.toRotationMatrix();
+  q_ = (q_ * Exp(w * dt)).normalized();
+  const Eigen::Matrix3d R1 = q_.toRotationMatrix();
+  const Eigen::Matrix3d R = 0.5 * (R0 + R1);
+  const Vec3 f_n = R * f;
+  const Vec3 v1 = v_ + (f_n - Vec3(0, 0, options_.gravity_mps2)) * dt;
+  p_ += 0.5 * (v_ + v1) * dt;
+  v_ = v1;
+
+  // P = Phi P Phi^T + Q with Phi = I + F dt, F block-sparse:
+  //   rows dp: [0 I 0 0 0]; dv: [0 0 -[f_n]x -R 0]; dtheta: [0 0 0 0 -R]; biases: 0.
+  const Eigen::Matrix3d A = -Skew(f_n);
+  const bool biases = options_.estimate_biases;
+  auto apply_F = [&](const Mat15& M) {  // returns F M (rows 9..14 zero)
+    Mat15 out = Mat15::Zero();
+    out.middleRows<3>(0) = M.middleRows<3>(3);
+    out.middleRows<3>(3) = A * M.middleRows<3>(6);
+    if (biases) {
+      out.middleRows<3>(3) -= R * M.middleRows<3>(9);
+      out.middleRows<3>(6) = -R * M.middleRows<3>(12);
+    }
+    return out;
+  };
+  const Mat15 FP = apply_F(P_);
+  const Mat15 FPFt = apply_F(FP.transpose());
+  P_ += dt * (FP + FP.transpose()) + (dt * dt) * FPFt;
+  const double qa = options_.accel_noise_mps2 * dt, qg = options_.gyro_noise_radps * dt;
+  P_.block<3, 3>(3, 3).diagonal().array() += qa * qa;
+  P_.block<3, 3>(6, 6).diagonal().array() += qg * qg;
+  if (biases) {
+    P_.block<3, 3>(9, 9).diagonal().array() += options_.accel_bias_rw * options_.accel_bias_rw * dt;
+    P_.block<3, 3>(12, 12).diagonal().array() += options_.gyro_bias_rw * options_.gyro_bias_rw * dt;
+  }
+}
+
+template <int Offset>
+void ZuptIns::Update3(const Vec3& innovation, double sigma) {
+  // H selects the error-state rows Offset..Offset+2; K = P H^T (H P H^T + R)^-1
+  const Eigen::Matrix3d S =
+      P_.block<3, 3>(Offset, Offset) + Eigen::Matrix3d::Identity() * sigma * sigma;
+  const Eigen::Matrix<double, 15, 3> K = P_.middleCols<3>(Offset) * S.inverse();
+  const Eigen::Matrix<double, 15, 1> dx = K * innovation;
+  const Eigen::Matrix<double, 3, 15> HP = P_.middleRows<3>(Offset);
+  P_ -= K * HP;
+  P_ = 0.5 * (P_ + P_.transpose());
+  Inject(dx);
+}
+
+void ZuptIns::Inject(const Eigen::Matrix<double, 15, 1>& dx) {
+  p_ += dx.segment<3>(0);
+  v_ += dx.segment<3>(3);
+  q_ = (Exp(dx.segment<3>(6)) * q_).normalized();  // global (navigation-frame) angle error
+  if (options_.estimate_biases) {
+    ba_ += dx.segment<3>(9);
+    bg_ += dx.segment<3>(12);
+  }
+}
+
+void ZuptIns::UpdateZupt() { Update3<3>(-v_, options_.zupt_sigma_mps); }
+
+void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
+  if (!options_.estimate_biases) return;
+  Update3<12>(gyro_b - bg_, options_.zaru_sigma_radps);  // at rest the gyro reads its bias
+}
+
+void ZuptIns::Process(const ImuSample& s, bool stance) {
+  ++summary_.samples;
+  if (have_last_) {
+    const double dt = s.t - t_last_;
+    if (dt <= 0) {
+      ++summary_.zero_dt;
+    } else {
+      if (median_dt_ > 0 && dt > 5.0 * median_dt_) {
+        if (++summary_.gaps <= 3) {
+          summary_.warnings.push_back(fmt::format(
+              "gap of {:.3f} s before t={} ({:.0f}x the sample period): dead reckoning across it",
+              dt, s.t, dt / median_dt_));
+        }
+      }
+      median_dt_ = median_dt_ > 0 ? 0.99 * median_dt_ + 0.01 * std::min(dt, 3 * median_dt_) : dt;
+      Propagate(s.accel_b, s.gyro_b, dt);
+    }
+  }
+  t_last_ = s.t;
+  have_last_ = true;
+  if (stance) {
+    ++summary_.stance_samples;
+    UpdateZupt();
+    if (options_.zaru) UpdateZaru(s.gyro_b);
+  }
+  InsState state;
+  state.t = s.t;
+  state.position_n = p_;
+  state.velocity_n = v_;
+  state.q_nb = q_;
+  state.position_cov = P_.block<3, 3>(0, 0);
+  state.stance = stance;
+  StanceBookkeeping(s, stance);
+  last_state_ = state;
+  if (on_state) on_state(state);
+}
+
+void ZuptIns::StanceBookkeeping(const ImuSample& s, bool stance) {
+  (void)s;
+  stance_run_ = stance ? stance_run_ + 1 : 0;
+  if (stance && stance_run_ >= options_.min_stance_samples) in_stance_phase_ = true;
+  if (stance || !in_stance_phase_) return;
+  // The stance phase ended at the previous sample: its position is ZUPT-corrected.
+  in_stance_phase_ = false;
+  const InsState& end = last_state_;
+  if (!last_stance_end_t_) {
+    last_stance_end_t_ = end.t;
+    last_stance_end_p_ = end.position_n;
+    last_stance_end_cov_ = end.position_cov;
+    return;
+  }
+  const Vec3 delta = end.position_n - last_stance_end_p_;
+  if (delta.head<2>().norm() < options_.min_step_length_m) return;  // shuffling, not a step
+  const Vec3 var = (end.position_cov.diagonal() - last_stance_end_cov_.diagonal()).cwiseMax(1e-6);
+  Step step{*last_stance_end_t_, end.t, agent_, delta, var};
+  ++summary_.steps;
+  summary_.distance_m += delta.head<2>().norm();
+  last_stance_end_t_ = end.t;
+  last_stance_end_p_ = end.position_n;
+  last_stance_end_cov_ = end.position_cov;
+  if (on_step) on_step(step);
+}
+
+void ZuptIns::Finish() {
+  if (!aligned_ && !alignment_.empty()) {
+    if (alignment_.size() < 5) {
+      throw std::invalid_argument("fewer than 5 IMU samples: nothing to align on");
+    }
+    Align();
+  }
+  const auto decisions = detector_.Flush();
+  for (std::size_t k = 0; k < decisions.size() && !delay_.empty(); ++k) {
+    const ImuSample front = delay_.front();
+    delay_.erase(delay_.begin());
+    Process(front, decisions[k].stance);
+  }
+  while (!delay_.empty()) {  // (only when the window never filled)
+    const ImuSample front = delay_.front();
+    delay_.erase(delay_.begin());
+    Process(front, false);
+  }
+  if (in_stance_phase_) StanceBookkeeping(ImuSample{}, false);
+  summary_.accel_bias = ba_;
+  summary_.gyro_bias = bg_;
+}
+
+}  // namespace trailmark::ins
