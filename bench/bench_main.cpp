@@ -2,10 +2,12 @@
 // pipeline on the default mission. `trailmark bench` prints the same figures as a table.
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <filesystem>
 
 #include "trailmark/io/mission_io.h"
 #include "trailmark/breadcrumb/localizer.h"
+#include "trailmark/ins/zupt_ins.h"
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/synthetic_incident.h"
@@ -142,6 +144,31 @@ void BM_BreadcrumbIncident(benchmark::State& state) {
       benchmark::Counter(o.duration_s * state.iterations(), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_BreadcrumbIncident)->Arg(1)->Arg(4)->Unit(benchmark::kMillisecond);
+
+// The full ZUPT INS (15-state error-state KF, adaptive SHOE detector, step output) on a
+// synthetic gait at 200 Hz: samples per second.
+void BM_ZuptIns(benchmark::State& state) {
+  Random rng(1);
+  std::vector<ImuSample> imu;
+  for (int k = 0; k < 200000; ++k) {
+    const double t = 0.005 * k, ph = std::fmod(t, 1.0);
+    const bool swing = ph > 0.4;
+    const double e = swing ? std::sin(3.14159265 * (ph - 0.4) / 0.6) : 0.0;
+    imu.push_back({t, "foot",
+                   Vec3(15 * e + rng.Normal(0, 0.02), rng.Normal(0, 0.02), 9.81 + 10 * e),
+                   Vec3(rng.Normal(0, 0.002), 6 * e, rng.Normal(0, 0.002))});
+  }
+  for (auto _ : state) {
+    ins::ZuptIns ins;
+    std::size_t steps = 0;
+    ins.on_step = [&](const Step&) { ++steps; };
+    for (const auto& s : imu) ins.Add(s);
+    ins.Finish();
+    benchmark::DoNotOptimize(steps);
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(imu.size()));
+}
+BENCHMARK(BM_ZuptIns)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -38,7 +38,16 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
     throw std::invalid_argument(fmt::format("unknown pipeline '{}' (known: {})", name, known));
   }
   const MissionDirectory mission(mission_dir);
-  for (const auto& f : pipeline->required_files()) mission.Require(f, "pipeline '" + name + "'");
+  if (!pipeline->CanRun(mission)) {
+    std::string need;
+    for (const auto& f : pipeline->required_files()) need += (need.empty() ? "" : ", ") + f;
+    for (const auto& f : pipeline->required_files()) {
+      const auto alt = f.find(" or ");
+      mission.Require(f.substr(0, alt), "pipeline '" + name + "'" +
+                                            (alt == std::string::npos ? "" : " (or " + f.substr(alt + 4) + ")"));
+    }
+    throw InputError(mission_dir.string(), 0, "pipeline '" + name + "' needs " + need);
+  }
   ProgressBar bar("run " + name);
   PipelineContext context{mission, options, [&](double f) { bar.Update(f); }};
   RunResult result = RunPipeline(*pipeline, context, out);

@@ -41,6 +41,22 @@ test -s "$dir/rep/breadcrumb/results.md" || fail "reproduce results.md"
 "$TM" run --pipeline breadcrumb "$dir/tb" --out "$dir/tbr" > /dev/null || fail "run training"
 "$TM" eval "$dir/tb" "$dir/tbr/estimates.csv" | grep -q "^ff2 " || fail "two firefighters"
 
+# The INS from raw IMU samples: 2 s at rest (100 Hz), then every steps-based pipeline from imu.csv.
+mkdir -p "$dir/imu"
+echo '{"format": "trailmark-mission/1", "nodes": [{"id": "foot", "kind": "agent", "start": [0, 0, 0]}]}' \
+  > "$dir/imu/mission.json"
+awk 'BEGIN { print "t,agent,ax,ay,az,gx,gy,gz"; for (k = 0; k < 200; k++) printf "%.2f,foot,0.01,0,9.80,0,0.001,0\n", k / 100 }' \
+  > "$dir/imu/imu.csv"
+"$TM" validate "$dir/imu" | grep -q "runnable pipelines: pdr breadcrumb ins" || fail "ins runnable"
+"$TM" run --pipeline ins "$dir/imu" --out "$dir/insr" --option detector=shoe > /dev/null || fail "run ins"
+[ "$(($(wc -l < "$dir/insr/estimates.csv") - 1))" -eq 200 ] || fail "ins: one estimate per sample"
+"$TM" run --pipeline pdr "$dir/imu" --out "$dir/pdri" > /dev/null || fail "pdr from imu.csv"
+grep -q "steps from imu.csv" "$dir/pdri/diagnostics.json" || fail "pdr from imu note"
+awk 'BEGIN { print "t,agent,ax,ay,az,gx,gy,gz"; for (k = 0; k < 200; k++) printf "%.2f,foot,0,0,1.0,0,0,0\n", k / 100 }' \
+  > "$dir/imu/imu.csv"
+run_failing "$TM" run --pipeline ins "$dir/imu" --out "$dir/x"
+[ $rc -eq 2 ] && grep -q "imu.csv.*in g, not m/s^2" "$dir/err" || { cat "$dir/err"; fail "g units"; }
+
 # Bad input: clear message naming file and line, exit code 2.
 run_failing "$TM" run --pipeline nope "$dir/m" --out "$dir/x"
 [ $rc -ne 0 ] && grep -q "unknown pipeline 'nope'" "$dir/err" || fail "unknown pipeline"

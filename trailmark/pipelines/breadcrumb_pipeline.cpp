@@ -9,6 +9,7 @@
 #include "trailmark/core/error.h"
 #include "trailmark/pipelines/merged_stream.h"
 #include "trailmark/pipelines/pipeline_options.h"
+#include "trailmark/pipelines/step_source.h"
 
 namespace trailmark {
 
@@ -59,12 +60,16 @@ LocalizerOptions BreadcrumbOptionsFrom(const std::map<std::string, std::string>&
   return l;
 }
 
+bool BreadcrumbPipeline::CanRun(const MissionDirectory& mission) const { return HasSteps(mission); }
+
 PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
   const MissionDirectory& mission = context.mission;
-  mission.Require("steps.csv", "the breadcrumb pipeline");
+  const auto [ins_options, rest] = SplitInsOptions(context.options);
   double static_period_s = 1.0;
-  LocalizerOptions options = BreadcrumbOptionsFrom(context.options, &static_period_s);
+  LocalizerOptions options = BreadcrumbOptionsFrom(rest, &static_period_s);
   PipelineSummary summary;
+  // Steps from steps.csv, or from imu.csv through the INS (then merged from memory).
+  const StepSource steps(mission, ins_options, "the breadcrumb pipeline", &summary);
   if (mission.info().radio) {
     options.radio = radio::LogDistanceModel::From(*mission.info().radio);
   } else {
@@ -118,7 +123,7 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   };
 
   MergedStream stream(mission, {.events = true, .steps = true, .ranges = true, .bearings = false,
-                                .rssi = true});
+                                .rssi = true, .steps_override = steps.steps()});
   MissionRow row;
   std::size_t rows = 0;
   std::vector<float> latency_us;

@@ -16,7 +16,8 @@ class BreadcrumbPipeline : public Pipeline {
     return "breadcrumb paper: incremental generalized-electrical-network estimator over PDR "
            "steps, RSSI/ranges between agents and dropped crumbs (IV)";
   }
-  std::vector<std::string> required_files() const override { return {"steps.csv"}; }
+  std::vector<std::string> required_files() const override { return {"steps.csv or imu.csv"}; }
+  bool CanRun(const MissionDirectory& mission) const override;
   std::vector<std::string> optional_files() const override {
     return {"rssi.csv", "ranges.csv", "events.csv"};
   }

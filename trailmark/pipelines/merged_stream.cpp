@@ -43,6 +43,22 @@ struct Source : SourceBase {
   RowReader<Row> reader;
 };
 
+struct VectorSource : SourceBase {
+  explicit VectorSource(const std::vector<Step>* v) : rows(v) {}
+  bool Advance() override {
+    if (next < rows->size()) {
+      head = MissionRow((*rows)[next++]);
+      return true;
+    }
+    head.reset();
+    return false;
+  }
+  double bytes_read() const override { return static_cast<double>(next); }
+  double file_size() const override { return static_cast<double>(rows->size()); }
+  const std::vector<Step>* rows;
+  std::size_t next = 0;
+};
+
 }  // namespace
 
 struct MergedStream::Impl {
@@ -60,7 +76,13 @@ MergedStream::MergedStream(const MissionDirectory& m, MergedStreamOptions o)
     }
   };
   add(MissionEvent{}, o.events);
-  add(Step{}, o.steps);
+  if (o.steps && o.steps_override) {
+    auto s = std::make_unique<VectorSource>(o.steps_override);
+    s->Advance();
+    impl_->sources.push_back(std::move(s));
+  } else {
+    add(Step{}, o.steps);
+  }
   add(RangeMeasurement{}, o.ranges);
   add(BearingMeasurement{}, o.bearings);
   add(RssiPacket{}, o.rssi);

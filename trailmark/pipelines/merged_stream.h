@@ -6,6 +6,7 @@
 #include <memory>
 #include <optional>
 #include <variant>
+#include <vector>
 
 #include "trailmark/io/mission_io.h"
 
@@ -15,6 +16,8 @@ using MissionRow = std::variant<MissionEvent, Step, RangeMeasurement, BearingMea
 
 struct MergedStreamOptions {
   bool events = true, steps = true, ranges = true, bearings = true, rssi = true;
+  /// Steps from memory (ordered by t1) instead of steps.csv, e.g. from the INS.
+  const std::vector<Step>* steps_override = nullptr;
 };
 
 class MergedStream {

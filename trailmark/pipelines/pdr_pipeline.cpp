@@ -5,6 +5,8 @@
 #include <map>
 
 #include "trailmark/core/error.h"
+#include "trailmark/pipelines/pipeline_options.h"
+#include "trailmark/pipelines/step_source.h"
 
 namespace trailmark {
 
@@ -25,26 +27,28 @@ void DeadReckoning::AddStep(const Step& step) {
   }
 }
 
+bool PdrPipeline::CanRun(const MissionDirectory& mission) const { return HasSteps(mission); }
+
 PipelineSummary PdrPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
   const MissionDirectory& mission = context.mission;
-  mission.Require("steps.csv", "the pdr pipeline");
+  PipelineSummary summary;
+  const auto [ins_options, rest] = SplitInsOptions(context.options);
+  PipelineOptions(rest, "pdr").RejectUnknown();
+  StepSource reader(mission, ins_options, "the pdr pipeline", &summary);
   std::map<std::string, DeadReckoning> agents;
   std::map<std::string, std::size_t> step_counts;
-  auto reader = mission.OpenStream<Step>();
   Step step;
-  const double size = std::max<double>(1.0, static_cast<double>(reader.csv().file_size()));
   std::size_t rows = 0;
   while (reader.Next(step)) {
     auto it = agents.find(step.agent);
     if (it == agents.end()) {
       const NodeInfo* node = mission.info().Find(step.agent);
       if (node == nullptr || node->kind != NodeKind::kAgent) {
-        reader.csv().Fail(fmt::format("'{}' has steps but is not an agent in mission.json",
-                                      step.agent));
+        reader.Fail(fmt::format("'{}' has steps but is not an agent in mission.json", step.agent));
       }
       const auto start = mission.info().AgentStart(*node);
       if (!start) {
-        reader.csv().Fail(fmt::format(
+        reader.Fail(fmt::format(
             "agent '{}' has no 'start' in mission.json and the mission has no single base: "
             "pdr needs a known start",
             step.agent));
@@ -58,10 +62,9 @@ PipelineSummary PdrPipeline::Run(const PipelineContext& context, EstimateSink& s
     ++step_counts[step.agent];
     const Mat2& c = it->second.covariance();
     sink.Add({step.t1, step.agent, it->second.position_n(), c(0, 0), c(0, 1), c(1, 1)});
-    if ((++rows & 0x3fff) == 0) context.progress(reader.csv().bytes_read() / size);
+    if ((++rows & 0x3fff) == 0) context.progress(reader.Progress());
   }
   context.progress(1.0);
-  PipelineSummary summary;
   summary.numbers["steps"] = static_cast<double>(rows);
   summary.numbers["agents"] = static_cast<double>(agents.size());
   for (const auto& [id, n] : step_counts) summary.notes.push_back(fmt::format("{}: {} steps", id, n));

@@ -33,7 +33,8 @@ class PdrPipeline : public Pipeline {
   std::string description() const override {
     return "dead reckoning of PDR steps from each agent's start (baseline)";
   }
-  std::vector<std::string> required_files() const override { return {"steps.csv"}; }
+  std::vector<std::string> required_files() const override { return {"steps.csv or imu.csv"}; }
+  bool CanRun(const MissionDirectory& mission) const override;
   PipelineSummary Run(const PipelineContext& context, EstimateSink& sink) const override;
 };
 

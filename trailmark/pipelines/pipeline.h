@@ -47,6 +47,13 @@ class Pipeline {
   virtual std::vector<std::string> required_files() const = 0;
   /// Files it uses when present.
   virtual std::vector<std::string> optional_files() const { return {}; }
+  /// Whether the mission has what the pipeline needs (default: every required file).
+  virtual bool CanRun(const MissionDirectory& mission) const {
+    for (const auto& f : required_files()) {
+      if (!mission.Has(f)) return false;
+    }
+    return true;
+  }
   /// Throws InputError on bad or missing input.
   virtual PipelineSummary Run(const PipelineContext& context, EstimateSink& sink) const = 0;
 };

@@ -33,9 +33,7 @@ const Pipeline* FindPipeline(const std::string& name) {
 std::vector<std::string> RunnablePipelines(const MissionDirectory& mission) {
   std::vector<std::string> names;
   for (const auto& p : AllPipelines()) {
-    bool ok = true;
-    for (const auto& f : p->required_files()) ok = ok && mission.Has(f);
-    if (ok) names.push_back(p->name());
+    if (p->CanRun(mission)) names.push_back(p->name());
   }
   return names;
 }
