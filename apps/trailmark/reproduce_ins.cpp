@@ -14,7 +14,9 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/eval/trajectory_metrics.h"
 #include "trailmark/ins/zupt_ins.h"
+#include "trailmark/core/error.h"
 #include "trailmark/io/convert_pyshoe.h"
+#include "trailmark/io/csv.h"
 #include "trailmark/pipelines/ins_pipeline.h"
 
 namespace trailmark::cli {
@@ -60,6 +62,60 @@ TrialRun RunTrial(const PyShoeTrial& trial, const ins::InsOptions& options, bool
   return r;
 }
 
+std::vector<ImuSample> ReadOpenShoe(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) throw InputError(file.string(), 0, "cannot open");
+  std::vector<ImuSample> out;
+  std::string line;
+  std::size_t n = 0;
+  while (std::getline(in, line)) {
+    ++n;
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+    if (line.empty()) continue;
+    std::vector<double> v;
+    std::size_t start = 0;
+    while (start <= line.size()) {
+      const auto comma = line.find(',', start);
+      const auto cell = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+      const auto x = ParseFiniteDouble(cell);
+      if (!x) throw InputError(file.string(), n, "'" + cell + "' is not a finite number");
+      v.push_back(*x);
+      if (comma == std::string::npos) break;
+      start = comma + 1;
+    }
+    if (v.size() != 6) throw InputError(file.string(), n, "expected 6 columns");
+    out.push_back({static_cast<double>(out.size()) / 820.0, "foot", Vec3(v[0], v[1], v[2]),
+                   Vec3(v[3], v[4], v[5])});
+  }
+  return out;
+}
+
+std::vector<ImuSample> ReadImuColumns(const fs::path& file, const char* t, const char* ax,
+                                      const char* ay, const char* az, const char* gx,
+                                      const char* gy, const char* gz, double index_rate_hz) {
+  CsvReader r(file.string());
+  const int ct = r.RequireColumn(t), c[6] = {r.RequireColumn(ax), r.RequireColumn(ay),
+                                            r.RequireColumn(az), r.RequireColumn(gx),
+                                            r.RequireColumn(gy), r.RequireColumn(gz)};
+  std::vector<ImuSample> out;
+  while (r.Next()) {
+    const double time = index_rate_hz > 0 ? r.Double(ct) / index_rate_hz : r.Double(ct);
+    out.push_back({time, "foot", Vec3(r.Double(c[0]), r.Double(c[1]), r.Double(c[2])),
+                   Vec3(r.Double(c[3]), r.Double(c[4]), r.Double(c[5]))});
+  }
+  return out;
+}
+
+std::vector<ins::InsState> RunIns(const std::vector<ImuSample>& imu, const ins::InsOptions& o) {
+  ins::ZuptIns ins(o);
+  std::vector<ins::InsState> states;
+  states.reserve(imu.size());
+  ins.on_state = [&](const ins::InsState& s) { states.push_back(s); };
+  for (const auto& s : imu) ins.Add(s);
+  ins.Finish();
+  return states;
+}
+
 }  // namespace
 
 int ReproduceIns(const fs::path& data_dir, const fs::path& out,
@@ -80,9 +136,10 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
              "2-D ARMSE after aligning the heading at 0.8 m\n\n", trials.size());
   fmt::print("{:<10} {:>10} {:>10} {:>10} {:>10} {:>12} {:>14}\n", "detector", "mean m",
              "median m", "max m", "precision", "recall", "samples/s");
-  std::string table = "| detector | mean ARMSE | median ARMSE | stance precision / recall vs zv_best |\n|---|---|---|---|\n";
   std::vector<std::string> detectors{"shoe", "are", "mv", "mag", "adaptive"};
   if (options.count("detector")) detectors = {options.at("detector")};
+  std::string table = "| detector | mean ARMSE | median ARMSE | stance precision / recall vs zv_best |\n|---|---|---|---|\n";
+
   for (const std::string& name : detectors) {
     auto with = options;
     with["detector"] = name;
@@ -115,6 +172,137 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
   table += "| PyShoe ARED (0.55) | 0.324 m | 0.160 m | |\n";
   table += "| PyShoe, per-trial tuned optimum (trials.csv) | ~0.06 m | | |\n";
   fmt::print("\n{}", table);
+
+  // OpenShoe figure-8 (820 Hz closed walk): horizontal loop-closure error.
+  const fs::path figure8 = data_dir / "openshoe-figure8" / "imu_820hz.txt";
+  std::string t8 = "\nOpenShoe figure-8 (820 Hz, ~81 m closed walk), horizontal loop closure:\n\n"
+                   "| detector | closure error | % of path |\n|---|---|---|\n";
+  if (fs::exists(figure8)) {
+    const auto imu = ReadOpenShoe(figure8);
+    for (const std::string& name : detectors) {
+      auto with = options;
+      with["detector"] = name;
+      with.erase("oracle");
+      const auto states = RunIns(imu, InsOptionsFrom(with));
+      double path = 0;
+      for (std::size_t k = 1; k < states.size(); ++k) {
+        path += (states[k].position_n - states[k - 1].position_n).head<2>().norm();
+      }
+      const double err = (states.back().position_n - states.front().position_n).head<2>().norm();
+      t8 += fmt::format("| {} | {:.3f} m | {:.2f} % of the {:.1f} m walked |\n", name, err,
+                        100 * err / path, path);
+    }
+    t8 += "| OpenShoe C filter (GLRT W 3, gamma 5000 with its sigmas) | 0.454 m | 0.56 % of ~81 m |\n";
+    t8 += "| OpenShoe smoother | 0.374 m | |\n";
+  } else {
+    t8 += "(openshoe-figure8 not present)\n";
+  }
+  fmt::print("{}", t8);
+  table += t8;
+
+  // LLIO footprint walks: error at every measured footprint after a 2-D rigid fit on the first
+  // 2 m of walked path (the peers' protocol in the data README), as % of the footprint path.
+  std::string tl = "\nLLIO footprint walks (200 Hz, 12 walks, error at every footprint after a "
+                   "rigid fit on the first 2 m):\n\n| detector | mean error | mean % of path | "
+                   "median walk % |\n|---|---|---|---|\n";
+  const fs::path llio = data_dir / "llio-gcp-walks";
+  if (fs::exists(llio)) {
+    std::vector<std::string> walks;
+    for (const auto& e : fs::directory_iterator(llio)) {
+      const auto n = e.path().filename().string();
+      if (n.size() > 8 && n.substr(n.size() - 8) == "_imu.csv") walks.push_back(n.substr(0, n.size() - 8));
+    }
+    std::sort(walks.begin(), walks.end());
+    for (const std::string& name : detectors) {
+      auto with = options;
+      with["detector"] = name;
+      with.erase("oracle");
+      const ins::InsOptions o = InsOptionsFrom(with);
+      std::vector<double> errors_m, percents;
+      for (const auto& w : walks) {
+        const auto imu = ReadImuColumns(llio / (w + "_imu.csv"), "t_s", "ax_mps2", "ay_mps2",
+                                        "az_mps2", "gx_radps", "gy_radps", "gz_radps", 0);
+        const auto states = RunIns(imu, o);
+        CsvReader g((llio / (w + "_gcp.csv")).string());
+        const int ci = g.RequireColumn("imu_index0"), cx = g.RequireColumn("x_m"),
+                  cy = g.RequireColumn("y_m");
+        std::vector<Vec2> est, gt;
+        while (g.Next()) {
+          const auto k = static_cast<std::size_t>(g.Double(ci));
+          if (k >= states.size()) g.Fail("imu_index0 beyond the IMU samples");
+          est.push_back(states[k].position_n.head<2>());
+          gt.emplace_back(g.Double(cx), g.Double(cy));
+        }
+        double path = 0;
+        std::size_t fit_n = 1;
+        for (std::size_t k = 1; k < gt.size(); ++k) {
+          path += (gt[k] - gt[k - 1]).norm();
+          if (path <= 2.0 || fit_n < 2) fit_n = k + 1;
+        }
+        const Rigid2D T = FitRigid2D(std::vector<Vec2>(est.begin(), est.begin() + fit_n),
+                                     std::vector<Vec2>(gt.begin(), gt.begin() + fit_n));
+        double sum = 0;
+        for (std::size_t k = 0; k < gt.size(); ++k) sum += (T.Apply(est[k]) - gt[k]).norm();
+        errors_m.push_back(sum / gt.size());
+        percents.push_back(100 * errors_m.back() / path);
+      }
+      double me = 0, mp = 0;
+      for (std::size_t k = 0; k < errors_m.size(); ++k) {
+        me += errors_m[k];
+        mp += percents[k];
+      }
+      tl += fmt::format("| {} | {:.2f} m | {:.2f} % | {:.2f} % |\n", name, me / errors_m.size(),
+                        mp / percents.size(), Percentile(percents, 50));
+    }
+    tl += "| PyShoe ARED 0.55 (data README) | 2.86 m | 3.56 % | 2.63 % |\n";
+    tl += "| PyShoe SHOE 8.5e7 (data README) | 2.95 m | 3.69 % | |\n";
+  } else {
+    tl += "(llio-gcp-walks not present)\n";
+  }
+  fmt::print("{}", tl);
+  table += tl;
+
+  // Dual-foot 60 Hz walk: per-foot ARMSE with the heading aligned at 0.8 m (PyShoe's metric).
+  std::string td = "\nDual-foot walk (60 Hz, ~2 min, per-foot truth), 2-D ARMSE aligned at 0.8 m:\n\n"
+                   "| detector | left foot | right foot |\n|---|---|---|\n";
+  const fs::path dual = data_dir / "zupt-dualfoot-60hz";
+  if (fs::exists(dual)) {
+    std::vector<Vec3> gt_left, gt_right;
+    {
+      CsvReader g((dual / "positionGt.csv").string());
+      const int lx = g.RequireColumn("pos_left_x"), ly = g.RequireColumn("pos_left_y"),
+                lz = g.RequireColumn("pos_left_z"), rx = g.RequireColumn("pos_right_x"),
+                ry = g.RequireColumn("pos_right_y"), rz = g.RequireColumn("pos_right_z");
+      while (g.Next()) {
+        gt_left.emplace_back(g.Double(lx), g.Double(ly), g.Double(lz));
+        gt_right.emplace_back(g.Double(rx), g.Double(ry), g.Double(rz));
+      }
+    }
+    for (const std::string& name : detectors) {
+      auto with = options;
+      with["detector"] = name;
+      with.erase("oracle");
+      const ins::InsOptions o = InsOptionsFrom(with);
+      double err[2] = {0, 0};
+      int side = 0;
+      for (const char* file : {"imuMeasLeft.csv", "imuMeasRight.csv"}) {
+        const auto imu = ReadImuColumns(dual / file, "time_index", "acc_x", "acc_y", "acc_z",
+                                        "gyro_x", "gyro_y", "gyro_z", 60.0);
+        const auto states = RunIns(imu, o);
+        std::vector<Vec3> est;
+        for (const auto& st : states) est.push_back(st.position_n);
+        const auto& gt = side == 0 ? gt_left : gt_right;
+        const std::size_t n = std::min(est.size(), gt.size());
+        err[side++] = HeadingAlignedArmse(std::vector<Vec3>(est.begin(), est.begin() + n),
+                                          std::vector<Vec3>(gt.begin(), gt.begin() + n), 0.8);
+      }
+      td += fmt::format("| {} | {:.3f} m | {:.3f} m |\n", name, err[0], err[1]);
+    }
+  } else {
+    td += "(zupt-dualfoot-60hz not present)\n";
+  }
+  fmt::print("{}", td);
+  table += td;
   fs::create_directories(out);
   std::ofstream(out / "results.md") << "# trailmark reproduce ins\n\n" << table;
   fmt::print("\nwritten: {}\n", (out / "results.md").string());

@@ -30,6 +30,34 @@ double HeadingAlignedArmse(const std::vector<Vec3>& estimate, const std::vector<
   return sum / static_cast<double>(truth.size()) / std::sqrt(2.0);
 }
 
+Vec2 Rigid2D::Apply(const Vec2& p) const {
+  const double c = std::cos(rotation_rad), s = std::sin(rotation_rad);
+  return Vec2(c * p.x() - s * p.y(), s * p.x() + c * p.y()) + translation;
+}
+
+Rigid2D FitRigid2D(const std::vector<Vec2>& from, const std::vector<Vec2>& to) {
+  if (from.size() != to.size() || from.size() < 2) {
+    throw std::invalid_argument("FitRigid2D: needs two or more point pairs");
+  }
+  Vec2 cf = Vec2::Zero(), ct = Vec2::Zero();
+  for (std::size_t k = 0; k < from.size(); ++k) {
+    cf += from[k];
+    ct += to[k];
+  }
+  cf /= static_cast<double>(from.size());
+  ct /= static_cast<double>(to.size());
+  double sxx = 0, sxy = 0;  // sum of dot and cross products of the centred pairs
+  for (std::size_t k = 0; k < from.size(); ++k) {
+    const Vec2 a = from[k] - cf, b = to[k] - ct;
+    sxx += a.dot(b);
+    sxy += a.x() * b.y() - a.y() * b.x();
+  }
+  Rigid2D r;
+  r.rotation_rad = std::atan2(sxy, sxx);
+  r.translation = ct - Rigid2D{r.rotation_rad, Vec2::Zero()}.Apply(cf);
+  return r;
+}
+
 PrecisionRecall ComparePrecisionRecall(const std::vector<bool>& detected,
                                        const std::vector<bool>& reference) {
   if (detected.size() != reference.size()) {

@@ -16,6 +16,15 @@ namespace trailmark {
 double HeadingAlignedArmse(const std::vector<Vec3>& estimate, const std::vector<Vec3>& truth,
                            double align_distance_m = 0.8);
 
+/// 2-D rigid transform (rotation, translation; Kabsch/Umeyama without scale) that maps
+/// `from` onto `to` in the least-squares sense; needs >= 2 distinct points.
+struct Rigid2D {
+  double rotation_rad = 0;
+  Vec2 translation = Vec2::Zero();
+  Vec2 Apply(const Vec2& p) const;
+};
+Rigid2D FitRigid2D(const std::vector<Vec2>& from, const std::vector<Vec2>& to);
+
 /// Precision and recall of a binary labelling (e.g. stance) against a reference.
 struct PrecisionRecall {
   double precision = 0, recall = 0;

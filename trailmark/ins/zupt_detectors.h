@@ -31,6 +31,9 @@ std::string ToString(DetectorKind kind);
 struct DetectorOptions {
   DetectorKind kind = DetectorKind::kAdaptive;
   int window = 5;                ///< W samples (PyShoe: 5 at 200 Hz; OpenShoe: 3 at 820 Hz)
+  /// > 0: the window in seconds instead (W = max(3, round(window_s * rate)), set by the INS from
+  /// the sample rate seen during alignment): one configuration across 60-820 Hz IMUs.
+  double window_s = 0.05;
   /// Noise levels that normalize the statistics (Skog 2010). Defaults: PyShoe's values for a
   /// MicroStrain 3DM-GX3/GX5 (0.00098 m/s^2, 0.005 deg/s), so that gamma values compare with the
   /// literature's (PyShoe: SHOE 8.5e7 at W = 5).
@@ -43,7 +46,7 @@ struct DetectorOptions {
   // adaptive
   double adaptive_reference = 1e10;   ///< E_ref: swing SHOE energy of normal walking
   double adaptive_power = 1.0;        ///< chosen on PyShoe VICON (docs/ins.md)
-  double adaptive_min_scale = 0.3, adaptive_max_scale = 30.0;
+  double adaptive_min_scale = 1e-3, adaptive_max_scale = 1e3;
   double adaptive_tau_s = 4.0;        ///< time constant of the swing-energy tracker
 };
 

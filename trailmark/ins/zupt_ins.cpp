@@ -95,6 +95,14 @@ void ZuptIns::Align() {
         "mean gyro over the alignment is {:.2f} rad/s: not at rest, or deg/s instead of rad/s",
         w.norm()));
   }
+  if (options_.detector.window_s > 0 && alignment_.size() >= 2) {
+    const double dt = (alignment_.back().t - alignment_.front().t) / (alignment_.size() - 1);
+    if (dt > 0) {
+      options_.detector.window =
+          std::max(3, static_cast<int>(std::lround(options_.detector.window_s / dt)));
+      detector_ = ZuptDetector(options_.detector);
+    }
+  }
   // Roll and pitch from gravity: at rest f_b = R_nb^T (0, 0, g).
   const double roll = std::atan2(f.y(), f.z());
   const double pitch = std::atan2(-f.x(), std::sqrt(f.y() * f.y() + f.z() * f.z()));
@@ -192,7 +200,16 @@ void ZuptIns::UpdateZupt() { Update3<3>(-v_, options_.zupt_sigma_mps); }
 
 void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
   if (!options_.estimate_biases) return;
-  Update3<12>(gyro_b - bg_, options_.zaru_sigma_radps);  // at rest the gyro reads its bias
+  // At rest the gyro reads its bias. Gated (chi-square, 3 dof): a "stance" that still rotates
+  // (the detector accepted a slow roll-over) must not be read as bias.
+  const Vec3 y = gyro_b - bg_;
+  const Eigen::Matrix3d S = P_.block<3, 3>(12, 12) +
+                            Eigen::Matrix3d::Identity() * options_.zaru_sigma_radps * options_.zaru_sigma_radps;
+  if (y.dot(S.ldlt().solve(y)) > options_.zaru_gate_chi2) {
+    ++summary_.zaru_gated;
+    return;
+  }
+  Update3<12>(y, options_.zaru_sigma_radps);
 }
 
 void ZuptIns::Process(const ImuSample& s, bool stance) {

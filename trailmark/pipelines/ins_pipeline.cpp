@@ -15,19 +15,25 @@ ins::InsOptions InsOptionsFrom(const std::map<std::string, std::string>& values,
   PipelineOptions o(values, "ins");
   ins::InsOptions x;
   x.detector.kind = ins::ParseDetectorKind(o.String("detector", ins::ToString(x.detector.kind)));
+  if (values.count("window")) x.detector.window_s = 0;  // an explicit sample count wins
   x.detector.window = static_cast<int>(o.Double("window", x.detector.window));
+  x.detector.window_s = o.Double("window_s", x.detector.window_s);
   if (values.count("gamma")) x.detector.gamma = o.Double("gamma", 0);
   else o.Double("gamma", 0);
   x.detector.sigma_a_mps2 = o.Double("detector_sigma_a", x.detector.sigma_a_mps2);
   x.detector.sigma_g_radps = o.Double("detector_sigma_g", x.detector.sigma_g_radps);
   x.detector.adaptive_reference = o.Double("adaptive_reference", x.detector.adaptive_reference);
   x.detector.adaptive_power = o.Double("adaptive_power", x.detector.adaptive_power);
+  x.detector.adaptive_min_scale = o.Double("adaptive_min_scale", x.detector.adaptive_min_scale);
+  x.detector.adaptive_max_scale = o.Double("adaptive_max_scale", x.detector.adaptive_max_scale);
+  x.detector.adaptive_tau_s = o.Double("adaptive_tau_s", x.detector.adaptive_tau_s);
   x.accel_noise_mps2 = o.Double("accel_noise", x.accel_noise_mps2);
   x.gyro_noise_radps = o.Double("gyro_noise", x.gyro_noise_radps);
   x.estimate_biases = o.Bool("biases", x.estimate_biases);
   x.zaru = o.Bool("zaru", x.zaru);
   x.zaru_sigma_radps = o.Double("zaru_sigma", x.zaru_sigma_radps);
   x.zupt_sigma_mps = o.Double("zupt_sigma", x.zupt_sigma_mps);
+  x.zaru_gate_chi2 = o.Double("zaru_gate", x.zaru_gate_chi2);
   x.alignment_s = o.Double("alignment_s", x.alignment_s);
   x.gravity_mps2 = o.Double("gravity", x.gravity_mps2);
   const double hz = o.Double("output_hz", 0.0);
