@@ -11,21 +11,43 @@
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/report/html_report.h"
+#include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark::cli {
 
 namespace fs = std::filesystem;
 
-void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
-  const SimulatedMission sim = SimulateScenario(scenario, seed);
+void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& out,
+              const SimulateImu& imu) {
+  SimulatedMission sim = SimulateScenario(scenario, seed);
+  if (imu.rate_hz > 0) {
+    ImuSimOptions o;
+    o.rate_hz = imu.rate_hz;
+    o.grade = ImuGrade::ByName(imu.grade);
+    if (imu.motion == "walk") o.motion = FootMotion::kWalk;
+    else if (imu.motion == "crawl") o.motion = FootMotion::kCrawl;
+    else if (imu.motion == "stairs") o.motion = FootMotion::kStairs;
+    else throw std::invalid_argument("unknown --imu-motion '" + imu.motion + "' (walk, crawl, stairs)");
+    Random rng(seed ^ 0x1e1e1e1eULL);
+    for (const auto& [id, walk] : sim.walks) {
+      const SimulatedImu s = SimulateFootImu(walk, id, o, rng.Fork());
+      sim.data.imu.insert(sim.data.imu.end(), s.samples.begin(), s.samples.end());
+    }
+    std::stable_sort(sim.data.imu.begin(), sim.data.imu.end(),
+                     [](const ImuSample& a, const ImuSample& b) { return a.t < b.t; });
+    sim.data.info.description += " Foot IMU at " + fmt::format("{:g}", imu.rate_hz) + " Hz, " +
+                                 o.grade.name + " grade, " + imu.motion + ".";
+    if (imu.drop_steps) sim.data.steps.clear();
+  }
   WriteMissionDirectory(out, sim.data, &sim.plan);
   const auto& d = sim.data;
   std::size_t crumbs = 0;
   for (const auto& e : d.events) crumbs += e.event == "drop";
-  fmt::print("simulated '{}' (seed {}) into {}: {} steps, {} RSSI packets, {} crumbs dropped, "
-             "{} truth rows, {:.0f} s\n",
-             scenario, seed, out.string(), d.steps.size(), d.rssi.size(), crumbs, d.truth.size(),
+  fmt::print("simulated '{}' (seed {}) into {}: {} steps, {} IMU samples, {} RSSI packets, {} "
+             "crumbs dropped, {} truth rows, {:.0f} s\n",
+             scenario, seed, out.string(), d.steps.size(), d.imu.size(), d.rssi.size(), crumbs,
+             d.truth.size(),
              d.truth.empty() ? 0.0 : d.truth.back().t - d.truth.front().t);
 }
 

@@ -13,7 +13,15 @@
 
 namespace trailmark::cli {
 
-void Simulate(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
+/// Foot-IMU options of `trailmark simulate` (rate 0: no imu.csv).
+struct SimulateImu {
+  double rate_hz = 0;
+  std::string grade = "industrial";
+  std::string motion = "walk";
+  bool drop_steps = false;  ///< write imu.csv only (no steps.csv): pipelines then run the INS
+};
+void Simulate(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out,
+              const SimulateImu& imu = {});
 RunResult Run(const std::string& pipeline, const std::filesystem::path& mission,
               const std::filesystem::path& out, const std::map<std::string, std::string>& options);
 /// Evaluates, prints the per-node table, writes metrics.json next to the estimates (or `out`).

@@ -14,7 +14,9 @@
 
 #include "commands.h"
 #include "trailmark/core/error.h"
+#include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
+#include "trailmark/io/mission_io.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace fs = std::filesystem;
@@ -45,6 +47,12 @@ int main(int argc, char** argv) {
       ->required();
   simulate->add_option("--seed", seed, "random seed; the same seed gives the same mission");
   simulate->add_option("--out", out, "mission directory to write")->required();
+  cli::SimulateImu sim_imu;
+  simulate->add_option("--imu-rate", sim_imu.rate_hz, "also write imu.csv: foot IMU at this rate (Hz)")
+      ->check(CLI::Range(0.0, 2000.0));
+  simulate->add_option("--imu-grade", sim_imu.grade, "perfect, tactical, industrial (default), consumer");
+  simulate->add_option("--imu-motion", sim_imu.motion, "walk (default), crawl, stairs");
+  simulate->add_flag("--imu-only", sim_imu.drop_steps, "no steps.csv: pipelines run the INS on imu.csv");
 
   app.add_subcommand("scenarios", "list the simulator's scenarios");
 
@@ -120,15 +128,19 @@ int main(int argc, char** argv) {
 
   std::string convert_format, convert_src, convert_out;
   auto* convert = app.add_subcommand(
-      "convert", "convert a recorded data file into a mission directory (formats: pyshoe-vicon)");
-  convert->add_option("format", convert_format, "pyshoe-vicon")->required();
-  convert->add_option("source", convert_src, "source file")->required()->check(CLI::ExistingFile);
+      "convert", "convert recorded data into a mission directory (formats: pyshoe-vicon, "
+                 "openshoe-figure8, llio-gcp-walk, zupt-dualfoot)");
+  convert->add_option("format", convert_format,
+                      "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
+                      "(WALK_imu.csv) | zupt-dualfoot (the folder)")
+      ->required();
+  convert->add_option("source", convert_src, "source file or folder")->required()->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
 
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
-      cli::Simulate(scenario, seed, out);
+      cli::Simulate(scenario, seed, out, sim_imu);
     } else if (app.got_subcommand("scenarios")) {
       for (const auto& s : Scenarios()) fmt::print("{:<18} {}\n", s.name, s.description);
     } else if (*run) {
@@ -161,12 +173,21 @@ int main(int argc, char** argv) {
       if (!bench_what.empty()) throw std::invalid_argument("unknown benchmark '" + bench_what + "'");
       return cli::Bench(bench_rows, bench_json);
     } else if (*convert) {
-      if (convert_format != "pyshoe-vicon") {
-        throw std::invalid_argument("unknown format '" + convert_format + "' (known: pyshoe-vicon)");
+      std::size_t samples = 0;
+      if (convert_format == "pyshoe-vicon") {
+        const PyShoeTrial trial = ReadPyShoeTrial(convert_src);
+        WritePyShoeMission(trial, convert_out);
+        samples = trial.imu.size();
+      } else {
+        MissionData m;
+        if (convert_format == "openshoe-figure8") m = ReadOpenShoeFigure8(convert_src);
+        else if (convert_format == "llio-gcp-walk") m = ReadLlioWalk(convert_src);
+        else if (convert_format == "zupt-dualfoot") m = ReadDualFoot(convert_src);
+        else throw std::invalid_argument("unknown format '" + convert_format + "'");
+        WriteMissionDirectory(convert_out, m, nullptr);
+        samples = m.imu.size();
       }
-      const PyShoeTrial trial = ReadPyShoeTrial(convert_src);
-      WritePyShoeMission(trial, convert_out);
-      fmt::print("converted {} ({} IMU samples) into {}\n", convert_src, trial.imu.size(), convert_out);
+      fmt::print("converted {} ({} IMU samples) into {}\n", convert_src, samples, convert_out);
     } else if (*reproduce) {
       return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
                             ParseKeyValues(reproduce_options), reproduce_data);

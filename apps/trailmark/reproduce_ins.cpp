@@ -15,9 +15,12 @@
 #include "trailmark/eval/trajectory_metrics.h"
 #include "trailmark/ins/zupt_ins.h"
 #include "trailmark/core/error.h"
+#include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/csv.h"
 #include "trailmark/pipelines/ins_pipeline.h"
+#include "trailmark/sim/imu_sim.h"
+#include "trailmark/sim/scenarios.h"
 
 namespace trailmark::cli {
 
@@ -60,50 +63,6 @@ TrialRun RunTrial(const PyShoeTrial& trial, const ins::InsOptions& options, bool
   r.armse = HeadingAlignedArmse(est, trial.truth_n, 0.8);
   r.stance = ComparePrecisionRecall(stance, trial.stance_label);
   return r;
-}
-
-std::vector<ImuSample> ReadOpenShoe(const fs::path& file) {
-  std::ifstream in(file);
-  if (!in) throw InputError(file.string(), 0, "cannot open");
-  std::vector<ImuSample> out;
-  std::string line;
-  std::size_t n = 0;
-  while (std::getline(in, line)) {
-    ++n;
-    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
-    if (line.empty()) continue;
-    std::vector<double> v;
-    std::size_t start = 0;
-    while (start <= line.size()) {
-      const auto comma = line.find(',', start);
-      const auto cell = line.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-      const auto x = ParseFiniteDouble(cell);
-      if (!x) throw InputError(file.string(), n, "'" + cell + "' is not a finite number");
-      v.push_back(*x);
-      if (comma == std::string::npos) break;
-      start = comma + 1;
-    }
-    if (v.size() != 6) throw InputError(file.string(), n, "expected 6 columns");
-    out.push_back({static_cast<double>(out.size()) / 820.0, "foot", Vec3(v[0], v[1], v[2]),
-                   Vec3(v[3], v[4], v[5])});
-  }
-  return out;
-}
-
-std::vector<ImuSample> ReadImuColumns(const fs::path& file, const char* t, const char* ax,
-                                      const char* ay, const char* az, const char* gx,
-                                      const char* gy, const char* gz, double index_rate_hz) {
-  CsvReader r(file.string());
-  const int ct = r.RequireColumn(t), c[6] = {r.RequireColumn(ax), r.RequireColumn(ay),
-                                            r.RequireColumn(az), r.RequireColumn(gx),
-                                            r.RequireColumn(gy), r.RequireColumn(gz)};
-  std::vector<ImuSample> out;
-  while (r.Next()) {
-    const double time = index_rate_hz > 0 ? r.Double(ct) / index_rate_hz : r.Double(ct);
-    out.push_back({time, "foot", Vec3(r.Double(c[0]), r.Double(c[1]), r.Double(c[2])),
-                   Vec3(r.Double(c[3]), r.Double(c[4]), r.Double(c[5]))});
-  }
-  return out;
 }
 
 std::vector<ins::InsState> RunIns(const std::vector<ImuSample>& imu, const ins::InsOptions& o) {
@@ -178,7 +137,7 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
   std::string t8 = "\nOpenShoe figure-8 (820 Hz, ~81 m closed walk), horizontal loop closure:\n\n"
                    "| detector | closure error | % of path |\n|---|---|---|\n";
   if (fs::exists(figure8)) {
-    const auto imu = ReadOpenShoe(figure8);
+    const auto imu = ReadOpenShoeFigure8(figure8).imu;
     for (const std::string& name : detectors) {
       auto with = options;
       with["detector"] = name;
@@ -220,8 +179,7 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
       const ins::InsOptions o = InsOptionsFrom(with);
       std::vector<double> errors_m, percents;
       for (const auto& w : walks) {
-        const auto imu = ReadImuColumns(llio / (w + "_imu.csv"), "t_s", "ax_mps2", "ay_mps2",
-                                        "az_mps2", "gx_radps", "gy_radps", "gz_radps", 0);
+        const auto imu = ReadLlioWalk(llio / (w + "_imu.csv")).imu;
         const auto states = RunIns(imu, o);
         CsvReader g((llio / (w + "_gcp.csv")).string());
         const int ci = g.RequireColumn("imu_index0"), cx = g.RequireColumn("x_m"),
@@ -267,17 +225,11 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
                    "| detector | left foot | right foot |\n|---|---|---|\n";
   const fs::path dual = data_dir / "zupt-dualfoot-60hz";
   if (fs::exists(dual)) {
-    std::vector<Vec3> gt_left, gt_right;
-    {
-      CsvReader g((dual / "positionGt.csv").string());
-      const int lx = g.RequireColumn("pos_left_x"), ly = g.RequireColumn("pos_left_y"),
-                lz = g.RequireColumn("pos_left_z"), rx = g.RequireColumn("pos_right_x"),
-                ry = g.RequireColumn("pos_right_y"), rz = g.RequireColumn("pos_right_z");
-      while (g.Next()) {
-        gt_left.emplace_back(g.Double(lx), g.Double(ly), g.Double(lz));
-        gt_right.emplace_back(g.Double(rx), g.Double(ry), g.Double(rz));
-      }
-    }
+    const MissionData dual_mission = ReadDualFoot(dual);
+    std::map<std::string, std::vector<ImuSample>> dual_imu;
+    std::map<std::string, std::vector<Vec3>> dual_gt;
+    for (const auto& s : dual_mission.imu) dual_imu[s.agent].push_back(s);
+    for (const auto& t : dual_mission.truth) dual_gt[t.id].push_back(t.position_n);
     for (const std::string& name : detectors) {
       auto with = options;
       with["detector"] = name;
@@ -285,13 +237,11 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
       const ins::InsOptions o = InsOptionsFrom(with);
       double err[2] = {0, 0};
       int side = 0;
-      for (const char* file : {"imuMeasLeft.csv", "imuMeasRight.csv"}) {
-        const auto imu = ReadImuColumns(dual / file, "time_index", "acc_x", "acc_y", "acc_z",
-                                        "gyro_x", "gyro_y", "gyro_z", 60.0);
-        const auto states = RunIns(imu, o);
+      for (const char* foot : {"left", "right"}) {
+        const auto states = RunIns(dual_imu[foot], o);
         std::vector<Vec3> est;
         for (const auto& st : states) est.push_back(st.position_n);
-        const auto& gt = side == 0 ? gt_left : gt_right;
+        const auto& gt = dual_gt[foot];
         const std::size_t n = std::min(est.size(), gt.size());
         err[side++] = HeadingAlignedArmse(std::vector<Vec3>(est.begin(), est.begin() + n),
                                           std::vector<Vec3>(gt.begin(), gt.begin() + n), 0.8);
@@ -303,6 +253,33 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
   }
   fmt::print("{}", td);
   table += td;
+
+  // Simulated closed loops: the office loop (400 m) with a foot IMU of each grade at 200 Hz.
+  std::string ts = "\nSimulated closed loop (office-loop, 400 m, 200 Hz foot IMU, seeds 1-3), INS "
+                   "end-point error:\n\n| IMU grade | end error (mean of 3) | % of distance |\n|---|---|---|\n";
+  for (const char* grade : {"perfect", "tactical", "industrial", "consumer"}) {
+    double err = 0, dist = 0;
+    for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+      const SimulatedMission sim = SimulateScenario("office-loop", seed);
+      ImuSimOptions io;
+      io.grade = ImuGrade::ByName(grade);
+      const auto& [id, walk] = sim.walks.front();
+      const SimulatedImu imu = SimulateFootImu(walk, id, io, Random(seed + 100));
+      auto with = options;
+      with.erase("oracle");
+      ins::InsOptions o = InsOptionsFrom(with);
+      o.initial_yaw_rad = sim.data.info.Find(id)->start_heading_rad.value_or(0.0);
+      o.initial_position_n = imu.foot_truth.front().position_n;
+      const auto states = RunIns(imu.samples, o);
+      err += (states.back().position_n - imu.foot_truth.back().position_n).head<2>().norm();
+      for (std::size_t k = 1; k < imu.foot_truth.size(); ++k) {
+        dist += (imu.foot_truth[k].position_n - imu.foot_truth[k - 1].position_n).head<2>().norm();
+      }
+    }
+    ts += fmt::format("| {} | {:.3f} m | {:.3f} % |\n", grade, err / 3, 100 * err / dist);
+  }
+  fmt::print("{}", ts);
+  table += ts;
   fs::create_directories(out);
   std::ofstream(out / "results.md") << "# trailmark reproduce ins\n\n" << table;
   fmt::print("\nwritten: {}\n", (out / "results.md").string());

@@ -181,6 +181,26 @@ TEST(ZuptIns, ReportsWrongUnits) {
   EXPECT_THROW(ZuptIns().Add({0, "foot", Vec3(0, 0, NAN), Vec3::Zero()}), std::invalid_argument);
 }
 
+TEST(ZuptIns, ReportsSaturationAndGaps) {
+  ZuptIns ins;
+  for (int k = 0; k < 400; ++k) {
+    double t = 0.005 * k + (k >= 300 ? 0.5 : 0.0);  // a 0.5 s gap at sample 300
+    Vec3 a(0, 0, kG);
+    if (k >= 100 && k < 110) a.x() = 78.45;  // clipped at 8 g for 10 samples
+    ins.Add({t, "foot", a, Vec3::Zero()});
+  }
+  ins.Finish();
+  EXPECT_GE(ins.summary().saturated, 8u);
+  EXPECT_EQ(ins.summary().gaps, 1u);
+  bool saturation_warned = false, gap_warned = false;
+  for (const auto& w : ins.summary().warnings) {
+    saturation_warned = saturation_warned || w.find("saturates") != std::string::npos;
+    gap_warned = gap_warned || w.find("gap of 0.505 s") != std::string::npos;
+  }
+  EXPECT_TRUE(saturation_warned);
+  EXPECT_TRUE(gap_warned);
+}
+
 // Recorded: three PyShoe VICON trials with the default (adaptive) detector and one
 // configuration; PyShoe's fixed-threshold SHOE scores 0.303 m mean over all 42 trials.
 TEST(ZuptIns, RecordedPyShoeTrials) {

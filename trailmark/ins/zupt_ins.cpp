@@ -212,8 +212,28 @@ void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
   Update3<12>(y, options_.zaru_sigma_radps);
 }
 
+void ZuptIns::CheckSaturation(const ImuSample& s) {
+  // A clipped axis repeats its full-scale value: >= 3 identical readings beyond 4 g or
+  // 5 rad/s (every MEMS range is larger than a walking foot's normal signal below these).
+  Eigen::Matrix<double, 6, 1> raw;
+  raw << s.accel_b, s.gyro_b;
+  bool clipped = false;
+  for (int i = 0; i < 6; ++i) {
+    const double limit = i < 3 ? 4 * 9.80665 : 5.0;
+    repeat_(i) = (raw(i) == last_raw_(i) && std::abs(raw(i)) > limit) ? repeat_(i) + 1 : 0;
+    clipped = clipped || repeat_(i) >= 2;
+  }
+  last_raw_ = raw;
+  if (clipped && ++summary_.saturated == 1) {
+    summary_.warnings.push_back(fmt::format(
+        "t={}: an IMU axis is stuck at {:.2f}: the sensor saturates (clipped motion is lost; "
+        "use a larger range)", s.t, raw.cwiseAbs().maxCoeff()));
+  }
+}
+
 void ZuptIns::Process(const ImuSample& s, bool stance) {
   ++summary_.samples;
+  CheckSaturation(s);
   if (have_last_) {
     const double dt = s.t - t_last_;
     if (dt <= 0) {

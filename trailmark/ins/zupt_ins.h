@@ -73,6 +73,7 @@ struct InsState {
 struct InsSummary {
   std::size_t samples = 0, stance_samples = 0, steps = 0;
   std::size_t gaps = 0, zero_dt = 0, zaru_gated = 0;
+  std::size_t saturated = 0;  ///< samples with an axis stuck at its extreme (clipped)
   double distance_m = 0;
   Vec3 gyro_bias = Vec3::Zero(), accel_bias = Vec3::Zero();
   std::vector<std::string> warnings;
@@ -129,6 +130,10 @@ class ZuptIns {
   Vec3 last_stance_end_p_ = Vec3::Zero();
   Eigen::Matrix3d last_stance_end_cov_ = Eigen::Matrix3d::Zero();
   InsState last_state_;
+  // saturation: an axis repeating the same large value (a clipped sensor)
+  Eigen::Matrix<double, 6, 1> last_raw_ = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<int, 6, 1> repeat_ = Eigen::Matrix<int, 6, 1>::Zero();
+  void CheckSaturation(const ImuSample& s);
   InsSummary summary_;
 };
 

@@ -115,6 +115,7 @@ PipelineSummary InsPipeline::Run(const PipelineContext& context, EstimateSink& s
         s.samples ? static_cast<double>(s.stance_samples) / s.samples : 0.0;
     summary.numbers[id + ".distance_m"] = s.distance_m;
     summary.numbers[id + ".gaps"] = static_cast<double>(s.gaps);
+    summary.numbers[id + ".saturated_samples"] = static_cast<double>(s.saturated);
     summary.numbers[id + ".gyro_bias_z_deg_per_h"] = s.gyro_bias.z() * 180 / 3.14159265358979 * 3600;
     for (const auto& w : s.warnings) summary.notes.push_back(id + ": " + w);
   }

@@ -78,6 +78,7 @@ SimulatedMission SimulateAgents(FloorPlan plan, const Vec2& base_n,
     }
   }
 
+  for (const auto& r : runs) sim.walks.emplace_back(r.plan->id, r.walk);
   RssiChannel channel(o.radio, &sim.plan, o.zones, radio_rng);
   std::vector<Deployed> chain{{"base", base_n, t_begin, false}};
   m.truth.push_back({t_begin, "base", Vec3(base_n.x(), base_n.y(), 0.0)});

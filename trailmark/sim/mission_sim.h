@@ -19,6 +19,8 @@ namespace trailmark {
 struct SimulatedMission {
   MissionData data;
   FloorPlan plan;
+  /// The true walk of every agent (for sensor simulations made afterwards, e.g. a foot IMU).
+  std::vector<std::pair<std::string, Walk>> walks;
 };
 
 /// Breadcrumb dispenser (breadcrumb paper sec. III; Liu et al. MobiSys'10): drop a crumb when

@@ -1,0 +1,78 @@
+#pragma once
+/// Foot-mounted IMU simulation: the instrumented foot's true motion from a walk (stance while the
+/// other foot swings, then a swing to the next footprint two steps ahead), turned into specific
+/// force and angular rate in the sensor frame, with the errors of a stated MEMS grade. No I/O.
+///
+/// Swing (duration of one step): minimum-jerk progress along the stride (Flash & Hogan 1985),
+/// a foot lift of lift_m, and a heel-off/toe-strike pitch excursion; the heading turns to the new
+/// stride direction during the swing. Stops: the foot rests. Motion types: walking, crawling
+/// (short, low strides and long stances) and stairs (each stride also climbs 2 risers).
+///
+/// Sensor model per axis (IEEE Std 952 terms): white noise from the noise density
+/// (sigma = density * sqrt(rate)), bias = turn-on bias (constant per run) + bias instability
+/// (first-order Gauss-Markov, correlation time tau), scale-factor error, and axis misalignment
+/// (a fixed small rotation). Gyro rates come from the exact rotation between samples, so that a
+/// noise-free run matches the INS's exponential-map mechanization.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+#include "trailmark/core/random.h"
+#include "trailmark/sim/walker.h"
+
+namespace trailmark {
+
+struct ImuGrade {
+  std::string name;
+  double accel_noise_density = 0;    ///< m/s^2/sqrt(Hz)
+  double gyro_noise_density = 0;     ///< rad/s/sqrt(Hz)
+  double accel_turn_on_bias = 0;     ///< m/s^2, 1 sigma per axis
+  double gyro_turn_on_bias = 0;      ///< rad/s, 1 sigma per axis
+  double accel_bias_instability = 0; ///< m/s^2 (Gauss-Markov steady-state sigma)
+  double gyro_bias_instability = 0;  ///< rad/s
+  double bias_correlation_s = 100.0;
+  double accel_scale_sigma = 0;      ///< relative
+  double gyro_scale_sigma = 0;
+  double misalignment_sigma_rad = 0;
+
+  /// No errors at all.
+  static ImuGrade Perfect();
+  /// Tactical-grade MEMS (ADIS16495-class datasheet: gyro 0.8 deg/h in-run, ARW 0.12 deg/sqrt(h);
+  /// accelerometer 3.2 ug in-run, VRW 0.012 m/s/sqrt(h)).
+  static ImuGrade Tactical();
+  /// Industrial MEMS of foot-mounted research units (MicroStrain 3DM-GX5-25 class).
+  static ImuGrade Industrial();
+  /// Consumer MEMS (MPU-9250 class: gyro 0.01 deg/s/sqrt(Hz), +-5 deg/s turn-on; accelerometer
+  /// 300 ug/sqrt(Hz), +-60 mg turn-on).
+  static ImuGrade Consumer();
+  /// "perfect", "tactical", "industrial", "consumer"; throws std::invalid_argument otherwise.
+  static ImuGrade ByName(const std::string& name);
+};
+
+enum class FootMotion { kWalk, kCrawl, kStairs };
+
+struct ImuSimOptions {
+  double rate_hz = 200.0;
+  ImuGrade grade = ImuGrade::Industrial();
+  FootMotion motion = FootMotion::kWalk;
+  double lift_m = 0.12;               ///< swing foot clearance (walking); crawling 0.03
+  double pitch_amplitude_rad = 0.5;   ///< heel-off / toe-strike excursion (~30 deg)
+  double riser_m = 0.17;              ///< stairs: height of one step
+  double gravity_mps2 = 9.8029;
+  double rest_before_s = 1.0;         ///< at rest before the first step (INS alignment)
+};
+
+struct SimulatedImu {
+  std::vector<ImuSample> samples;
+  std::vector<TruthSample> foot_truth;  ///< the foot's true position at every sample
+  std::vector<bool> stance;             ///< true stance label of every sample
+};
+
+/// The walk's steps alternate feet; the instrumented foot (agent `agent`) lands on every
+/// second footprint. Deterministic given `rng`.
+SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent,
+                             const ImuSimOptions& options, Random rng);
+
+}  // namespace trailmark
