@@ -57,6 +57,14 @@ awk 'BEGIN { print "t,agent,ax,ay,az,gx,gy,gz"; for (k = 0; k < 200; k++) printf
 run_failing "$TM" run --pipeline ins "$dir/imu" --out "$dir/x"
 [ $rc -eq 2 ] && grep -q "imu.csv.*in g, not m/s^2" "$dir/err" || { cat "$dir/err"; fail "g units"; }
 
+# A simulated foot IMU, no steps.csv: the steps-based pipelines run the INS.
+"$TM" simulate office-loop-1lap --seed 3 --imu-rate 100 --imu-grade tactical --imu-only \
+  --out "$dir/si" | grep -q "0 steps, [0-9]* IMU samples" || fail "simulate --imu-rate"
+"$TM" run --pipeline breadcrumb "$dir/si" --out "$dir/sir" > /dev/null || fail "breadcrumb from simulated IMU"
+"$TM" eval "$dir/si" "$dir/sir/estimates.csv" | grep -q "^ff1 " || fail "eval breadcrumb from IMU"
+run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigation --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "unknown IMU grade 'navigation'" "$dir/err" || fail "bad IMU grade"
+
 # Bad input: clear message naming file and line, exit code 2.
 run_failing "$TM" run --pipeline nope "$dir/m" --out "$dir/x"
 [ $rc -ne 0 ] && grep -q "unknown pipeline 'nope'" "$dir/err" || fail "unknown pipeline"
