@@ -36,7 +36,7 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     }
     std::stable_sort(sim.data.imu.begin(), sim.data.imu.end(),
                      [](const ImuSample& a, const ImuSample& b) { return a.t < b.t; });
-    sim.data.info.description += " Foot IMU at " + fmt::format("{:g}", imu.rate_hz) + " Hz, " +
+    sim.data.info.description += ". Foot IMU at " + fmt::format("{:g}", imu.rate_hz) + " Hz, " +
                                  o.grade.name + " grade, " + imu.motion + ".";
     if (imu.drop_steps) sim.data.steps.clear();
   }
@@ -212,13 +212,21 @@ void Validate(const fs::path& mission_dir) {
 
 int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
   const fs::path mission_dir = out / "mission";
-  Simulate(scenario, seed, mission_dir);
+  // The default mission carries both PDR steps and a simulated foot IMU (industrial grade,
+  // 100 Hz), so that every pipeline runs: the steps-based ones on steps.csv, ins on imu.csv.
+  SimulateImu imu;
+  imu.rate_hz = 100;
+  imu.grade = "industrial";
+  Simulate(scenario, seed, mission_dir, imu);
   const MissionDirectory mission(mission_dir);
   std::vector<std::pair<RunResult, Metrics>> rows;
   std::vector<fs::path> run_dirs;
   for (const auto& name : RunnablePipelines(mission)) {
     const fs::path run_dir = out / "runs" / name;
-    RunResult r = Run(name, mission_dir, run_dir, {});
+    // The INS estimate is reported at 10 Hz (the truth's rate) to keep the report small.
+    std::map<std::string, std::string> options;
+    if (name == "ins") options["output_hz"] = "10";
+    RunResult r = Run(name, mission_dir, run_dir, options);
     Metrics m = Eval(mission_dir, run_dir / "estimates.csv", run_dir / "metrics.json", false);
     rows.emplace_back(std::move(r), std::move(m));
     run_dirs.push_back(run_dir);
