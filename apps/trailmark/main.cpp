@@ -3,7 +3,8 @@
 //   trailmark run --pipeline NAME MISSION --out DIR
 //   trailmark eval MISSION ESTIMATES.csv
 //   trailmark report RUN_DIR... --out report.html
-//   trailmark reproduce breadcrumb [--seeds N]
+//   trailmark reproduce breadcrumb|ins [--seeds N]
+//   trailmark energy [--battery-mah Q --sleep-ua I ...]
 //   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
 #include <fmt/format.h>
@@ -17,6 +18,7 @@
 #include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/landmarks/energy.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace fs = std::filesystem;
@@ -137,6 +139,23 @@ int main(int argc, char** argv) {
   convert->add_option("source", convert_src, "source file or folder")->required()->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
 
+  landmarks::EnergyModel energy_model;
+  std::vector<double> energy_after_years{0, 1, 2, 5};
+  std::vector<double> energy_periods{0.5, 1, 3, 10, 60};
+  auto* energy = app.add_subcommand(
+      "energy", "landmark battery lifetime (radio-landmarks paper, eqs. 1-2, Fig. 5)");
+  energy->add_option("--battery-mah", energy_model.battery_mAh, "battery capacity (mAh)")
+      ->check(CLI::PositiveNumber);
+  energy->add_option("--sleep-ua", energy_model.sleep_current_uA, "sleep current (uA)")
+      ->check(CLI::PositiveNumber);
+  energy->add_option("--send-ma", energy_model.send_current_mA, "current while sending (mA)")
+      ->check(CLI::NonNegativeNumber);
+  energy->add_option("--send-ms", energy_model.send_time_ms, "time of one send (ms)")
+      ->check(CLI::NonNegativeNumber);
+  energy->add_option("--after-years", energy_after_years, "years asleep before the emergency")
+      ->check(CLI::NonNegativeNumber);
+  energy->add_option("--periods", energy_periods, "wake-up periods (s)")->check(CLI::PositiveNumber);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
@@ -188,6 +207,25 @@ int main(int argc, char** argv) {
         samples = m.imu.size();
       }
       fmt::print("converted {} ({} IMU samples) into {}\n", convert_src, samples, convert_out);
+    } else if (*energy) {
+      const auto& e = energy_model;
+      fmt::print("landmark: {} mAh, sleep {} uA, send {} mA for {} ms\n", e.battery_mAh,
+                 e.sleep_current_uA, e.send_current_mA, e.send_time_ms);
+      fmt::print("sleep-only lifetime: {:.2f} years (eq. 1 with Q_left = 0)\n\n",
+                 e.SleepLifetimeS() / landmarks::kSecondsPerYear);
+      fmt::print("operating time when woken every T_wakeup, after sleeping (eq. 2):\n");
+      fmt::print("{:>12}", "T_wakeup s");
+      for (double y : energy_after_years) fmt::print(" {:>14}", fmt::format("after {:g} y", y));
+      fmt::print("\n");
+      for (double p : energy_periods) {
+        fmt::print("{:>12g}", p);
+        for (double y : energy_after_years) {
+          const double t = e.MaxOperatingTimeS(y * landmarks::kSecondsPerYear, p);
+          fmt::print(" {:>14}", t >= 86400 * 2 ? fmt::format("{:.1f} d", t / 86400)
+                                              : fmt::format("{:.1f} h", t / 3600));
+        }
+        fmt::print("\n");
+      }
     } else if (*reproduce) {
       return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
                             ParseKeyValues(reproduce_options), reproduce_data);

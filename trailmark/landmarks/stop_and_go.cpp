@@ -1,0 +1,286 @@
+#include "trailmark/landmarks/stop_and_go.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace trailmark::landmarks {
+
+namespace {
+
+double Rho(double r, Loss loss, double k) {
+  const double a = std::abs(r);
+  switch (loss) {
+    case Loss::kSquared: return 0.5 * r * r;
+    case Loss::kHuber: return a <= k ? 0.5 * r * r : k * (a - 0.5 * k);
+    case Loss::kCauchy: return 0.5 * k * k * std::log1p((r / k) * (r / k));
+  }
+  return 0.5 * r * r;
+}
+
+/// IRLS weight w(r) = rho'(r) / r.
+double Weight(double r, Loss loss, double k) {
+  const double a = std::abs(r);
+  switch (loss) {
+    case Loss::kSquared: return 1.0;
+    case Loss::kHuber: return a <= k ? 1.0 : k / a;
+    case Loss::kCauchy: return 1.0 / (1.0 + (r / k) * (r / k));
+  }
+  return 1.0;
+}
+
+/// Second singular value of the centred points (0 for collinear sets), and the first.
+std::pair<double, double> Spread(const std::vector<Vec2>& pts) {
+  if (pts.size() < 2) return {0.0, 0.0};
+  Vec2 c = Vec2::Zero();
+  for (const auto& p : pts) c += p;
+  c /= static_cast<double>(pts.size());
+  Eigen::Matrix2d C = Eigen::Matrix2d::Zero();
+  for (const auto& p : pts) C += (p - c) * (p - c).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(C / static_cast<double>(pts.size()));
+  return {std::sqrt(std::max(0.0, eig.eigenvalues()(0))), std::sqrt(std::max(0.0, eig.eigenvalues()(1)))};
+}
+
+struct Problem {
+  const StopAndGoProblem& p;
+  const StopAndGoOptions& o;
+  std::vector<int> col_s, col_h;  // first column of each unknown, -1 when known
+  int n = 0;
+
+  Vec2 S(const Eigen::VectorXd& u, int j) const {
+    return col_s[j] >= 0 ? Vec2(u.segment<2>(col_s[j])) : p.landmarks[j];
+  }
+  Vec2 H(const Eigen::VectorXd& u, int q) const {
+    return col_h[q] >= 0 ? Vec2(u.segment<2>(col_h[q])) : p.standing[q];
+  }
+  double Cost(const Eigen::VectorXd& u, double* rms = nullptr) const {
+    double c = 0, ss = 0;
+    int m = 0;
+    for (std::size_t q = 0; q < p.range_m.size(); ++q) {
+      for (std::size_t j = 0; j < p.range_m[q].size(); ++j) {
+        if (!p.range_m[q][j]) continue;
+        const double f = (H(u, q) - S(u, j)).norm() - *p.range_m[q][j];  // eq. (6)
+        c += Rho(f / p.sigma_m[q][j], o.loss, o.robust_k);
+        ss += f * f;
+        ++m;
+      }
+    }
+    if (rms) *rms = m ? std::sqrt(ss / m) : 0.0;
+    return c;
+  }
+  /// Gradient Q^T W b (eq. 10) and normal matrix Q^T W Q, with IRLS weights.
+  void Linearize(const Eigen::VectorXd& u, Eigen::VectorXd* g, Eigen::MatrixXd* N) const {
+    g->setZero(n);
+    N->setZero(n, n);
+    for (std::size_t q = 0; q < p.range_m.size(); ++q) {
+      for (std::size_t j = 0; j < p.range_m[q].size(); ++j) {
+        if (!p.range_m[q][j]) continue;
+        const Vec2 d = H(u, q) - S(u, j);
+        const double dist = std::max(d.norm(), 1e-6);
+        const Vec2 e = d / dist;  // eq. (14); eq. (13) is its negative
+        const double f = dist - *p.range_m[q][j];
+        const double s = p.sigma_m[q][j];
+        const double w = Weight(f / s, o.loss, o.robust_k) / (s * s);
+        const int cs = col_s[j], ch = col_h[q];
+        if (cs >= 0) g->segment<2>(cs) += w * f * (-e);
+        if (ch >= 0) g->segment<2>(ch) += w * f * e;
+        if (cs >= 0) N->block<2, 2>(cs, cs) += w * e * e.transpose();
+        if (ch >= 0) N->block<2, 2>(ch, ch) += w * e * e.transpose();
+        if (cs >= 0 && ch >= 0) {
+          N->block<2, 2>(cs, ch) -= w * e * e.transpose();
+          N->block<2, 2>(ch, cs) -= w * e * e.transpose();
+        }
+      }
+    }
+  }
+};
+
+/// Grid search of one position against fixed anchors with ranges (robust cost).
+Vec2 GridInit(const std::vector<Vec2>& anchors, const std::vector<double>& ranges,
+              const std::vector<double>& sigmas, const StopAndGoOptions& o) {
+  Vec2 lo = anchors.front(), hi = lo;
+  double reach = 0;
+  for (std::size_t k = 0; k < anchors.size(); ++k) {
+    lo = lo.cwiseMin(anchors[k]);
+    hi = hi.cwiseMax(anchors[k]);
+    reach = std::max(reach, ranges[k]);
+  }
+  lo.array() -= reach + o.init_margin_m;
+  hi.array() += reach + o.init_margin_m;
+  const double step = std::max(o.init_grid_m, (hi - lo).maxCoeff() / 400.0);
+  Vec2 best = 0.5 * (lo + hi);
+  double best_cost = std::numeric_limits<double>::infinity();
+  for (double x = lo.x(); x <= hi.x(); x += step) {
+    for (double y = lo.y(); y <= hi.y(); y += step) {
+      double c = 0;
+      for (std::size_t k = 0; k < anchors.size(); ++k) {
+        c += Rho(((Vec2(x, y) - anchors[k]).norm() - ranges[k]) / sigmas[k], o.loss, o.robust_k);
+      }
+      if (c < best_cost) best_cost = c, best = Vec2(x, y);
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+bool SolvableStopAndGo(int landmarks, int standing_positions) {
+  if (landmarks <= 2) return false;
+  return standing_positions * (landmarks - 2) >= 2 * landmarks;  // eq. (8) without division
+}
+
+StopAndGoResult SolveStopAndGo(StopAndGoProblem problem, const StopAndGoOptions& o) {
+  StopAndGoResult result;
+  const int B = static_cast<int>(problem.landmarks.size());
+  const int q = static_cast<int>(problem.standing.size());
+  problem.landmark_known.resize(B, false);
+  problem.standing_known.resize(q, false);
+  problem.range_m.resize(q);
+  problem.sigma_m.resize(q);
+  for (int p = 0; p < q; ++p) {
+    problem.range_m[p].resize(B);
+    problem.sigma_m[p].resize(B, 1.0);
+  }
+  int unknown_s = 0, unknown_h = 0, measurements = 0;
+  for (int j = 0; j < B; ++j) unknown_s += !problem.landmark_known[j];
+  for (int p = 0; p < q; ++p) unknown_h += !problem.standing_known[p];
+  for (int p = 0; p < q; ++p) {
+    for (int j = 0; j < B; ++j) measurements += problem.range_m[p][j].has_value();
+  }
+  const bool gauge = unknown_s == B && unknown_h == q;  // nothing known: rigid-motion freedom
+  const int params = 2 * (unknown_s + unknown_h) - (gauge ? 3 : 0);
+  if (gauge && !SolvableStopAndGo(B, q)) {
+    result.solvable = false;
+    result.notes.push_back(fmt::format(
+        "eq. (8) not met: {} standing positions for {} landmarks, need q >= 2B/(B-2) = {:.2f}", q, B,
+        B > 2 ? 2.0 * B / (B - 2) : std::numeric_limits<double>::infinity()));
+  }
+  if (measurements < params) {
+    result.solvable = false;
+    result.notes.push_back(fmt::format("{} ranges for {} unknowns", measurements, params));
+  }
+  if (gauge) result.notes.push_back("no known position: the solution is defined up to a rigid motion");
+
+  // Degenerate geometry: landmarks seen only from collinear standing positions (and vice versa)
+  // have a mirror solution.
+  const auto [minor_h, major_h] = Spread(problem.standing);
+  const auto [minor_s, major_s] = Spread(problem.landmarks);
+  if (unknown_s > 0 && minor_h < std::max(0.2, 0.05 * major_h)) {
+    result.degenerate = true;
+    result.notes.push_back(fmt::format(
+        "standing positions nearly collinear (spread {:.2f} m across): each landmark has a mirror "
+        "solution across their line",
+        minor_h));
+  }
+  if (unknown_h > 0 && unknown_s == 0 && minor_s < std::max(0.2, 0.05 * major_s)) {
+    result.degenerate = true;
+    result.notes.push_back("known landmarks nearly collinear: handheld positions have a mirror");
+  }
+
+  // Initialization: unknown landmarks by grid search against the standing positions, then
+  // unknown standing positions against the landmarks.
+  for (int j = 0; j < B; ++j) {
+    if (problem.landmark_known[j]) continue;
+    std::vector<Vec2> anchors;
+    std::vector<double> r, s;
+    for (int p = 0; p < q; ++p) {
+      if (problem.range_m[p][j]) {
+        anchors.push_back(problem.standing[p]);
+        r.push_back(*problem.range_m[p][j]);
+        s.push_back(problem.sigma_m[p][j]);
+      }
+    }
+    if (anchors.size() < 3) {
+      result.solvable = false;
+      result.notes.push_back(fmt::format("landmark {} heard from {} standing positions (< 3)", j,
+                                         anchors.size()));
+    }
+    if (!anchors.empty()) problem.landmarks[j] = GridInit(anchors, r, s, o);
+  }
+  for (int p = 0; p < q; ++p) {
+    if (problem.standing_known[p]) continue;
+    std::vector<Vec2> anchors;
+    std::vector<double> r, s;
+    for (int j = 0; j < B; ++j) {
+      if (problem.range_m[p][j]) {
+        anchors.push_back(problem.landmarks[j]);
+        r.push_back(*problem.range_m[p][j]);
+        s.push_back(problem.sigma_m[p][j]);
+      }
+    }
+    if (anchors.size() < 3) {
+      result.solvable = false;
+      result.notes.push_back(fmt::format("standing position {} hears {} landmarks (< 3)", p, anchors.size()));
+    }
+    if (!anchors.empty()) problem.standing[p] = GridInit(anchors, r, s, o);
+  }
+
+  Problem pr{problem, o, std::vector<int>(B, -1), std::vector<int>(q, -1), 0};
+  for (int j = 0; j < B; ++j) {
+    if (!problem.landmark_known[j]) pr.col_s[j] = pr.n, pr.n += 2;
+  }
+  for (int p = 0; p < q; ++p) {
+    if (!problem.standing_known[p]) pr.col_h[p] = pr.n, pr.n += 2;
+  }
+  Eigen::VectorXd u(pr.n);
+  for (int j = 0; j < B; ++j) {
+    if (pr.col_s[j] >= 0) u.segment<2>(pr.col_s[j]) = problem.landmarks[j];
+  }
+  for (int p = 0; p < q; ++p) {
+    if (pr.col_h[p] >= 0) u.segment<2>(pr.col_h[p]) = problem.standing[p];
+  }
+  if (pr.n > 0) {
+    Eigen::VectorXd g;
+    Eigen::MatrixXd N;
+    // Gradient descent with an adaptive step (eq. 16) until the cost is steady.
+    double cost = pr.Cost(u), lambda = o.gd_initial_step;
+    while (result.gd_iterations < o.max_gd_iterations) {
+      ++result.gd_iterations;
+      pr.Linearize(u, &g, &N);
+      Eigen::VectorXd trial = u - lambda * g;
+      double c = pr.Cost(trial);
+      int halvings = 0;
+      while (c > cost && halvings++ < 30) {
+        lambda *= 0.5;
+        trial = u - lambda * g;
+        c = pr.Cost(trial);
+      }
+      if (c > cost) break;
+      const double change = (cost - c) / std::max(cost, 1e-12);
+      u = trial;
+      cost = c;
+      lambda *= 1.2;
+      if (change < o.steady_relative_change) break;
+    }
+    // Gauss-Newton with an SVD pseudo-inverse (eq. 17), step halving as a safeguard.
+    while (result.gn_iterations < o.max_gn_iterations) {
+      ++result.gn_iterations;
+      pr.Linearize(u, &g, &N);
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(N, Eigen::ComputeThinU | Eigen::ComputeThinV);
+      svd.setThreshold(o.svd_relative_threshold);
+      Eigen::VectorXd step = -svd.solve(g);
+      double c = pr.Cost(u + step);
+      int halvings = 0;
+      while (c > cost && halvings++ < 20) {
+        step *= 0.5;
+        c = pr.Cost(u + step);
+      }
+      if (c > cost) break;
+      u += step;
+      cost = c;
+      if (step.norm() < o.gn_tolerance_m) break;
+    }
+    result.cost = cost;
+  }
+  result.landmarks = problem.landmarks;
+  result.standing = problem.standing;
+  for (int j = 0; j < B; ++j) result.landmarks[j] = pr.S(u, j);
+  for (int p = 0; p < q; ++p) result.standing[p] = pr.H(u, p);
+  pr.Cost(u, &result.rms_residual_m);
+  return result;
+}
+
+}  // namespace trailmark::landmarks
