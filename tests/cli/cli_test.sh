@@ -10,7 +10,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
 "$TM" --help | grep -q simulate || fail "--help"
-for c in simulate run eval report pipelines demo bench scenarios validate reproduce; do
+for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
@@ -64,6 +64,12 @@ run_failing "$TM" run --pipeline ins "$dir/imu" --out "$dir/x"
 "$TM" eval "$dir/si" "$dir/sir/estimates.csv" | grep -q "^ff1 " || fail "eval breadcrumb from IMU"
 run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigation --out "$dir/x"
 [ $rc -eq 1 ] && grep -q "unknown IMU grade 'navigation'" "$dir/err" || fail "bad IMU grade"
+
+"$TM" energy | grep -q "sleep-only lifetime: 8.62 years" || fail "energy"
+"$TM" reproduce landmarks --out "$dir/rep" | grep -q "| landmark localization, median error | 0.78 m" \
+  || fail "reproduce landmarks"
+run_failing "$TM" energy --sleep-ua 0
+[ $rc -ne 0 ] || fail "energy with zero sleep current"
 
 # Bad input: clear message naming file and line, exit code 2.
 run_failing "$TM" run --pipeline nope "$dir/m" --out "$dir/x"
