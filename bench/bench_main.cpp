@@ -8,6 +8,7 @@
 #include "trailmark/io/mission_io.h"
 #include "trailmark/breadcrumb/localizer.h"
 #include "trailmark/ins/zupt_ins.h"
+#include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/synthetic_incident.h"
@@ -169,6 +170,30 @@ void BM_ZuptIns(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(imu.size()));
 }
 BENCHMARK(BM_ZuptIns)->Unit(benchmark::kMillisecond);
+
+// The landmark UKF at 50 Hz (prediction + acceleration update) with 5 RSSI updates every 3 s:
+// one item = one 50 Hz sample.
+void BM_LandmarkUkf(benchmark::State& state) {
+  const radio::LogDistanceModel radio{-30, 7.1, 3};
+  const std::vector<Vec2> lm = {{0, 1}, {5, -1}, {10, 1}, {15, -1}, {20, 1}};
+  Random rng(2);
+  std::size_t items = 0;
+  for (auto _ : state) {
+    landmarks::LandmarkUkf ukf(Vec2::Zero(), radio);
+    for (int k = 0; k < 9000; ++k) {  // 3 minutes
+      ukf.Predict(0.02);
+      ukf.UpdateAcceleration(Vec2(rng.Normal(0, 0.5), rng.Normal(0, 0.5)));
+      if (k % 150 == 0) {
+        for (const auto& l : lm) ukf.UpdateRssi(l, Mat2::Zero(), -30 - 71 * std::log10(1 + (l - ukf.position()).norm()));
+      }
+    }
+    benchmark::DoNotOptimize(ukf.position());
+    items += 9000;
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(items));
+  state.counters["x_real_time"] = benchmark::Counter(items * 0.02, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_LandmarkUkf)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

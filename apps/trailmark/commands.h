@@ -42,7 +42,8 @@ int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
 int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::path& out,
                  const std::map<std::string, std::string>& options = {});
 /// `trailmark reproduce landmarks`: the radio-landmarks paper's stop-and-go experiment.
-int ReproduceLandmarks(int seeds, const std::filesystem::path& out);
+int ReproduceLandmarks(int seeds, const std::filesystem::path& out,
+                       const std::filesystem::path& data_dir);
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
 /// side with the published figures; results.md under out/NAME.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,

@@ -143,7 +143,7 @@ int Reproduce(const std::string& name, int seeds, const fs::path& out,
               const std::map<std::string, std::string>& options, const fs::path& data_dir) {
   if (name == "breadcrumb") return ReproduceBreadcrumb(seeds, out / "breadcrumb", options);
   if (name == "ins") return ReproduceIns(data_dir, out / "ins", options);
-  if (name == "landmarks") return ReproduceLandmarks(std::max(seeds, 20), out / "landmarks");
+  if (name == "landmarks") return ReproduceLandmarks(std::max(seeds, 20), out / "landmarks", data_dir);
   throw std::invalid_argument("unknown reproduction '" + name + "' (known: breadcrumb, ins, landmarks)");
 }
 

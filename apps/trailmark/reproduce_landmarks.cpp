@@ -3,11 +3,14 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
+#include <optional>
 #include <fstream>
 
 #include "commands.h"
 #include "trailmark/eval/metrics.h"
+#include "trailmark/io/csv.h"
 #include "trailmark/ins/zupt_ins.h"
 #include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/landmarks/stop_and_go.h"
@@ -21,11 +24,138 @@ namespace trailmark::cli {
 namespace fs = std::filesystem;
 
 namespace {
+
+/// Distance from a point to a polyline given as segments.
+double DistanceToPath(const Vec2& p, const std::vector<std::pair<Vec2, Vec2>>& path) {
+  double best = 1e300;
+  for (const auto& [a, b] : path) {
+    const Vec2 ab = b - a;
+    const double t = std::clamp(ab.squaredNorm() > 0 ? (p - a).dot(ab) / ab.squaredNorm() : 0.0, 0.0, 1.0);
+    best = std::min(best, (a + t * ab - p).norm());
+  }
+  return best;
+}
+
+/// The recorded BLE flat (../shared/data/ble-rss-flat): path-loss fit on the calibration
+/// sessions, then single fixes (stop-and-go solver, anchors known) and UKF tracking on the
+/// separate test runs. Horizontal distances throughout (the anchors' height folds into alpha).
+std::string BleFlat(const fs::path& dir) {
+  if (!fs::exists(dir / "anchors.csv")) return "\n(ble-rss-flat not present)\n";
+  std::vector<Vec2> anchors;
+  {
+    CsvReader r((dir / "anchors.csv").string());
+    const int cx = r.RequireColumn("x"), cy = r.RequireColumn("y");
+    while (r.Next()) anchors.emplace_back(r.Double(cx), r.Double(cy));
+  }
+  struct Row {
+    double t;
+    std::optional<Vec2> xy;
+    std::vector<std::optional<double>> rssi;
+  };
+  auto read = [&](const char* file) {
+    std::vector<Row> rows;
+    CsvReaderOptions unnamed;
+    unnamed.allow_unnamed_columns = true;  // a pandas index column
+    CsvReader r((dir / file).string(), unnamed);
+    const int ct = r.RequireColumn("ts"), cx = r.Column("x"), cy = r.Column("y");
+    std::vector<int> cr;
+    for (std::size_t k = 0; k < anchors.size(); ++k) cr.push_back(r.RequireColumn("rssi_" + std::to_string(k + 1)));
+    while (r.Next()) {
+      Row row;
+      row.t = r.Double(ct) * 1e-9;
+      if (cx >= 0 && cy >= 0) row.xy = Vec2(r.Double(cx), r.Double(cy));
+      for (int c : cr) row.rssi.push_back(r.OptionalDouble(c));
+      rows.push_back(std::move(row));
+    }
+    return rows;
+  };
+  const auto calib = read("calibration_df.csv");
+  const auto robot = read("test_robot_df.csv");
+  const auto walk = read("test_walk_df.csv");
+  std::vector<std::pair<Vec2, Vec2>> path;
+  {
+    CsvReader r((dir / "path_reference.csv").string());
+    const int a = r.RequireColumn("x0"), b = r.RequireColumn("y0"), c = r.RequireColumn("x1"), d = r.RequireColumn("y1");
+    while (r.Next()) path.emplace_back(Vec2(r.Double(a), r.Double(b)), Vec2(r.Double(c), r.Double(d)));
+  }
+  std::vector<radio::CalibrationPair> pairs;
+  for (const auto& row : calib) {
+    for (std::size_t k = 0; k < anchors.size(); ++k) {
+      if (row.rssi[k]) pairs.push_back({std::max((*row.xy - anchors[k]).norm(), 0.1), *row.rssi[k]});
+    }
+  }
+  const radio::PathLossFit fit = radio::FitLogDistance(pairs, 0.05, 0.5);
+  auto fix = [&](const Row& row) -> std::optional<Vec2> {
+    landmarks::StopAndGoProblem p;
+    p.landmarks = anchors;
+    p.landmark_known.assign(anchors.size(), true);
+    p.standing = {Vec2(4.5, 3.5)};
+    p.standing_known = {false};
+    std::vector<std::optional<double>> r;
+    std::vector<double> s;
+    int heard = 0;
+    for (const auto& v : row.rssi) {
+      if (v) {
+        const auto range = radio::ToRange(fit.model, *v);
+        r.push_back(range.range_m);
+        s.push_back(std::max(range.sigma_m, 0.1));
+        ++heard;
+      } else {
+        r.push_back(std::nullopt);
+        s.push_back(1.0);
+      }
+    }
+    if (heard < 3) return std::nullopt;
+    p.range_m = {r};
+    p.sigma_m = {s};
+    landmarks::StopAndGoOptions o;
+    o.init_grid_m = 0.2;
+    o.init_margin_m = 1.0;
+    return landmarks::SolveStopAndGo(p, o).standing.front();
+  };
+  auto track = [&](const std::vector<Row>& rows, auto&& error_of) {
+    std::vector<double> fix_err, ukf_err;
+    std::optional<landmarks::LandmarkUkf> ukf;
+    double last_t = 0;
+    for (const auto& row : rows) {
+      const auto f = fix(row);
+      if (f) fix_err.push_back(error_of(*f, row));
+      if (!ukf) {
+        if (!f) continue;
+        landmarks::LandmarkUkfOptions uo;
+        uo.initial_sigma_m = 2.0;
+        uo.rssi_sigma_db = fit.residual_sigma_db;
+        uo.tau = 0.5;
+        ukf.emplace(*f, fit.model, uo);
+        last_t = row.t;
+      }
+      ukf->Predict(row.t - last_t);
+      last_t = row.t;
+      for (std::size_t k = 0; k < anchors.size(); ++k) {
+        if (row.rssi[k]) ukf->UpdateRssi(anchors[k], Mat2::Zero(), *row.rssi[k]);
+      }
+      ukf_err.push_back(error_of(ukf->position(), row));
+    }
+    return std::make_pair(Percentile(fix_err, 50), Percentile(ukf_err, 50));
+  };
+  const auto [robot_fix, robot_ukf] = track(robot, [](const Vec2& e, const Row& r) { return (e - *r.xy).norm(); });
+  const auto [walk_fix, walk_ukf] = track(walk, [&](const Vec2& e, const Row&) { return DistanceToPath(e, path); });
+  return fmt::format(
+      "\nRecorded BLE RSSI in a furnished flat (ble-rss-flat, 6 anchors, Kolakowski 2021): model "
+      "fitted on the calibration sessions, evaluated on the separate test runs\n\n"
+      "| figure | value |\n|---|---|\n"
+      "| path-loss fit on {} calibration pairs (trimmed 5 %) | n {:.2f}, alpha {:.1f} dBm, residual sigma {:.2f} dB |\n"
+      "| robot test path ({} samples), median error: single fix / UKF | {:.2f} m / {:.2f} m |\n"
+      "| walking test ({} samples), median distance to the walked path: single fix / UKF | {:.2f} m / {:.2f} m |\n",
+      fit.pairs_used, fit.model.path_loss_exponent, fit.model.alpha_dbm, fit.residual_sigma_db,
+      robot.size(), robot_fix, robot_ukf, walk.size(), walk_fix, walk_ukf);
+}
+
 /// Drift of the ZUPT INS as a random walk per metre walked (0.02-0.1 give 0.127-0.132 m here).
 constexpr double kDriftPerMetre = 0.05;
 }
 
-int ReproduceLandmarks(int seeds, const fs::path& out) {
+int ReproduceLandmarks(int seeds, const fs::path& out, const fs::path& data_dir) {
   const LandmarkCorridorOptions o;
   std::vector<double> landmark_err[2], handheld_err[2];  // [squared, huber]
   std::vector<radio::CalibrationPair> pairs;
@@ -167,6 +297,7 @@ int ReproduceLandmarks(int seeds, const fs::path& out) {
                    Percentile(err_imu, 50));
   t += fmt::format("| continuous tracking, fused, median | 0.276 m | {:.3f} m (the paper's UKF: Wiener model + acceleration, RSSI while moving); {:.3f} m (ours: the ZUPT INS as motion model, RSSI always) |\n",
                    Percentile(err_paper, 50), Percentile(err_ours, 50));
+  t += BleFlat(data_dir / "ble-rss-flat");
   fmt::print("{}", t);
   fs::create_directories(out);
   std::ofstream(out / "results.md") << "# trailmark reproduce landmarks\n\n" << t;

@@ -72,7 +72,9 @@ CsvReader::CsvReader(std::string path, Options options)
   SplitFields(line);
   for (std::size_t i = 0; i < fields_.size(); ++i) {
     const std::string name(Trim(fields_[i]));
-    if (name.empty()) Fail(fmt::format("header: column {} has an empty name", i + 1));
+    if (name.empty() && !options_.allow_unnamed_columns) {
+      Fail(fmt::format("header: column {} has an empty name", i + 1));
+    }
     for (const auto& prev : header_) {
       if (prev == name) Fail(fmt::format("header: column '{}' appears twice", name));
     }

@@ -15,6 +15,9 @@ namespace trailmark {
 struct CsvReaderOptions {
   std::size_t max_line_bytes = 1 << 20;  ///< longer lines are rejected (not a CSV file)
   std::size_t chunk_bytes = 1 << 20;     ///< read buffer size
+  /// Accept unnamed header cells (pandas index columns in third-party data); the mission
+  /// format itself requires every column to be named.
+  bool allow_unnamed_columns = false;
 };
 
 class CsvReader {
