@@ -66,6 +66,11 @@ run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigatio
 [ $rc -eq 1 ] && grep -q "unknown IMU grade 'navigation'" "$dir/err" || fail "bad IMU grade"
 
 "$TM" energy | grep -q "sleep-only lifetime: 8.62 years" || fail "energy"
+"$TM" simulate landmark-corridor --seed 1 --out "$dir/lc" > /dev/null || fail "simulate landmark-corridor"
+"$TM" run --pipeline landmarks-stopgo "$dir/lc" --out "$dir/lcr" > /dev/null || fail "landmarks-stopgo"
+"$TM" eval "$dir/lc" "$dir/lcr/estimates.csv" | grep -q "^lm3 " || fail "landmarks estimated"
+run_failing "$TM" run --pipeline landmarks-ukf "$dir/lc" --out "$dir/x" --option loss=l1
+[ $rc -eq 1 ] && grep -q "loss must be squared, huber or cauchy" "$dir/err" || fail "bad loss option"
 "$TM" reproduce landmarks --out "$dir/rep" | grep -q "| landmark localization, median error | 0.78 m" \
   || fail "reproduce landmarks"
 run_failing "$TM" energy --sleep-ua 0

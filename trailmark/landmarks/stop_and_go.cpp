@@ -275,6 +275,24 @@ StopAndGoResult SolveStopAndGo(StopAndGoProblem problem, const StopAndGoOptions&
     }
     result.cost = cost;
   }
+  result.landmark_cov.assign(B, Mat2::Zero());
+  result.standing_cov.assign(q, Mat2::Zero());
+  if (pr.n > 0) {
+    Eigen::VectorXd g;
+    Eigen::MatrixXd N;
+    pr.Linearize(u, &g, &N);
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(N, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    svd.setThreshold(o.svd_relative_threshold);
+    const Eigen::MatrixXd cov = svd.solve(Eigen::MatrixXd::Identity(pr.n, pr.n));
+    const double dof = std::max(1.0, static_cast<double>(measurements - params));
+    const double scale = std::max(1.0, 2.0 * result.cost / dof);
+    for (int j = 0; j < B; ++j) {
+      if (pr.col_s[j] >= 0) result.landmark_cov[j] = scale * cov.block<2, 2>(pr.col_s[j], pr.col_s[j]);
+    }
+    for (int p = 0; p < q; ++p) {
+      if (pr.col_h[p] >= 0) result.standing_cov[p] = scale * cov.block<2, 2>(pr.col_h[p], pr.col_h[p]);
+    }
+  }
   result.landmarks = problem.landmarks;
   result.standing = problem.standing;
   for (int j = 0; j < B; ++j) result.landmarks[j] = pr.S(u, j);

@@ -50,6 +50,9 @@ struct StopAndGoProblem {
 
 struct StopAndGoResult {
   std::vector<Vec2> landmarks, standing;
+  /// Marginal covariances from the final Gauss-Newton information (pseudo-inverse), scaled by
+  /// the residual variance when it exceeds the stated sigmas; zero for known positions.
+  std::vector<Mat2> landmark_cov, standing_cov;
   int gd_iterations = 0, gn_iterations = 0;
   double cost = 0;                 ///< final robust cost
   double rms_residual_m = 0;

@@ -7,6 +7,7 @@
 
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
+#include "trailmark/pipelines/landmarks_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline.h"
 
@@ -18,6 +19,8 @@ const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
     v->push_back(std::make_unique<PdrPipeline>());
     v->push_back(std::make_unique<BreadcrumbPipeline>());
     v->push_back(std::make_unique<InsPipeline>());
+    v->push_back(std::make_unique<LandmarksPipeline>(false));
+    v->push_back(std::make_unique<LandmarksPipeline>(true));
     return v;
   }();
   return *pipelines;

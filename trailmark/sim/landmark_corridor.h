@@ -39,4 +39,12 @@ struct LandmarkCorridor {
 
 LandmarkCorridor SimulateLandmarkCorridor(const LandmarkCorridorOptions& options, std::uint64_t seed);
 
+/// The same corridor as a mission (scenario "landmark-corridor"): the responder ("ff1") enters
+/// at the corridor's start, walks to the 7 stops in turn (5 s each, 10 wake-ups per stop) and
+/// back to the start, waking the landmarks every 3 s while walking (events "wake"; one answer
+/// per landmark in range). Landmarks are declared without positions (to be estimated) except
+/// the first, surveyed (position_sigma 0.2 m). Steps from the PDR error model; truth at 10 Hz.
+struct SimulatedMission;
+SimulatedMission SimulateLandmarkMission(const LandmarkCorridorOptions& options, std::uint64_t seed);
+
 }  // namespace trailmark

@@ -1,5 +1,7 @@
 #include "trailmark/sim/scenarios.h"
 
+#include "trailmark/sim/landmark_corridor.h"
+
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -176,6 +178,9 @@ std::vector<ScenarioInfo> Scenarios() {
           {"office-loop-1lap", "the same floor, one lap (100 m): quick tests"},
           {"office-loop-kicked",
            "office loop x 4 where a walked-past breadcrumb may be kicked 1-2 m (sec. V-C)"},
+          {"landmark-corridor",
+           "radio-landmarks paper: 5 wake-up landmarks in a corridor (4 to be localized), a "
+           "stop-and-go walk with 7 stops, wake-ups every 3 s while walking"},
           {"training-building",
            "two firefighters search the rooms of a fire-training floor from the right entrance, "
            "a fire zone, kicked crumbs (sec. V-B)"}};
@@ -199,6 +204,7 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
     return sim;
   }
   if (name == "training-building") return SimulateTrainingBuilding({}, seed);
+  if (name == "landmark-corridor") return SimulateLandmarkMission({}, seed);
   std::string known;
   for (const auto& s : Scenarios()) known += (known.empty() ? "" : ", ") + s.name;
   throw std::invalid_argument("unknown scenario '" + name + "' (known: " + known + ")");
