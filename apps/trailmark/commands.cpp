@@ -64,6 +64,8 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
     std::string need;
     for (const auto& f : pipeline->required_files()) need += (need.empty() ? "" : ", ") + f;
     for (const auto& f : pipeline->required_files()) {
+      if (f.find(".csv") == std::string::npos && f.find(".json") == std::string::npos) continue;
+      if (f.find(' ') != std::string::npos && f.find(" or ") == std::string::npos) continue;
       const auto alt = f.find(" or ");
       mission.Require(f.substr(0, alt), "pipeline '" + name + "'" +
                                             (alt == std::string::npos ? "" : " (or " + f.substr(alt + 4) + ")"));

@@ -19,7 +19,9 @@
 namespace trailmark {
 
 bool LandmarksPipeline::CanRun(const MissionDirectory& mission) const {
-  return HasSteps(mission) && mission.Has("rssi.csv");
+  int declared = 0;
+  for (const NodeInfo& n : mission.info().nodes) declared += n.kind == NodeKind::kLandmark;
+  return HasSteps(mission) && mission.Has("rssi.csv") && declared >= 3;
 }
 
 namespace {
@@ -74,7 +76,7 @@ PipelineSummary LandmarksPipeline::Run(const PipelineContext& context, EstimateS
   std::vector<std::optional<Vec2>> estimate;
   std::vector<Mat2> estimate_cov;
   for (const NodeInfo& n : mission.info().nodes) {
-    if (n.kind != NodeKind::kLandmark && n.kind != NodeKind::kCrumb) continue;
+    if (n.kind != NodeKind::kLandmark) continue;
     index[n.id] = static_cast<int>(ids.size());
     ids.push_back(n.id);
     known.push_back(n.position.has_value());

@@ -26,7 +26,7 @@ class LandmarksPipeline : public Pipeline {
                   "reckoning re-anchored at each stop (sec. 5.3, 6.2)";
   }
   std::vector<std::string> required_files() const override {
-    return {"steps.csv or imu.csv", "rssi.csv"};
+    return {"steps.csv or imu.csv", "rssi.csv", "3+ landmarks in mission.json"};
   }
   std::vector<std::string> optional_files() const override { return {"events.csv"}; }
   bool CanRun(const MissionDirectory& mission) const override;
