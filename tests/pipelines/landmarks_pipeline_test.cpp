@@ -54,5 +54,28 @@ TEST(LandmarksPipeline, CorridorMissionLocalizesTheLandmarks) {
   }
 }
 
+// Without a calibration in mission.json the radio model is fitted online from the stops' RSSI
+// of the surveyed landmark, and the unknown landmarks are still localized.
+TEST(LandmarksPipeline, FitsTheRadioOnlineWithoutCalibration) {
+  SimulatedMission sim = SimulateScenario("landmark-corridor", 3);
+  sim.data.info.radio.reset();
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  struct Sink : EstimateSink {
+    void Add(const Estimate& e) override { rows.push_back(e); }
+    std::vector<Estimate> rows;
+  } sink;
+  const PipelineSummary s = LandmarksPipeline(false).Run({mission, {}}, sink);
+  EXPECT_GE(s.numbers.at("radio_refits"), 1.0);
+  EXPECT_NEAR(s.numbers.at("radio_path_loss_exponent"), 7.1, 1.0);  // the simulated channel
+  const Metrics m = Evaluate(sim.data.info, sim.data.truth, sink.rows);
+  double sum = 0;
+  for (const auto& n : m.nodes) {
+    if (n.kind == NodeKind::kLandmark && n.id != "lm1") sum += n.stats.final_m;
+  }
+  EXPECT_LT(sum / 4, 1.5);
+}
+
 }  // namespace
 }  // namespace trailmark

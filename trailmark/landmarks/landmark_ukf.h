@@ -53,6 +53,9 @@ class LandmarkUkf {
   /// `delta_n` since the last call, with that displacement's covariance (its drift).
   void PredictWithDisplacement(const Vec2& delta_n, const Mat2& cov);
 
+  /// Replaces the RSSI model (e.g. after an online re-calibration).
+  void SetRadioModel(const radio::LogDistanceModel& radio) { radio_ = radio; }
+
   const State& state() const { return x_; }
   const Cov& covariance() const { return P_; }
   Vec2 position() const { return x_.head<2>(); }

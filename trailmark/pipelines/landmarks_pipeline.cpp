@@ -63,11 +63,16 @@ PipelineSummary LandmarksPipeline::Run(const PipelineContext& context, EstimateS
   mission.Require("rssi.csv", "the " + name() + " pipeline");
   const StepSource steps(mission, ins_options, "the " + name() + " pipeline", &summary);
   radio::LogDistanceModel model;
-  if (mission.info().radio) {
+  const bool calibrated = mission.info().radio.has_value();
+  if (calibrated) {
     model = radio::LogDistanceModel::From(*mission.info().radio);
   } else {
-    summary.notes.push_back("mission.json has no radio calibration: default log-distance model");
+    summary.notes.push_back(
+        "mission.json has no radio calibration: fitted online from the stops' RSSI of surveyed "
+        "landmarks (default log-distance model until then)");
   }
+  std::vector<radio::CalibrationPair> calibration;  // (distance stop-surveyed landmark, rssi)
+  int refits = 0;
 
   // Landmarks: known (position, sigma) or to be estimated.
   std::vector<std::string> ids;
@@ -195,6 +200,31 @@ PipelineSummary LandmarksPipeline::Run(const PipelineContext& context, EstimateS
           s.rssi.push_back(a.count[j] ? std::optional<double>(a.sum[j] / a.count[j]) : std::nullopt);
         }
         stops.push_back(s);
+        // Online calibration (no calibration in mission.json): every stop's averaged RSSI of a
+        // surveyed landmark at the PDR distance is a pair; refit once the distances spread.
+        if (!calibrated) {
+          for (int j = 0; j < B; ++j) {
+            if (known[j] && s.rssi[j]) {
+              calibration.push_back({std::max((s.standing - *estimate[j]).norm(), 0.3), *s.rssi[j]});
+            }
+          }
+          double dmin = 1e300, dmax = 0;
+          for (const auto& c : calibration) dmin = std::min(dmin, c.distance_m), dmax = std::max(dmax, c.distance_m);
+          if (calibration.size() >= 4 && dmax > 2 * dmin) {
+            try {
+              const radio::PathLossFit fit = radio::FitLogDistance(calibration, 0.0, 0.5);
+              if (fit.model.path_loss_exponent > 1.0 && fit.model.path_loss_exponent < 10.0) {
+                model = fit.model;
+                model.sigma_db = std::max(fit.residual_sigma_db, 1.0);
+                ++refits;
+                for (auto& [id, ag] : agents) {
+                  if (ag.ukf) ag.ukf->SetRadioModel(model);
+                }
+              }
+            } catch (const std::invalid_argument&) {
+            }
+          }
+        }
         // Landmarks from every stop so far (standing positions from the PDR, sec. 6.2).
         landmarks::StopAndGoProblem prob;
         for (int j = 0; j < B; ++j) {
@@ -262,6 +292,9 @@ PipelineSummary LandmarksPipeline::Run(const PipelineContext& context, EstimateS
   summary.numbers["landmarks_known"] = static_cast<double>(std::count(known.begin(), known.end(), true));
   summary.numbers["handheld_fixes"] = static_cast<double>(fixes);
   summary.numbers["ukf_rssi_updates"] = static_cast<double>(ukf_updates);
+  summary.numbers["radio_refits"] = refits;
+  summary.numbers["radio_path_loss_exponent"] = model.path_loss_exponent;
+  summary.numbers["radio_alpha_dbm"] = model.alpha_dbm;
   context.progress(1.0);
   return summary;
 }
