@@ -11,25 +11,35 @@
 namespace trailmark {
 namespace {
 
+struct VectorSink : EstimateSink {
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
+
+/// Runs `pipeline` on the mission; returns its summary and fills `rows`.
+PipelineSummary RunOn(const Pipeline& pipeline, const MissionDirectory& mission,
+                      std::vector<Estimate>* rows) {
+  VectorSink sink;
+  const PipelineSummary s = pipeline.Run({mission, {}}, sink);
+  *rows = std::move(sink.rows);
+  return s;
+}
+
 TEST(LandmarksPipeline, CorridorMissionLocalizesTheLandmarks) {
   const SimulatedMission sim = SimulateScenario("landmark-corridor", 2);
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  struct PdrSink : EstimateSink {
-    void Add(const Estimate& e) override { rows.push_back(e); }
-    std::vector<Estimate> rows;
-  } pdr_sink;
-  PdrPipeline().Run({mission, {}}, pdr_sink);
-  const double pdr_mean = Evaluate(sim.data.info, sim.data.truth, pdr_sink.rows).agents.stats.mean_m;
+  std::vector<Estimate> pdr_rows;
+  RunOn(PdrPipeline(), mission, &pdr_rows);
+  const double pdr_mean = Evaluate(sim.data.info, sim.data.truth, pdr_rows).agents.stats.mean_m;
   for (bool ukf : {false, true}) {
-    struct Sink : EstimateSink {
-      void Add(const Estimate& e) override { rows.push_back(e); }
-      std::vector<Estimate> rows;
-    } sink;
     const LandmarksPipeline pipeline(ukf);
     ASSERT_TRUE(pipeline.CanRun(mission));
-    const PipelineSummary s = pipeline.Run({mission, {}}, sink);
+    struct {
+      std::vector<Estimate> rows;
+    } sink;
+    const PipelineSummary s = RunOn(pipeline, mission, &sink.rows);
     EXPECT_EQ(s.numbers.at("stops"), 7.0);
     EXPECT_EQ(s.numbers.at("landmarks_localized"), 4.0);
     for (const auto& e : sink.rows) {
@@ -62,14 +72,11 @@ TEST(LandmarksPipeline, FitsTheRadioOnlineWithoutCalibration) {
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  struct Sink : EstimateSink {
-    void Add(const Estimate& e) override { rows.push_back(e); }
-    std::vector<Estimate> rows;
-  } sink;
-  const PipelineSummary s = LandmarksPipeline(false).Run({mission, {}}, sink);
+  std::vector<Estimate> rows;
+  const PipelineSummary s = RunOn(LandmarksPipeline(false), mission, &rows);
   EXPECT_GE(s.numbers.at("radio_refits"), 1.0);
   EXPECT_NEAR(s.numbers.at("radio_path_loss_exponent"), 7.1, 1.0);  // the simulated channel
-  const Metrics m = Evaluate(sim.data.info, sim.data.truth, sink.rows);
+  const Metrics m = Evaluate(sim.data.info, sim.data.truth, rows);
   double sum = 0;
   for (const auto& n : m.nodes) {
     if (n.kind == NodeKind::kLandmark && n.id != "lm1") sum += n.stats.final_m;
