@@ -44,6 +44,8 @@ int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::p
 /// `trailmark reproduce landmarks`: the radio-landmarks paper's stop-and-go experiment.
 int ReproduceLandmarks(int seeds, const std::filesystem::path& out,
                        const std::filesystem::path& data_dir);
+/// `trailmark reproduce beacons` (static part): MDS beacon localization, Figs. 4-5.
+int ReproduceBeacons(int runs, const std::filesystem::path& out);
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
 /// side with the published figures; results.md under out/NAME.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,

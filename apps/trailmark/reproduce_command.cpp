@@ -144,7 +144,9 @@ int Reproduce(const std::string& name, int seeds, const fs::path& out,
   if (name == "breadcrumb") return ReproduceBreadcrumb(seeds, out / "breadcrumb", options);
   if (name == "ins") return ReproduceIns(data_dir, out / "ins", options);
   if (name == "landmarks") return ReproduceLandmarks(std::max(seeds, 20), out / "landmarks", data_dir);
-  throw std::invalid_argument("unknown reproduction '" + name + "' (known: breadcrumb, ins, landmarks)");
+  if (name == "beacons") return ReproduceBeacons(seeds >= 100 ? seeds : 100, out / "beacons");
+  throw std::invalid_argument("unknown reproduction '" + name +
+                              "' (known: breadcrumb, ins, landmarks, beacons)");
 }
 
 }  // namespace trailmark::cli

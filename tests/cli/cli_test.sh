@@ -73,6 +73,7 @@ run_failing "$TM" run --pipeline landmarks-ukf "$dir/lc" --out "$dir/x" --option
 [ $rc -eq 1 ] && grep -q "loss must be squared, huber or cauchy" "$dir/err" || fail "bad loss option"
 "$TM" reproduce landmarks --out "$dir/rep" | grep -q "| landmark localization, median error | 0.78 m" \
   || fail "reproduce landmarks"
+"$TM" reproduce beacons --out "$dir/rep" | grep -q "1,000 beacons" || fail "reproduce beacons"
 run_failing "$TM" energy --sleep-ua 0
 [ $rc -ne 0 ] || fail "energy with zero sleep current"
 

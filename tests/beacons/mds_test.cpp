@@ -1,0 +1,89 @@
+// MDS beacon localization (ultrasound-beacons paper, sec. 5): exact distances give the exact
+// layout (up to a rigid motion and flip), shortest-path completion, Procrustes anchoring, and
+// SMACOF on the measured links removing the shortest-path bias.
+#include "trailmark/beacons/mds.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Geometry>
+
+#include "trailmark/core/random.h"
+
+namespace trailmark::beacons {
+namespace {
+
+std::vector<Vec2> RandomBeacons(int n, std::uint64_t seed) {
+  Random rng(seed);
+  std::vector<Vec2> p;
+  for (int i = 0; i < n; ++i) p.emplace_back(rng.Uniform(0, 15), rng.Uniform(0, 9));
+  return p;
+}
+
+double AlignedError(const std::vector<Vec2>& est, const std::vector<Vec2>& truth) {
+  const RigidTransform T = Procrustes(est, truth);
+  double sum = 0;
+  for (std::size_t i = 0; i < est.size(); ++i) sum += (T.Apply(est[i]) - truth[i]).norm();
+  return sum / est.size();
+}
+
+TEST(Mds, ExactDistancesGiveTheExactLayout) {
+  const auto truth = RandomBeacons(21, 1);
+  std::vector<std::vector<double>> full(truth.size(), std::vector<double>(truth.size()));
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    for (std::size_t j = 0; j < truth.size(); ++j) full[i][j] = (truth[i] - truth[j]).norm();
+  }
+  EXPECT_LT(AlignedError(ClassicalMds(full), truth), 1e-6);
+}
+
+TEST(Mds, ProcrustesRecoversRotationTranslationAndFlip) {
+  const auto from = RandomBeacons(6, 2);
+  const Mat2 R = Eigen::Rotation2Dd(0.7).toRotationMatrix();
+  Mat2 flip = Mat2::Identity();
+  flip(1, 1) = -1;
+  std::vector<Vec2> to;
+  for (const auto& p : from) to.push_back(R * flip * p + Vec2(3, -4));
+  const RigidTransform T = Procrustes(from, to);
+  for (std::size_t i = 0; i < from.size(); ++i) EXPECT_LT((T.Apply(from[i]) - to[i]).norm(), 1e-9);
+  EXPECT_NEAR(T.rotation.determinant(), -1.0, 1e-9);
+  const RigidTransform proper = Procrustes(from, to, false);
+  EXPECT_NEAR(proper.rotation.determinant(), 1.0, 1e-9);
+}
+
+TEST(Mds, ShortestPathsCompleteAChainAndReportDisconnection) {
+  // 0 - 1 - 2 - 3 on a line, 1 m apart, only neighbours measured.
+  RangeMatrix m(4, std::vector<std::optional<double>>(4));
+  for (int i = 0; i + 1 < 4; ++i) m[i][i + 1] = m[i + 1][i] = 1.0;
+  std::vector<std::vector<double>> full;
+  EXPECT_TRUE(FillShortestPaths(m, &full));
+  EXPECT_DOUBLE_EQ(full[0][3], 3.0);
+  EXPECT_DOUBLE_EQ(full[3][0], 3.0);
+  m[2][3] = m[3][2] = std::nullopt;
+  EXPECT_FALSE(FillShortestPaths(m, &full));
+  // A noisy short link read as negative must not loop (negative cycle): it counts as ~0.
+  m[2][3] = m[3][2] = -0.2;
+  EXPECT_TRUE(FillShortestPaths(m, &full));
+  EXPECT_NEAR(full[0][3], 2.0, 1e-5);
+}
+
+TEST(Mds, SmacofOnMeasuredLinksRemovesTheShortestPathBias) {
+  const auto truth = RandomBeacons(21, 3);
+  RangeMatrix m(truth.size(), std::vector<std::optional<double>>(truth.size()));
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    for (std::size_t j = 0; j < truth.size(); ++j) {
+      const double d = (truth[i] - truth[j]).norm();
+      if (i != j && d < 6.0) m[i][j] = d;  // a 6 m ultrasound range
+    }
+  }
+  std::vector<std::vector<double>> full;
+  ASSERT_TRUE(FillShortestPaths(m, &full));
+  const auto mds = ClassicalMds(full);
+  double stress = 0;
+  const auto refined = RefineSmacof(m, mds, 1000, 1e-12, &stress);
+  const double e_mds = AlignedError(mds, truth), e_ref = AlignedError(refined, truth);
+  EXPECT_GT(e_mds, 0.05);         // shortest paths are longer than straight lines
+  EXPECT_LT(e_ref, 0.25 * e_mds);  // refinement on the measured links removes most of it
+  EXPECT_LT(stress, 1e-3);
+}
+
+}  // namespace
+}  // namespace trailmark::beacons

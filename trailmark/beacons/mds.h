@@ -1,0 +1,45 @@
+#pragma once
+/// Static localization of dropped beacons (ultrasound-beacons paper, sec. 5): classical
+/// multidimensional scaling (Torgerson; Shang et al. 2003) on a distance matrix whose missing
+/// entries are filled by shortest paths over the measured links (Ji & Zha 2004) or by RSSI
+/// ranges; anchoring by Procrustes (rotation, translation, optionally reflection) to known
+/// positions. Beyond the paper: refinement by weighted SMACOF stress majorization (de Leeuw
+/// 1977) on the measured links only, so that filled (biased-long) distances no longer distort
+/// the layout. No I/O.
+
+#include <optional>
+#include <vector>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark::beacons {
+
+/// Symmetric n x n matrix of measured ranges (metres); empty where not measured.
+using RangeMatrix = std::vector<std::vector<std::optional<double>>>;
+
+/// Completes the matrix with shortest-path distances over the measured links (Dijkstra from
+/// every node). Returns false when the link graph is not connected (unreachable pairs are then
+/// left at the largest finite distance x 2).
+bool FillShortestPaths(const RangeMatrix& measured, std::vector<std::vector<double>>* full);
+
+/// Classical MDS: the 2-D configuration whose distances best match `full` (double centring,
+/// the two leading eigenpairs of B = -1/2 J D^2 J).
+std::vector<Vec2> ClassicalMds(const std::vector<std::vector<double>>& full);
+
+/// SMACOF on the measured links only (weights 1 on measured pairs, 0 elsewhere), from `start`.
+/// Returns the refined configuration; `stress` (optional) receives the final raw stress.
+std::vector<Vec2> RefineSmacof(const RangeMatrix& measured, std::vector<Vec2> start,
+                               int max_iterations = 300, double tolerance = 1e-7,
+                               double* stress = nullptr);
+
+/// Similarity without scale: the rigid motion (and reflection when allowed) mapping `from` onto
+/// `to` in least squares (Kabsch/Umeyama). Needs >= 2 (>= 3 non-collinear with reflection).
+struct RigidTransform {
+  Mat2 rotation = Mat2::Identity();  ///< may include a reflection (det -1)
+  Vec2 translation = Vec2::Zero();
+  Vec2 Apply(const Vec2& p) const { return rotation * p + translation; }
+};
+RigidTransform Procrustes(const std::vector<Vec2>& from, const std::vector<Vec2>& to,
+                          bool allow_reflection = true);
+
+}  // namespace trailmark::beacons
