@@ -44,6 +44,9 @@ int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::p
 /// `trailmark reproduce landmarks`: the radio-landmarks paper's stop-and-go experiment.
 int ReproduceLandmarks(int seeds, const std::filesystem::path& out,
                        const std::filesystem::path& data_dir);
+/// Prints `text` and writes it to out/results.md under a "# title" heading; returns 0.
+int WriteReproduction(const std::filesystem::path& out, const std::string& title,
+                      const std::string& text);
 /// `trailmark reproduce beacons` (static part): MDS beacon localization, Figs. 4-5.
 int ReproduceBeacons(int runs, const std::filesystem::path& out);
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by

@@ -18,6 +18,20 @@ namespace fs = std::filesystem;
 
 namespace {
 
+/// n beacons uniform in width x height, ultrasound ranges (sigma 0.3 m) below range_m.
+void RandomLayout(int n, double width, double height, double range_m, Random& rng,
+                  std::vector<Vec2>* truth, beacons::RangeMatrix* m) {
+  truth->clear();
+  for (int i = 0; i < n; ++i) truth->emplace_back(rng.Uniform(0, width), rng.Uniform(0, height));
+  m->assign(n, std::vector<std::optional<double>>(n));
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const double d = ((*truth)[i] - (*truth)[j]).norm();
+      if (d < range_m) (*m)[i][j] = (*m)[j][i] = std::max(0.05, d + rng.Normal(0, 0.3));
+    }
+  }
+}
+
 struct MdsErrors {
   double mds = 0, refined = 0;
 };
@@ -26,14 +40,8 @@ struct MdsErrors {
 /// beacons closer than `range_m`; the rest from shortest paths or from RSSI (n 2.3, sigma_db).
 MdsErrors Simulate(int n, double range_m, bool rssi_fill, double sigma_db, Random& rng) {
   std::vector<Vec2> truth;
-  for (int i = 0; i < n; ++i) truth.emplace_back(rng.Uniform(0, 15), rng.Uniform(0, 9));
-  beacons::RangeMatrix m(n, std::vector<std::optional<double>>(n));
-  for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n; ++j) {
-      const double d = (truth[i] - truth[j]).norm();
-      if (d < range_m) m[i][j] = m[j][i] = std::max(0.05, d + rng.Normal(0, 0.3));
-    }
-  }
+  beacons::RangeMatrix m;
+  RandomLayout(n, 15, 9, range_m, rng, &truth, &m);
   std::vector<std::vector<double>> full;
   beacons::FillShortestPaths(m, &full);
   if (rssi_fill) {  // the missing links from RSSI (log-distance, n 2.3, alpha -40 dBm)
@@ -92,14 +100,8 @@ int ReproduceBeacons(int runs, const fs::path& out) {
     Random big(7);
     const int n = 1000;
     std::vector<Vec2> truth;
-    for (int i = 0; i < n; ++i) truth.emplace_back(big.Uniform(0, 150), big.Uniform(0, 90));
-    beacons::RangeMatrix m(n, std::vector<std::optional<double>>(n));
-    for (int i = 0; i < n; ++i) {
-      for (int j = i + 1; j < n; ++j) {
-        const double d = (truth[i] - truth[j]).norm();
-        if (d < 8.0) m[i][j] = m[j][i] = std::max(0.05, d + big.Normal(0, 0.3));
-      }
-    }
+    beacons::RangeMatrix m;
+    RandomLayout(n, 150, 90, 8.0, big, &truth, &m);
     const auto t0 = std::chrono::steady_clock::now();
     std::vector<std::vector<double>> full;
     beacons::FillShortestPaths(m, &full);
@@ -112,11 +114,7 @@ int ReproduceBeacons(int runs, const fs::path& out) {
     t += fmt::format("\n1,000 beacons (150 x 90 m, 8 m range): shortest paths + MDS + SMACOF in "
                      "{:.2f} s, mean error {:.2f} m\n", s, err / n);
   }
-  fmt::print("{}", t);
-  fs::create_directories(out);
-  std::ofstream(out / "results.md") << "# trailmark reproduce beacons (static localization)\n\n" << t;
-  fmt::print("\nwritten: {}\n", (out / "results.md").string());
-  return 0;
+  return WriteReproduction(out, "trailmark reproduce beacons (static localization)", t);
 }
 
 }  // namespace trailmark::cli

@@ -139,6 +139,14 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
 
 }  // namespace
 
+int WriteReproduction(const fs::path& out, const std::string& title, const std::string& text) {
+  fmt::print("{}", text);
+  fs::create_directories(out);
+  std::ofstream(out / "results.md") << "# " << title << "\n\n" << text;
+  fmt::print("\nwritten: {}\n", (out / "results.md").string());
+  return 0;
+}
+
 int Reproduce(const std::string& name, int seeds, const fs::path& out,
               const std::map<std::string, std::string>& options, const fs::path& data_dir) {
   if (name == "breadcrumb") return ReproduceBreadcrumb(seeds, out / "breadcrumb", options);

@@ -298,11 +298,7 @@ int ReproduceLandmarks(int seeds, const fs::path& out, const fs::path& data_dir)
   t += fmt::format("| continuous tracking, fused, median | 0.276 m | {:.3f} m (the paper's UKF: Wiener model + acceleration, RSSI while moving); {:.3f} m (ours: the ZUPT INS as motion model, RSSI always) |\n",
                    Percentile(err_paper, 50), Percentile(err_ours, 50));
   t += BleFlat(data_dir / "ble-rss-flat");
-  fmt::print("{}", t);
-  fs::create_directories(out);
-  std::ofstream(out / "results.md") << "# trailmark reproduce landmarks\n\n" << t;
-  fmt::print("\nwritten: {}\n", (out / "results.md").string());
-  return 0;
+  return WriteReproduction(out, "trailmark reproduce landmarks", t);
 }
 
 }  // namespace trailmark::cli

@@ -1,5 +1,7 @@
 #include "trailmark/beacons/mds.h"
 
+#include "trailmark/geometry/rigid_fit.h"
+
 #include <Eigen/Dense>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -155,29 +157,8 @@ std::vector<Vec2> RefineSmacof(const RangeMatrix& measured, std::vector<Vec2> X,
 
 RigidTransform Procrustes(const std::vector<Vec2>& from, const std::vector<Vec2>& to,
                           bool allow_reflection) {
-  if (from.size() != to.size() || from.size() < 2) {
-    throw std::invalid_argument("Procrustes: needs two or more point pairs");
-  }
-  Vec2 cf = Vec2::Zero(), ct = Vec2::Zero();
-  for (std::size_t k = 0; k < from.size(); ++k) {
-    cf += from[k];
-    ct += to[k];
-  }
-  cf /= static_cast<double>(from.size());
-  ct /= static_cast<double>(to.size());
-  Mat2 H = Mat2::Zero();
-  for (std::size_t k = 0; k < from.size(); ++k) H += (from[k] - cf) * (to[k] - ct).transpose();
-  const Eigen::JacobiSVD<Mat2> svd(H, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Mat2 R = svd.matrixV() * svd.matrixU().transpose();
-  if (!allow_reflection && R.determinant() < 0) {
-    Mat2 D = Mat2::Identity();
-    D(1, 1) = -1;
-    R = svd.matrixV() * D * svd.matrixU().transpose();
-  }
-  RigidTransform T;
-  T.rotation = R;
-  T.translation = ct - R * cf;
-  return T;
+  const RigidFit2 fit = FitRigid(from, to, allow_reflection);
+  return {fit.rotation, fit.translation};
 }
 
 }  // namespace trailmark::beacons

@@ -1,5 +1,7 @@
 #include "trailmark/eval/trajectory_metrics.h"
 
+#include "trailmark/geometry/rigid_fit.h"
+
 #include <cmath>
 #include <stdexcept>
 
@@ -36,25 +38,10 @@ Vec2 Rigid2D::Apply(const Vec2& p) const {
 }
 
 Rigid2D FitRigid2D(const std::vector<Vec2>& from, const std::vector<Vec2>& to) {
-  if (from.size() != to.size() || from.size() < 2) {
-    throw std::invalid_argument("FitRigid2D: needs two or more point pairs");
-  }
-  Vec2 cf = Vec2::Zero(), ct = Vec2::Zero();
-  for (std::size_t k = 0; k < from.size(); ++k) {
-    cf += from[k];
-    ct += to[k];
-  }
-  cf /= static_cast<double>(from.size());
-  ct /= static_cast<double>(to.size());
-  double sxx = 0, sxy = 0;  // sum of dot and cross products of the centred pairs
-  for (std::size_t k = 0; k < from.size(); ++k) {
-    const Vec2 a = from[k] - cf, b = to[k] - ct;
-    sxx += a.dot(b);
-    sxy += a.x() * b.y() - a.y() * b.x();
-  }
+  const RigidFit2 fit = FitRigid(from, to, false);
   Rigid2D r;
-  r.rotation_rad = std::atan2(sxy, sxx);
-  r.translation = ct - Rigid2D{r.rotation_rad, Vec2::Zero()}.Apply(cf);
+  r.rotation_rad = std::atan2(fit.rotation(1, 0), fit.rotation(0, 0));
+  r.translation = fit.translation;
   return r;
 }
 
