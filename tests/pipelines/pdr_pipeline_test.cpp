@@ -23,8 +23,8 @@ class VectorSink : public EstimateSink {
 TEST(PdrPipeline, ErrorFreeStepsReproduceTruthExactly) {
   OfficeLoopOptions o;
   o.laps = 1;
-  o.pdr = {.heading_random_walk_rad = 0, .heading_drift_sigma_rad_per_s = 0,
-           .turn_scale_error_sigma = 0, .scale_error_sigma = 0, .step_noise_m = 0};
+  o.sim.pdr = {.heading_random_walk_rad = 0, .heading_drift_sigma_rad_per_s = 0,
+               .turn_scale_error_sigma = 0, .scale_error_sigma = 0, .step_noise_m = 0};
   const SimulatedMission sim = SimulateOfficeLoop(o, 11);
   TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);

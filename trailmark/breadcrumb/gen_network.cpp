@@ -224,6 +224,15 @@ void GenNetwork::FoldPersistent(int edge) {
   }
 }
 
+GenNetwork::Linearized GenNetwork::LinearizePersistent(const Persistent& e) const {
+  const Vec2 xi = nodes_[e.i].x_hat, xj = nodes_[e.j].x_hat;
+  const Vec2 diff = xi - xj;
+  const double d = diff.norm();
+  const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
+  const Vec2 h = e.model.Slope(d) * u;
+  return {h, 1.0 / e.Variance(), e.Mean() - e.model.Predict(d) + h.dot(diff)};  // eq. (19)
+}
+
 void GenNetwork::DeleteNode(NodeIndex k) { Marginalize<1>({k}); }
 
 void GenNetwork::DeleteNodes(NodeIndex a, NodeIndex b) {
@@ -510,15 +519,8 @@ bool GenNetwork::Solve() {
     if (have_persistent) {
       for (const auto& e : persistent_) {
         if (!e.active || e.information <= 0) continue;
-        const Vec2 xi = nodes_[e.i].x_hat, xj = nodes_[e.j].x_hat;
-        const Vec2 diff = xi - xj;
-        const double d = diff.norm();
-        const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
-        const Vec2 h = e.model.Slope(d) * u;
-        const double z = e.Mean();
-        const double w = 1.0 / e.Variance();
-        const double r = z - e.model.Predict(d) + h.dot(xi - xj);  // eq. (19)
-        const Mat2 W = w * h * h.transpose();                      // eq. (18)
+        const auto [h, w, r] = LinearizePersistent(e);
+        const Mat2 W = w * h * h.transpose();  // eq. (18)
         const int ci = nodes_[e.i].compact * 2, cj = nodes_[e.j].compact * 2;
         auto add = [&](int r0, int c0, const Mat2& m) {
           for (int a = 0; a < 2; ++a) {
@@ -656,14 +658,8 @@ void GenNetwork::DenseSystem(Eigen::MatrixXd* L, Eigen::VectorXd* b,
   }
   for (const auto& e : persistent_) {
     if (!e.active || e.information <= 0) continue;
-    const Vec2 xi = nodes_[e.i].x_hat, xj = nodes_[e.j].x_hat;
-    const Vec2 diff = xi - xj;
-    const double d = diff.norm();
-    const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
-    const Vec2 h = e.model.Slope(d) * u;
-    const double w = 1.0 / e.Variance();
-    const double r = e.Mean() - e.model.Predict(d) + h.dot(xi - xj);
-    const Mat2 W = w * h * h.transpose();
+    const auto [h, w, r] = LinearizePersistent(e);
+    const Mat2 W = w * h * h.transpose();  // eq. (18)
     const int ci = pos[e.i] * 2, cj = pos[e.j] * 2;
     L->block<2, 2>(ci, ci) += W;
     L->block<2, 2>(cj, cj) += W;

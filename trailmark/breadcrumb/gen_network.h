@@ -171,6 +171,15 @@ class GenNetwork {
                            double variance, const ScalarModel& model, const Vec2& offset,
                            NodeIndex bias = -1);
   void FoldPersistent(int edge);
+  /// One persistent range edge linearized at the current estimates (eqs. (18)-(19)):
+  /// Jacobian row h (w.r.t. x_i; -h for x_j), weight w = 1/variance and the linearized
+  /// observation r, so the edge adds w h h^T to the Kirchhoff blocks and +-w h r to b.
+  struct Linearized {
+    Vec2 h;
+    double w;
+    double r;
+  };
+  Linearized LinearizePersistent(const Persistent& e) const;
   bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L);
   void CompactIndices();
   std::vector<std::pair<int, int>> BlockPattern() const;

@@ -69,7 +69,7 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   LocalizerOptions options = BreadcrumbOptionsFrom(rest, &static_period_s);
   PipelineSummary summary;
   // Steps from steps.csv, or from imu.csv through the INS (then merged from memory).
-  const StepSource steps(mission, ins_options, "the breadcrumb pipeline", &summary);
+  const auto ins_steps = InsStepsUnlessStepFile(mission, ins_options, "the breadcrumb pipeline", &summary);
   if (mission.info().radio) {
     options.radio = radio::LogDistanceModel::From(*mission.info().radio);
   } else {
@@ -123,7 +123,7 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   };
 
   MergedStream stream(mission, {.events = true, .steps = true, .ranges = true, .bearings = false,
-                                .rssi = true, .steps_override = steps.steps()});
+                                .rssi = true, .steps_override = ins_steps ? &*ins_steps : nullptr});
   MissionRow row;
   std::size_t rows = 0;
   std::vector<float> latency_us;

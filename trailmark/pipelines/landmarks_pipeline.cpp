@@ -61,7 +61,7 @@ PipelineSummary LandmarksPipeline::Run(const PipelineContext& context, EstimateS
 
   PipelineSummary summary;
   mission.Require("rssi.csv", "the " + name() + " pipeline");
-  const StepSource steps(mission, ins_options, "the " + name() + " pipeline", &summary);
+  const auto ins_steps = InsStepsUnlessStepFile(mission, ins_options, "the " + name() + " pipeline", &summary);
   radio::LogDistanceModel model;
   const bool calibrated = mission.info().radio.has_value();
   if (calibrated) {
@@ -144,7 +144,7 @@ PipelineSummary LandmarksPipeline::Run(const PipelineContext& context, EstimateS
   };
 
   MergedStream stream(mission, {.events = true, .steps = true, .ranges = false, .bearings = false,
-                                .rssi = true, .steps_override = steps.steps()});
+                                .rssi = true, .steps_override = ins_steps ? &*ins_steps : nullptr});
   MissionRow row;
   TimeS t_last = 0;
   bool first = true;

@@ -22,24 +22,33 @@ bool HasSteps(const MissionDirectory& mission) {
   return mission.Has("steps.csv") || mission.Has("imu.csv");
 }
 
+std::optional<std::vector<Step>> InsStepsUnlessStepFile(
+    const MissionDirectory& mission, const std::map<std::string, std::string>& ins_options,
+    const std::string& who, PipelineSummary* summary) {
+  if (mission.Has("steps.csv")) {
+    if (!ins_options.empty() && summary) {
+      summary->notes.push_back("ins.* options ignored: the mission has steps.csv");
+    }
+    return std::nullopt;
+  }
+  if (!mission.Has("imu.csv")) mission.Require("steps.csv", who + " (or imu.csv for the INS)");
+  std::vector<Step> steps = InsStepsFromImu(mission, InsOptionsFrom(ins_options), summary);
+  if (summary) {
+    summary->notes.push_back("steps from imu.csv through the ZUPT INS (" +
+                             std::to_string(steps.size()) + " steps)");
+  }
+  return steps;
+}
+
 StepSource::StepSource(const MissionDirectory& mission,
                        const std::map<std::string, std::string>& ins_options,
                        const std::string& who, PipelineSummary* summary)
     : mission_(mission) {
-  if (mission.Has("steps.csv")) {
+  if (auto steps = InsStepsUnlessStepFile(mission, ins_options, who, summary)) {
+    steps_ = std::move(*steps);
+  } else {
     reader_ = std::make_unique<RowReader<Step>>(mission.Path("steps.csv").string(),
                                                   &mission.registry());
-    if (!ins_options.empty() && summary) {
-      summary->notes.push_back("ins.* options ignored: the mission has steps.csv");
-    }
-    return;
-  }
-  if (!mission.Has("imu.csv")) mission.Require("steps.csv", who + " (or imu.csv for the INS)");
-  from_imu_ = true;
-  steps_ = InsStepsFromImu(mission, InsOptionsFrom(ins_options), summary);
-  if (summary) {
-    summary->notes.push_back("steps from imu.csv through the ZUPT INS (" +
-                             std::to_string(steps_.size()) + " steps)");
   }
 }
 

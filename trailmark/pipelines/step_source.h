@@ -20,6 +20,13 @@ std::pair<std::map<std::string, std::string>, std::map<std::string, std::string>
 /// True when the mission has steps.csv or imu.csv.
 bool HasSteps(const MissionDirectory& mission);
 
+/// For pipelines that read steps.csv themselves (e.g. through MergedStream): the INS steps when
+/// the mission has imu.csv but no steps.csv; nullopt when steps.csv is present. Throws
+/// InputError when the mission has neither file (naming `who`).
+std::optional<std::vector<Step>> InsStepsUnlessStepFile(
+    const MissionDirectory& mission, const std::map<std::string, std::string>& ins_options,
+    const std::string& who, PipelineSummary* summary);
+
 class StepSource {
  public:
   /// Throws InputError when the mission has neither file (naming `who`).
@@ -30,13 +37,9 @@ class StepSource {
   /// Fails at the current row (file:line for steps.csv; imu.csv otherwise).
   [[noreturn]] void Fail(const std::string& problem) const;
   double Progress() const;
-  bool from_imu() const { return from_imu_; }
-  /// All steps when they came from the INS (for pipelines that merge streams); else null.
-  const std::vector<Step>* steps() const { return from_imu_ ? &steps_ : nullptr; }
 
  private:
   const MissionDirectory& mission_;
-  bool from_imu_ = false;
   std::vector<Step> steps_;
   std::size_t next_ = 0;
   std::unique_ptr<RowReader<Step>> reader_;

@@ -109,21 +109,17 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   Vec3 foot(walk.steps.front().from.x(), walk.steps.front().from.y(), 0.0);
   const Vec2 first_dir = walk.steps.front().to - walk.steps.front().from;
   double yaw = std::atan2(first_dir.y(), first_dir.x());
-  for (std::size_t k = 1; k < walk.steps.size(); k += 2) {
-    const auto& s = walk.steps[k];
-    const Vec3 to(s.to.x(), s.to.y(), foot.z() + climb);
+  auto add_stride = [&](const TrueStep& s, double rise_m) {
+    const Vec3 to(s.to.x(), s.to.y(), foot.z() + rise_m);
     const Vec2 d = (to - foot).head<2>();
     const double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
     strides.push_back({s.t0, s.t1, foot, to, yaw, yaw + WrapAngle(yaw_to - yaw)});
     foot = to;
     yaw = strides.back().yaw_to;
-  }
+  };
+  for (std::size_t k = 1; k < walk.steps.size(); k += 2) add_stride(walk.steps[k], climb);
   if (walk.steps.size() % 2 == 1 && walk.steps.size() > 1) {  // join the last footprint
-    const auto& s = walk.steps.back();
-    const Vec3 to(s.to.x(), s.to.y(), foot.z() + climb / 2);
-    const Vec2 d = (to - foot).head<2>();
-    const double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
-    strides.push_back({s.t0, s.t1, foot, to, yaw, yaw + WrapAngle(yaw_to - yaw)});
+    add_stride(walk.steps.back(), climb / 2);
   }
 
   auto pose_at = [&](double t) {

@@ -67,16 +67,8 @@ SimulatedMission SimulateOfficeLoop(const OfficeLoopOptions& o, std::uint64_t se
       route.waypoints.push_back(p);
     }
   }
-  MissionSimOptions sim;
-  sim.packet_period_s = o.packet_period_s;
-  sim.crumb_packet_period_s = o.crumb_packet_period_s;
-  sim.walker = o.walker;
-  sim.pdr = o.pdr;
-  sim.radio = o.radio;
-  sim.dispenser = o.dispenser;
-  sim.kick = o.kick;
   SimulatedMission mission = SimulateAgents(BuildOfficeFloor(o), Vec2::Zero(),
-                                            {{"ff1", route, 0.0, std::numbers::pi}}, sim, seed);
+                                            {{"ff1", route, 0.0, std::numbers::pi}}, o.sim, seed);
   mission.data.info.name = "office-loop";
   mission.data.info.description =
       "Office floor, 100 m corridor loop walked " + std::to_string(o.laps) +
@@ -197,8 +189,8 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   }
   if (name == "office-loop-kicked") {
     OfficeLoopOptions o;
-    o.kick.probability = 0.5;
-    o.kick.max_kicks = 2;
+    o.sim.kick.probability = 0.5;
+    o.sim.kick.max_kicks = 2;
     SimulatedMission sim = SimulateOfficeLoop(o, seed);
     sim.data.info.name = name;
     return sim;

@@ -19,13 +19,7 @@ struct OfficeLoopOptions {
   double corridor_width_m = 2.0;
   double loop_width_m = 30.0;         ///< 2 x (30 + 20) = 100 m loop
   double loop_height_m = 20.0;
-  double packet_period_s = 0.5;       ///< agent <-> chain beacons
-  double crumb_packet_period_s = 2.0; ///< crumb <-> crumb and base <-> crumb
-  WalkerOptions walker;
-  PdrErrorOptions pdr;
-  RssiChannelOptions radio;
-  DispenserOptions dispenser;
-  KickOptions kick;
+  MissionSimOptions sim;              ///< walker, PDR errors, radio, dispenser, kicks
 };
 
 /// The office floor of the breadcrumb paper's experiment (sec. V-A, Fig. 9a): a rectangular
