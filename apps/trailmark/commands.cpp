@@ -63,12 +63,16 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
   if (!pipeline->CanRun(mission)) {
     std::string need;
     for (const auto& f : pipeline->required_files()) need += (need.empty() ? "" : ", ") + f;
+    // A missing file is named with its path; "a.csv or b.csv" needs either one; requirements
+    // that are not file names ("3+ landmarks in mission.json") are in the message below.
     for (const auto& f : pipeline->required_files()) {
-      if (f.find(".csv") == std::string::npos && f.find(".json") == std::string::npos) continue;
-      if (f.find(' ') != std::string::npos && f.find(" or ") == std::string::npos) continue;
       const auto alt = f.find(" or ");
-      mission.Require(f.substr(0, alt), "pipeline '" + name + "'" +
-                                            (alt == std::string::npos ? "" : " (or " + f.substr(alt + 4) + ")"));
+      const std::string file = f.substr(0, alt);
+      const std::string other = alt == std::string::npos ? "" : f.substr(alt + 4);
+      const bool is_file = file.find(' ') == std::string::npos &&
+                           (file.ends_with(".csv") || file.ends_with(".json"));
+      if (!is_file || (!other.empty() && mission.Has(other))) continue;
+      mission.Require(file, "pipeline '" + name + "'" + (other.empty() ? "" : " (or " + other + ")"));
     }
     throw InputError(mission_dir.string(), 0, "pipeline '" + name + "' needs " + need);
   }

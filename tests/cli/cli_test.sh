@@ -62,6 +62,9 @@ run_failing "$TM" run --pipeline ins "$dir/imu" --out "$dir/x"
   --out "$dir/si" | grep -q "0 steps, [0-9]* IMU samples" || fail "simulate --imu-rate"
 "$TM" run --pipeline breadcrumb "$dir/si" --out "$dir/sir" > /dev/null || fail "breadcrumb from simulated IMU"
 "$TM" eval "$dir/si" "$dir/sir/estimates.csv" | grep -q "^ff1 " || fail "eval breadcrumb from IMU"
+run_failing "$TM" run --pipeline landmarks-stopgo "$dir/si" --out "$dir/x"  # imu.csv, no landmarks
+[ $rc -eq 2 ] && grep -q "needs steps.csv or imu.csv, rssi.csv, 3+ landmarks" "$dir/err" \
+  && ! grep -q "steps.csv: missing" "$dir/err" || { cat "$dir/err"; fail "imu.csv stands for steps.csv"; }
 run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigation --out "$dir/x"
 [ $rc -eq 1 ] && grep -q "unknown IMU grade 'navigation'" "$dir/err" || fail "bad IMU grade"
 

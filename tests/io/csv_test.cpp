@@ -111,6 +111,25 @@ TEST(CsvReader, StepsAreOrderedByT1AndT1MustNotPrecedeT0) {
               HasSubstr("before t0"));
 }
 
+// Values no sensor produces are a wrong unit or a corrupted row: rejected with file and line.
+TEST(CsvReader, ImplausibleTimeRssiAndStepLengthAreRejected) {
+  TempDir dir;
+  EXPECT_THAT(ErrorOf<TruthSample>(dir.File("t.csv", "t,id,x,y\n0,a,0,0\n1e300,a,0,0\n")),
+              AllOf(HasSubstr("t.csv:3:"), HasSubstr("not plausible")));
+  EXPECT_EQ(ErrorOf<TruthSample>(dir.File("epoch.csv", "t,id,x,y\n1763776000.25,a,0,0\n")), "");
+  EXPECT_THAT(ErrorOf<Step>(dir.File("s0.csv", "t0,t1,agent,dx,dy\n-1e11,2,a,0,0\n")),
+              AllOf(HasSubstr("s0.csv:2:"), HasSubstr("not plausible")));
+  EXPECT_THAT(ErrorOf<Step>(dir.File("s1.csv", "t0,t1,agent,dx,dy\n0,1,a,0.7,0\n1,2,a,1e300,0\n")),
+              AllOf(HasSubstr("s1.csv:3:"), HasSubstr("not a plausible foot displacement")));
+  const std::string rssi_header = "t,rx,tx,rssi_dbm\n";
+  EXPECT_EQ(ErrorOf<RssiPacket>(dir.File("r0.csv", rssi_header + "0,a,b,-95.5\n1,a,b,-3\n")), "");
+  for (const char* bad : {"1e300", "75", "-250"}) {
+    EXPECT_THAT(ErrorOf<RssiPacket>(dir.File("r1.csv", rssi_header + "0,a,b," + bad + "\n")),
+                AllOf(HasSubstr("r1.csv:2:"), HasSubstr("not a received power in dBm")))
+        << bad;
+  }
+}
+
 TEST(CsvReader, TruncatedLastLineIsReported) {
   TempDir dir;
   const auto path = dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n0.01,ff1,0,");

@@ -88,5 +88,26 @@ TEST(ImuSim, DeterministicPerSeedAndGradesByName) {
   EXPECT_THROW(ImuGrade::ByName("navigation"), std::invalid_argument);
 }
 
+// Every scenario's foot motion stays within a MEMS gyro's range (the INS rejects > 34.9 rad/s
+// as deg/s data): the landmark corridor's stop-and-go ends each leg with a 0.05 s shuffle step,
+// which once produced a 49 rad/s pitch rate; the walking loop keeps walking at full swing and
+// still closes (the ImuSim tests above).
+TEST(ImuSim, ShortStridesIntoStopsStayWithinGyroRange) {
+  for (const std::string scenario : {"landmark-corridor", "office-loop-1lap", "training-building"}) {
+    const SimulatedMission sim = SimulateScenario(scenario, 3);
+    ImuSimOptions o;
+    o.grade = ImuGrade::Perfect();
+    o.rate_hz = 100;
+    for (const auto& [id, walk] : sim.walks) {
+      double peak_gyro = 0;
+      for (const auto& s : SimulateFootImu(walk, id, o, Random(5)).samples) {
+        peak_gyro = std::max(peak_gyro, s.gyro_b.norm());
+      }
+      EXPECT_LT(peak_gyro, 20.0) << scenario << " " << id;  // walking peaks ~10-15 rad/s
+      EXPECT_GT(peak_gyro, 3.0) << scenario << " " << id;   // the feet do swing
+    }
+  }
+}
+
 }  // namespace
 }  // namespace trailmark

@@ -1,5 +1,7 @@
 #include "trailmark/io/streams.h"
 
+#include <cmath>
+
 #include <fmt/format.h>
 
 #include "trailmark/core/error.h"
@@ -17,6 +19,19 @@ struct ColumnSpec {
 
 template <class Row>
 struct Layout;
+
+// Plausibility bounds: values outside them are a wrong unit or a corrupted row, not data.
+constexpr double kMaxAbsTimeS = 1e10;        // ~317 years: Unix-epoch seconds still fit
+constexpr double kMinRssiDbm = -200.0;       // far below any receiver's sensitivity
+constexpr double kMaxRssiDbm = 60.0;         // above any transmitter's power (1 kW)
+constexpr double kMaxStepLengthM = 100.0;    // one row of steps.csv
+
+void CheckTime(const CsvReader& c, double t) {
+  if (std::abs(t) > kMaxAbsTimeS) {
+    c.Fail(fmt::format("time {} is not plausible (|t| > {:g} s; times are seconds)", t,
+                       kMaxAbsTimeS));
+  }
+}
 
 template <>
 struct Layout<ImuSample> {
@@ -46,9 +61,14 @@ struct Layout<Step> {
   static void Parse(const CsvReader& c, const std::vector<int>& k, Step& r) {
     r.t0 = c.Double(k[0]);
     r.t1 = c.Double(k[1]);
+    CheckTime(c, r.t0);
     if (r.t1 < r.t0) c.Fail(fmt::format("t1 = {} is before t0 = {}", r.t1, r.t0));
     r.agent.assign(c.NodeId(k[2]));
     r.delta_n = Vec3(c.Double(k[3]), c.Double(k[4]), c.OptionalDouble(k[5]).value_or(0.0));
+    if (r.delta_n.norm() > kMaxStepLengthM) {
+      c.Fail(fmt::format("a step of {:g} m is not a plausible foot displacement (> {:g} m)",
+                         r.delta_n.norm(), kMaxStepLengthM));
+    }
     const auto sxx = c.OptionalDouble(k[6]);
     const auto syy = c.OptionalDouble(k[7]);
     const auto szz = c.OptionalDouble(k[8]);
@@ -80,6 +100,11 @@ struct Layout<RssiPacket> {
     r.rx.assign(c.NodeId(k[1]));
     r.tx.assign(c.NodeId(k[2]));
     r.rssi_dbm = c.Double(k[3]);
+    if (r.rssi_dbm < kMinRssiDbm || r.rssi_dbm > kMaxRssiDbm) {
+      c.Fail(fmt::format("column 'rssi_dbm': {} is not a received power in dBm (expected {:g} "
+                         "to {:g})",
+                         r.rssi_dbm, kMinRssiDbm, kMaxRssiDbm));
+    }
   }
   static std::vector<std::string_view> Ids(const RssiPacket& r) { return {r.rx, r.tx}; }
   static void Format(CsvWriter& w, const RssiPacket& r) {
@@ -214,6 +239,7 @@ bool RowReader<Row>::Next(Row& row) {
   if (!csv_.Next()) return false;
   Layout<Row>::Parse(csv_, columns_, row);
   const double t = Layout<Row>::Time(row);
+  CheckTime(csv_, t);
   if (t < last_t_) {
     csv_.Fail(fmt::format("row out of time order: t = {} comes after t = {} (line {}); rows "
                           "must be in non-decreasing time",

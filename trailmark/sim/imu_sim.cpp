@@ -1,10 +1,11 @@
 #include "trailmark/sim/imu_sim.h"
 
-#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
+
+#include <Eigen/Geometry>
 
 namespace trailmark {
 
@@ -96,10 +97,16 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   if (!(o.rate_hz > 0)) throw std::invalid_argument("SimulateFootImu: rate must be > 0");
   // The instrumented foot's strides: it rests during even steps and swings during odd ones,
   // from its footprint to the footprint two steps ahead.
+  // A swing shorter than a normal one (the shuffle into a stop) lifts and pitches the foot
+  // proportionally less and turns it at most kMaxSwingYawRate: the motion stays within what a
+  // foot does and a MEMS gyro measures; the heading left over is caught up by the next strides.
+  constexpr double kFullSwingS = 0.35;
+  constexpr double kMaxSwingYawRate = 8.0;  // rad/s, mean over the swing
   struct Stride {
     double t0, t1;
     Vec3 from, to;
     double yaw_from, yaw_to;
+    double amplitude;  ///< scale of lift and pitch, (0, 1]
   };
   std::vector<Stride> strides;
   const double lift = o.motion == FootMotion::kCrawl ? std::min(o.lift_m, 0.03) : o.lift_m;
@@ -113,7 +120,11 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
     const Vec3 to(s.to.x(), s.to.y(), foot.z() + rise_m);
     const Vec2 d = (to - foot).head<2>();
     const double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
-    strides.push_back({s.t0, s.t1, foot, to, yaw, yaw + WrapAngle(yaw_to - yaw)});
+    const double swing_s = s.t1 - s.t0;
+    const double max_turn = kMaxSwingYawRate * swing_s;
+    const double turn = std::clamp(WrapAngle(yaw_to - yaw), -max_turn, max_turn);
+    strides.push_back({s.t0, s.t1, foot, to, yaw, yaw + turn,
+                       std::clamp(swing_s / kFullSwingS, 0.0, 1.0)});
     foot = to;
     yaw = strides.back().yaw_to;
   };
@@ -142,11 +153,12 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
     double m, dm, ddm;
     MinimumJerk(tau, &m, &dm, &ddm);
     const double sp = std::sin(std::numbers::pi * tau);
-    f.p = s.from + (s.to - s.from) * m + Vec3(0, 0, lift * sp * sp);
+    const double lift_m = s.amplitude * lift;
+    f.p = s.from + (s.to - s.from) * m + Vec3(0, 0, lift_m * sp * sp);
     f.v = (s.to - s.from) * (dm / T) +
-          Vec3(0, 0, lift * std::numbers::pi * std::sin(2 * std::numbers::pi * tau) / T);
+          Vec3(0, 0, lift_m * std::numbers::pi * std::sin(2 * std::numbers::pi * tau) / T);
     const double yaw_t = s.yaw_from + (s.yaw_to - s.yaw_from) * m;
-    const double theta = pitch * std::sin(2 * std::numbers::pi * tau) * sp * sp;
+    const double theta = s.amplitude * pitch * std::sin(2 * std::numbers::pi * tau) * sp * sp;
     f.R = (Eigen::AngleAxisd(yaw_t, Vec3::UnitZ()) * Eigen::AngleAxisd(theta, Vec3::UnitY()))
               .toRotationMatrix();
     f.stance = false;
