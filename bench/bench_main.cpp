@@ -2,13 +2,19 @@
 // pipeline on the default mission. `trailmark bench` prints the same figures as a table.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <filesystem>
 
 #include "trailmark/io/mission_io.h"
 #include "trailmark/breadcrumb/localizer.h"
 #include "trailmark/ins/zupt_ins.h"
 #include "trailmark/landmarks/landmark_ukf.h"
+#include "trailmark/beacons/beacon_map.h"
+#include "trailmark/beacons/mds.h"
+#include "trailmark/beacons/scaat_ekf.h"
+#include "trailmark/sim/beacon_lab.h"
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/synthetic_incident.h"
@@ -194,6 +200,74 @@ void BM_LandmarkUkf(benchmark::State& state) {
   state.counters["x_real_time"] = benchmark::Counter(items * 0.02, benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_LandmarkUkf)->Unit(benchmark::kMillisecond);
+
+// The SCAAT EKF on the simulated lab trace e (8 min): every step and every ultrasound range and
+// bearing, as the beacons-ekf pipeline feeds it, without file reading. x_real_time = mission
+// seconds per wall second (issue 4: >= 10,000x).
+void BM_ScaatEkfLabTrace(benchmark::State& state) {
+  BeaconLabOptions o;
+  o.trace = LabTrace::kE;
+  const SimulatedMission sim = SimulateBeaconLab(o, 1);
+  std::map<std::string, beacons::BeaconPosition> beacon;
+  for (const auto& n : sim.data.info.nodes) {
+    if (n.position) beacon[n.id] = {n.position->head<2>(), Mat2::Identity() * 1e-4};
+  }
+  struct Event {
+    double t;
+    int kind;  // 0 step, 1 range, 2 bearing
+    std::size_t index;
+  };
+  std::vector<Event> events;
+  for (std::size_t i = 0; i < sim.data.steps.size(); ++i) events.push_back({sim.data.steps[i].t1, 0, i});
+  for (std::size_t i = 0; i < sim.data.ranges.size(); ++i) {
+    if (sim.data.ranges[i].b == "ff1") events.push_back({sim.data.ranges[i].t, 1, i});
+  }
+  for (std::size_t i = 0; i < sim.data.bearings.size(); ++i) events.push_back({sim.data.bearings[i].t, 2, i});
+  std::stable_sort(events.begin(), events.end(), [](const Event& a, const Event& b) { return a.t < b.t; });
+  const double duration = sim.data.truth.back().t - sim.data.truth.front().t;
+  for (auto _ : state) {
+    beacons::ScaatEkf ekf(sim.data.info.nodes[0].start->head<2>());
+    for (const Event& e : events) {
+      if (e.kind == 0) {
+        const Step& st = sim.data.steps[e.index];
+        ekf.PredictStep(st.delta_n.head<2>(), Mat2::Identity() * st.variance_m2->x());
+      } else if (e.kind == 1) {
+        const auto& r = sim.data.ranges[e.index];
+        ekf.UpdateRange(beacon[r.a], r.range_m, *r.sigma_m);
+      } else {
+        const auto& b = sim.data.bearings[e.index];
+        ekf.UpdateBearing(beacon[b.a], b.bearing_rad, *b.sigma_rad);
+      }
+    }
+    benchmark::DoNotOptimize(ekf.position());
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(events.size()));
+  state.counters["x_real_time"] = benchmark::Counter(state.iterations() * duration, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_ScaatEkfLabTrace)->Unit(benchmark::kMillisecond);
+
+// Shortest paths + MDS + SMACOF for n beacons on a 5 m-range trail-like layout (issue 4: 1,000
+// beacons < 1 s).
+void BM_BeaconMds(benchmark::State& state) {
+  const int n = static_cast<int>(state.range(0));
+  Random rng(7);
+  const double side = std::sqrt(n * 13.5);  // the lab's density: ~21 beacons in 15 x 9 m
+  std::vector<Vec2> p;
+  for (int i = 0; i < n; ++i) p.emplace_back(rng.Uniform(0, side), rng.Uniform(0, side));
+  beacons::RangeMatrix m(n, std::vector<std::optional<double>>(n));
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const double d = (p[i] - p[j]).norm();
+      if (d < 8.0) m[i][j] = m[j][i] = d + rng.Normal(0, 0.1);
+    }
+  }
+  for (auto _ : state) {
+    std::vector<std::vector<double>> full;
+    beacons::FillShortestPaths(m, &full);
+    benchmark::DoNotOptimize(beacons::RefineSmacof(m, beacons::ClassicalMds(full)));
+  }
+}
+BENCHMARK(BM_BeaconMds)->Arg(21)->Arg(200)->Arg(1000)->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

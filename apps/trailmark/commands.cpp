@@ -162,14 +162,18 @@ void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
   fmt::print("report written to {}\n", out.string());
 }
 
-void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows) {
-  fmt::print("\n{:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "pipeline",
-             "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist", "crumbs m",
-             "run time s");
-  for (const auto& [run, m] : rows) {
+void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
+                       const std::vector<std::string>& missions) {
+  fmt::print("\n{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "mission", "pipeline",
+             "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist", "static m", "run time s");
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    const auto& [run, m] = rows[k];
     const auto& a = m.agents;
-    fmt::print("{:<14} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>10} {:>10} {:>11} {:>10.3f}\n",
-               run.pipeline, a.stats.mean_m, a.stats.p95_m, a.stats.max_m, a.stats.final_m,
+    const bool agents = a.stats.samples > 0;
+    auto num = [&](double v) { return agents ? fmt::format("{:.2f}", v) : std::string("-"); };
+    fmt::print("{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10.3f}\n",
+               k < missions.size() ? missions[k] : "", run.pipeline, num(a.stats.mean_m), num(a.stats.p95_m),
+               num(a.stats.max_m), num(a.stats.final_m),
                a.mean_pct_of_distance ? fmt::format("{:.2f}", *a.mean_pct_of_distance) : "-",
                a.max_pct_of_distance ? fmt::format("{:.2f}", *a.max_pct_of_distance) : "-",
                m.static_nodes.stats.samples > 0 ? fmt::format("{:.2f}", m.static_nodes.stats.mean_m)
@@ -224,21 +228,42 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
   imu.rate_hz = 100;
   imu.grade = "industrial";
   Simulate(scenario, seed, mission_dir, imu);
-  const MissionDirectory mission(mission_dir);
   std::vector<std::pair<RunResult, Metrics>> rows;
-  std::vector<fs::path> run_dirs;
-  for (const auto& name : RunnablePipelines(mission)) {
-    const fs::path run_dir = out / "runs" / name;
-    // The INS estimate is reported at 10 Hz (the truth's rate) to keep the report small.
-    std::map<std::string, std::string> options;
-    if (name == "ins") options["output_hz"] = "10";
-    RunResult r = Run(name, mission_dir, run_dir, options);
-    Metrics m = Eval(mission_dir, run_dir / "estimates.csv", run_dir / "metrics.json", false);
-    rows.emplace_back(std::move(r), std::move(m));
-    run_dirs.push_back(run_dir);
+  std::vector<std::string> missions;
+  std::set<std::string> done;
+  auto run_all = [&](const std::string& label, const fs::path& mdir, const fs::path& runs, const fs::path& report) {
+    const MissionDirectory mission(mdir);
+    std::vector<fs::path> run_dirs;
+    for (const auto& name : RunnablePipelines(mission)) {
+      if (done.count(name)) continue;
+      const fs::path run_dir = runs / name;
+      // The INS estimate is reported at 10 Hz (the truth's rate) to keep the report small.
+      std::map<std::string, std::string> options;
+      if (name == "ins") options["output_hz"] = "10";
+      RunResult r = Run(name, mdir, run_dir, options);
+      Metrics m = Eval(mdir, run_dir / "estimates.csv", run_dir / "metrics.json", false);
+      rows.emplace_back(std::move(r), std::move(m));
+      missions.push_back(label);
+      run_dirs.push_back(run_dir);
+      done.insert(name);
+    }
+    if (!run_dirs.empty()) Report(run_dirs, mdir, report);
+  };
+  run_all(scenario, mission_dir, out / "runs", out / "report.html");
+  // Pipelines that need other sensors run on the simulated experiment of their paper, with
+  // dead reckoning (pdr) on the same mission for comparison.
+  for (const std::string extra : {"landmark-corridor", "beacon-trail"}) {
+    const fs::path mdir = out / "missions" / extra;
+    Simulate(extra, seed, mdir);
+    done.erase("pdr");
+    run_all(extra, mdir, out / "runs" / extra, out / ("report-" + extra + ".html"));
   }
-  PrintSummaryTable(rows);
-  Report(run_dirs, mission_dir, out / "report.html");
+  PrintSummaryTable(rows, missions);
+  for (const auto& p : AllPipelines()) {
+    if (!done.count(p->name()) && p->name() != "pdr") fmt::print("not run (no mission with its inputs): {}\n", p->name());
+  }
+  fmt::print("\nreports: {}, {}, {}\n", (out / "report.html").string(),
+             (out / "report-landmark-corridor.html").string(), (out / "report-beacon-trail.html").string());
   return 0;
 }
 

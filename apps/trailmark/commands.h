@@ -29,8 +29,10 @@ Metrics Eval(const std::filesystem::path& mission, const std::filesystem::path& 
              const std::filesystem::path& metrics_out, bool print);
 void Report(const std::vector<std::filesystem::path>& run_dirs,
             const std::filesystem::path& mission, const std::filesystem::path& out);
-/// The main job: simulate the default mission, run every pipeline on it, print the summary
-/// table and write the HTML report.
+/// The main job: simulate the default mission and run every pipeline it has the inputs for;
+/// the other pipelines run on the simulated experiment of their paper (landmark corridor,
+/// beacon trail, each with dead reckoning for comparison); print the summary table and write
+/// one HTML report per mission.
 int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
@@ -47,14 +49,16 @@ int ReproduceLandmarks(int seeds, const std::filesystem::path& out,
 /// Prints `text` and writes it to out/results.md under a "# title" heading; returns 0.
 int WriteReproduction(const std::filesystem::path& out, const std::string& title,
                       const std::string& text);
-/// `trailmark reproduce beacons` (static part): MDS beacon localization, Figs. 4-5.
-int ReproduceBeacons(int runs, const std::filesystem::path& out);
+/// `trailmark reproduce beacons`: MDS beacon localization (Figs. 4-5, `runs` simulations per
+/// point) and tracking on the six lab traces (Table 1, Figs. 6-9, `seeds` each).
+int ReproduceBeacons(int runs, int seeds, const std::filesystem::path& out);
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
 /// side with the published figures; results.md under out/NAME.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,
               const std::map<std::string, std::string>& options = {},
               const std::filesystem::path& data_dir = "../shared/data");
 
-void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows);
+void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
+                       const std::vector<std::string>& missions);
 
 }  // namespace trailmark::cli

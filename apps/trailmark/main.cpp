@@ -5,12 +5,15 @@
 //   trailmark report RUN_DIR... --out report.html
 //   trailmark reproduce breadcrumb|ins [--seeds N]
 //   trailmark energy [--battery-mah Q --sleep-ua I ...]
+//   trailmark wayout MISSION [--agent A] [--at T]
 //   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
 #include <fmt/format.h>
 
 #include <CLI/CLI.hpp>
+#include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <map>
 
 #include "commands.h"
@@ -19,6 +22,7 @@
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/landmarks/energy.h"
+#include "trailmark/pipelines/beacons_pipeline.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace fs = std::filesystem;
@@ -156,6 +160,15 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   energy->add_option("--periods", energy_periods, "wake-up periods (s)")->check(CLI::PositiveNumber);
 
+  std::string wayout_mission, wayout_agent = "ff1";
+  double wayout_at = std::numeric_limits<double>::quiet_NaN();
+  auto* wayout = app.add_subcommand(
+      "wayout", "the way back out along an ultrasound beacon trail: walk to the smallest beacon id "
+                "you hear (ultrasound-beacons paper, sec. 4)");
+  wayout->add_option("mission", wayout_mission, "mission directory with ranges.csv")->required();
+  wayout->add_option("--agent", wayout_agent, "the firefighter (default ff1)");
+  wayout->add_option("--at", wayout_at, "mission time (s); default: the end of the mission");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
@@ -226,6 +239,21 @@ int main(int argc, char** argv) {
         }
         fmt::print("\n");
       }
+    } else if (*wayout) {
+      const MissionDirectory m(wayout_mission);
+      const WayOutReport w = ComputeWayOut(
+          m, wayout_agent, std::isnan(wayout_at) ? std::nullopt : std::optional<double>(wayout_at));
+      std::string heard;
+      for (const auto& h : w.heard) heard += (heard.empty() ? "" : ", ") + h;
+      fmt::print("{} hears: {}\n", wayout_agent, heard.empty() ? "no beacon" : heard);
+      for (std::size_t k = 0; k < w.route.size(); ++k) {
+        const auto& p = w.route_positions_n[k];
+        fmt::print("{:>3}. {:<10} {}\n", k + 1, w.route[k],
+                   p ? fmt::format("at ({:.1f}, {:.1f}) m", p->x(), p->y()) : "position unknown");
+      }
+      if (w.broken) fmt::print("warning: {}\n", *w.broken);
+      if (!w.route.empty() && !w.broken) fmt::print("then out through the entry\n");
+      return w.route.empty() || w.broken ? 3 : 0;
     } else if (*reproduce) {
       return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
                             ParseKeyValues(reproduce_options), reproduce_data);

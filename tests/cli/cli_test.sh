@@ -10,7 +10,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
 "$TM" --help | grep -q simulate || fail "--help"
-for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy; do
+for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy wayout; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
@@ -76,7 +76,21 @@ run_failing "$TM" run --pipeline landmarks-ukf "$dir/lc" --out "$dir/x" --option
 [ $rc -eq 1 ] && grep -q "loss must be squared, huber or cauchy" "$dir/err" || fail "bad loss option"
 "$TM" reproduce landmarks --out "$dir/rep" | grep -q "| landmark localization, median error | 0.78 m" \
   || fail "reproduce landmarks"
-"$TM" reproduce beacons --out "$dir/rep" | grep -q "1,000 beacons" || fail "reproduce beacons"
+"$TM" reproduce beacons --seeds 1 --out "$dir/rep" > "$dir/repb.txt" || fail "reproduce beacons"
+grep -q "1,000 beacons" "$dir/repb.txt" && grep -q "| \*\*overall\*\* | 1.93 / 3.70 |" "$dir/repb.txt" \
+  || fail "reproduce beacons tables"
+# The ultrasound beacon trail: MDS, the SCAAT EKF, the way back out.
+"$TM" simulate beacon-trail --seed 3 --out "$dir/bt" | grep -q "crumbs dropped" || fail "simulate beacon-trail"
+"$TM" validate "$dir/bt" | grep -q "beacons-mds beacons-ekf" || fail "beacon pipelines runnable"
+"$TM" run --pipeline beacons-mds "$dir/bt" --out "$dir/btm" > /dev/null || fail "beacons-mds"
+"$TM" eval "$dir/bt" "$dir/btm/estimates.csv" | grep -q "^b12 " || fail "beacons localized"
+"$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/bte" > /dev/null || fail "beacons-ekf"
+grep -q '"ff1: way out b01"' "$dir/bte/diagnostics.json" || fail "way out in diagnostics"
+"$TM" wayout "$dir/bt" --at 100 | grep -q "then out through the entry" || fail "wayout command"
+run_failing "$TM" wayout "$dir/bt" --agent nobody
+[ $rc -eq 2 ] && grep -q "no agent 'nobody'" "$dir/err" || fail "wayout unknown agent"
+run_failing "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/x" --option update=polar
+[ $rc -eq 1 ] && grep -q "update must be range-bearing or position" "$dir/err" || fail "bad update option"
 run_failing "$TM" energy --sleep-ua 0
 [ $rc -ne 0 ] || fail "energy with zero sleep current"
 

@@ -62,4 +62,11 @@ Box2 FloorPlan::Bounds() const {
   return box;
 }
 
+void AddRectangle(std::vector<Segment2>& walls, const Vec2& lo, const Vec2& hi) {
+  walls.push_back({{lo.x(), lo.y()}, {hi.x(), lo.y()}});
+  walls.push_back({{hi.x(), lo.y()}, {hi.x(), hi.y()}});
+  walls.push_back({{hi.x(), hi.y()}, {lo.x(), hi.y()}});
+  walls.push_back({{lo.x(), hi.y()}, {lo.x(), lo.y()}});
+}
+
 }  // namespace trailmark

@@ -51,6 +51,9 @@ class FloorPlan {
   SegmentIndex index_;
 };
 
+/// Appends the four walls of the axis-aligned rectangle [lo, hi] (for simulated floor plans).
+void AddRectangle(std::vector<Segment2>& walls, const Vec2& lo, const Vec2& hi);
+
 /// Splits `wall` into the pieces not covered by any door lying along it.
 std::vector<Segment2> CutDoors(const Segment2& wall, const std::vector<Segment2>& doors,
                                double snap_m);

@@ -5,6 +5,7 @@
 #include <limits>
 #include <nlohmann/json.hpp>
 
+#include "trailmark/pipelines/beacons_pipeline.h"
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
 #include "trailmark/pipelines/landmarks_pipeline.h"
@@ -21,6 +22,8 @@ const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
     v->push_back(std::make_unique<InsPipeline>());
     v->push_back(std::make_unique<LandmarksPipeline>(false));
     v->push_back(std::make_unique<LandmarksPipeline>(true));
+    v->push_back(std::make_unique<BeaconsPipeline>(false));
+    v->push_back(std::make_unique<BeaconsPipeline>(true));
     return v;
   }();
   return *pipelines;

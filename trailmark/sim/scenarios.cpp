@@ -1,5 +1,6 @@
 #include "trailmark/sim/scenarios.h"
 
+#include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/landmark_corridor.h"
 
 #include <algorithm>
@@ -10,16 +11,6 @@
 #include <stdexcept>
 
 namespace trailmark {
-namespace {
-
-void AddRect(std::vector<Segment2>& walls, Vec2 lo, Vec2 hi) {
-  walls.push_back({{lo.x(), lo.y()}, {hi.x(), lo.y()}});
-  walls.push_back({{hi.x(), lo.y()}, {hi.x(), hi.y()}});
-  walls.push_back({{hi.x(), hi.y()}, {lo.x(), hi.y()}});
-  walls.push_back({{lo.x(), hi.y()}, {lo.x(), lo.y()}});
-}
-
-}  // namespace
 
 FloorPlan BuildOfficeFloor(const OfficeLoopOptions& o) {
   // Loop centre line: x in [-W, 0], y in [-H, 0]; base at (0, 0), the upper right corner.
@@ -27,9 +18,9 @@ FloorPlan BuildOfficeFloor(const OfficeLoopOptions& o) {
   const double depth = 6.0;  // office depth on the outside of the corridor
   std::vector<Segment2> walls, doors;
   std::vector<Room> rooms;
-  AddRect(walls, {-W - h - depth, -H - h - depth}, {h + depth, h + depth});  // exterior
-  AddRect(walls, {-W - h, -H - h}, {h, h});                                  // corridor outside
-  AddRect(walls, {-W + h, -H + h}, {-h, -h});                                // corridor inside
+  AddRectangle(walls, {-W - h - depth, -H - h - depth}, {h + depth, h + depth});  // exterior
+  AddRectangle(walls, {-W - h, -H - h}, {h, h});                                  // corridor outside
+  AddRectangle(walls, {-W + h, -H + h}, {-h, -h});                                // corridor inside
   rooms.push_back({"corridor", {{-W - h, -H - h}, {h, -H - h}, {h, h}, {-W - h, h}}, 0});
   // Office partitions every 5 m along the long sides, doors of 1 m into the corridor.
   for (double x = -W + 5; x < 0; x += 5) {
@@ -89,7 +80,7 @@ FloorPlan BuildTrainingFloor(const TrainingBuildingOptions& o) {
                D = o.room_depth_m;
   std::vector<Segment2> walls, doors;
   std::vector<Room> rooms;
-  AddRect(walls, {0, -h - D}, {L, h + D});  // exterior
+  AddRectangle(walls, {0, -h - D}, {L, h + D});  // exterior
   walls.push_back({{0, h}, {L, h}});        // corridor walls
   walls.push_back({{0, -h}, {L, -h}});
   rooms.push_back({"corridor", {{0, -h}, {L, -h}, {L, h}, {0, h}}, 0});
@@ -175,7 +166,14 @@ std::vector<ScenarioInfo> Scenarios() {
            "stop-and-go walk with 7 stops, wake-ups every 3 s while walking"},
           {"training-building",
            "two firefighters search the rooms of a fire-training floor from the right entrance, "
-           "a fire zone, kicked crumbs (sec. V-B)"}};
+           "a fire zone, kicked crumbs (sec. V-B)"},
+          {"beacon-lab",
+           "ultrasound-beacons paper: 15 x 9 m lab, ~21 surveyed ultrasound beacons placed by the "
+           "deployment rules, walking trace a (4 min) with foot-node range/bearing and PDR steps"},
+          {"beacon-trail",
+           "ultrasound-beacons paper: a firefighter drops ultrasound beacons by the deployment "
+           "rules (entry, signal loss, turns), walks trace c, then retreats to the exit by the "
+           "smallest-id rule; beacon positions unknown (MDS)"}};
 }
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
@@ -197,6 +195,13 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   }
   if (name == "training-building") return SimulateTrainingBuilding({}, seed);
   if (name == "landmark-corridor") return SimulateLandmarkMission({}, seed);
+  if (name == "beacon-lab") return SimulateBeaconLab({}, seed);
+  if (name == "beacon-trail") {
+    BeaconLabOptions o;
+    o.surveyed = false;
+    o.trace = LabTrace::kC;
+    return SimulateBeaconLab(o, seed);
+  }
   std::string known;
   for (const auto& s : Scenarios()) known += (known.empty() ? "" : ", ") + s.name;
   throw std::invalid_argument("unknown scenario '" + name + "' (known: " + known + ")");

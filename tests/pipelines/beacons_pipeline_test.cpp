@@ -1,0 +1,174 @@
+// The ultrasound-beacon pipelines end to end on simulated lab missions.
+#include "trailmark/pipelines/beacons_pipeline.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <fstream>
+
+#include "test_util.h"
+#include "trailmark/core/error.h"
+#include "trailmark/eval/metrics.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/beacon_lab.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark {
+namespace {
+
+struct VectorSink : EstimateSink {
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
+
+struct Outcome {
+  PipelineSummary summary;
+  Metrics metrics;
+  std::vector<double> agent_errors;
+};
+
+Outcome RunOn(const Pipeline& pipeline, const MissionDirectory& mission, const MissionData& data,
+              std::map<std::string, std::string> options = {}) {
+  VectorSink sink;
+  Outcome o;
+  o.summary = pipeline.Run({mission, options}, sink);
+  for (const auto& e : sink.rows) {
+    EXPECT_TRUE(e.position_n.allFinite()) << e.id;
+    EXPECT_GT(e.sxx, 0) << e.id;
+    EXPECT_GT(e.sxx * e.syy - e.sxy * e.sxy, 0) << e.id;
+  }
+  std::stable_sort(sink.rows.begin(), sink.rows.end(),
+                   [](const auto& a, const auto& b) { return a.t < b.t; });
+  o.metrics = Evaluate(data.info, data.truth, sink.rows);
+  for (const auto& s : o.metrics.agents.series) o.agent_errors.push_back(s.error_m);
+  return o;
+}
+
+TEST(BeaconsPipeline, TracksTheLabTraceWithinTheIssueTargets) {
+  BeaconLabOptions lab;
+  lab.trace = LabTrace::kC;
+  const SimulatedMission sim = SimulateBeaconLab(lab, 3);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const BeaconsPipeline ekf(true);
+  ASSERT_TRUE(ekf.CanRun(mission));
+  const Outcome ours = RunOn(ekf, mission, sim.data);
+  const Outcome paper = RunOn(ekf, mission, sim.data, {{"update", "position"}});
+  const Outcome us_only = RunOn(ekf, mission, sim.data, {{"filter", "us-only"}});
+  const Outcome pdr = RunOn(PdrPipeline(), mission, sim.data);
+  // Issue targets (paper Table 1 overall 1.93 / 3.70 m): 50 % <= 1.0 m, 75 % <= 1.8 m.
+  EXPECT_LE(Percentile(ours.agent_errors, 50), 1.0);
+  EXPECT_LE(Percentile(ours.agent_errors, 75), 1.8);
+  // Fusion beats each modality alone (Figs. 6 and 9).
+  EXPECT_LT(Percentile(ours.agent_errors, 50), Percentile(us_only.agent_errors, 50));
+  EXPECT_LT(Percentile(ours.agent_errors, 50), 0.5 * Percentile(pdr.agent_errors, 50));
+  EXPECT_LE(Percentile(paper.agent_errors, 50), 1.0);
+  EXPECT_GT(ours.summary.numbers.at("ff1.range_updates"), 500);
+  EXPECT_EQ(ours.summary.numbers.at("beacons_surveyed"), ours.summary.numbers.at("beacons"));
+}
+
+TEST(BeaconsPipeline, StartsWithoutASurveyedStartFromTheFirstUltrasound) {
+  const SimulatedMission sim = SimulateBeaconLab({}, 5);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const Outcome o = RunOn(BeaconsPipeline(true), mission, sim.data, {{"init", "ultrasound"}});
+  ASSERT_TRUE(o.summary.numbers.count("ff1.initialized_at_s"));
+  EXPECT_LT(o.summary.numbers.at("ff1.initialized_at_s"), 20.0);
+  EXPECT_LE(Percentile(o.agent_errors, 50), 1.0);
+  // Instants before the initialization are not scored, and are few.
+  EXPECT_LT(o.metrics.agents.uncovered, 200u);
+}
+
+TEST(BeaconsPipeline, DroppedTrailIsLocalizedByMdsAndLeadsBackOut) {
+  const SimulatedMission sim = SimulateScenario("beacon-trail", 2);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const Outcome mds = RunOn(BeaconsPipeline(false), mission, sim.data);
+  EXPECT_TRUE(mds.agent_errors.empty());  // beacons only
+  EXPECT_EQ(mds.summary.numbers.at("beacons_from_mds"), mds.summary.numbers.at("beacons"));
+  double final_sum = 0;
+  int n = 0;
+  for (const auto& node : mds.metrics.nodes) {
+    if (node.kind != NodeKind::kCrumb) continue;
+    final_sum += node.stats.final_m;
+    ++n;
+  }
+  ASSERT_GE(n, 18);
+  EXPECT_LT(final_sum / n, 1.5);  // seeds 1-4: 0.55-1.04 m
+  const Outcome ekf = RunOn(BeaconsPipeline(true), mission, sim.data);
+  const Outcome pdr = RunOn(PdrPipeline(), mission, sim.data);
+  EXPECT_LT(Percentile(ekf.agent_errors, 50), 1.5);
+  EXPECT_LT(ekf.metrics.agents.stats.mean_m, pdr.metrics.agents.stats.mean_m);
+  // At the end the firefighter is back at the door: the way out is the entry beacon.
+  bool noted = false;
+  for (const auto& note : ekf.summary.notes) noted |= note == "ff1: way out b01";
+  EXPECT_TRUE(noted);
+  // Mid-mission (deep in the trace), the way out descends through the ids to b01.
+  const WayOutReport w = ComputeWayOut(mission, "ff1", 120.0);
+  ASSERT_FALSE(w.route.empty());
+  EXPECT_FALSE(w.broken.has_value());
+  EXPECT_EQ(w.route.back(), "b01");
+  EXPECT_TRUE(std::is_sorted(w.route.rbegin(), w.route.rend()));
+  for (const auto& p : w.route_positions_n) EXPECT_TRUE(p.has_value());
+}
+
+TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClosely) {
+  // Recorded data may not log the drops: each beacon is then anchored at the responder's
+  // estimate the first time a range to it is at most 1.5 m.
+  SimulatedMission sim = SimulateScenario("beacon-trail", 2);
+  sim.data.events.clear();
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const Outcome ekf = RunOn(BeaconsPipeline(true), mission, sim.data);
+  const Outcome pdr = RunOn(PdrPipeline(), mission, sim.data);
+  EXPECT_EQ(ekf.summary.numbers.at("beacons_from_mds"), ekf.summary.numbers.at("beacons"));
+  EXPECT_EQ(ekf.summary.numbers.at("beacons_anchored_by_close_pass"),
+            ekf.summary.numbers.at("beacons"));
+  EXPECT_LT(ekf.metrics.agents.stats.mean_m,
+            0.5 * pdr.metrics.agents.stats.mean_m);  // 0.57 vs 2.92 m
+}
+
+TEST(BeaconsPipeline, BadInputIsReportedClearly) {
+  const SimulatedMission sim = SimulateBeaconLab({}, 1);
+  testing::TempDir dir;
+  MissionData data = sim.data;
+  data.bearings.resize(50);
+  WriteMissionDirectory(dir.path(), data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  VectorSink sink;
+  EXPECT_THROW(BeaconsPipeline(true).Run({mission, {{"filter", "kalman"}}}, sink),
+               std::invalid_argument);
+  EXPECT_THROW(BeaconsPipeline(true).Run({mission, {{"update", "polar"}}}, sink),
+               std::invalid_argument);
+  EXPECT_THROW(BeaconsPipeline(true).Run({mission, {{"no_such_option", "1"}}}, sink),
+               std::invalid_argument);
+  // A NaN bearing is named with its file and line.
+  {
+    std::ofstream f(dir.path() / "bearings.csv", std::ios::app);
+    f << "1000,b01,ff1,nan,0.5\n";
+  }
+  try {
+    BeaconsPipeline(true).Run({mission, {}}, sink);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("bearings.csv:52"), std::string::npos) << e.what();
+  }
+  // Without ranges.csv the pipeline cannot run, and says why.
+  std::filesystem::remove(dir.path() / "ranges.csv");
+  const MissionDirectory no_ranges(dir.path());
+  EXPECT_FALSE(BeaconsPipeline(true).CanRun(no_ranges));
+  try {
+    BeaconsPipeline(false).Run({no_ranges, {}}, sink);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("ranges.csv"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace trailmark

@@ -1,0 +1,122 @@
+// The simulated ultrasound-beacon lab: deployment rules (sec. 4), the moving-node ultrasound
+// characterization (sec. 3.B), the retreat by the smallest-id rule.
+#include "trailmark/sim/beacon_lab.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numbers>
+
+#include "trailmark/eval/metrics.h"
+
+namespace trailmark {
+namespace {
+
+std::map<std::string, Vec2> BeaconTruth(const MissionData& m) {
+  std::map<std::string, Vec2> b;
+  for (const auto& t : m.truth) {
+    if (t.id != "ff1") b[t.id] = t.position_n.head<2>();
+  }
+  return b;
+}
+
+Vec2 AgentAt(const MissionData& m, TimeS t) {
+  const TruthSample* best = nullptr;
+  for (const auto& s : m.truth) {
+    if (s.id == "ff1" && (!best || std::abs(s.t - t) < std::abs(best->t - t))) best = &s;
+  }
+  return best->position_n.head<2>();
+}
+
+TEST(BeaconLab, DeploymentRulesPlaceABeaconAtTheEntryAtTurnsAndBeforeSignalLoss) {
+  BeaconLabOptions o;
+  o.surveyed = false;
+  const SimulatedMission sim = SimulateBeaconLab(o, 4);
+  const auto beacons = BeaconTruth(sim.data);
+  ASSERT_GE(beacons.size(), 18u);
+  ASSERT_LE(beacons.size(), 24u);
+  // Rule (i): b01 just inside the door (x = 0, y = 4.5).
+  EXPECT_LT((beacons.at("b01") - Vec2(0.3, 4.5)).norm(), 0.5);
+  // Rule (iii): every corner of the ring has a beacon within 1.5 m.
+  for (const Vec2 corner : {Vec2(1.5, 1.5), Vec2(13.5, 1.5), Vec2(13.5, 7.5), Vec2(1.5, 7.5)}) {
+    double nearest = 1e9;
+    for (const auto& [id, p] : beacons) nearest = std::min(nearest, (p - corner).norm());
+    EXPECT_LT(nearest, 1.5) << corner.transpose();
+  }
+  // Rule (ii) keeps the trail connected: every beacon is in line of sight and range of one
+  // deployed before it, and hears at least two others (sec. 4: "at least two neighbours").
+  std::vector<Vec2> ordered;
+  for (const auto& [id, p] : beacons) ordered.push_back(p);  // ids sort in deployment order
+  for (std::size_t j = 0; j < ordered.size(); ++j) {
+    int earlier = 0, all = 0;
+    for (std::size_t i = 0; i < ordered.size(); ++i) {
+      if (i == j || !UltrasoundLineOfSight(sim.plan, ordered[i], ordered[j], 5.0)) continue;
+      ++all;
+      earlier += i < j;
+    }
+    if (j > 0) EXPECT_GE(earlier, 1) << j;
+    EXPECT_GE(all, 2) << j;
+  }
+  // Drop events in id order.
+  std::vector<std::string> dropped;
+  for (const auto& e : sim.data.events) {
+    if (e.event == "drop") dropped.push_back(e.node);
+  }
+  EXPECT_TRUE(std::is_sorted(dropped.begin(), dropped.end()));
+  EXPECT_EQ(dropped.size(), beacons.size());
+}
+
+TEST(BeaconLab, UltrasoundErrorsMatchThePapersMovingNodeCharacterization) {
+  const SimulatedMission sim = SimulateBeaconLab({}, 2);
+  const auto beacons = BeaconTruth(sim.data);
+  std::map<std::pair<double, std::string>, double> bearing;
+  for (const auto& b : sim.data.bearings) bearing[{b.t, b.a}] = b.bearing_rad;
+  std::vector<double> range_err, bearing_err;
+  double signed_sum = 0;
+  for (const auto& r : sim.data.ranges) {
+    if (r.b != "ff1") continue;
+    const Vec2 p = AgentAt(sim.data, r.t);
+    const Vec2 rel = p - beacons.at(r.a);
+    range_err.push_back(std::abs(r.range_m - rel.norm()));
+    signed_sum += r.range_m - rel.norm();
+    bearing_err.push_back(
+        std::abs(WrapAngle(bearing.at({r.t, r.a}) - std::atan2(rel.y(), rel.x()))));
+    EXPECT_LE(rel.norm(), 5.0 + 0.2);  // 5 m maximum range (truth at 10 Hz: 0.1 m slack)
+  }
+  const double duration = sim.data.truth.back().t - sim.data.truth.front().t;
+  // Sec. 3.B: 90 % of range errors below 1 m, 90th percentile of bearing errors 60 deg; NLOS
+  // biased long; sec. 7.C: ~5 measurements per second.
+  EXPECT_LT(Percentile(range_err, 90), 1.0);
+  EXPECT_NEAR(Percentile(bearing_err, 90) * 180 / std::numbers::pi, 60.0, 8.0);
+  EXPECT_GT(signed_sum / range_err.size(), 0.05);
+  EXPECT_NEAR(range_err.size() / duration, 5.0, 1.5);
+  EXPECT_NEAR(duration, LabTraceMinutes(LabTrace::kA) * 60, 10.0);
+}
+
+TEST(BeaconLab, RetreatBySmallestIdReachesTheExitWithoutCrossingAWall) {
+  BeaconLabOptions o;
+  o.surveyed = false;
+  o.trace = LabTrace::kE;  // ends far from the door
+  const SimulatedMission sim = SimulateBeaconLab(o, 6);
+  ASSERT_EQ(sim.walks.size(), 1u);
+  const auto& truth = sim.walks[0].second.truth;
+  for (std::size_t k = 1; k < truth.size(); ++k) {
+    ASSERT_FALSE(sim.plan.Crosses(truth[k - 1].position, truth[k].position)) << truth[k].t;
+  }
+  EXPECT_LT((truth.back().position - Vec2(-1.0, 4.5)).norm(), 0.2);  // truth at 10 Hz
+  // From anywhere on the trail the rule ends at the entry beacon.
+  const auto beacons = BeaconTruth(sim.data);
+  std::vector<Vec2> ordered;
+  for (const auto& [id, p] : beacons) ordered.push_back(p);
+  for (const Vec2 from : {Vec2(13.5, 7.5), Vec2(7.5, 1.5), Vec2(12.0, 1.5)}) {
+    const auto targets = RetreatTargets(sim.plan, ordered, from, 5.0);
+    ASSERT_FALSE(targets.empty());
+    EXPECT_EQ(targets.back(), 0);
+    EXPECT_TRUE(std::is_sorted(targets.rbegin(), targets.rend()));
+  }
+}
+
+}  // namespace
+}  // namespace trailmark

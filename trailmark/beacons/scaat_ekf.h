@@ -1,0 +1,210 @@
+#pragma once
+/// Tracking along an ultrasound beacon trail (ultrasound-beacons paper, sec. 6).
+///
+/// `ScaatEkf`: the paper's extended Kalman filter with state x = (u, v, psi, scale) — position
+/// and the corrections applied to the PDR's step heading and step length. Measurements are
+/// processed one at a time in time order (SCAAT, Welch & Bishop 1997):
+///  - an inertial step d (navigation frame of the PDR) moves the position by
+///        p <- p + scale R(psi) d                                            (sec. 6)
+///    i.e. the step heading corrected by psi and the step length by scale;
+///  - an ultrasound measurement of range r and bearing b from a beacon at B updates the state.
+///    The paper converts (r, b) to a position B + r (cos b, sin b) (`UpdatePosition`); ours,
+///    by default, updates with the range and the bearing as two scalar measurements of
+///    h_r = |p - B|, h_b = atan2(p - B), which keeps the long-tailed bearing from corrupting the
+///    range and lets each be gated on its own.
+/// Deviation from the text, stated: the paper "does not update the state" on an inertial step and
+/// only applies the last (psi, scale); we propagate the covariance through the step (the
+/// Jacobians in psi and scale), without which psi and scale would never become observable from
+/// position measurements. Beyond the paper: chi-square gating of every scalar update (NLOS
+/// ranges are biased long), beacon position uncertainty added to the measurement noise (MDS
+/// beacons), Joseph-form updates so the covariance stays symmetric positive definite.
+///
+/// `UltrasoundOnlyKf`: the paper's baseline (sec. 7.C) — position and velocity, constant
+/// velocity, each range/bearing converted to a position fix.
+///
+/// `InitializeFromUltrasound`: a start without a surveyed position — the position and PDR
+/// heading correction that best explain the first ultrasound measurements along the PDR track
+/// (robust non-linear least squares from a grid of headings; the paper suggests "averaging the
+/// first few ultrasound measurements through non-linear regression", sec. 6). No I/O.
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark::beacons {
+
+/// A beacon as the tracker sees it: its position and that position's uncertainty.
+struct BeaconPosition {
+  Vec2 position_n = Vec2::Zero();
+  Mat2 cov = Mat2::Zero();
+};
+
+/// Measurement models, with the optional Jacobian in the node's position next to them.
+double UltrasoundRange(const Vec2& position_n, const Vec2& beacon_n,
+                       Eigen::RowVector2d* H = nullptr);
+double UltrasoundBearing(const Vec2& position_n, const Vec2& beacon_n,
+                         Eigen::RowVector2d* H = nullptr);
+
+struct ScaatEkfOptions {
+  double initial_position_sigma_m = 0.1;    ///< surveyed start (paper: Ubisense fix)
+  double initial_heading_sigma_rad = 0.17;  ///< PDR heading offset prior, ~10 deg
+  double initial_scale_sigma = 0.1;         ///< step length scale prior
+  /// Random walk of the heading correction per metre walked (PDR heading drift; sec. 3.B: the
+  /// drift occurs incrementally).
+  double heading_walk_rad_per_sqrt_m = 0.03;
+  double scale_walk_per_sqrt_m = 0.002;
+  double step_sigma_floor_m = 0.02;         ///< per axis, added to every step's covariance
+  double range_sigma_m = 0.30;              ///< when a measurement gives none (moving foot)
+  double bearing_sigma_rad = 0.57;          ///< when none given: p90 of 60 deg (sec. 3.B)
+  double gate_sigma = 3.0;                  ///< scalar innovations beyond this are rejected
+  double gate_chi2_2dof = 11.83;            ///< position fixes (99.73 %)
+  double min_range_for_bearing_m = 0.3;     ///< bearing of a node on top of the beacon: skip
+  double scale_min = 0.5, scale_max = 1.5;  ///< physical bounds on the step-length correction
+
+  bool IsValid(std::string* why) const;
+};
+
+/// What happened to one measurement.
+enum class UpdateResult { kAccepted, kGated, kSkipped };
+
+struct ScaatEkfSummary {
+  std::size_t steps = 0;
+  std::size_t range_updates = 0, bearing_updates = 0, position_updates = 0;
+  std::size_t gated = 0, skipped = 0;
+  std::string BriefReport() const;
+};
+
+class ScaatEkf {
+ public:
+  using Options = ScaatEkfOptions;
+  using State = Eigen::Vector4d;  ///< (u, v, psi, scale)
+  using Cov = Eigen::Matrix4d;
+  enum Index { kU = 0, kV = 1, kPsi = 2, kScale = 3 };
+
+  ScaatEkf(const Vec2& position_n, const Mat2& position_cov, double psi_rad, double psi_sigma_rad,
+           double scale, double scale_sigma, Options options = {});
+  /// Starts with the options' priors around (position, psi 0, scale 1).
+  ScaatEkf(const Vec2& position_n, Options options = {});
+  /// Any state and covariance (e.g. from InitializeFromUltrasound).
+  ScaatEkf(const State& x, const Cov& P, Options options = {});
+
+  /// One PDR step `delta_n` (PDR navigation frame) with its covariance.
+  void PredictStep(const Vec2& delta_n, const Mat2& delta_cov);
+  /// Scalar range update; sigma <= 0 uses the options' value.
+  UpdateResult UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m = 0);
+  /// Scalar bearing update (from the beacon to the node, navigation frame).
+  UpdateResult UpdateBearing(const BeaconPosition& beacon, double bearing_rad,
+                             double sigma_rad = 0);
+  /// The paper's update: range and bearing converted to a position fix.
+  UpdateResult UpdatePosition(const BeaconPosition& beacon, double range_m, double bearing_rad,
+                              double range_sigma_m = 0, double bearing_sigma_rad = 0);
+
+  /// A direct measurement of the heading correction, e.g. from the entry: the known heading
+  /// through the door minus the PDR's direction over the first metre (ours).
+  UpdateResult UpdateHeadingCorrection(double psi_rad, double sigma_rad);
+
+  const State& state() const { return x_; }
+  const Cov& covariance() const { return P_; }
+  Vec2 position() const { return x_.head<2>(); }
+  Mat2 position_cov() const { return P_.topLeftCorner<2, 2>(); }
+  double psi() const { return x_(kPsi); }
+  double scale() const { return x_(kScale); }
+  /// Normalized innovation squared of the last processed update (accepted or gated).
+  double last_nis() const { return last_nis_; }
+  const ScaatEkfSummary& summary() const { return summary_; }
+  const Options& options() const { return options_; }
+
+ private:
+  // Joseph-form update with a measurement of dimension M.
+  template <int M>
+  UpdateResult Update(const Eigen::Matrix<double, M, 1>& innovation,
+                      const Eigen::Matrix<double, M, 4>& H, const Eigen::Matrix<double, M, M>& R,
+                      double gate);
+  void Condition();
+
+  Options options_;
+  State x_ = State::Zero();
+  Cov P_ = Cov::Identity();
+  double last_nis_ = 0;
+  ScaatEkfSummary summary_;
+};
+
+struct UltrasoundOnlyKfOptions {
+  double accel_sigma_mps2 = 0.7;  ///< white-noise acceleration (walking)
+  double initial_position_sigma_m = 0.1;
+  double initial_velocity_sigma_mps = 1.0;
+  double range_sigma_m = 0.30;
+  double bearing_sigma_rad = 0.57;
+  double gate_chi2_2dof = 11.83;
+};
+
+/// The paper's ultrasound-only baseline (sec. 7.C): (x, y, vx, vy), constant velocity, every
+/// range/bearing converted to a position.
+class UltrasoundOnlyKf {
+ public:
+  using Options = UltrasoundOnlyKfOptions;
+  UltrasoundOnlyKf(const Vec2& position_n, TimeS t, Options options = {});
+  void PredictTo(TimeS t);
+  UpdateResult UpdatePosition(TimeS t, const BeaconPosition& beacon, double range_m,
+                              double bearing_rad, double range_sigma_m = 0,
+                              double bearing_sigma_rad = 0);
+  Vec2 position() const { return x_.head<2>(); }
+  Mat2 position_cov() const { return P_.topLeftCorner<2, 2>(); }
+  std::size_t accepted() const { return accepted_; }
+  std::size_t gated() const { return gated_; }
+
+ private:
+  Options options_;
+  TimeS t_;
+  Eigen::Vector4d x_ = Eigen::Vector4d::Zero();
+  Eigen::Matrix4d P_ = Eigen::Matrix4d::Identity();
+  std::size_t accepted_ = 0, gated_ = 0;
+};
+
+/// The paper's conversion of (range, bearing) from a beacon to a position with its covariance
+/// (first-order propagation of the polar noise plus the beacon's uncertainty).
+void PolarToPosition(const BeaconPosition& beacon, double range_m, double bearing_rad,
+                     double range_sigma_m, double bearing_sigma_rad, Vec2* position_n, Mat2* cov);
+
+/// One ultrasound measurement for the initialization: at the moment the PDR track (cumulative
+/// PDR displacement from the first buffered sample) was at `pdr_n`.
+struct InitMeasurement {
+  Vec2 pdr_n = Vec2::Zero();
+  Vec2 beacon_n = Vec2::Zero();
+  double range_m = 0, range_sigma_m = 0.30;
+  std::optional<double> bearing_rad;
+  double bearing_sigma_rad = 0.57;
+};
+
+struct InitOptions {
+  int min_measurements = 10;
+  int min_beacons = 2;               ///< or one beacon once the walk is long enough:
+  double min_track_m = 3.0;          ///< PDR track length that makes a single beacon enough
+  double min_heading_track_m = 2.0;  ///< the heading needs this much walk in any case
+  int heading_grid = 24;             ///< initial headings tried (15 deg apart)
+  double huber_k = 1.5;              ///< robust loss threshold (in sigmas)
+  double max_rms_normalized = 2.0;   ///< reject a solution whose residuals are too large
+};
+
+struct InitResult {
+  bool ok = false;
+  Vec2 origin_n = Vec2::Zero();  ///< position at the first buffered sample
+  double psi_rad = 0;            ///< rotation from the PDR frame to the navigation frame
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Identity();  ///< of (origin x, origin y, psi)
+  double rms_normalized = 0;
+  std::string why;  ///< when not ok
+  /// The position of a PDR-track point in the navigation frame.
+  Vec2 Map(const Vec2& pdr_n) const;
+};
+
+/// The filter that continues from an initialization at the PDR-track point `pdr_n` (position,
+/// heading correction and their covariance propagated; scale from the options' prior).
+ScaatEkf StartFromInit(const InitResult& init, const Vec2& pdr_n, const ScaatEkfOptions& options);
+
+InitResult InitializeFromUltrasound(const std::vector<InitMeasurement>& measurements,
+                                    const InitOptions& options = {});
+
+}  // namespace trailmark::beacons

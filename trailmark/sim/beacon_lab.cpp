@@ -1,0 +1,377 @@
+#include "trailmark/sim/beacon_lab.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "trailmark/core/random.h"
+
+namespace trailmark {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// Aisle centre lines of the lab.
+constexpr double kWest = 1.5, kEast = 13.5, kSouth = 1.5, kNorth = 7.5, kCross = 7.5, kMid = 4.5;
+const Vec2 kEntryOutside(-1.0, kMid);  // the base, outside the door
+const Vec2 kTraceStart(kWest, kMid);
+
+std::vector<Vec2> RingCcw() {
+  return {{kWest, kMid},   {kWest, kSouth}, {kEast, kSouth},
+          {kEast, kNorth}, {kWest, kNorth}, {kWest, kMid}};
+}
+std::vector<Vec2> Reversed(std::vector<Vec2> v) {
+  std::reverse(v.begin(), v.end());
+  return v;
+}
+std::vector<Vec2> WestLoop() {
+  return {{kWest, kMid},    {kWest, kSouth}, {kCross, kSouth},
+          {kCross, kNorth}, {kWest, kNorth}, {kWest, kMid}};
+}
+std::vector<Vec2> EastLoop() {
+  return {{kWest, kMid},    {kWest, kSouth},  {kEast, kSouth}, {kEast, kNorth},
+          {kCross, kNorth}, {kCross, kSouth}, {kWest, kSouth}, {kWest, kMid}};
+}
+std::vector<Vec2> FigureEight() {
+  return {{kWest, kMid},   {kWest, kSouth},  {kCross, kSouth}, {kCross, kNorth}, {kEast, kNorth},
+          {kEast, kSouth}, {kCross, kSouth}, {kCross, kNorth}, {kWest, kNorth},  {kWest, kMid}};
+}
+
+// Loops appended until the route is long enough for the trace's duration.
+Route TraceRoute(LabTrace trace, double speed_mps) {
+  std::vector<std::vector<Vec2>> cycle;
+  switch (trace) {
+    case LabTrace::kA:
+      cycle = {RingCcw()};
+      break;
+    case LabTrace::kB:
+      cycle = {Reversed(RingCcw())};
+      break;
+    case LabTrace::kC:
+      cycle = {FigureEight()};
+      break;
+    case LabTrace::kD:
+      cycle = {WestLoop(), Reversed(WestLoop())};
+      break;
+    case LabTrace::kE:
+      cycle = {EastLoop(), WestLoop()};
+      break;
+    case LabTrace::kF:
+      cycle = {RingCcw(), FigureEight(), Reversed(EastLoop())};
+      break;
+  }
+  Route route;
+  route.waypoints.push_back(kTraceStart);
+  const double want_m = LabTraceMinutes(trace) * 60.0 * speed_mps;
+  for (std::size_t k = 0; route.Length() < want_m; ++k) {
+    const auto& loop = cycle[k % cycle.size()];
+    for (std::size_t i = 1; i < loop.size(); ++i) {
+      route.waypoints.push_back(loop[i]);
+      // Trace f searches: a pause at every corner of its first loop kind.
+      if (trace == LabTrace::kF && k % cycle.size() == 0 && i + 1 < loop.size()) {
+        route.stops.push_back({route.Length(), 4.0});
+      }
+      if (route.Length() >= want_m) break;
+    }
+  }
+  return route;
+}
+
+// The walk that lays the trail: in through the door, around the ring, through the cross aisle.
+Route DeploymentRoute() {
+  Route r;
+  r.waypoints = {kEntryOutside,   {kWest, kMid},    {kWest, kSouth},  {kEast, kSouth},
+                 {kEast, kNorth}, {kCross, kNorth}, {kCross, kSouth}, {kCross, kNorth},
+                 {kWest, kNorth}, {kWest, kMid}};
+  return r;
+}
+
+Walk Concatenate(std::vector<Walk> parts) {
+  Walk all;
+  for (auto& w : parts) {
+    all.steps.insert(all.steps.end(), w.steps.begin(), w.steps.end());
+    for (const auto& s : w.truth) {
+      if (all.truth.empty() || s.t > all.truth.back().t + 1e-9) all.truth.push_back(s);
+    }
+    all.stops.insert(all.stops.end(), w.stops.begin(), w.stops.end());
+  }
+  return all;
+}
+
+double TurnAngle(const Vec2& a, const Vec2& b, const Vec2& c) {
+  const Vec2 u = b - a, v = c - b;
+  if (u.norm() < 1e-9 || v.norm() < 1e-9) return 0;
+  return std::abs(std::atan2(u.x() * v.y() - u.y() * v.x(), u.dot(v)));
+}
+
+// Applies the three deployment rules along `walk` (the deployment route).
+BeaconLayout Deploy(const FloorPlan& plan, const Route& route, const Walk& walk,
+                    const DeploymentOptions& o, double range_m, Random& rng) {
+  BeaconLayout layout;
+  std::vector<Vec2> turns;
+  for (std::size_t i = 1; i + 1 < route.waypoints.size(); ++i) {
+    if (TurnAngle(route.waypoints[i - 1], route.waypoints[i], route.waypoints[i + 1]) >
+        o.major_turn_rad) {
+      turns.push_back(route.waypoints[i]);
+    }
+  }
+  std::vector<bool> turn_done(turns.size(), false);
+  int last = -1;
+  auto drop = [&](const Vec2& at, TimeS t) {
+    for (std::size_t j = 0; j < layout.beacons.size(); ++j) {
+      if ((layout.beacons[j] - at).norm() < o.skip_if_beacon_within_m) {
+        last = static_cast<int>(j);  // already marked: that one is now the last heard
+        return;
+      }
+    }
+    layout.beacons.push_back(
+        at + Vec2(rng.Normal(0, o.drop_scatter_m), rng.Normal(0, o.drop_scatter_m)));
+    layout.drop_time_s.push_back(std::round(t * 1000) / 1000);
+    last = static_cast<int>(layout.beacons.size()) - 1;
+  };
+  const Walk::Sample* previous = nullptr;
+  for (const auto& s : walk.truth) {
+    if (last < 0) {
+      if (s.position.x() >= 0.3) drop(s.position, s.t);  // rule (i): at the entry
+      previous = &s;
+      continue;
+    }
+    const Vec2& b = layout.beacons[last];
+    const bool heard = (s.position - b).norm() <= o.receive_threshold_m &&
+                       UltrasoundLineOfSight(plan, b, s.position, range_m);
+    if (!heard && previous != nullptr) drop(previous->position, previous->t);  // rule (ii)
+    for (std::size_t k = 0; k < turns.size(); ++k) {                           // rule (iii)
+      if (!turn_done[k] && (s.position - turns[k]).norm() < 0.2) {
+        turn_done[k] = true;
+        drop(s.position, s.t);
+      }
+    }
+    previous = &s;
+  }
+  return layout;
+}
+
+std::string BeaconId(int j) { return fmt::format("b{:02d}", j + 1); }
+
+}  // namespace
+
+BeaconLabOptions::BeaconLabOptions() {
+  walker.speed_mps = 1.1;
+  // Xsens MTx PDR (sec. 3.B): heading errors from magnetic disturbance dominate and grow
+  // incrementally; individual steps stay accurate.
+  pdr.heading_drift_sigma_rad_per_s = 0.003;
+  pdr.heading_random_walk_rad = 0.01;
+  pdr.turn_scale_error_sigma = 0.03;
+  pdr.scale_error_sigma = 0.05;
+}
+
+const char* LabTraceName(LabTrace trace) {
+  static const char* names[] = {"a", "b", "c", "d", "e", "f"};
+  return names[static_cast<int>(trace)];
+}
+
+double LabTraceMinutes(LabTrace trace) {
+  static const double minutes[] = {4, 5, 3, 6, 8, 7};  // "three till eight minutes" (sec. 7.A)
+  return minutes[static_cast<int>(trace)];
+}
+
+FloorPlan BuildBeaconLab() {
+  std::vector<Segment2> walls, doors;
+  std::vector<Room> rooms;
+  AddRectangle(walls, {0, 0}, {15, 9});
+  doors.push_back({{0, kMid - 0.6}, {0, kMid + 0.6}});
+  AddRectangle(walls, {3.0, 3.0}, {6.5, 6.0});   // bench block west
+  AddRectangle(walls, {8.5, 3.0}, {12.0, 6.0});  // bench block east
+  rooms.push_back({"lab", {{0, 0}, {15, 0}, {15, 9}, {0, 9}}, 0});
+  return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
+}
+
+bool UltrasoundLineOfSight(const FloorPlan& plan, const Vec2& a, const Vec2& b, double range_m) {
+  return (a - b).norm() <= range_m && !plan.Crosses(a, b);
+}
+
+std::vector<int> RetreatTargets(const FloorPlan& plan, const std::vector<Vec2>& beacons,
+                                const Vec2& position, double range_m) {
+  std::vector<int> targets;
+  Vec2 at = position;
+  int current = static_cast<int>(beacons.size());
+  while (current > 0) {
+    int smallest = -1;
+    for (int j = 0; j < current; ++j) {
+      if (UltrasoundLineOfSight(plan, beacons[j], at, range_m)) {
+        smallest = j;
+        break;
+      }
+    }
+    if (smallest < 0) break;  // nothing smaller heard: stuck (reported by an empty/short list)
+    targets.push_back(smallest);
+    if (smallest == 0) break;
+    at = beacons[smallest];
+    current = smallest;
+  }
+  return targets;
+}
+
+SimulatedMission SimulateBeaconLab(const BeaconLabOptions& o, std::uint64_t seed) {
+  Random rng(seed * 104729 + 17);
+  Random walk_rng = rng.Fork(), deploy_rng = rng.Fork(), pdr_rng = rng.Fork(), us_rng = rng.Fork();
+  SimulatedMission sim;
+  sim.plan = BuildBeaconLab();
+  const UltrasoundOptions& us = o.ultrasound;
+
+  // The trail: the deployment rules applied on the deployment walk.
+  const Route deploy_route = DeploymentRoute();
+  const Walk deploy_walk = WalkRoute(deploy_route, o.walker, 0.0, walk_rng);
+  const BeaconLayout layout =
+      Deploy(sim.plan, deploy_route, deploy_walk, o.deployment, us.max_range_m, deploy_rng);
+  const int B = static_cast<int>(layout.beacons.size());
+
+  // The walk of this mission.
+  Walk walk;
+  std::vector<TimeS> beacon_since(B, -1e300);  // surveyed: there from the start
+  if (o.surveyed) {
+    walk = WalkRoute(TraceRoute(o.trace, o.walker.speed_mps), o.walker, 0.0, walk_rng);
+  } else {
+    beacon_since = layout.drop_time_s;
+    const TimeS t_trace = deploy_walk.truth.back().t;
+    Walk trace = WalkRoute(TraceRoute(o.trace, o.walker.speed_mps), o.walker, t_trace, walk_rng);
+    Route out;
+    out.waypoints.push_back(trace.truth.back().position);
+    for (int j : RetreatTargets(sim.plan, layout.beacons, out.waypoints.back(), us.max_range_m)) {
+      out.waypoints.push_back(layout.beacons[j]);
+    }
+    out.waypoints.push_back(kEntryOutside);
+    Walk retreat = WalkRoute(out, o.walker, trace.truth.back().t + 1.0, walk_rng);
+    walk = Concatenate({deploy_walk, std::move(trace), std::move(retreat)});
+  }
+  sim.walks.emplace_back("ff1", walk);
+
+  MissionData& m = sim.data;
+  m.info.name = o.surveyed ? fmt::format("beacon-lab-{}", LabTraceName(o.trace)) : "beacon-trail";
+  m.info.description = fmt::format(
+      "{} x 9 m lab with {} ultrasound beacons placed by the deployment rules (ultrasound-beacons "
+      "paper, sec. 4, 7); {}; trace {} ({} min); simulated, seed {}",
+      15, B,
+      o.surveyed ? "beacons surveyed" : "beacons dropped by ff1, then the trace and the retreat",
+      LabTraceName(o.trace), LabTraceMinutes(o.trace), seed);
+  const Vec2 start = walk.truth.front().position;
+  const double start_heading = walk.truth.front().heading_rad;
+  if (!o.surveyed)
+    m.info.nodes.push_back(NodeInfo::Base("base", Vec3(kEntryOutside.x(), kEntryOutside.y(), 0)));
+  m.info.nodes.push_back(
+      NodeInfo::Agent("ff1", Vec3(start.x(), start.y(), 0), 0.1, start_heading, 0.05));
+  for (int j = 0; j < B; ++j) {
+    NodeInfo n;
+    n.id = BeaconId(j);
+    if (o.surveyed) {
+      n.kind = NodeKind::kLandmark;
+      n.position = Vec3(layout.beacons[j].x(), layout.beacons[j].y(), 0);
+      n.position_sigma_m = 0.02;
+    } else {
+      n.kind = NodeKind::kCrumb;
+    }
+    m.info.nodes.push_back(n);
+    m.truth.push_back({o.surveyed ? walk.truth.front().t : layout.drop_time_s[j], n.id,
+                       Vec3(layout.beacons[j].x(), layout.beacons[j].y(), 0)});
+    if (!o.surveyed) m.events.push_back({layout.drop_time_s[j], "ff1", "drop", n.id});
+  }
+
+  // PDR steps (the IMU's heading starts off by a magnetometer error).
+  PdrErrorOptions pdr_options = o.pdr;
+  pdr_options.initial_heading_error_rad = o.initial_heading_error_sigma_rad * pdr_rng.Normal();
+  PdrErrorModel pdr(pdr_options, pdr_rng.Fork());
+  for (const auto& st : walk.steps) {
+    const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
+    const double var = pdr.ReportedVariance((st.to - st.from).norm());
+    m.steps.push_back({st.t0, st.t1, "ff1", Vec3(d.x(), d.y(), 0), Vec3(var, var, 1e-4)});
+  }
+  for (const auto& s : walk.truth)
+    m.truth.push_back({s.t, "ff1", Vec3(s.position.x(), s.position.y(), 0)});
+  m.events.push_back({walk.truth.front().t, "ff1", "enter", ""});
+  if (!o.surveyed) m.events.push_back({walk.truth.back().t, "ff1", "exit", ""});
+
+  // Ultrasound pulses of the foot node, received by the beacons (range and bearing from the
+  // beacon to the foot).
+  auto position_at = [&](TimeS t) {
+    const auto it = std::lower_bound(walk.truth.begin(), walk.truth.end(), t,
+                                     [](const Walk::Sample& s, TimeS v) { return s.t < v; });
+    if (it == walk.truth.begin()) return it->position;
+    if (it == walk.truth.end()) return walk.truth.back().position;
+    const auto prev = std::prev(it);
+    const double a = (t - prev->t) / std::max(it->t - prev->t, 1e-9);
+    return Vec2(prev->position + a * (it->position - prev->position));
+  };
+  auto long_by = [&]() { return us_rng.Uniform(us.nlos_min_m, us.nlos_max_m); };
+  for (TimeS t = walk.truth.front().t + 0.2; t <= walk.truth.back().t;
+       t += us.pulse_period_s + us_rng.Uniform(-us.period_jitter_s, us.period_jitter_s)) {
+    const TimeS tr = std::round(t * 1000) / 1000;
+    const Vec2 foot = position_at(tr);
+    for (int j = 0; j < B; ++j) {
+      if (beacon_since[j] > tr) continue;
+      const Vec2 rel = foot - layout.beacons[j];
+      const double d = rel.norm();
+      if (d > us.max_range_m) continue;
+      const double true_bearing = std::atan2(rel.y(), rel.x());
+      double range, bearing;
+      if (UltrasoundLineOfSight(sim.plan, layout.beacons[j], foot, us.max_range_m)) {
+        const double p_detect =
+            us.detection_near -
+            (us.detection_near - us.detection_at_max_range) * d / us.max_range_m;
+        if (us_rng.Uniform() > p_detect) continue;
+        range = us_rng.Uniform() < us.nlos_probability ? d + long_by()
+                                                       : d + us_rng.Normal(0, us.range_sigma_m);
+        bearing = us_rng.Uniform() < us.bearing_outlier_probability
+                      ? us_rng.Uniform(-kPi, kPi)
+                      : true_bearing + us_rng.Normal(0, us.bearing_sigma_rad);
+      } else {
+        if (us_rng.Uniform() > us.corner_reflection_probability) continue;
+        range = d + long_by();
+        bearing = true_bearing + us_rng.Normal(0, 1.5 * us.bearing_sigma_rad);
+      }
+      if (range > us.max_range_m + us.nlos_max_m) continue;
+      bearing = std::remainder(bearing, 2 * kPi);
+      m.ranges.push_back({tr, BeaconId(j), "ff1", std::round(std::max(range, 0.02) * 1000) / 1000,
+                          us.range_sigma_m, "ultrasound"});
+      m.bearings.push_back(
+          {tr, BeaconId(j), "ff1", std::round(bearing * 1000) / 1000, us.bearing_sigma_rad});
+    }
+  }
+  // Beacon <-> beacon ranging: each new beacon ranges the others at its drop, then every pair
+  // periodically (static nodes, line of sight).
+  auto range_pairs = [&](TimeS t, int only) {
+    for (int i = 0; i < B; ++i) {
+      for (int j = i + 1; j < B; ++j) {
+        if (only >= 0 && i != only && j != only) continue;
+        if (beacon_since[i] > t || beacon_since[j] > t) continue;
+        if (!UltrasoundLineOfSight(sim.plan, layout.beacons[i], layout.beacons[j], us.max_range_m))
+          continue;
+        const double d = (layout.beacons[i] - layout.beacons[j]).norm();
+        for (int k = 0; k < us.beacon_ranging_burst; ++k) {
+          const double r = us_rng.Uniform() < us.static_outlier_probability
+                               ? d + long_by()
+                               : d + us_rng.Normal(0, us.static_range_sigma_m);
+          m.ranges.push_back({std::round((t + 0.05 * k) * 1000) / 1000, BeaconId(i), BeaconId(j),
+                              std::round(std::max(r, 0.02) * 1000) / 1000, us.static_range_sigma_m,
+                              "ultrasound"});
+        }
+      }
+    }
+  };
+  if (!o.surveyed) {
+    for (int j = 0; j < B; ++j) range_pairs(layout.drop_time_s[j] + 0.5, j);
+  }
+  for (TimeS t = walk.truth.front().t + 0.1; t <= walk.truth.back().t;
+       t += us.beacon_ranging_period_s) {
+    range_pairs(t, -1);
+  }
+  auto by_time = [](const auto& a, const auto& b) { return a.t < b.t; };
+  std::stable_sort(m.ranges.begin(), m.ranges.end(), by_time);
+  std::stable_sort(m.bearings.begin(), m.bearings.end(), by_time);
+  std::stable_sort(m.events.begin(), m.events.end(), by_time);
+  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
+  return sim;
+}
+
+}  // namespace trailmark
