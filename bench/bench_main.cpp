@@ -15,6 +15,9 @@
 #include "trailmark/beacons/mds.h"
 #include "trailmark/beacons/scaat_ekf.h"
 #include "trailmark/sim/beacon_lab.h"
+#include "trailmark/mapmatch/pattern_comparison.h"
+#include "trailmark/geometry/rigid_fit.h"
+#include <nanoflann.hpp>
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/synthetic_incident.h"
@@ -268,6 +271,68 @@ void BM_BeaconMds(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_BeaconMds)->Arg(21)->Arg(200)->Arg(1000)->Unit(benchmark::kMillisecond);
+
+// ICP closest points for one pattern comparison (issue 5, item 2: a library or our own "if
+// measured faster on these tiny point sets"): 40 odometry points against a 20-node pattern.
+// Ours: brute force over the pattern's segments (exact). nanoflann: a k-d tree over the
+// pattern densified to 5 cm (an approximation), built per pattern as ICP needs.
+std::vector<Vec2> IcpPattern() {
+  std::vector<Vec2> p;
+  for (int k = 0; k <= 8; ++k) p.emplace_back(k, 0);
+  for (int k = 1; k <= 5; ++k) p.emplace_back(8, k);
+  for (int k = 7; k >= 2; --k) p.emplace_back(k, 5);
+  return p;
+}
+std::vector<Vec2> IcpQueries() {
+  Random rng(4);
+  std::vector<Vec2> q;
+  for (const Vec2& p : mapmatch::ResampleByDistance(IcpPattern(), 0.5)) q.push_back(p + Vec2(rng.Normal(0, 0.3), rng.Normal(0, 0.3)));
+  return q;
+}
+void BM_IcpOwnBruteForce(benchmark::State& state) {
+  const auto target = IcpPattern();
+  const auto source = IcpQueries();
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(mapmatch::Icp(source, target, Mat2::Identity(), Vec2::Zero()));
+  }
+}
+BENCHMARK(BM_IcpOwnBruteForce)->Unit(benchmark::kMicrosecond);
+
+struct Cloud {
+  std::vector<Vec2> pts;
+  std::size_t kdtree_get_point_count() const { return pts.size(); }
+  double kdtree_get_pt(std::size_t i, std::size_t d) const { return pts[i](static_cast<int>(d)); }
+  template <class B>
+  bool kdtree_get_bbox(B&) const { return false; }
+};
+void BM_IcpNanoflannTree(benchmark::State& state) {
+  const auto target = IcpPattern();
+  const auto source = IcpQueries();
+  using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, Cloud>, Cloud, 2>;
+  for (auto _ : state) {
+    Cloud cloud{mapmatch::ResampleByDistance(target, 0.05)};
+    Tree tree(2, cloud, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+    Mat2 R = Mat2::Identity();
+    Vec2 t = Vec2::Zero();
+    std::vector<Vec2> from(source.size()), to(source.size());
+    for (int it = 0; it < 10; ++it) {  // the iterations our ICP typically needs
+      for (std::size_t k = 0; k < source.size(); ++k) {
+        const Vec2 p = R * source[k] + t;
+        unsigned int idx = 0;
+        double d2 = 0;
+        const double q[2] = {p.x(), p.y()};
+        tree.knnSearch(q, 1, &idx, &d2);
+        from[k] = source[k];
+        to[k] = cloud.pts[idx];
+      }
+      const RigidFit2 fit = FitRigid(from, to, false);
+      R = fit.rotation;
+      t = fit.translation;
+    }
+    benchmark::DoNotOptimize(t);
+  }
+}
+BENCHMARK(BM_IcpNanoflannTree)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

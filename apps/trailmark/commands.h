@@ -52,6 +52,10 @@ int WriteReproduction(const std::filesystem::path& out, const std::string& title
 /// `trailmark reproduce beacons`: MDS beacon localization (Figs. 4-5, `runs` simulations per
 /// point) and tracking on the six lab traces (Table 1, Figs. 6-9, `seeds` each).
 int ReproduceBeacons(int runs, int seeds, const std::filesystem::path& out);
+/// `trailmark reproduce mapmatch`: the map-aided search paper on the two simulated houses
+/// (Figs. 7-9); `extra` options go to every mapmatch run.
+int ReproduceMapMatch(int seeds, const std::filesystem::path& out,
+                      const std::map<std::string, std::string>& extra = {});
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
 /// side with the published figures; results.md under out/NAME.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,

@@ -152,9 +152,10 @@ int Reproduce(const std::string& name, int seeds, const fs::path& out,
   if (name == "breadcrumb") return ReproduceBreadcrumb(seeds, out / "breadcrumb", options);
   if (name == "ins") return ReproduceIns(data_dir, out / "ins", options);
   if (name == "landmarks") return ReproduceLandmarks(std::max(seeds, 20), out / "landmarks", data_dir);
+  if (name == "mapmatch") return ReproduceMapMatch(seeds, out / "mapmatch", options);
   if (name == "beacons") return ReproduceBeacons(std::max(seeds, 100), seeds, out / "beacons");
   throw std::invalid_argument("unknown reproduction '" + name +
-                              "' (known: breadcrumb, ins, landmarks, beacons)");
+                              "' (known: breadcrumb, ins, landmarks, beacons, mapmatch)");
 }
 
 }  // namespace trailmark::cli

@@ -89,6 +89,14 @@ grep -q '"ff1: way out b01"' "$dir/bte/diagnostics.json" || fail "way out in dia
 "$TM" wayout "$dir/bt" --at 100 | grep -q "then out through the entry" || fail "wayout command"
 run_failing "$TM" wayout "$dir/bt" --agent nobody
 [ $rc -eq 2 ] && grep -q "no agent 'nobody'" "$dir/err" || fail "wayout unknown agent"
+# Map-aided search: the house search, pattern observations, no initial position.
+"$TM" simulate house1-search --seed 2 --out "$dir/hs" > /dev/null || fail "simulate house1-search"
+"$TM" validate "$dir/hs" | grep -q "mapmatch" || fail "mapmatch runnable"
+"$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/hsr" --option init=uniform > /dev/null || fail "mapmatch"
+grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatch diagnostics"
+"$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | grep -q "^ff1 " || fail "mapmatch eval"
+run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
+[ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
 run_failing "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/x" --option update=polar
 [ $rc -eq 1 ] && grep -q "update must be range-bearing or position" "$dir/err" || fail "bad update option"
 run_failing "$TM" energy --sleep-ua 0

@@ -9,6 +9,7 @@
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
 #include "trailmark/pipelines/landmarks_pipeline.h"
+#include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline.h"
 
@@ -24,6 +25,7 @@ const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
     v->push_back(std::make_unique<LandmarksPipeline>(true));
     v->push_back(std::make_unique<BeaconsPipeline>(false));
     v->push_back(std::make_unique<BeaconsPipeline>(true));
+    v->push_back(std::make_unique<MapMatchPipeline>());
     return v;
   }();
   return *pipelines;

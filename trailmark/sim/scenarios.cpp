@@ -1,6 +1,7 @@
 #include "trailmark/sim/scenarios.h"
 
 #include "trailmark/sim/beacon_lab.h"
+#include "trailmark/sim/house_search.h"
 #include "trailmark/sim/landmark_corridor.h"
 
 #include <algorithm>
@@ -170,6 +171,12 @@ std::vector<ScenarioInfo> Scenarios() {
           {"beacon-lab",
            "ultrasound-beacons paper: 15 x 9 m lab, ~21 surveyed ultrasound beacons placed by the "
            "deployment rules, walking trace a (4 min) with foot-node range/bearing and PDR steps"},
+          {"house1-search",
+           "map-aided search paper, data set 1: a left-hand directional search (4.5 min, slow, "
+           "sweeping, furniture not on the map) of the 70 m^2 west part of a 125 m^2 house"},
+          {"house2-search",
+           "map-aided search paper, data set 2: a 10-minute left-hand search of a 253 m^2 house "
+           "(corridor, seven rooms)"},
           {"beacon-trail",
            "ultrasound-beacons paper: a firefighter drops ultrasound beacons by the deployment "
            "rules (entry, signal loss, turns), walks trace c, then retreats to the exit by the "
@@ -196,6 +203,12 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   if (name == "training-building") return SimulateTrainingBuilding({}, seed);
   if (name == "landmark-corridor") return SimulateLandmarkMission({}, seed);
   if (name == "beacon-lab") return SimulateBeaconLab({}, seed);
+  if (name == "house1-search" || name == "house2-search") {
+    HouseSearchOptions o;
+    o.house = name == "house1-search" ? 1 : 2;
+    o.duration_s = o.house == 1 ? 270 : 600;
+    return SimulateHouseSearch(o, seed);
+  }
   if (name == "beacon-trail") {
     BeaconLabOptions o;
     o.surveyed = false;

@@ -90,8 +90,9 @@ Route FollowWall(const FloorPlan& plan, const Vec2& start, double heading_rad, H
   double walked = 0;
   auto dir = [](double a) { return Vec2(std::cos(a), std::sin(a)); };
   auto range = [&](double a, double max) { return walls.RayCast(p, dir(a), max).value_or(max); };
-  int corner_turns = 0;
-  while (walked < o.max_length_m) {
+  int corner_turns = 0;  // turns since the last move
+  const long max_iterations = 64 * static_cast<long>(o.max_length_m / o.probe_step_m) + 1024;
+  for (long iteration = 0; walked < o.max_length_m && iteration < max_iterations; ++iteration) {
     const double front = range(psi, probe);
     const double side = range(psi + side_sign * std::numbers::pi / 2, probe);
     if (front < d + o.probe_step_m) {
@@ -100,21 +101,29 @@ Route FollowWall(const FloorPlan& plan, const Vec2& start, double heading_rad, H
       if (++corner_turns > 16) break;  // boxed in
       continue;
     }
-    corner_turns = 0;
+    double steer;
     if (side >= probe - 1e-9) {
       // Lost the wall (open corner or doorway): turn towards the hand side gradually.
-      psi += side_sign * std::numbers::pi / 8;
+      steer = side_sign * std::numbers::pi / 8;
     } else {
       // Steer to hold the wall at distance d (proportional, limited rate).
-      const double err = side - d;
-      psi += side_sign * std::clamp(0.8 * err, -0.3, 0.3);
+      steer = side_sign * std::clamp(0.8 * (side - d), -0.3, 0.3);
     }
-    Vec2 next = p + dir(psi) * o.probe_step_m;
-    if (walls.Intersects({p, next})) {
-      psi -= side_sign * std::numbers::pi / 8;
-      continue;
+    Vec2 next = p + dir(psi + steer) * o.probe_step_m;
+    if (!walls.Intersects({p, next})) {
+      psi += steer;
+    } else {
+      // The steered step touches a wall (a door frame, a table corner): go straight on if
+      // that is free, else turn away from the hand.
+      next = p + dir(psi) * o.probe_step_m;
+      if (walls.Intersects({p, next})) {
+        psi -= side_sign * std::numbers::pi / 8;
+        if (++corner_turns > 16) break;  // boxed in (or standing on a wall)
+        continue;
+      }
     }
     p = next;
+    corner_turns = 0;
     walked += o.probe_step_m;
     route.waypoints.push_back(p);
   }

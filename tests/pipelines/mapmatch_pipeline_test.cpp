@@ -1,0 +1,105 @@
+// The mapmatch pipeline end to end on the simulated house search, and its input checks.
+#include "trailmark/pipelines/mapmatch_pipeline.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "test_util.h"
+#include "trailmark/core/error.h"
+#include "trailmark/eval/metrics.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/house_search.h"
+
+namespace trailmark {
+namespace {
+
+struct VectorSink : EstimateSink {
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
+
+TEST(MapMatchPipeline, KnownStartStaysOnTheMapAndEveryEstimateIsValid) {
+  HouseSearchOptions o;
+  const SimulatedMission sim = SimulateHouseSearch(o, 1);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const MapMatchPipeline pipeline;
+  ASSERT_TRUE(pipeline.CanRun(mission));
+  for (const auto& options :
+       std::vector<std::map<std::string, std::string>>{{{"pseudo", "false"}},
+                                                       {},
+                                                       {{"init", "uniform"}},
+                                                       {{"patterns_above_variance_m2", "0"}}}) {
+    VectorSink sink;
+    const PipelineSummary s = pipeline.Run({mission, options}, sink);
+    ASSERT_EQ(sink.rows.size(), sim.data.steps.size() + 1);  // the start and one per step
+    for (const auto& e : sink.rows) {
+      ASSERT_TRUE(e.position_n.allFinite());
+      ASSERT_GT(e.sxx, 0);
+      ASSERT_GT(e.sxx * e.syy - e.sxy * e.sxy, 0);
+    }
+    const Metrics m = Evaluate(sim.data.info, sim.data.truth, sink.rows);
+    if (options.count("pseudo")) {
+      // The conventional map-aided filter from a known start: within 1 m on average (seeds 1-6
+      // of house 1: 0.4-0.8 m).
+      EXPECT_LT(m.agents.stats.mean_m, 1.0);
+      EXPECT_EQ(s.numbers.at("ff1.pattern_comparisons"), 0.0);
+    } else {
+      // A comparison every 2 m after the first 20 m: used, or skipped while converged.
+      EXPECT_GT(s.numbers.at("ff1.pattern_comparisons") +
+                    s.numbers.at("ff1.comparisons_skipped_converged"),
+                20.0);
+      if (options.count("patterns_above_variance_m2")) {  // the paper's filter: always used
+        EXPECT_EQ(s.numbers.at("ff1.comparisons_skipped_converged"), 0.0);
+        EXPECT_GT(s.numbers.at("icp_runs"), 1000.0);
+      }
+    }
+    EXPECT_EQ(s.numbers.at("search_sequences"), 3.0);  // the searched part + two closed bedrooms
+  }
+}
+
+TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
+  HouseSearchOptions o;
+  o.duration_s = 60;
+  SimulatedMission sim = SimulateHouseSearch(o, 2);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  VectorSink sink;
+  {
+    const MissionDirectory mission(dir.path());
+    EXPECT_THROW(MapMatchPipeline().Run({mission, {{"init", "maybe"}}}, sink),
+                 std::invalid_argument);
+    EXPECT_THROW(MapMatchPipeline().Run({mission, {{"particles", "3"}}}, sink),
+                 std::invalid_argument);
+  }
+  // A floor plan with its outer wall broken: nothing enclosed, named with the file.
+  const FloorPlan broken({{{0, 0}, {12.5, 0}}, {{12.5, 0}, {12.5, 10}}, {{12.5, 10}, {0, 10}}}, {},
+                         {});
+  WriteMissionDirectory(dir.path(), sim.data, &broken);
+  try {
+    const MissionDirectory mission(dir.path());
+    MapMatchPipeline().Run({mission, {}}, sink);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("floorplan.geojson"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("encloses no area"), std::string::npos) << e.what();
+  }
+  // No floor plan at all: the pipeline cannot run and says so.
+  sim.data.info.floorplan.reset();
+  testing::TempDir bare;
+  WriteMissionDirectory(bare.path(), sim.data, nullptr);
+  const MissionDirectory mission(bare.path());
+  EXPECT_FALSE(MapMatchPipeline().CanRun(mission));
+  try {
+    MapMatchPipeline().Run({mission, {}}, sink);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("needs a floor plan"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace trailmark

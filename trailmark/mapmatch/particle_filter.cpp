@@ -1,0 +1,386 @@
+#include "trailmark/mapmatch/particle_filter.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <nanoflann.hpp>
+#include <numbers>
+#include <numeric>
+
+namespace trailmark::mapmatch {
+
+struct MapParticleFilter::NodeIndex {
+  std::vector<Vec2> points;
+  std::vector<std::vector<std::pair<int, int>>> at;  ///< (sequence, node) per unique point
+  // nanoflann dataset adaptor
+  std::size_t kdtree_get_point_count() const { return points.size(); }
+  double kdtree_get_pt(std::size_t i, std::size_t d) const {
+    return points[i](static_cast<int>(d));
+  }
+  template <class Box>
+  bool kdtree_get_bbox(Box&) const {
+    return false;
+  }
+  using Tree = nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<double, NodeIndex>,
+                                                   NodeIndex, 2>;
+  std::unique_ptr<Tree> tree;
+  int Nearest(const Vec2& p) const {
+    unsigned int index = 0;
+    double d2 = 0;
+    const double q[2] = {p.x(), p.y()};
+    return tree->knnSearch(q, 1, &index, &d2) == 1 ? static_cast<int>(index) : -1;
+  }
+};
+
+bool MapParticleFilterOptions::IsValid(std::string* why) const {
+  auto fail = [&](const char* w) {
+    if (why) *why = w;
+    return false;
+  };
+  if (particles < 10 || particles > 1000000)
+    return fail("particles must be within 10 .. 1,000,000");
+  if (!(position_noise_m >= 0) || !(heading_noise_rad_per_m >= 0))
+    return fail("noises must be >= 0");
+  if (!(likelihood_sigma > 0)) return fail("likelihood_sigma must be > 0");
+  if (!(weight_floor >= 0 && weight_floor < 1)) return fail("weight_floor must be within [0, 1)");
+  if (!(outlier_weight >= 0 && outlier_weight < 1))
+    return fail("outlier_weight must be within [0, 1)");
+  if (!(resample_fraction >= 0 && resample_fraction <= 1))
+    return fail("resample_fraction must be within [0, 1]");
+  if (!(resample_position_sigma_m >= 0) || !(resample_heading_sigma_rad >= 0))
+    return fail("resample noises >= 0");
+  if (!(max_match_rmse_m > 0)) return fail("max_match_rmse_m must be > 0");
+  return true;
+}
+
+std::string MapParticleFilterSummary::BriefReport() const {
+  return fmt::format(
+      "map particle filter: {} time / {} pattern updates ({} uninformative), {} wall eliminations, "
+      "{} floor "
+      "replacements, {} particles from patterns, {} systematic resamples, {} backtracks, {} "
+      "restarts; {} "
+      "comparisons skipped while converged",
+      time_updates, pattern_updates, uninformative_updates, wall_eliminations, floor_replacements,
+      pattern_resamples, systematic_resamples, backtracks, restarts, skipped_converged);
+}
+
+MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
+                                     const std::vector<NodeSequence>& sequences, Options options)
+    : grid_(grid),
+      sequences_(sequences),
+      options_(options),
+      rng_(options.seed),
+      nodes_(new NodeIndex) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument("MapParticleFilter options: " + why);
+  inside_centers_ = grid.InsideCenters();
+  if (inside_centers_.empty())
+    throw std::invalid_argument("MapParticleFilter: the floor plan encloses no area");
+  std::map<std::pair<long, long>, int> unique;
+  for (int m = 0; m < static_cast<int>(sequences.size()); ++m) {
+    for (int n = 0; n < static_cast<int>(sequences[m].nodes.size()); ++n) {
+      const Vec2& p = sequences[m].nodes[n];
+      const auto key = std::make_pair(std::lround(p.x() * 1000), std::lround(p.y() * 1000));
+      auto it = unique.find(key);
+      if (it == unique.end()) {
+        it = unique.emplace(key, static_cast<int>(nodes_->points.size())).first;
+        nodes_->points.push_back(p);
+        nodes_->at.emplace_back();
+      }
+      nodes_->at[it->second].emplace_back(m, n);
+    }
+  }
+  nodes_->tree =
+      std::make_unique<NodeIndex::Tree>(2, *nodes_, nanoflann::KDTreeSingleIndexAdaptorParams(8));
+  particles_.resize(options_.particles);
+}
+
+MapParticleFilter::~MapParticleFilter() = default;
+
+bool MapParticleFilter::InsideBuilding(const Vec2& p) const {
+  return std::isfinite(p.x()) && std::isfinite(p.y()) && grid_.Inside(grid_.CellOf(p));
+}
+
+Vec2 MapParticleFilter::RandomInsidePoint() {
+  const Vec2& c = inside_centers_[std::min(
+      inside_centers_.size() - 1, static_cast<std::size_t>(Uniform() * inside_centers_.size()))];
+  const double h = 0.5 * grid_.spacing();
+  return c + Vec2(rng_.Uniform(-h, h), rng_.Uniform(-h, h));
+}
+
+void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
+  uniform_start_ = false;
+  for (auto& q : particles_) {
+    q.position_n = p + Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
+    q.heading_offset_rad = offset + rng_.Normal(0, hs);
+    q.step_from_n = q.position_n;
+    q.weight = 1.0 / particles_.size();
+  }
+}
+
+void MapParticleFilter::InitializeUniform() {
+  uniform_start_ = true;
+  for (auto& q : particles_) {
+    q.position_n = q.step_from_n = RandomInsidePoint();
+    q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
+    q.weight = 1.0 / particles_.size();
+  }
+}
+
+void MapParticleFilter::Normalize() {
+  double sum = 0;
+  for (const auto& q : particles_) sum += q.weight;
+  if (!(sum > 0) || !std::isfinite(sum)) {
+    for (auto& q : particles_) q.weight = 1.0 / particles_.size();
+    return;
+  }
+  for (auto& q : particles_) q.weight /= sum;
+}
+
+void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
+  std::vector<double> cdf;
+  std::vector<int> alive;
+  double acc = 0;
+  for (int i = 0; i < static_cast<int>(particles_.size()); ++i) {
+    if (dead[i]) continue;
+    acc += particles_[i].weight;
+    cdf.push_back(acc);
+    alive.push_back(i);
+  }
+  if (alive.empty() || !(acc > 0)) {
+    // Every particle hit a wall: start again (uniform, or around the last mean).
+    ++summary_.restarts;
+    const Vec2 mean = Mean();
+    for (auto& q : particles_) {
+      q.position_n = uniform_start_ ? RandomInsidePoint()
+                                    : mean + Vec2(rng_.Normal(0, 1.0), rng_.Normal(0, 1.0));
+      q.step_from_n = q.position_n;  // a new particle, not a step
+      if (uniform_start_) q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
+      q.weight = 1.0 / particles_.size();
+    }
+    return;
+  }
+  for (int i = 0; i < static_cast<int>(particles_.size()); ++i) {
+    if (!dead[i]) continue;
+    const double u = Uniform() * acc;
+    const auto k = std::min(
+        static_cast<std::size_t>(std::lower_bound(cdf.begin(), cdf.end(), u) - cdf.begin()),
+        alive.size() - 1);
+    particles_[i] = particles_[alive[k]];
+  }
+  Normalize();
+}
+
+void MapParticleFilter::SystematicResample() {
+  const std::size_t n = particles_.size();
+  std::vector<Particle> out(n);
+  const double step = 1.0 / n;
+  double u = Uniform() * step, acc = particles_[0].weight;
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    while (u > acc && k + 1 < n) acc += particles_[++k].weight;
+    out[i] = particles_[k];
+    out[i].weight = step;
+    u += step;
+  }
+  particles_ = std::move(out);
+  ++summary_.systematic_resamples;
+}
+
+void MapParticleFilter::Predict(const Vec2& d) {
+  ++summary_.time_updates;
+  const double len = d.norm();
+  const FloorPlan& plan = grid_.plan();
+  const std::vector<Particle> before = particles_;
+  // When every particle hits a wall, the step is tried again from the same particles with
+  // wider noise (a backtracking step, cf. Widyawan et al. 2008) before giving up.
+  for (int attempt = 0; attempt < 4; ++attempt) {
+    const double widen = 1.0 + 1.5 * attempt;
+    if (attempt > 0) {
+      particles_ = before;
+      ++summary_.backtracks;
+    }
+    std::vector<char> dead(particles_.size(), 0);
+    std::size_t n_dead = 0;
+    for (std::size_t i = 0; i < particles_.size(); ++i) {
+      auto& q = particles_[i];
+      q.step_from_n = q.position_n;
+      const double ps = widen * options_.position_noise_m;
+      const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d +
+                        Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
+      q.heading_offset_rad = WrapAngle(
+          q.heading_offset_rad + rng_.Normal(0, widen * options_.heading_noise_rad_per_m * len));
+      if (plan.Crosses(q.position_n, next)) {
+        dead[i] = 1;
+        ++n_dead;
+      }
+      q.position_n = next;
+    }
+    summary_.wall_eliminations += n_dead;
+    if (n_dead < particles_.size() || attempt == 3) {
+      if (n_dead > 0) ReplaceFromSurvivors(dead);
+      return;
+    }
+  }
+}
+
+void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odometry_heading_rad) {
+  if (!options_.pseudo_observations) return;
+  ++summary_.pattern_updates;
+  const double s2 = options_.likelihood_sigma * options_.likelihood_sigma;
+  // E of the observation each particle takes: its nearest node, the end whose heading is
+  // closest to the particle's walking heading.
+  auto observed_rmse = [&](const Particle& q) {
+    const int u = nodes_->Nearest(q.position_n);
+    if (u < 0) return std::numeric_limits<double>::infinity();
+    const double heading = q.heading_offset_rad + odometry_heading_rad;
+    double best_dh = 1e300, e = std::numeric_limits<double>::infinity();
+    for (const auto& [m, n] : nodes_->at[u]) {
+      const SequenceComparison& sc = pc.sequences[m];
+      // As the first node of pattern n (left-hand end) ...
+      const double dh1 = std::abs(WrapAngle(sc.heading_rad[n][0] - heading));
+      if (dh1 < best_dh) best_dh = dh1, e = sc.rmse_m[n][0];
+      // ... and as the last node of every pattern ending here (right-hand end).
+      for (int eta = 0; eta < static_cast<int>(sc.last_node.size()); ++eta) {
+        if (sc.last_node[eta] != n) continue;
+        const double dh2 = std::abs(WrapAngle(sc.heading_rad[eta][1] - heading));
+        if (dh2 < best_dh) best_dh = dh2, e = sc.rmse_m[eta][1];
+      }
+    }
+    return e;
+  };
+  std::vector<double> E(particles_.size());
+  double e_min = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < particles_.size(); ++i) {
+    E[i] = observed_rmse(particles_[i]);
+    e_min = std::min(e_min, E[i]);
+  }
+  double best_anywhere = std::numeric_limits<double>::infinity();
+  for (const auto& sc : pc.sequences) {
+    for (const auto& r : sc.rmse_m) best_anywhere = std::min({best_anywhere, r[0], r[1]});
+  }
+  if (Covariance().trace() <= options_.use_patterns_above_variance_m2) {
+    ++summary_.skipped_converged;
+    return;
+  }
+  if (!(best_anywhere <= options_.max_match_rmse_m)) {
+    ++summary_.uninformative_updates;  // not a search pattern: no weights, no new particles
+    return;
+  }
+  if (!std::isfinite(e_min)) {
+    ++summary_.uninformative_updates;
+  } else {
+    // Eq. (2)-(3), scaled by exp(E_min / sigma^2) against underflow (cancels in eq. 3).
+    for (std::size_t i = 0; i < particles_.size(); ++i) {
+      const double l = std::isfinite(E[i]) ? std::exp(-(E[i] - e_min) / s2) : 0.0;
+      particles_[i].weight *= options_.outlier_weight + (1 - options_.outlier_weight) * l;
+    }
+    Normalize();
+    const double eps = options_.weight_floor / particles_.size();
+    std::vector<char> low(particles_.size(), 0);
+    int n_low = 0;
+    for (std::size_t i = 0; i < particles_.size(); ++i) {
+      if (particles_[i].weight < eps) low[i] = 1, ++n_low;
+    }
+    summary_.floor_replacements += n_low;
+    if (n_low > 0 && n_low < static_cast<int>(particles_.size())) ReplaceFromSurvivors(low);
+  }
+  // Resampling from the pseudo observations: the q lowest-weight particles are redrawn.
+  if (options_.resample_from_patterns && options_.resample_fraction > 0) {
+    struct Obs {
+      Vec2 p;
+      double heading;
+      double cumulative;
+    };
+    std::vector<Obs> obs;
+    double acc = 0, best = std::numeric_limits<double>::infinity();
+    for (const auto& sc : pc.sequences) {
+      for (const auto& r : sc.rmse_m) best = std::min({best, r[0], r[1]});
+    }
+    if (std::isfinite(best)) {
+      for (const auto& sc : pc.sequences) {
+        for (std::size_t n = 0; n < sc.rmse_m.size(); ++n) {
+          for (int end = 0; end < 2; ++end) {
+            if (!std::isfinite(sc.rmse_m[n][end])) continue;
+            const double w = std::exp(-(sc.rmse_m[n][end] - best) / s2);
+            if (w < 1e-12) continue;
+            acc += w;
+            obs.push_back({sc.position_n[n][end], sc.heading_rad[n][end], acc});
+          }
+        }
+      }
+    }
+    if (!obs.empty()) {
+      std::vector<std::size_t> order(particles_.size());
+      std::iota(order.begin(), order.end(), 0);
+      const std::size_t count =
+          static_cast<std::size_t>(options_.resample_fraction * particles_.size());
+      std::partial_sort(order.begin(), order.begin() + count, order.end(),
+                        [&](std::size_t a, std::size_t b) {
+                          return particles_[a].weight < particles_[b].weight;
+                        });
+      // A new particle starts with a small weight (ours; the paper does not say): it must earn
+      // its share at the next comparisons instead of pulling the estimate at once.
+      const double new_weight = options_.new_particle_weight / particles_.size();
+      for (std::size_t k = 0; k < count; ++k) {
+        const double u = Uniform() * acc;
+        const auto it = std::lower_bound(obs.begin(), obs.end(), u,
+                                         [](const Obs& o, double v) { return o.cumulative < v; });
+        const Obs& o = it == obs.end() ? obs.back() : *it;
+        Particle& q = particles_[order[k]];
+        for (int attempt = 0; attempt < 10; ++attempt) {
+          q.position_n = o.p + Vec2(rng_.Normal(0, options_.resample_position_sigma_m),
+                                    rng_.Normal(0, options_.resample_position_sigma_m));
+          if (InsideBuilding(q.position_n)) break;
+          q.position_n = o.p;
+        }
+        q.step_from_n = q.position_n;  // a new particle, not a step
+        q.heading_offset_rad = WrapAngle(o.heading - odometry_heading_rad +
+                                         rng_.Normal(0, options_.resample_heading_sigma_rad));
+        q.weight = new_weight;
+        ++summary_.pattern_resamples;
+      }
+      Normalize();
+    }
+  }
+  double sum2 = 0;
+  for (const auto& q : particles_) sum2 += q.weight * q.weight;
+  if (1.0 / sum2 < options_.ess_resample_fraction * particles_.size()) SystematicResample();
+}
+
+bool MapParticleFilter::WantsPatterns() const {
+  return options_.pseudo_observations &&
+         Covariance().trace() > options_.use_patterns_above_variance_m2;
+}
+
+Vec2 MapParticleFilter::Mean() const {
+  Vec2 m = Vec2::Zero();
+  double sum = 0;
+  for (const auto& q : particles_) m += q.weight * q.position_n, sum += q.weight;
+  return sum > 0 ? Vec2(m / sum) : m;
+}
+
+Mat2 MapParticleFilter::Covariance() const {
+  const Vec2 m = Mean();
+  Mat2 c = Mat2::Zero();
+  double sum = 0;
+  for (const auto& q : particles_) {
+    const Vec2 d = q.position_n - m;
+    c += q.weight * d * d.transpose();
+    sum += q.weight;
+  }
+  c = sum > 0 ? Mat2(c / sum) : c;
+  return 0.5 * (c + c.transpose()) + Mat2::Identity() * 1e-6;
+}
+
+double MapParticleFilter::MeanHeadingOffset() const {
+  double s = 0, c = 0;
+  for (const auto& q : particles_)
+    s += q.weight * std::sin(q.heading_offset_rad), c += q.weight * std::cos(q.heading_offset_rad);
+  return std::atan2(s, c);
+}
+
+}  // namespace trailmark::mapmatch

@@ -1,0 +1,127 @@
+#pragma once
+/// The information fusion of the map-aided search paper (sec. IV-E): a particle filter whose
+/// particles carry a position and the heading offset between the odometry frame and the map.
+///  - time update: the odometry displacement rotated by each particle's offset, plus Gaussian
+///    noise (0.12 m per axis; 2 deg per metre walked on the offset);
+///  - map: a particle whose step crosses a wall is eliminated (spatial index of the walls);
+///  - pseudo observations (eq. 2-3): each particle takes the pattern observation at its nearest
+///    node whose heading is closest to its walking heading; weight x exp(-E / sigma^2);
+///    particles below the floor eps = 0.01 / N are replaced by copies of the others;
+///  - resampling from the pseudo observations: the q = 10 % lowest-weight particles are
+///    redrawn from (Pos, Hea) in proportion to the likelihood, with noise (0.5 m, 25 deg).
+/// Beyond the paper, stated: systematic resampling when the effective sample size falls below
+/// N/3 (the floor alone lets weights degenerate); when every particle hits a wall, the step is
+/// retried from the same particles with wider noise (backtracking, up to 3 times) and only then
+/// restarted (uniform, or around the last estimate); optionally a robust likelihood. The estimate
+/// is the MMSE mean with its covariance. Deterministic per seed. No I/O.
+
+#include <cstdint>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/random.h"
+#include "trailmark/mapmatch/pattern_comparison.h"
+
+namespace trailmark::mapmatch {
+
+struct MapParticleFilterOptions {
+  int particles = 500;                        ///< N_p (sec. V-B)
+  double position_noise_m = 0.12;             ///< per time update, per axis (sec. V-B)
+  double heading_noise_rad_per_m = 0.0349;    ///< 2 deg per metre walked (sec. V-B)
+  double likelihood_sigma = 0.1;              ///< sigma of eq. (2), sqrt(m) (sec. V-B)
+  double weight_floor = 0.01;                 ///< eps = weight_floor / N (sec. V-B)
+  bool pseudo_observations = true;            ///< eq. (2)-(3)
+  bool resample_from_patterns = true;         ///< sec. IV-E, last paragraph
+  double resample_fraction = 0.10;            ///< q (sec. V-B)
+  double resample_position_sigma_m = 0.5;     ///< sec. V-B
+  double resample_heading_sigma_rad = 0.436;  ///< 25 deg (sec. V-B)
+  double ess_resample_fraction = 1.0 / 3;     ///< ours: systematic resampling below N/3
+  /// Ours: the pattern likelihood as a mixture alpha + (1 - alpha) exp(-E/sigma^2), relative
+  /// to the best match — a match can be wrong (furniture, a search that leaves the pattern),
+  /// and alpha bounds what one wrong match can do to the particles at the true position.
+  /// 0 is the paper's likelihood.
+  double outlier_weight = 0.0;
+  /// Ours: a comparison whose best match anywhere is worse than this is not used (the walk
+  /// is not a directional search along the map's walls, e.g. down the middle of a corridor, or
+  /// the map is wrong there). Infinity = always use (the paper).
+  double max_match_rmse_m = 0.6;
+  /// Ours, after the paper's own conclusion ("the pattern comparison is of most use before the
+  /// filter has converged ... or when the uncertainty has increased due to map errors"): pseudo
+  /// observations are used only while the position variance (trace) exceeds this. 0 = always
+  /// (the paper; `trailmark reproduce mapmatch` shows both).
+  double use_patterns_above_variance_m2 = 2.0;
+  /// Weight (x 1/N) of a particle drawn from the pseudo observations; 1 = as much as an
+  /// average particle (ours: the paper does not say).
+  double new_particle_weight = 1.0;
+  std::uint64_t seed = 1;
+  bool IsValid(std::string* why) const;
+};
+
+struct MapParticleFilterSummary {
+  std::size_t time_updates = 0, pattern_updates = 0, uninformative_updates = 0;
+  std::size_t wall_eliminations = 0, floor_replacements = 0, pattern_resamples = 0;
+  std::size_t systematic_resamples = 0, backtracks = 0, restarts = 0, skipped_converged = 0;
+  std::string BriefReport() const;
+};
+
+class MapParticleFilter {
+ public:
+  using Options = MapParticleFilterOptions;
+  struct Particle {
+    Vec2 position_n = Vec2::Zero();
+    double heading_offset_rad = 0;  ///< odometry frame -> map frame
+    double weight = 0;
+    Vec2 step_from_n = Vec2::Zero();  ///< where its last time update started (for checks)
+  };
+
+  /// `grid` and the sequences must outlive the filter.
+  MapParticleFilter(const SearchGrid& grid, const std::vector<NodeSequence>& sequences,
+                    Options options = {});
+  ~MapParticleFilter();
+
+  /// Known initial state (position, heading offset) with the given spread.
+  void InitializeKnown(const Vec2& position_n, double heading_offset_rad, double position_sigma_m,
+                       double heading_sigma_rad);
+  /// Unknown initial state: uniform over the inside of the building and over the heading.
+  void InitializeUniform();
+
+  /// Odometry displacement (odometry frame) since the last update.
+  void Predict(const Vec2& delta_odometry);
+  /// Eq. (2)-(3) and the resampling from the pseudo observations. `odometry_heading_rad` is
+  /// the odometry's current walking direction (odometry frame).
+  void UpdatePatterns(const PatternComparison& comparison, double odometry_heading_rad);
+
+  /// Whether the next UpdatePatterns would use a comparison (pseudo observations on, and the
+  /// filter uncertain enough): callers skip the costly comparison otherwise.
+  bool WantsPatterns() const;
+
+  Vec2 Mean() const;
+  Mat2 Covariance() const;
+  double MeanHeadingOffset() const;
+  const std::vector<Particle>& particles() const { return particles_; }
+  const MapParticleFilterSummary& summary() const { return summary_; }
+
+ private:
+  void Normalize();
+  void ReplaceFromSurvivors(const std::vector<char>& dead);
+  void SystematicResample();
+  Vec2 RandomInsidePoint();
+  bool InsideBuilding(const Vec2& p) const;
+  double Uniform() { return rng_.Uniform(); }
+
+  const SearchGrid& grid_;
+  const std::vector<NodeSequence>& sequences_;
+  Options options_;
+  Random rng_;
+  std::vector<Particle> particles_;
+  std::vector<Vec2> inside_centers_;
+  bool uniform_start_ = false;
+  // Unique node positions (nanoflann k-d tree) and the (sequence, node) pairs at each.
+  struct NodeIndex;
+  std::unique_ptr<NodeIndex> nodes_;
+  MapParticleFilterSummary summary_;
+};
+
+}  // namespace trailmark::mapmatch

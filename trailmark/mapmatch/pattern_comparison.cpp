@@ -1,0 +1,207 @@
+#include "trailmark/mapmatch/pattern_comparison.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "trailmark/geometry/rigid_fit.h"
+
+namespace trailmark::mapmatch {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+Mat2 Rot(double a) { return Eigen::Rotation2Dd(a).toRotationMatrix(); }
+
+// Distance of an angle to the nearest multiple of pi/2.
+double ToPrincipal(double a) {
+  const double q = kPi / 2;
+  const double r = std::fmod(std::fmod(a, q) + q, q);  // [0, q)
+  return std::min(r, q - r);
+}
+
+Vec2 ClosestOnSegment(const Vec2& p, const Vec2& a, const Vec2& b) {
+  const Vec2 d = b - a;
+  const double l2 = d.squaredNorm();
+  if (l2 <= 0) return a;
+  return a + std::clamp((p - a).dot(d) / l2, 0.0, 1.0) * d;
+}
+
+Vec2 ClosestOnPolyline(const Vec2& p, const std::vector<Vec2>& line) {
+  if (line.size() == 1) return line[0];
+  Vec2 best = line[0];
+  double best_d = 1e300;
+  for (std::size_t k = 1; k < line.size(); ++k) {
+    const Vec2 c = ClosestOnSegment(p, line[k - 1], line[k]);
+    const double d = (c - p).squaredNorm();
+    if (d < best_d) best_d = d, best = c;
+  }
+  return best;
+}
+
+Vec2 Centroid(const std::vector<Vec2>& v) {
+  Vec2 s = Vec2::Zero();
+  for (const auto& p : v) s += p;
+  return s / static_cast<double>(v.size());
+}
+
+}  // namespace
+
+double PrincipalRotation(const std::vector<Vec2>& x) {
+  std::vector<double> theta;
+  for (std::size_t l = 1; l < x.size(); ++l) {
+    const Vec2 d = x[l] - x[l - 1];
+    if (d.squaredNorm() > 1e-12) theta.push_back(std::atan2(d.y(), d.x()));
+  }
+  if (theta.empty()) return 0.0;
+  // C(phi) is piecewise linear in phi: its minimum is at a phi that puts one displacement
+  // exactly on a principal direction.
+  double best_phi = 0, best_cost = 1e300;
+  for (double t : theta) {
+    double phi = -t;
+    phi = std::remainder(phi, kPi / 2);  // [-pi/4, pi/4]
+    if (phi >= kPi / 4) phi -= kPi / 2;
+    double cost = 0;
+    for (double u : theta) cost += ToPrincipal(u + phi);
+    if (cost < best_cost - 1e-12) best_cost = cost, best_phi = phi;
+  }
+  return best_phi;
+}
+
+IcpResult Icp(const std::vector<Vec2>& source, const std::vector<Vec2>& target, const Mat2& R0,
+              const Vec2& t0, const IcpOptions& o) {
+  IcpResult r;
+  r.rotation = R0;
+  r.translation = t0;
+  if (source.size() < 2 || target.empty()) return r;
+  const std::size_t n = source.size();
+  const std::size_t keep =
+      std::max<std::size_t>(2, n - static_cast<std::size_t>(o.trim_fraction * n));
+  std::vector<Vec2> closest(n);
+  std::vector<std::pair<double, std::size_t>> residual(n);
+  std::vector<Vec2> from, to;
+  double previous = 1e300;
+  for (int it = 0; it < o.max_iterations; ++it) {
+    for (std::size_t k = 0; k < n; ++k) {
+      const Vec2 p = r.Apply(source[k]);
+      closest[k] = ClosestOnPolyline(p, target);
+      residual[k] = {(closest[k] - p).squaredNorm(), k};
+    }
+    if (keep < n) std::nth_element(residual.begin(), residual.begin() + keep, residual.end());
+    double sq = 0;
+    for (std::size_t k = 0; k < keep; ++k) sq += residual[k].first;
+    r.rmse_m = std::sqrt(sq / keep);
+    r.iterations = it + 1;
+    if (std::abs(previous - r.rmse_m) < o.tolerance_m) break;
+    if ((it >= 1 && r.rmse_m > o.abandon_rmse_m) || (it == 0 && r.rmse_m > 2 * o.abandon_rmse_m))
+      break;
+    previous = r.rmse_m;
+    from.clear();
+    to.clear();
+    for (std::size_t k = 0; k < keep; ++k) {
+      from.push_back(source[residual[k].second]);
+      to.push_back(closest[residual[k].second]);
+    }
+    const RigidFit2 fit = FitRigid(from, to, false);
+    r.rotation = fit.rotation;
+    r.translation = fit.translation;
+  }
+  return r;
+}
+
+bool PatternComparisonOptions::IsValid(std::string* why) const {
+  if (!(pattern_length_m > 1.0) || !(point_spacing_m > 0.01) ||
+      point_spacing_m > pattern_length_m / 2) {
+    if (why)
+      *why = "pattern_length_m must be > 1 m and point_spacing_m within 0.01 m .. half the pattern";
+    return false;
+  }
+  return true;
+}
+
+std::vector<Vec2> ResampleByDistance(const std::vector<Vec2>& line, double spacing) {
+  std::vector<Vec2> out;
+  if (line.empty()) return out;
+  out.push_back(line.front());
+  double carry = 0;  // distance walked since the last output point
+  for (std::size_t k = 1; k < line.size(); ++k) {
+    const Vec2 a = line[k - 1], b = line[k];
+    const double len = (b - a).norm();
+    double s = spacing - carry;
+    while (s <= len) {
+      out.push_back(a + (b - a) * (s / len));
+      s += spacing;
+    }
+    carry = len - (s - spacing);
+  }
+  if ((out.back() - line.back()).norm() > 1e-9) out.push_back(line.back());
+  return out;
+}
+
+PatternComparison ComparePatterns(const std::vector<Vec2>& trajectory,
+                                  const std::vector<NodeSequence>& sequences,
+                                  const PatternComparisonOptions& o) {
+  PatternComparison out;
+  std::vector<Vec2> x = ResampleByDistance(trajectory, o.point_spacing_m);
+  double length = 0;
+  for (std::size_t k = 1; k < trajectory.size(); ++k)
+    length += (trajectory[k] - trajectory[k - 1]).norm();
+  out.principal_rotation_rad = PrincipalRotation(x);
+  const Mat2 R_phi = Rot(out.principal_rotation_rad);
+  for (auto& p : x) p = R_phi * p;
+  const Vec2 cx = Centroid(x);
+  const double inf = std::numeric_limits<double>::infinity();
+  for (const NodeSequence& seq : sequences) {
+    const auto& nodes = seq.nodes;
+    const int N = static_cast<int>(nodes.size());
+    SequenceComparison sc;
+    sc.rmse_m.assign(N, {inf, inf});
+    sc.position_n.assign(N, {Vec2::Zero(), Vec2::Zero()});
+    sc.heading_rad.assign(N, {0.0, 0.0});
+    sc.last_node.assign(N, 0);
+    double total = 0;
+    for (int n = 0; n < N; ++n) total += (nodes[(n + 1) % N] - nodes[n]).norm();
+    if (N < 3 || x.size() < 3) {
+      out.sequences.push_back(std::move(sc));
+      continue;
+    }
+    std::vector<Vec2> pattern;
+    for (int eta = 0; eta < N; ++eta) {
+      // Delta N: the pattern's length as close as possible to the odometry's (cyclic).
+      pattern.assign(1, nodes[eta]);
+      double len = 0;
+      int dn = 0;
+      while (dn < N - 1) {
+        const double step = (nodes[(eta + dn + 1) % N] - nodes[(eta + dn) % N]).norm();
+        if (len + step > length && std::abs(len + step - length) > std::abs(len - length)) break;
+        len += step;
+        ++dn;
+        pattern.push_back(nodes[(eta + dn) % N]);
+      }
+      const Vec2& first = nodes[eta];
+      const Vec2& last = nodes[(eta + dn) % N];
+      const Vec2 d_first = nodes[(eta + 1) % N] - nodes[eta];
+      const Vec2 d_last = nodes[(eta + dn + 1) % N] - last;
+      sc.position_n[eta] = {first, last};
+      sc.last_node[eta] = (eta + dn) % N;
+      sc.heading_rad[eta] = {std::atan2(-d_first.y(), -d_first.x()),
+                             std::atan2(d_last.y(), d_last.x())};
+      if (dn < 2 || total < 0.5 * length) continue;
+      const Vec2 cp = Centroid(pattern);
+      for (int i = 0; i < 4; ++i) {
+        const Mat2 Ri = Rot(i * kPi / 2);
+        const IcpResult r = Icp(x, pattern, Ri, cp - Ri * cx, o.icp);
+        ++out.icp_runs;
+        out.icp_abandoned += r.rmse_m > o.icp.abandon_rmse_m;
+        const Vec2 xk = r.Apply(x.back());
+        const int end = (xk - first).norm() < (xk - last).norm() ? 0 : 1;
+        sc.rmse_m[eta][end] = std::min(sc.rmse_m[eta][end], r.rmse_m);
+      }
+    }
+    out.sequences.push_back(std::move(sc));
+  }
+  return out;
+}
+
+}  // namespace trailmark::mapmatch

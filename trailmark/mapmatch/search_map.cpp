@@ -1,0 +1,406 @@
+#include "trailmark/mapmatch/search_map.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <stdexcept>
+
+namespace trailmark::mapmatch {
+namespace {
+
+struct UnionFind {
+  explicit UnionFind(int n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
+  int Find(int x) { return parent[x] == x ? x : parent[x] = Find(parent[x]); }
+  void Unite(int a, int b) { parent[Find(a)] = Find(b); }
+  std::vector<int> parent;
+};
+
+double Cross(const Vec2& a, const Vec2& b) { return a.x() * b.y() - a.y() * b.x(); }
+
+}  // namespace
+
+WallGraph WallGraph::Build(const std::vector<Segment2>& walls, double snap_m) {
+  WallGraph g;
+  auto node_of = [&](const Vec2& p) {
+    for (std::size_t i = 0; i < g.nodes.size(); ++i) {
+      if ((g.nodes[i] - p).norm() <= snap_m) return static_cast<int>(i);
+    }
+    g.nodes.push_back(p);
+    return static_cast<int>(g.nodes.size()) - 1;
+  };
+  std::vector<Segment2> kept;
+  for (const auto& w : walls) {
+    if (w.Length() <= snap_m) continue;
+    g.edges.emplace_back(node_of(w.a), node_of(w.b));
+    kept.push_back(w);
+  }
+  const int E = static_cast<int>(kept.size());
+  UnionFind uf(E);
+  std::vector<int> edge_of_node(g.nodes.size(), -1);
+  for (int e = 0; e < E; ++e) {
+    for (int n : {g.edges[e].first, g.edges[e].second}) {
+      if (edge_of_node[n] >= 0) uf.Unite(e, edge_of_node[n]);
+      edge_of_node[n] = e;
+    }
+  }
+  for (int i = 0; i < E; ++i) {  // T-junctions and crossings
+    for (int j = i + 1; j < E; ++j) {
+      if (uf.Find(i) == uf.Find(j)) continue;
+      if (DistanceToSegment(kept[i].a, kept[j]) <= snap_m ||
+          DistanceToSegment(kept[i].b, kept[j]) <= snap_m ||
+          DistanceToSegment(kept[j].a, kept[i]) <= snap_m ||
+          DistanceToSegment(kept[j].b, kept[i]) <= snap_m || SegmentsIntersect(kept[i], kept[j])) {
+        uf.Unite(i, j);
+      }
+    }
+  }
+  std::map<int, int> label;
+  for (int e = 0; e < E; ++e) {
+    const int root = uf.Find(e);
+    if (!label.count(root)) label[root] = static_cast<int>(label.size());
+    g.component.push_back(label[root]);
+  }
+  g.components = static_cast<int>(label.size());
+  return g;
+}
+
+std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
+  std::vector<MapProblem> problems;
+  const auto& walls = plan.walls();
+  if (walls.empty()) {
+    problems.push_back({"the floor plan has no walls", true});
+    return problems;
+  }
+  int zero = 0;
+  for (std::size_t i = 0; i < walls.size(); ++i) {
+    if (walls[i].Length() <= snap_m) {
+      if (zero++ == 0) {
+        problems.push_back({fmt::format("wall {} at ({:.2f}, {:.2f}) has zero length: ignored", i,
+                                        walls[i].a.x(), walls[i].a.y()),
+                            false});
+      }
+    }
+  }
+  if (zero > 1)
+    problems.push_back({fmt::format("{} zero-length walls in all: ignored", zero), false});
+  int overlaps = 0;
+  for (std::size_t i = 0; i < walls.size(); ++i) {
+    const Vec2 u = walls[i].b - walls[i].a;
+    const double len = u.norm();
+    if (len <= snap_m) continue;
+    for (std::size_t j = i + 1; j < walls.size(); ++j) {
+      const Vec2 v = walls[j].b - walls[j].a;
+      if (v.norm() <= snap_m || std::abs(Cross(u, v)) > 1e-6 * len * v.norm()) continue;
+      if (std::abs(Cross(u / len, walls[j].a - walls[i].a)) > snap_m) continue;  // parallel, apart
+      const double s0 = (walls[j].a - walls[i].a).dot(u) / len,
+                   s1 = (walls[j].b - walls[i].a).dot(u) / len;
+      const double overlap = std::min(len, std::max(s0, s1)) - std::max(0.0, std::min(s0, s1));
+      if (overlap > snap_m && overlaps++ == 0) {
+        problems.push_back(
+            {fmt::format("walls {} and {} overlap over {:.2f} m (drawn twice?)", i, j, overlap),
+             false});
+      }
+    }
+  }
+  if (overlaps > 1)
+    problems.push_back({fmt::format("{} overlapping wall pairs in all", overlaps), false});
+  // Wall ends that touch no other wall: a gap in the outline, or a free-standing partition.
+  int dangling = 0;
+  std::string first;
+  for (std::size_t i = 0; i < walls.size(); ++i) {
+    if (walls[i].Length() <= snap_m) continue;
+    for (const Vec2& end : {walls[i].a, walls[i].b}) {
+      bool touches = false;
+      for (std::size_t j = 0; j < walls.size() && !touches; ++j) {
+        touches =
+            j != i && walls[j].Length() > snap_m && DistanceToSegment(end, walls[j]) <= snap_m;
+      }
+      if (!touches && dangling++ == 0) first = fmt::format("({:.2f}, {:.2f})", end.x(), end.y());
+    }
+  }
+  if (dangling > 0) {
+    problems.push_back(
+        {fmt::format("{} wall end(s) touch no other wall, first at {}: a gap in a wall, or a "
+                     "free-standing partition",
+                     dangling, first),
+         false});
+  }
+  return problems;
+}
+
+bool SearchGridOptions::IsValid(std::string* why) const {
+  if (!(spacing_m >= 0.1 && spacing_m <= 10.0)) {
+    if (why) *why = "grid spacing must be within 0.1 .. 10 m";
+    return false;
+  }
+  return true;
+}
+
+SearchGrid::SearchGrid(const FloorPlan& plan, Options options) : plan_(&plan), options_(options) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument("SearchGrid: " + why);
+  const Box2 box = plan.Bounds();
+  if (box.Empty()) return;
+  const double s = options_.spacing_m;
+  // Grid offset per axis: the nodes as far as possible from the axis-parallel walls (a node on
+  // a wall line would block its doorway; buildings are mostly rectangular, sec. IV-D).
+  std::vector<double> xs, ys;
+  for (const auto& w : plan.walls()) {
+    if (std::abs(w.a.x() - w.b.x()) < 1e-9) xs.push_back(w.a.x());
+    if (std::abs(w.a.y() - w.b.y()) < 1e-9) ys.push_back(w.a.y());
+  }
+  auto best_offset = [s](const std::vector<double>& coords) {
+    double best = 0.5 * s, best_score = -1;
+    for (int k = 0; k < 100; ++k) {
+      const double o = s * k / 100.0;  // node positions o + n s
+      double score = 0.5 * s;
+      for (double c : coords) {
+        const double r = std::remainder(c - o, s);  // [-s/2, s/2]
+        score = std::min(score, std::abs(r));
+      }
+      if (score > best_score + 1e-12) best_score = score, best = o;
+    }
+    return best;
+  };
+  const Vec2 offset(best_offset(xs), best_offset(ys));
+  origin_ = Vec2(offset.x() + s * std::floor((box.min.x() - s - offset.x()) / s),
+                 offset.y() + s * std::floor((box.min.y() - s - offset.y()) / s));
+  nx_ = static_cast<int>(std::ceil((box.max.x() - origin_.x()) / s)) + 2;
+  ny_ = static_cast<int>(std::ceil((box.max.y() - origin_.y()) / s)) + 2;
+  if (static_cast<double>(nx_) * ny_ > 2e7)
+    throw std::invalid_argument("SearchGrid: floor plan too large for the grid");
+  // Flood fill from the border with every door closed: what is not reached is inside.
+  const SegmentIndex drawn(plan.walls());
+  std::vector<char> outside(static_cast<std::size_t>(nx_) * ny_, 0);
+  std::vector<Cell> stack;
+  for (int ix = 0; ix < nx_; ++ix) stack.push_back({ix, 0}), stack.push_back({ix, ny_ - 1});
+  for (int iy = 0; iy < ny_; ++iy) stack.push_back({0, iy}), stack.push_back({nx_ - 1, iy});
+  for (const Cell& c : stack) outside[Index(c)] = 1;
+  while (!stack.empty()) {
+    const Cell c = stack.back();
+    stack.pop_back();
+    for (int d = 0; d < 4; ++d) {
+      const Cell n = Step(c, d);
+      if (n.ix < 0 || n.iy < 0 || n.ix >= nx_ || n.iy >= ny_ || outside[Index(n)]) continue;
+      if (drawn.Intersects({Center(c), Center(n)})) continue;
+      outside[Index(n)] = 1;
+      stack.push_back(n);
+    }
+  }
+  inside_.resize(outside.size());
+  for (int iy = 0; iy < ny_; ++iy) {
+    for (int ix = 0; ix < nx_; ++ix) {
+      const std::size_t i = Index({ix, iy});
+      if (outside[i]) continue;
+      // A node lying on a wall is not a place to stand (walls at the grid's half spacing).
+      const Vec2 c = Center({ix, iy});
+      Box2 box;
+      box.Extend(c - Vec2::Constant(1e-6));
+      box.Extend(c + Vec2::Constant(1e-6));
+      bool on_wall = false;
+      drawn.ForEachCandidate(box, [&](std::size_t k) {
+        on_wall = on_wall || DistanceToSegment(c, drawn.segments()[k]) < 1e-6;
+      });
+      inside_[i] = !on_wall;
+      inside_count_ += inside_[i];
+    }
+  }
+}
+
+SearchGrid::Cell SearchGrid::Step(const Cell& c, int dir) {
+  static const int dx[] = {1, 0, -1, 0}, dy[] = {0, 1, 0, -1};
+  return {c.ix + dx[dir], c.iy + dy[dir]};
+}
+
+bool SearchGrid::Inside(const Cell& c) const {
+  return c.ix >= 0 && c.iy >= 0 && c.ix < nx_ && c.iy < ny_ && inside_[Index(c)];
+}
+
+Vec2 SearchGrid::Center(const Cell& c) const {
+  return origin_ + Vec2(c.ix * options_.spacing_m, c.iy * options_.spacing_m);
+}
+
+bool SearchGrid::CanMove(const Cell& c, int dir) const {
+  const Cell n = Step(c, dir);
+  return Inside(c) && Inside(n) && !plan_->Crosses(Center(c), Center(n));
+}
+
+SearchGrid::Cell SearchGrid::CellOf(const Vec2& p) const {
+  const Vec2 q = (p - origin_) / options_.spacing_m;
+  return {static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))};
+}
+
+std::optional<SearchGrid::Cell> SearchGrid::Nearest(const Vec2& p) const {
+  std::optional<Cell> best;
+  double best_d = 1e300;
+  for (int iy = 0; iy < ny_; ++iy) {
+    for (int ix = 0; ix < nx_; ++ix) {
+      if (!inside_[iy * nx_ + ix]) continue;
+      const double d = (Center({ix, iy}) - p).squaredNorm();
+      if (d < best_d) best_d = d, best = Cell{ix, iy};
+    }
+  }
+  return best;
+}
+
+std::vector<Vec2> SearchGrid::InsideCenters() const {
+  std::vector<Vec2> out;
+  for (int iy = 0; iy < ny_; ++iy) {
+    for (int ix = 0; ix < nx_; ++ix) {
+      if (inside_[iy * nx_ + ix]) out.push_back(Center({ix, iy}));
+    }
+  }
+  return out;
+}
+
+std::vector<Vec2> RightHandWalk(const SearchGrid& grid, SearchGrid::Cell c, int dir) {
+  std::vector<Vec2> nodes{grid.Center(c)};
+  std::map<std::tuple<int, int, int>, std::size_t> seen{{{c.ix, c.iy, dir}, 0}};
+  const std::size_t limit = 4 * grid.inside_count() + 8;
+  for (std::size_t k = 0; k < limit; ++k) {
+    bool moved = false;
+    for (int turn : {3, 0, 1, 2}) {  // right, straight, left, back
+      const int nd = (dir + turn) % 4;
+      if (grid.CanMove(c, nd)) {
+        c = SearchGrid::Step(c, nd);
+        dir = nd;
+        moved = true;
+        break;
+      }
+    }
+    if (!moved) return nodes;  // an isolated node
+    const auto key = std::make_tuple(c.ix, c.iy, dir);
+    const auto it = seen.find(key);
+    if (it != seen.end()) {
+      return std::vector<Vec2>(nodes.begin() + static_cast<long>(it->second), nodes.end());
+    }
+    seen[key] = nodes.size();
+    nodes.push_back(grid.Center(c));
+  }
+  return nodes;
+}
+
+namespace {
+
+// A heading at `c` with a wall (or the outside) on the right and the way ahead open.
+std::optional<int> HeadingAlongWall(const SearchGrid& grid, const SearchGrid::Cell& c) {
+  for (int d = 0; d < 4; ++d) {
+    if (!grid.CanMove(c, (d + 3) % 4) && grid.CanMove(c, d)) return d;
+  }
+  return std::nullopt;
+}
+
+// Components of the solid walls that pass within reach of any node of the sequences.
+std::vector<char> Touched(const SearchGrid& grid, const WallGraph& g,
+                          const std::vector<Segment2>& walls,
+                          const std::vector<NodeSequence>& sequences) {
+  std::vector<char> touched(g.components, 0);
+  const double reach = 0.75 * grid.spacing();
+  for (const auto& s : sequences) {
+    for (const Vec2& p : s.nodes) {
+      for (std::size_t e = 0; e < walls.size(); ++e) {
+        if (!touched[g.component[e]] && DistanceToSegment(p, walls[e]) <= reach)
+          touched[g.component[e]] = 1;
+      }
+    }
+  }
+  return touched;
+}
+
+}  // namespace
+
+std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Vec2& entry_n,
+                                                 const SearchSequenceOptions& options) {
+  const SearchGrid grid(plan, options.grid);
+  if (grid.inside_count() == 0) {
+    throw std::invalid_argument(
+        "the floor plan encloses no area: with the doors closed, the walls must close the building "
+        "(gaps in the "
+        "outer walls?)");
+  }
+  const auto start = grid.Nearest(entry_n);
+  if ((grid.Center(*start) - entry_n).norm() > 3.0 * options.grid.spacing_m + 2.0) {
+    throw std::invalid_argument(
+        fmt::format("the entry ({:.2f}, {:.2f}) is {:.1f} m from the nearest enclosed grid node: "
+                    "no enclosed area at the entry",
+                    entry_n.x(), entry_n.y(), (grid.Center(*start) - entry_n).norm()));
+  }
+  std::vector<NodeSequence> sequences;
+  {
+    const int dir = HeadingAlongWall(grid, *start).value_or(0);
+    std::vector<Vec2> nodes = RightHandWalk(grid, *start, dir);
+    // The node closest to the entry first (sec. IV-C).
+    const auto first =
+        std::min_element(nodes.begin(), nodes.end(), [&](const Vec2& a, const Vec2& b) {
+          return (a - entry_n).squaredNorm() < (b - entry_n).squaredNorm();
+        });
+    std::rotate(nodes.begin(), first, nodes.end());
+    sequences.push_back({std::move(nodes), false});
+  }
+  // Inner walls not connected to the outer ones (Fig. 3, grey): a sequence around each.
+  std::vector<Segment2> walls;
+  for (const auto& w : plan.solid_walls()) {
+    if (w.Length() > options.wall_snap_m) walls.push_back(w);
+  }
+  const WallGraph g = WallGraph::Build(walls, options.wall_snap_m);
+  for (int extra = 0; extra < options.max_extra_sequences; ++extra) {
+    const std::vector<char> touched = Touched(grid, g, walls, sequences);
+    int component = -1;
+    double longest = 0;
+    for (int k = 0; k < g.components; ++k) {
+      if (touched[k]) continue;
+      double len = 0;
+      for (std::size_t e = 0; e < walls.size(); ++e)
+        len += g.component[e] == k ? walls[e].Length() : 0.0;
+      if (len > longest) longest = len, component = k;
+    }
+    if (component < 0 || longest < options.grid.spacing_m) break;
+    // Start next to the component's longest wall, with it on the right.
+    std::size_t wall = 0;
+    for (std::size_t e = 0; e < walls.size(); ++e) {
+      if (g.component[e] == component &&
+          walls[e].Length() >= walls[wall].Length() * (g.component[wall] == component)) {
+        wall = e;
+      }
+    }
+    const auto c = grid.Nearest(0.5 * (walls[wall].a + walls[wall].b));
+    const auto dir = c ? HeadingAlongWall(grid, *c) : std::nullopt;
+    if (!dir) break;
+    std::vector<Vec2> nodes = RightHandWalk(grid, *c, *dir);
+    NodeSequence s{std::move(nodes), true};
+    sequences.push_back(std::move(s));
+    if (!Touched(grid, g, walls, sequences)[component]) break;  // could not get round it
+  }
+  // Enclosed parts the searches never enter (rooms closed off, sec. V-A): a sequence each.
+  for (int extra = 0; extra < options.max_extra_sequences; ++extra) {
+    std::optional<SearchGrid::Cell> unreached;
+    for (const Vec2& c : grid.InsideCenters()) {
+      bool near = false;
+      for (const auto& s : sequences) {
+        for (const Vec2& p : s.nodes) {
+          if ((p - c).squaredNorm() <= 2.25 * options.grid.spacing_m * options.grid.spacing_m) {
+            near = true;
+            break;
+          }
+        }
+        if (near) break;
+      }
+      if (near) continue;
+      // Start where a wall is on the right.
+      const SearchGrid::Cell cell = grid.CellOf(c);
+      if (HeadingAlongWall(grid, cell)) {
+        unreached = cell;
+        break;
+      }
+    }
+    if (!unreached) break;
+    sequences.push_back(
+        {RightHandWalk(grid, *unreached, *HeadingAlongWall(grid, *unreached)), true});
+  }
+  return sequences;
+}
+
+}  // namespace trailmark::mapmatch

@@ -1,0 +1,110 @@
+#pragma once
+/// The floor plan as the map-aided search paper uses it (sec. IV-B, IV-C): walls as a
+/// topological graph, a square grid over the building, and the node sequences of directional
+/// searches along the grid, from which the search patterns are cut. No I/O.
+///
+/// Directional search on the grid: a right-hand search keeps a wall on its right — at every
+/// node it turns right if it can, else goes straight, else turns left, else turns back (the
+/// wall-follower rule); a move is possible when the segment between the two grid nodes crosses
+/// no wall and both nodes are inside the building. The walk starts at the inside node closest
+/// to the entry, facing along the wall so that the wall is on its right, and stops when it
+/// returns to its first state. A left-hand search is the same sequence walked backwards
+/// (Fig. 1), so one sequence serves both. Inner walls not connected to the outer walls get
+/// their own sequence (Fig. 3, grey).
+///
+/// Inside: the grid nodes that cannot be reached from outside the building's bounding box with
+/// every door closed (the walls as drawn); the entry door is thereby closed too, so a search
+/// never leaves the building.
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/geometry/floor_plan.h"
+
+namespace trailmark::mapmatch {
+
+/// Walls as a topological graph: nodes are wall end points (merged within `snap_m`), edges
+/// are walls; `component[e]` groups walls that touch (shared ends or T-junctions).
+struct WallGraph {
+  std::vector<Vec2> nodes;
+  std::vector<std::pair<int, int>> edges;
+  std::vector<int> component;
+  int components = 0;
+  static WallGraph Build(const std::vector<Segment2>& walls, double snap_m = 0.05);
+};
+
+/// What is wrong or doubtful in a floor plan, for the pipeline's diagnostics.
+struct MapProblem {
+  std::string message;
+  bool fatal = false;  ///< pattern extraction cannot work (e.g. nothing enclosed)
+};
+/// Zero-length walls, overlapping collinear walls, wall ends that touch nothing (a gap, or a
+/// free-standing partition), no walls at all.
+std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m = 0.05);
+
+struct SearchGridOptions {
+  double spacing_m = 1.0;  ///< grid spacing (sec. V-B: 1 m, "small enough for narrow hallways")
+  bool IsValid(std::string* why) const;
+};
+
+class SearchGrid {
+ public:
+  using Options = SearchGridOptions;
+  SearchGrid(const FloorPlan& plan, Options options = {});
+
+  struct Cell {
+    int ix = 0, iy = 0;
+    bool operator==(const Cell& o) const { return ix == o.ix && iy == o.iy; }
+  };
+  /// 0 east, 1 north, 2 west, 3 south.
+  static Cell Step(const Cell& c, int dir);
+
+  bool Inside(const Cell& c) const;
+  Vec2 Center(const Cell& c) const;
+  /// Whether a searcher can move from c in direction dir.
+  bool CanMove(const Cell& c, int dir) const;
+  /// The cell containing `p` (may be outside the grid or the building).
+  Cell CellOf(const Vec2& p) const;
+  /// The inside cell closest to `p` (empty when nothing is inside).
+  std::optional<Cell> Nearest(const Vec2& p) const;
+  std::size_t inside_count() const { return inside_count_; }
+  double spacing() const { return options_.spacing_m; }
+  const FloorPlan& plan() const { return *plan_; }
+  /// All inside cell centres (for uniform initialization).
+  std::vector<Vec2> InsideCenters() const;
+
+ private:
+  int Index(const Cell& c) const { return c.iy * nx_ + c.ix; }
+  const FloorPlan* plan_;
+  Options options_;
+  Vec2 origin_ = Vec2::Zero();  ///< centre of cell (0, 0)
+  int nx_ = 0, ny_ = 0;
+  std::vector<char> inside_;
+  std::size_t inside_count_ = 0;
+};
+
+/// One directional-search node sequence (closed: the last node is adjacent to the first).
+struct NodeSequence {
+  std::vector<Vec2> nodes;
+  bool around_inner_walls = false;  ///< an extra sequence: inner walls not on the outer walls,
+                                    ///< or an enclosed part the first search never enters
+};
+
+struct SearchSequenceOptions {
+  SearchGridOptions grid;
+  double wall_snap_m = 0.05;
+  int max_extra_sequences = 20;
+};
+
+/// The right-hand sequence from the node closest to `entry_n`, plus one sequence around every
+/// group of inner walls the first one never passes, and one in every enclosed part it never
+/// enters (a closed-off room). Throws std::invalid_argument when nothing
+/// is enclosed near the entry.
+std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Vec2& entry_n,
+                                                 const SearchSequenceOptions& options = {});
+
+/// The right-hand walk on the grid from `start` facing `dir` until it repeats a state.
+std::vector<Vec2> RightHandWalk(const SearchGrid& grid, SearchGrid::Cell start, int dir);
+
+}  // namespace trailmark::mapmatch

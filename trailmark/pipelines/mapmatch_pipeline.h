@@ -1,0 +1,34 @@
+#pragma once
+/// `mapmatch`: the map-aided search paper's navigation filter on a mission (sec. IV): odometry
+/// (steps.csv, or the INS on imu.csv) and the floor plan (walls cannot be crossed), with
+/// pseudo observations from comparing the last 20 m of odometry with the directional-search
+/// patterns of the map every 2 m walked. Works without an initial position.
+///
+/// Options (the four configurations of Figs. 7-8): `init=auto|known|uniform` (auto: known
+/// when the agent has a start in mission.json), `pseudo=true|false`, `resample=true|false`;
+/// and `particles`, `seed`, `grid_m`, `pattern_length_m`, `compare_every_m`,
+/// `point_spacing_m`, `sigma`, `outlier_weight`, `new_particle_weight`, `variance_alarm_m2`
+/// (map-error indicator, sec. V-E: 3 m^2) and `variance_alarm_min_s` (how long it must last).
+/// Diagnostics: the extracted sequences, floor-plan problems, and the periods when the
+/// estimated variance exceeded the alarm level (map errors suspected).
+
+#include "trailmark/pipelines/pipeline.h"
+
+namespace trailmark {
+
+class MapMatchPipeline : public Pipeline {
+ public:
+  std::string name() const override { return "mapmatch"; }
+  std::string description() const override {
+    return "map-aided search paper: particle filter on odometry and the floor plan with pseudo "
+           "observations from "
+           "directional-search patterns (ICP); no initial position needed";
+  }
+  std::vector<std::string> required_files() const override {
+    return {"steps.csv or imu.csv", "floorplan.geojson (mission.json \"floorplan\")"};
+  }
+  bool CanRun(const MissionDirectory& mission) const override;
+  PipelineSummary Run(const PipelineContext& context, EstimateSink& sink) const override;
+};
+
+}  // namespace trailmark
