@@ -9,7 +9,7 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcli11-dev nlohmann-json3-dev libfmt-dev libspdlog-dev
-  libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libsqlite3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libsqlite3-dev libcpp-httplib-dev curl
   clang libclang-rt-14-dev
 )
 

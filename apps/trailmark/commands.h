@@ -62,6 +62,19 @@ int Reproduce(const std::string& name, int seeds, const std::filesystem::path& o
               const std::map<std::string, std::string>& options = {},
               const std::filesystem::path& data_dir = "../shared/data");
 
+/// `trailmark serve`: replay a mission's online estimates into the incident server.
+struct ServeOptions {
+  std::filesystem::path replay;
+  std::string pipeline;  ///< empty: the most capable runnable one
+  std::map<std::string, std::string> options;
+  double speed = 10;
+  int port = 8080;
+  std::string bind = "127.0.0.1";
+  std::string token;     ///< empty: a random one is made and printed
+  bool exit_after_replay = false;
+};
+int Serve(const ServeOptions& options);
+
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
                        const std::vector<std::string>& missions);
 

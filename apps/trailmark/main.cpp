@@ -6,6 +6,7 @@
 //   trailmark reproduce breadcrumb|ins [--seeds N]
 //   trailmark energy [--battery-mah Q --sleep-ua I ...]
 //   trailmark wayout MISSION [--agent A] [--at T]
+//   trailmark serve --replay MISSION [--speed S] [--port P] [--token T]
 //   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
 #include <fmt/format.h>
@@ -169,6 +170,20 @@ int main(int argc, char** argv) {
   wayout->add_option("--agent", wayout_agent, "the firefighter (default ff1)");
   wayout->add_option("--at", wayout_at, "mission time (s); default: the end of the mission");
 
+  cli::ServeOptions serve_options;
+  std::string serve_replay;
+  std::vector<std::string> serve_kv;
+  auto* serve = app.add_subcommand("serve", "the incident server: replays a mission's online estimates at a speed "
+                                            "and serves the state and the dashboard over HTTP (docs/server.md)");
+  serve->add_option("--replay", serve_replay, "mission directory to replay")->required();
+  serve->add_option("--pipeline", serve_options.pipeline, "pipeline (default: the most capable runnable one)");
+  serve->add_option("--option", serve_kv, "pipeline option key=value (repeatable)");
+  serve->add_option("--speed", serve_options.speed, "mission seconds per wall second")->check(CLI::PositiveNumber);
+  serve->add_option("--port", serve_options.port, "TCP port (0: any free port)")->check(CLI::Range(0, 65535));
+  serve->add_option("--bind", serve_options.bind, "address to listen on (default 127.0.0.1, loopback only)");
+  serve->add_option("--token", serve_options.token, "access token (default: $TRAILMARK_TOKEN, else a random one)");
+  serve->add_flag("--exit-after-replay", serve_options.exit_after_replay, "stop when the replay has ended");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
@@ -239,6 +254,11 @@ int main(int argc, char** argv) {
         }
         fmt::print("\n");
       }
+    } else if (*serve) {
+      serve_options.replay = serve_replay;
+      serve_options.options = ParseKeyValues(serve_kv);
+      if (serve_options.token.empty() && std::getenv("TRAILMARK_TOKEN")) serve_options.token = std::getenv("TRAILMARK_TOKEN");
+      return cli::Serve(serve_options);
     } else if (*wayout) {
       const MissionDirectory m(wayout_mission);
       const WayOutReport w = ComputeWayOut(

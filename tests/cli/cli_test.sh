@@ -10,7 +10,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
 "$TM" --help | grep -q simulate || fail "--help"
-for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy wayout; do
+for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy wayout serve; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
@@ -99,6 +99,24 @@ run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init
 [ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
 run_failing "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/x" --option update=polar
 [ $rc -eq 1 ] && grep -q "update must be range-bearing or position" "$dir/err" || fail "bad update option"
+# The incident server: replay, token, state contract (curl on loopback).
+"$TM" serve --replay "$dir/bt" --speed 100 --port 0 --token t0k3n > "$dir/serve.log" 2>&1 &
+serve_pid=$!
+for _ in $(seq 50); do grep -q "listening on" "$dir/serve.log" && break; sleep 0.1; done
+port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
+[ -n "$port" ] || { cat "$dir/serve.log"; fail "serve did not start"; }
+sleep 1
+code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/api/state")
+[ "$code" = 401 ] || fail "serve: /api/state without the token gave $code"
+curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/state" > "$dir/state.json"
+grep -q '"nodes":\[{' "$dir/state.json" && grep -q '"kind":"agent"' "$dir/state.json" && grep -q '"alerts":' "$dir/state.json" \
+  || { cat "$dir/state.json"; fail "serve: state"; }
+code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=t0k3n")
+[ "$code" = 200 ] || fail "serve: dashboard gave $code"
+code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=wrong")
+[ "$code" = 401 ] || fail "serve: dashboard with a wrong token gave $code"
+kill $serve_pid; wait $serve_pid || true
+grep -q "2 refused without the token" "$dir/serve.log" || { cat "$dir/serve.log"; fail "serve: refusals counted"; }
 run_failing "$TM" energy --sleep-ua 0
 [ $rc -ne 0 ] || fail "energy with zero sleep current"
 

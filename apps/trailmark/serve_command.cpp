@@ -1,0 +1,83 @@
+// `trailmark serve --replay MISSION`: the incident server on a recorded or simulated mission.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <random>
+#include <thread>
+
+#include "commands.h"
+#include "server/incident_server.h"
+#include "trailmark/io/mission_io.h"
+
+namespace trailmark::cli {
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+void OnSignal(int) { g_stop = true; }
+
+class VectorSink : public EstimateSink {
+ public:
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
+
+std::string RandomToken() {
+  std::random_device rd;
+  return fmt::format("{:016x}{:016x}", (static_cast<unsigned long long>(rd()) << 32) ^ rd(),
+                     (static_cast<unsigned long long>(rd()) << 32) ^ rd());
+}
+
+}  // namespace
+
+int Serve(const ServeOptions& o) {
+  const MissionDirectory mission(o.replay);
+  std::string pipeline = o.pipeline;
+  if (pipeline.empty()) {
+    // The most capable pipeline the mission can feed.
+    const auto runnable = RunnablePipelines(mission);
+    for (const char* p : {"breadcrumb", "beacons-ekf", "landmarks-ukf", "mapmatch", "ins", "pdr"}) {
+      if (std::find(runnable.begin(), runnable.end(), p) != runnable.end()) {
+        pipeline = p;
+        break;
+      }
+    }
+    if (pipeline.empty())
+      throw std::invalid_argument("serve: no pipeline can run on " + o.replay.string());
+  }
+  const Pipeline* p = FindPipeline(pipeline);
+  if (!p) throw std::invalid_argument("unknown pipeline '" + pipeline + "'");
+  VectorSink sink;
+  p->Run({mission, o.options}, sink);
+  std::stable_sort(sink.rows.begin(), sink.rows.end(),
+                   [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+  server::ServerOptions so;
+  so.bind = o.bind;
+  so.port = o.port;
+  so.speed = o.speed;
+  so.token = o.token.empty() ? RandomToken() : o.token;
+  server::IncidentServer srv(mission.info(), std::move(sink.rows), so);
+  srv.Start();
+  fmt::print("trailmark serve: {} on '{}' at {}x, listening on http://{}:{}/\n", pipeline,
+             mission.info().name, o.speed, o.bind, srv.port());
+  fmt::print("dashboard: http://{}:{}/?token={}\n", o.bind, srv.port(), so.token);
+  std::fflush(stdout);
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  while (!g_stop) {
+    if (o.exit_after_replay && srv.replay_done()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  srv.Stop();
+  fmt::print(
+      "trailmark serve: stopped after {} requests ({} refused without the token), {} estimates "
+      "released\n",
+      srv.stats().requests.load(), srv.stats().unauthorized.load(),
+      srv.stats().released_estimates.load());
+  return 0;
+}
+
+}  // namespace trailmark::cli

@@ -1,0 +1,161 @@
+#include "server/incident_server.h"
+
+#include <httplib.h>
+
+#include <chrono>
+#include <stdexcept>
+
+namespace trailmark::server {
+
+struct IncidentServer::Http {
+  httplib::Server server;
+};
+
+IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates,
+                               ServerOptions options)
+    : info_(info),
+      estimates_(std::move(estimates)),
+      options_(std::move(options)),
+      state_(info_, options_.alerts),
+      http_(new Http) {
+  if (options_.token.empty()) throw std::invalid_argument("serve: a token is required");
+  if (!(options_.speed > 0)) throw std::invalid_argument("serve: speed must be > 0");
+}
+
+IncidentServer::~IncidentServer() { Stop(); }
+
+nlohmann::json IncidentServer::StateJson() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return state_.ToJson();
+}
+
+void IncidentServer::Start() {
+  httplib::Server& svr = http_->server;
+  svr.set_payload_max_length(options_.max_request_bytes);
+  auto authorized = [this](const httplib::Request& req) {
+    ++stats_.requests;
+    const bool ok = req.get_header_value("Authorization") == "Bearer " + options_.token ||
+                    (req.has_param("token") && req.get_param_value("token") == options_.token);
+    if (!ok) ++stats_.unauthorized;
+    return ok;
+  };
+  auto refuse = [](httplib::Response& res) {
+    res.status = 401;
+    res.set_header("WWW-Authenticate", "Bearer");
+    res.set_content(R"({"error": "missing or wrong token"})", "application/json");
+  };
+  svr.Get("/api/health", [](const httplib::Request&, httplib::Response& res) {
+    res.set_content(R"({"ok": true})", "application/json");
+  });
+  svr.Get("/api/state",
+          [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
+            if (req.get_header_value("Authorization") != "Bearer " + options_.token) {
+              ++stats_.requests;
+              ++stats_.unauthorized;
+              return refuse(res);
+            }
+            ++stats_.requests;
+            res.set_content(StateJson().dump(), "application/json");
+          });
+  svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {
+    if (!authorized(req)) return refuse(res);
+    res.set_content(DashboardHtml(), "text/html; charset=utf-8");
+  });
+  port_ = options_.port == 0
+              ? svr.bind_to_any_port(options_.bind)
+              : (svr.bind_to_port(options_.bind, options_.port) ? options_.port : -1);
+  if (port_ <= 0) {
+    throw std::runtime_error("serve: cannot listen on " + options_.bind + ":" +
+                             std::to_string(options_.port) + " (port in use?)");
+  }
+  http_thread_ = std::thread([this] { http_->server.listen_after_bind(); });
+  replay_thread_ = std::thread([this] { ReplayLoop(); });
+}
+
+void IncidentServer::Stop() {
+  stop_ = true;
+  if (http_) http_->server.stop();
+  if (http_thread_.joinable()) http_thread_.join();
+  if (replay_thread_.joinable()) replay_thread_.join();
+}
+
+void IncidentServer::ReplayLoop() {
+  const auto wall0 = std::chrono::steady_clock::now();
+  const TimeS t0 = estimates_.empty() ? 0.0 : estimates_.front().t;
+  std::size_t next = 0;
+  while (!stop_) {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+    const TimeS now = t0 + elapsed * options_.speed;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      while (next < estimates_.size() && estimates_[next].t <= now) {
+        state_.Apply(estimates_[next++]);
+        ++stats_.released_estimates;
+      }
+      state_.Advance(now);
+    }
+    if (next >= estimates_.size()) replay_done_ = true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+}
+
+const char* DashboardHtml() {
+  return R"HTML(<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
+<title>trailmark — incident</title>
+<style>
+body{margin:0;font:14px system-ui,sans-serif;display:flex;flex-wrap:wrap;height:100vh}
+#map{flex:3 1 480px;min-height:60vh;background:#111}#side{flex:1 1 240px;padding:8px;overflow:auto}
+.alert{background:#fee;border-left:4px solid #c00;margin:4px 0;padding:4px}.node{cursor:pointer;padding:2px}
+.node.sel{background:#def}
+</style></head><body>
+<canvas id="map"></canvas>
+<div id="side"><h3>Firefighters</h3><div id="list"></div><h3>Alerts</h3><div id="alerts"></div>
+<p id="clock"></p></div>
+<script>
+const token = new URLSearchParams(location.search).get('token') || '';
+const canvas = document.getElementById('map'), ctx = canvas.getContext('2d');
+let selected = null, trails = {};
+function ellipse(n, s, ox, oy) {
+  const a = (n.sxx + n.syy) / 2, d = Math.sqrt(Math.max(0, (n.sxx - n.syy) ** 2 / 4 + n.sxy ** 2));
+  const l1 = a + d, l2 = Math.max(0, a - d), ang = 0.5 * Math.atan2(2 * n.sxy, n.sxx - n.syy);
+  ctx.beginPath(); ctx.ellipse(ox + n.x * s, oy - n.y * s, Math.sqrt(5.991 * l1) * s, Math.sqrt(5.991 * l2) * s, -ang, 0, 2 * Math.PI);
+  ctx.stroke();
+}
+async function tick() {
+  const r = await fetch('/api/state', {headers: {Authorization: 'Bearer ' + token}});
+  if (!r.ok) { document.getElementById('clock').textContent = 'not authorized'; return; }
+  const st = await r.json();
+  canvas.width = canvas.clientWidth; canvas.height = canvas.clientHeight;
+  const xs = st.nodes.map(n => n.x), ys = st.nodes.map(n => n.y);
+  const minx = Math.min(...xs, 0) - 2, maxx = Math.max(...xs, 0) + 2, miny = Math.min(...ys, 0) - 2, maxy = Math.max(...ys, 0) + 2;
+  const s = Math.min(canvas.width / (maxx - minx), canvas.height / (maxy - miny));
+  const ox = -minx * s, oy = canvas.height + miny * s;
+  const list = document.getElementById('list'); list.innerHTML = '';
+  for (const n of st.nodes) {
+    if (n.kind === 'agent') {
+      (trails[n.id] = trails[n.id] || []).push([n.x, n.y]);
+      ctx.strokeStyle = '#555'; ctx.beginPath();
+      trails[n.id].forEach(([x, y], i) => i ? ctx.lineTo(ox + x * s, oy - y * s) : ctx.moveTo(ox + x * s, oy - y * s));
+      ctx.stroke();
+      ctx.strokeStyle = n.id === selected ? '#ff0' : '#f80'; ellipse(n, s, ox, oy);
+      ctx.fillStyle = '#f33'; ctx.beginPath(); ctx.arc(ox + n.x * s, oy - n.y * s, 6, 0, 2 * Math.PI); ctx.fill();
+      ctx.fillStyle = '#fff'; ctx.fillText(n.id, ox + n.x * s + 8, oy - n.y * s - 8);
+      const div = document.createElement('div'); div.className = 'node' + (n.id === selected ? ' sel' : '');
+      div.dataset.id = n.id; div.textContent = `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`;
+      div.onclick = () => { selected = n.id; }; list.appendChild(div);
+    } else {
+      ctx.fillStyle = n.kind === 'base' ? '#4af' : '#8c8';
+      ctx.fillRect(ox + n.x * s - 3, oy - n.y * s - 3, 6, 6);
+    }
+  }
+  document.getElementById('alerts').innerHTML = st.alerts.map(a => `<div class="alert">${a.message}</div>`).join('');
+  document.getElementById('clock').textContent = st.t === null ? '' : `mission time ${st.t.toFixed(1)} s`;
+}
+setInterval(tick, 500); tick();
+</script></body></html>
+)HTML";
+}
+
+}  // namespace trailmark::server

@@ -1,0 +1,70 @@
+#pragma once
+/// `trailmark serve`: the incident server (issue 7, first part). Replays a mission's online
+/// estimates at a chosen speed into an IncidentState and serves it over HTTP (cpp-httplib):
+///   GET /api/state   (Authorization: Bearer TOKEN)  -> the state JSON, 401 without the token
+///   GET /?token=TOKEN                                -> the dashboard page
+///   GET /api/health                                  -> {"ok": true} (no token)
+/// Binds to 127.0.0.1 unless told otherwise. Every request without the right token is refused
+/// and counted. See docs/server.md.
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "server/incident_state.h"
+
+namespace trailmark::server {
+
+struct ServerOptions {
+  std::string bind = "127.0.0.1";
+  int port = 8080;      ///< 0: any free port (see IncidentServer::port())
+  std::string token;    ///< required; never empty
+  double speed = 10.0;  ///< mission seconds per wall second
+  AlertOptions alerts;
+  std::size_t max_request_bytes = 1 << 20;
+};
+
+struct ServerStats {
+  std::atomic<std::size_t> requests{0}, unauthorized{0}, released_estimates{0};
+};
+
+class IncidentServer {
+ public:
+  /// `estimates` in non-decreasing time (a pipeline's online output).
+  IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates, ServerOptions options);
+  ~IncidentServer();
+  IncidentServer(const IncidentServer&) = delete;
+  IncidentServer& operator=(const IncidentServer&) = delete;
+
+  /// Binds and starts serving and replaying; throws std::runtime_error when it cannot bind.
+  void Start();
+  void Stop();
+  int port() const { return port_; }
+  bool replay_done() const { return replay_done_; }
+  const ServerStats& stats() const { return stats_; }
+  /// The state JSON as GET /api/state returns it.
+  nlohmann::json StateJson();
+
+ private:
+  void ReplayLoop();
+
+  MissionInfo info_;
+  std::vector<Estimate> estimates_;
+  ServerOptions options_;
+  std::mutex mutex_;
+  IncidentState state_;
+  struct Http;
+  std::unique_ptr<Http> http_;
+  std::thread http_thread_, replay_thread_;
+  std::atomic<bool> stop_{false}, replay_done_{false};
+  int port_ = 0;
+  ServerStats stats_;
+};
+
+/// The dashboard page served at / (self-contained, no network beyond this server).
+const char* DashboardHtml();
+
+}  // namespace trailmark::server

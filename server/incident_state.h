@@ -1,0 +1,63 @@
+#pragma once
+/// What the incident commander sees, as data: the latest estimate of every node and the alerts
+/// derived from them — no data for a while (link lost), motionless (like a PASS alarm),
+/// uncertainty too large. Fed with estimates in time order; `Advance` moves the clock (alerts
+/// depend on it). No network, no threads: the HTTP server and tests use it alike.
+
+#include <deque>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+#include "trailmark/core/mission.h"
+
+namespace trailmark::server {
+
+struct AlertOptions {
+  double no_data_s = 10.0;           ///< an agent without an estimate this long: link lost
+  double motionless_s = 30.0;        ///< PASS devices alarm after ~30 s without motion (NFPA 1982)
+  double motionless_radius_m = 0.5;  ///< "without motion": within this radius
+  double uncertainty_m = 5.0;        ///< 95 % ellipse semi-major axis above this
+};
+
+struct NodeState {
+  std::string id;
+  NodeKind kind = NodeKind::kCrumb;
+  Estimate estimate;
+  std::deque<std::pair<TimeS, Vec2>> recent;  ///< agents: positions over the motionless window
+};
+
+struct Alert {
+  std::string id, kind, message;
+  TimeS t = 0;
+};
+
+class IncidentState {
+ public:
+  explicit IncidentState(const MissionInfo& info, AlertOptions options = {});
+  /// An estimate (non-decreasing time across calls; older ones are ignored and counted).
+  void Apply(const Estimate& e);
+  /// Mission time now; recomputes the alerts.
+  void Advance(TimeS now);
+  TimeS now() const { return now_; }
+  const std::map<std::string, NodeState>& nodes() const { return nodes_; }
+  const std::vector<Alert>& alerts() const { return alerts_; }
+  std::size_t stale_estimates() const { return stale_; }
+  /// The contract of GET /api/state (docs/server.md).
+  nlohmann::json ToJson() const;
+
+ private:
+  MissionInfo info_;
+  AlertOptions options_;
+  TimeS now_ = -1e300;
+  std::map<std::string, NodeState> nodes_;
+  std::vector<Alert> alerts_;
+  std::size_t stale_ = 0;
+};
+
+/// 95 % confidence ellipse semi-major axis of a horizontal covariance (chi-square 2 dof).
+double Ellipse95SemiMajor(double sxx, double sxy, double syy);
+
+}  // namespace trailmark::server

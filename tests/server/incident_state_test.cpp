@@ -1,0 +1,68 @@
+// The incident state behind `trailmark serve`: the /api/state contract and the alerts.
+#include "server/incident_state.h"
+
+#include <gtest/gtest.h>
+
+namespace trailmark::server {
+namespace {
+
+MissionInfo Info() {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3::Zero(), 0.1));
+  info.nodes.push_back(NodeInfo::Base("base", Vec3::Zero()));
+  return info;
+}
+
+Estimate At(const std::string& id, TimeS t, double x, double var = 0.01) {
+  return {t, id, Vec3(x, 1, 0), var, 0, var};
+}
+
+TEST(IncidentState, StateJsonFollowsTheContract) {
+  IncidentState s(Info());
+  s.Apply(At("base", 0, 0));
+  s.Apply(At("ff1", 1, 2));
+  s.Apply(At("c7", 1, 3));  // a crumb dropped on the way (not declared)
+  s.Advance(1.5);
+  const auto j = s.ToJson();
+  EXPECT_DOUBLE_EQ(j.at("t").get<double>(), 1.5);
+  ASSERT_EQ(j.at("nodes").size(), 3u);
+  for (const auto& n : j.at("nodes")) {
+    for (const char* key : {"id", "kind", "t", "x", "y", "z", "sxx", "sxy", "syy"})
+      EXPECT_TRUE(n.contains(key)) << key;
+  }
+  EXPECT_EQ(j.at("nodes")[1].at("id"), "c7");
+  EXPECT_EQ(j.at("nodes")[1].at("kind"), "crumb");
+  EXPECT_EQ(j.at("nodes")[2].at("kind"), "agent");
+  EXPECT_TRUE(j.at("alerts").empty());
+  // An older estimate never overwrites a newer one.
+  s.Apply(At("ff1", 0.5, 9));
+  EXPECT_EQ(s.stale_estimates(), 1u);
+  EXPECT_DOUBLE_EQ(s.nodes().at("ff1").estimate.position_n.x(), 2);
+}
+
+TEST(IncidentState, AlertsForLinkLostMotionlessAndUncertainty) {
+  IncidentState s(Info());
+  // ff1 walks for 40 s, ff2 stands still from t = 5 s, then ff1 goes silent.
+  for (int k = 0; k <= 40; ++k) {
+    s.Apply(At("ff1", k, 0.5 * k));
+    s.Apply(At("ff2", k, k < 5 ? k : 5.0, k > 20 ? 40.0 : 0.01));
+  }
+  s.Advance(40);
+  auto has = [&](const std::string& id, const std::string& kind) {
+    for (const auto& a : s.alerts()) {
+      if (a.id == id && a.kind == kind) return true;
+    }
+    return false;
+  };
+  EXPECT_FALSE(has("ff1", "motionless"));
+  EXPECT_TRUE(has("ff2", "motionless"));   // still for 35 s > 30 s
+  EXPECT_TRUE(has("ff2", "uncertainty"));  // 95 % ellipse sqrt(5.991 x 40) = 15.5 m > 5 m
+  EXPECT_FALSE(has("ff1", "no-data"));
+  s.Advance(51);
+  EXPECT_TRUE(has("ff1", "no-data"));  // 11 s without an estimate
+  EXPECT_NEAR(Ellipse95SemiMajor(4, 0, 1), std::sqrt(5.991 * 4), 1e-12);
+}
+
+}  // namespace
+}  // namespace trailmark::server
