@@ -168,10 +168,14 @@ SearchGrid::SearchGrid(const FloorPlan& plan, Options options) : plan_(&plan), o
   const Vec2 offset(best_offset(xs), best_offset(ys));
   origin_ = Vec2(offset.x() + s * std::floor((box.min.x() - s - offset.x()) / s),
                  offset.y() + s * std::floor((box.min.y() - s - offset.y()) / s));
-  nx_ = static_cast<int>(std::ceil((box.max.x() - origin_.x()) / s)) + 2;
-  ny_ = static_cast<int>(std::ceil((box.max.y() - origin_.y()) / s)) + 2;
-  if (static_cast<double>(nx_) * ny_ > 2e7)
-    throw std::invalid_argument("SearchGrid: floor plan too large for the grid");
+  const double nx = std::ceil((box.max.x() - origin_.x()) / s) + 2, ny = std::ceil((box.max.y() - origin_.y()) / s) + 2;
+  if (!(nx * ny <= 2e7)) {
+    throw std::invalid_argument(fmt::format("the floor plan spans {:.0f} x {:.0f} m: too large for a {} m search grid "
+                                            "(at most 2e7 nodes; a wall far away?)",
+                                            box.max.x() - box.min.x(), box.max.y() - box.min.y(), s));
+  }
+  nx_ = static_cast<int>(nx);
+  ny_ = static_cast<int>(ny);
   // Flood fill from the border with every door closed: what is not reached is inside.
   const SegmentIndex drawn(plan.walls());
   std::vector<char> outside(static_cast<std::size_t>(nx_) * ny_, 0);
