@@ -2,14 +2,59 @@
 
 #include <httplib.h>
 
+#include <algorithm>
 #include <chrono>
+#include <fstream>
+#include <sstream>
 #include <stdexcept>
+
+#include "server/journal.h"
+#include "trailmark/core/error.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/io/streams.h"
+#include "trailmark/pipelines/pipeline.h"
 
 namespace trailmark::server {
 
 struct IncidentServer::Http {
   httplib::Server server;
 };
+
+struct IncidentServer::Live {
+  std::unique_ptr<Journal> journal;
+  std::filesystem::path work;  ///< scratch: POST bodies, the exported journal
+  std::size_t posts = 0;
+};
+
+namespace {
+
+class VectorSink : public EstimateSink {
+ public:
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
+
+std::vector<std::string> Lines(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+// The rows of a CSV document of one stream, checked by the mission readers, in canonical form.
+template <class Row>
+std::pair<std::string, std::vector<std::string>> Canonical(const std::filesystem::path& in,
+                                                           const std::filesystem::path& out) {
+  const std::vector<Row> rows = ReadAll<Row>(in.string());
+  WriteAll<Row>(out.string(), rows);
+  std::vector<std::string> lines = Lines(out);
+  if (lines.empty()) return {"", {}};
+  const std::string header = lines.front();
+  lines.erase(lines.begin());
+  return {header, lines};
+}
+
+}  // namespace
 
 IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates,
                                ServerOptions options)
@@ -20,6 +65,13 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
       http_(new Http) {
   if (options_.token.empty()) throw std::invalid_argument("serve: a token is required");
   if (!(options_.speed > 0)) throw std::invalid_argument("serve: speed must be > 0");
+  if (!options_.journal_file.empty()) {
+    live_ = std::make_unique<Live>();
+    live_->journal = std::make_unique<Journal>(options_.journal_file);
+    live_->work = std::filesystem::path(options_.journal_file.string() + ".work");
+    std::filesystem::create_directories(live_->work);
+    dirty_ = live_->journal->size() > 0;  // a restart: rebuild the state from the journal
+  }
 }
 
 IncidentServer::~IncidentServer() { Stop(); }
@@ -57,6 +109,23 @@ void IncidentServer::Start() {
             ++stats_.requests;
             res.set_content(StateJson().dump(), "application/json");
           });
+  if (live_) {
+    svr.Post(R"(/api/ingest/([a-z]+\.csv))",
+             [this, refuse](const httplib::Request& req, httplib::Response& res) {
+               ++stats_.requests;
+               if (req.get_header_value("Authorization") != "Bearer " + options_.token) {
+                 ++stats_.unauthorized;
+                 return refuse(res);
+               }
+               try {
+                 res.set_content(Ingest(req.matches[1], req.body).dump(), "application/json");
+               } catch (const std::exception& e) {
+                 ++stats_.rejected_requests;
+                 res.status = 400;
+                 res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");
+               }
+             });
+  }
   svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {
     if (!authorized(req)) return refuse(res);
     res.set_content(DashboardHtml(), "text/html; charset=utf-8");
@@ -69,7 +138,7 @@ void IncidentServer::Start() {
                              std::to_string(options_.port) + " (port in use?)");
   }
   http_thread_ = std::thread([this] { http_->server.listen_after_bind(); });
-  replay_thread_ = std::thread([this] { ReplayLoop(); });
+  replay_thread_ = std::thread([this] { live_ ? LiveLoop() : ReplayLoop(); });
 }
 
 void IncidentServer::Stop() {
@@ -96,6 +165,83 @@ void IncidentServer::ReplayLoop() {
       state_.Advance(now);
     }
     if (next >= estimates_.size()) replay_done_ = true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+}
+
+nlohmann::json IncidentServer::Ingest(const std::string& stream, const std::string& body) {
+  std::lock_guard<std::mutex> lock(ingest_mutex_);
+  const std::filesystem::path in = live_->work / ("post-" + stream);
+  const std::filesystem::path out = live_->work / ("canonical-" + stream);
+  {
+    std::ofstream f(in, std::ios::binary);
+    f << body;
+  }
+  std::pair<std::string, std::vector<std::string>> rows;
+  try {
+    if (stream == "steps.csv")
+      rows = Canonical<Step>(in, out);
+    else if (stream == "rssi.csv")
+      rows = Canonical<RssiPacket>(in, out);
+    else if (stream == "ranges.csv")
+      rows = Canonical<RangeMeasurement>(in, out);
+    else if (stream == "bearings.csv")
+      rows = Canonical<BearingMeasurement>(in, out);
+    else if (stream == "events.csv")
+      rows = Canonical<MissionEvent>(in, out);
+    else if (stream == "imu.csv")
+      rows = Canonical<ImuSample>(in, out);
+    else
+      throw std::invalid_argument("unknown stream '" + stream + "'");
+  } catch (const InputError& e) {
+    // Name the request, not the scratch file.
+    std::string what = e.what();
+    const std::string scratch = in.string();
+    if (what.rfind(scratch, 0) == 0) what = "request body" + what.substr(scratch.size());
+    throw std::invalid_argument(what);
+  }
+  const Journal::AppendResult r = live_->journal->Append(stream, rows.first, rows.second);
+  stats_.ingested_rows += r.accepted;
+  stats_.duplicate_rows += r.duplicates;
+  dirty_ = dirty_ || r.accepted > 0;
+  return {{"accepted", r.accepted}, {"duplicates", r.duplicates}};
+}
+
+void IncidentServer::LiveLoop() {
+  const std::filesystem::path mission_json = options_.live_dir / "mission.json";
+  auto last = std::chrono::steady_clock::now() - std::chrono::hours(1);
+  while (!stop_) {
+    const auto now = std::chrono::steady_clock::now();
+    if (dirty_ && std::chrono::duration<double>(now - last).count() >= options_.live_period_s) {
+      dirty_ = false;
+      last = now;
+      try {
+        const std::filesystem::path dir = live_->work / "mission";
+        std::filesystem::remove_all(dir);
+        {
+          std::lock_guard<std::mutex> lock(ingest_mutex_);
+          live_->journal->Export(dir, mission_json);
+        }
+        if (info_.floorplan && std::filesystem::exists(options_.live_dir / *info_.floorplan)) {
+          std::filesystem::copy_file(options_.live_dir / *info_.floorplan, dir / *info_.floorplan,
+                                     std::filesystem::copy_options::overwrite_existing);
+        }
+        const MissionDirectory mission(dir);
+        const Pipeline* p = FindPipeline(options_.pipeline);
+        VectorSink sink;
+        if (p && p->CanRun(mission)) p->Run({mission, options_.pipeline_options}, sink);
+        ++stats_.pipeline_runs;
+        std::stable_sort(sink.rows.begin(), sink.rows.end(),
+                         [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+        IncidentState fresh(info_, options_.alerts);
+        for (const auto& e : sink.rows) fresh.Apply(e);
+        if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
+        std::lock_guard<std::mutex> lock(mutex_);
+        state_ = std::move(fresh);
+      } catch (const std::exception&) {
+        ++stats_.rejected_requests;  // the journal holds rows the pipeline refuses; keep serving
+      }
+    }
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
 }

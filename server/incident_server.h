@@ -4,10 +4,13 @@
 ///   GET /api/state   (Authorization: Bearer TOKEN)  -> the state JSON, 401 without the token
 ///   GET /?token=TOKEN                                -> the dashboard page
 ///   GET /api/health                                  -> {"ok": true} (no token)
+///   POST /api/ingest/<stream> (bearer token; live mode) -> rows journaled, then acknowledged
 /// Binds to 127.0.0.1 unless told otherwise. Every request without the right token is refused
 /// and counted. See docs/server.md.
 
 #include <atomic>
+#include <filesystem>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -19,6 +22,13 @@
 namespace trailmark::server {
 
 struct ServerOptions {
+  /// Live mode (instead of a replay): a directory with the incident's mission.json, and the
+  /// journal file; measurements are POSTed to /api/ingest/<stream>, journaled, and the pipeline
+  /// re-run on the journal at most every `live_period_s`.
+  std::filesystem::path live_dir, journal_file;
+  std::string pipeline = "pdr";
+  std::map<std::string, std::string> pipeline_options;
+  double live_period_s = 1.0;
   std::string bind = "127.0.0.1";
   int port = 8080;      ///< 0: any free port (see IncidentServer::port())
   std::string token;    ///< required; never empty
@@ -29,6 +39,8 @@ struct ServerOptions {
 
 struct ServerStats {
   std::atomic<std::size_t> requests{0}, unauthorized{0}, released_estimates{0};
+  std::atomic<std::size_t> ingested_rows{0}, duplicate_rows{0}, rejected_requests{0},
+      pipeline_runs{0};
 };
 
 class IncidentServer {
@@ -50,6 +62,9 @@ class IncidentServer {
 
  private:
   void ReplayLoop();
+  void LiveLoop();
+  /// Parses one POSTed CSV document of `stream`, journals its rows; returns the JSON answer.
+  nlohmann::json Ingest(const std::string& stream, const std::string& body);
 
   MissionInfo info_;
   std::vector<Estimate> estimates_;
@@ -59,7 +74,10 @@ class IncidentServer {
   struct Http;
   std::unique_ptr<Http> http_;
   std::thread http_thread_, replay_thread_;
-  std::atomic<bool> stop_{false}, replay_done_{false};
+  std::atomic<bool> stop_{false}, replay_done_{false}, dirty_{false};
+  struct Live;
+  std::unique_ptr<Live> live_;
+  std::mutex ingest_mutex_;
   int port_ = 0;
   ServerStats stats_;
 };

@@ -72,8 +72,13 @@ struct ServeOptions {
   std::string bind = "127.0.0.1";
   std::string token;     ///< empty: a random one is made and printed
   bool exit_after_replay = false;
+  std::filesystem::path live, journal;  ///< live mode: mission.json directory and journal file
 };
 int Serve(const ServeOptions& options);
+int ServeLive(const ServeOptions& options);
+/// `trailmark journal export JOURNAL --mission DIR --out OUT`.
+int JournalExport(const std::filesystem::path& journal, const std::filesystem::path& mission,
+                  const std::filesystem::path& out);
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
                        const std::vector<std::string>& missions);

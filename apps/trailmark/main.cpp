@@ -175,7 +175,12 @@ int main(int argc, char** argv) {
   std::vector<std::string> serve_kv;
   auto* serve = app.add_subcommand("serve", "the incident server: replays a mission's online estimates at a speed "
                                             "and serves the state and the dashboard over HTTP (docs/server.md)");
-  serve->add_option("--replay", serve_replay, "mission directory to replay")->required();
+  std::string serve_live, serve_journal;
+  auto* replay_opt = serve->add_option("--replay", serve_replay, "mission directory to replay");
+  auto* live_opt = serve->add_option("--live", serve_live, "live incident: directory with its mission.json; "
+                                                          "measurements are POSTed to /api/ingest/<stream>");
+  serve->add_option("--journal", serve_journal, "live mode: the SQLite journal file (created or resumed)");
+  replay_opt->excludes(live_opt);
   serve->add_option("--pipeline", serve_options.pipeline, "pipeline (default: the most capable runnable one)");
   serve->add_option("--option", serve_kv, "pipeline option key=value (repeatable)");
   serve->add_option("--speed", serve_options.speed, "mission seconds per wall second")->check(CLI::PositiveNumber);
@@ -183,6 +188,14 @@ int main(int argc, char** argv) {
   serve->add_option("--bind", serve_options.bind, "address to listen on (default 127.0.0.1, loopback only)");
   serve->add_option("--token", serve_options.token, "access token (default: $TRAILMARK_TOKEN, else a random one)");
   serve->add_flag("--exit-after-replay", serve_options.exit_after_replay, "stop when the replay has ended");
+
+  std::string journal_file, journal_mission, journal_out;
+  auto* journal = app.add_subcommand("journal", "the incident journal of `trailmark serve --live`");
+  auto* journal_export = journal->add_subcommand("export", "write the journal as a mission directory");
+  journal_export->add_option("journal", journal_file, "journal file")->required();
+  journal_export->add_option("--mission", journal_mission, "directory with the incident's mission.json")->required();
+  journal_export->add_option("--out", journal_out, "mission directory to write")->required();
+  journal->require_subcommand(1);
 
   CLI11_PARSE(app, argc, argv);
   try {
@@ -255,10 +268,15 @@ int main(int argc, char** argv) {
         fmt::print("\n");
       }
     } else if (*serve) {
+      if (serve_replay.empty() && serve_live.empty()) throw std::invalid_argument("serve needs --replay MISSION or --live DIR");
+      serve_options.live = serve_live;
+      serve_options.journal = serve_journal;
       serve_options.replay = serve_replay;
       serve_options.options = ParseKeyValues(serve_kv);
       if (serve_options.token.empty() && std::getenv("TRAILMARK_TOKEN")) serve_options.token = std::getenv("TRAILMARK_TOKEN");
       return cli::Serve(serve_options);
+    } else if (*journal_export) {
+      return cli::JournalExport(journal_file, journal_mission, journal_out);
     } else if (*wayout) {
       const MissionDirectory m(wayout_mission);
       const WayOutReport w = ComputeWayOut(

@@ -10,6 +10,7 @@
 
 #include "commands.h"
 #include "server/incident_server.h"
+#include "server/journal.h"
 #include "trailmark/io/mission_io.h"
 
 namespace trailmark::cli {
@@ -31,9 +32,56 @@ std::string RandomToken() {
                      (static_cast<unsigned long long>(rd()) << 32) ^ rd());
 }
 
+std::atomic<bool>& StopFlag() { return g_stop; }
+
 }  // namespace
 
+int ServeLive(const ServeOptions& o) {
+  if (o.journal.empty()) throw std::invalid_argument("serve --live needs --journal FILE");
+  const MissionDirectory mission(o.live);  // mission.json of the incident (nodes, floor plan)
+  server::ServerOptions so;
+  so.live_dir = o.live;
+  so.journal_file = o.journal;
+  so.pipeline = o.pipeline.empty() ? "pdr" : o.pipeline;
+  if (!FindPipeline(so.pipeline))
+    throw std::invalid_argument("unknown pipeline '" + so.pipeline + "'");
+  so.pipeline_options = o.options;
+  so.bind = o.bind;
+  so.port = o.port;
+  so.token = o.token.empty() ? RandomToken() : o.token;
+  server::IncidentServer srv(mission.info(), {}, so);
+  srv.Start();
+  fmt::print(
+      "trailmark serve: live incident '{}', journal {}, pipeline {}, listening on http://{}:{}/\n",
+      mission.info().name, o.journal.string(), so.pipeline, o.bind, srv.port());
+  fmt::print("dashboard: http://{}:{}/?token={}\n", o.bind, srv.port(), so.token);
+  std::fflush(stdout);
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  while (!StopFlag()) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  srv.Stop();
+  fmt::print(
+      "trailmark serve: stopped after {} requests ({} refused without the token, {} rejected), {} "
+      "rows "
+      "journaled, {} duplicates dropped\n",
+      srv.stats().requests.load(), srv.stats().unauthorized.load(),
+      srv.stats().rejected_requests.load(), srv.stats().ingested_rows.load(),
+      srv.stats().duplicate_rows.load());
+  return 0;
+}
+
+int JournalExport(const std::filesystem::path& journal, const std::filesystem::path& mission,
+                  const std::filesystem::path& out) {
+  if (!std::filesystem::exists(journal))
+    throw std::invalid_argument(journal.string() + ": no such journal");
+  const server::Journal j(journal);
+  j.Export(out, mission / "mission.json");
+  fmt::print("exported {} rows from {} into {}\n", j.size(), journal.string(), out.string());
+  return 0;
+}
+
 int Serve(const ServeOptions& o) {
+  if (!o.live.empty()) return ServeLive(o);
   const MissionDirectory mission(o.replay);
   std::string pipeline = o.pipeline;
   if (pipeline.empty()) {
