@@ -9,7 +9,7 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcli11-dev nlohmann-json3-dev libfmt-dev libspdlog-dev
-  libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libsqlite3-dev libcpp-httplib-dev curl
+  libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libsqlite3-dev libcpp-httplib-dev curl chromium
   clang libclang-rt-14-dev
 )
 
@@ -38,6 +38,10 @@ if ! command -v npm >/dev/null 2>&1; then
   $SUDO apt-get install -y -qq --no-install-recommends nodejs npm
 fi
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+if [ ! -d "$here/tests/browser/node_modules/playwright-core" ]; then
+  echo "[install] npm ci in tests/browser (playwright-core; the browser is Debian's chromium)"
+  (cd "$here/tests/browser" && npm ci --no-audit --no-fund --loglevel=error)
+fi
 if [ ! -f "$here/web/report/node_modules/chart.js/dist/chart.umd.js" ]; then
   echo "[install] npm ci in web/report"
   (cd "$here/web/report" && npm ci --no-audit --no-fund --loglevel=error)

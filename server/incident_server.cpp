@@ -57,10 +57,14 @@ std::pair<std::string, std::vector<std::string>> Canonical(const std::filesystem
 }  // namespace
 
 IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates,
-                               ServerOptions options)
+                               ServerOptions options,
+                               std::vector<std::pair<TimeS, std::string>> heard,
+                               std::vector<Segment2> walls)
     : info_(info),
       estimates_(std::move(estimates)),
       options_(std::move(options)),
+      heard_(std::move(heard)),
+      walls_(std::move(walls)),
       state_(info_, options_.alerts),
       http_(new Http) {
   if (options_.token.empty()) throw std::invalid_argument("serve: a token is required");
@@ -126,6 +130,16 @@ void IncidentServer::Start() {
                }
              });
   }
+  svr.Get("/api/floorplan", [this, refuse](const httplib::Request& req, httplib::Response& res) {
+    ++stats_.requests;
+    if (req.get_header_value("Authorization") != "Bearer " + options_.token) {
+      ++stats_.unauthorized;
+      return refuse(res);
+    }
+    nlohmann::json walls = nlohmann::json::array();
+    for (const auto& w : walls_) walls.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
+    res.set_content(nlohmann::json{{"walls", walls}}.dump(), "application/json");
+  });
   svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {
     if (!authorized(req)) return refuse(res);
     res.set_content(DashboardHtml(), "text/html; charset=utf-8");
@@ -151,13 +165,17 @@ void IncidentServer::Stop() {
 void IncidentServer::ReplayLoop() {
   const auto wall0 = std::chrono::steady_clock::now();
   const TimeS t0 = estimates_.empty() ? 0.0 : estimates_.front().t;
-  std::size_t next = 0;
+  std::size_t next = 0, next_heard = 0;
   while (!stop_) {
     const double elapsed =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     const TimeS now = t0 + elapsed * options_.speed;
     {
       std::lock_guard<std::mutex> lock(mutex_);
+      while (next_heard < heard_.size() && heard_[next_heard].first <= now) {
+        state_.Heard(heard_[next_heard].second, heard_[next_heard].first);
+        ++next_heard;
+      }
       while (next < estimates_.size() && estimates_[next].t <= now) {
         state_.Apply(estimates_[next++]);
         ++stats_.released_estimates;
@@ -262,7 +280,8 @@ body{margin:0;font:14px system-ui,sans-serif;display:flex;flex-wrap:wrap;height:
 <script>
 const token = new URLSearchParams(location.search).get('token') || '';
 const canvas = document.getElementById('map'), ctx = canvas.getContext('2d');
-let selected = null, trails = {};
+let selected = null, trails = {}, walls = [];
+fetch('/api/floorplan', {headers: {Authorization: 'Bearer ' + token}}).then(r => r.ok ? r.json() : {walls: []}).then(j => { walls = j.walls; });
 function ellipse(n, s, ox, oy) {
   const a = (n.sxx + n.syy) / 2, d = Math.sqrt(Math.max(0, (n.sxx - n.syy) ** 2 / 4 + n.sxy ** 2));
   const l1 = a + d, l2 = Math.max(0, a - d), ang = 0.5 * Math.atan2(2 * n.sxy, n.sxx - n.syy);
@@ -275,9 +294,14 @@ async function tick() {
   const st = await r.json();
   canvas.width = canvas.clientWidth; canvas.height = canvas.clientHeight;
   const xs = st.nodes.map(n => n.x), ys = st.nodes.map(n => n.y);
+  for (const w of walls) { xs.push(w[0], w[2]); ys.push(w[1], w[3]); }
+  for (const t of Object.values(trails)) for (const [x, y] of t) { xs.push(x); ys.push(y); }
   const minx = Math.min(...xs, 0) - 2, maxx = Math.max(...xs, 0) + 2, miny = Math.min(...ys, 0) - 2, maxy = Math.max(...ys, 0) + 2;
   const s = Math.min(canvas.width / (maxx - minx), canvas.height / (maxy - miny));
   const ox = -minx * s, oy = canvas.height + miny * s;
+  ctx.strokeStyle = '#889'; ctx.lineWidth = 2;
+  for (const w of walls) { ctx.beginPath(); ctx.moveTo(ox + w[0] * s, oy - w[1] * s); ctx.lineTo(ox + w[2] * s, oy - w[3] * s); ctx.stroke(); }
+  ctx.lineWidth = 1;
   const list = document.getElementById('list'); list.innerHTML = '';
   for (const n of st.nodes) {
     if (n.kind === 'agent') {

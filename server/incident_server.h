@@ -4,6 +4,7 @@
 ///   GET /api/state   (Authorization: Bearer TOKEN)  -> the state JSON, 401 without the token
 ///   GET /?token=TOKEN                                -> the dashboard page
 ///   GET /api/health                                  -> {"ok": true} (no token)
+///   GET /api/floorplan (bearer token)                -> {"walls": [[x0, y0, x1, y1], ...]}
 ///   POST /api/ingest/<stream> (bearer token; live mode) -> rows journaled, then acknowledged
 /// Binds to 127.0.0.1 unless told otherwise. Every request without the right token is refused
 /// and counted. See docs/server.md.
@@ -18,6 +19,7 @@
 #include <vector>
 
 #include "server/incident_state.h"
+#include "trailmark/geometry/segment.h"
 
 namespace trailmark::server {
 
@@ -45,8 +47,12 @@ struct ServerStats {
 
 class IncidentServer {
  public:
-  /// `estimates` in non-decreasing time (a pipeline's online output).
-  IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates, ServerOptions options);
+  /// `estimates` in non-decreasing time (a pipeline's online output); `heard`: (time, node) of
+  /// every measurement, released with the replay for the link-lost alert; `walls`: the floor
+  /// plan's solid walls for the dashboard (may be empty).
+  IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates, ServerOptions options,
+                 std::vector<std::pair<TimeS, std::string>> heard = {},
+                 std::vector<Segment2> walls = {});
   ~IncidentServer();
   IncidentServer(const IncidentServer&) = delete;
   IncidentServer& operator=(const IncidentServer&) = delete;
@@ -69,6 +75,8 @@ class IncidentServer {
   MissionInfo info_;
   std::vector<Estimate> estimates_;
   ServerOptions options_;
+  std::vector<std::pair<TimeS, std::string>> heard_;
+  std::vector<Segment2> walls_;
   std::mutex mutex_;
   IncidentState state_;
   struct Http;

@@ -38,15 +38,25 @@ void IncidentState::Apply(const Estimate& e) {
   now_ = std::max(now_, e.t);
 }
 
+void IncidentState::Heard(const std::string& id, TimeS t) {
+  auto it = heard_.find(id);
+  if (it == heard_.end())
+    heard_.emplace(id, t);
+  else
+    it->second = std::max(it->second, t);
+}
+
 void IncidentState::Advance(TimeS now) {
   now_ = std::max(now_, now);
   alerts_.clear();
   for (const auto& [id, n] : nodes_) {
     if (n.kind != NodeKind::kAgent) continue;
     const Estimate& e = n.estimate;
-    if (now_ - e.t > options_.no_data_s) {
+    const auto heard = heard_.find(id);
+    const TimeS last = heard != heard_.end() ? std::max(heard->second, e.t) : e.t;
+    if (now_ - last > options_.no_data_s) {
       alerts_.push_back({id, "no-data",
-                         fmt::format("no data from {} for {:.0f} s (link lost?)", id, now_ - e.t),
+                         fmt::format("no data from {} for {:.0f} s (link lost?)", id, now_ - last),
                          now_});
     }
     // Motionless: the estimates of the last motionless_s all within the radius (and the window

@@ -39,6 +39,9 @@ class IncidentState {
   explicit IncidentState(const MissionInfo& info, AlertOptions options = {});
   /// An estimate (non-decreasing time across calls; older ones are ignored and counted).
   void Apply(const Estimate& e);
+  /// A measurement from `id` arrived at time t (steps, RSSI, ranges, IMU...): the link is up
+  /// even when no estimate changes (a firefighter standing still emits no steps).
+  void Heard(const std::string& id, TimeS t);
   /// Mission time now; recomputes the alerts.
   void Advance(TimeS now);
   TimeS now() const { return now_; }
@@ -53,6 +56,7 @@ class IncidentState {
   AlertOptions options_;
   TimeS now_ = -1e300;
   std::map<std::string, NodeState> nodes_;
+  std::map<std::string, TimeS> heard_;
   std::vector<Alert> alerts_;
   std::size_t stale_ = 0;
 };

@@ -107,7 +107,20 @@ int Serve(const ServeOptions& o) {
   so.port = o.port;
   so.speed = o.speed;
   so.token = o.token.empty() ? RandomToken() : o.token;
-  server::IncidentServer srv(mission.info(), std::move(sink.rows), so);
+  // When each node was heard (for the link-lost alert): every row of the measurement streams.
+  const MissionData data = ReadMissionData(mission);
+  std::vector<std::pair<TimeS, std::string>> heard;
+  for (const auto& r : data.steps) heard.emplace_back(r.t1, r.agent);
+  for (const auto& r : data.rssi) heard.emplace_back(r.t, r.rx), heard.emplace_back(r.t, r.tx);
+  for (const auto& r : data.ranges) heard.emplace_back(r.t, r.a), heard.emplace_back(r.t, r.b);
+  for (std::size_t k = 0; k < data.imu.size(); k += 10)
+    heard.emplace_back(data.imu[k].t, data.imu[k].agent);
+  std::stable_sort(heard.begin(), heard.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<Segment2> walls;
+  if (const auto plan = mission.LoadFloorPlan()) walls = plan->solid_walls();
+  server::IncidentServer srv(mission.info(), std::move(sink.rows), so, std::move(heard),
+                             std::move(walls));
   srv.Start();
   fmt::print("trailmark serve: {} on '{}' at {}x, listening on http://{}:{}/\n", pipeline,
              mission.info().name, o.speed, o.bind, srv.port());

@@ -61,6 +61,9 @@ TEST(IncidentState, AlertsForLinkLostMotionlessAndUncertainty) {
   EXPECT_FALSE(has("ff1", "no-data"));
   s.Advance(51);
   EXPECT_TRUE(has("ff1", "no-data"));  // 11 s without an estimate
+  s.Heard("ff1", 50.5);                // an RSSI packet: the link is up, it just stands
+  s.Advance(51);
+  EXPECT_FALSE(has("ff1", "no-data"));
   EXPECT_NEAR(Ellipse95SemiMajor(4, 0, 1), std::sqrt(5.991 * 4), 1e-12);
 }
 
