@@ -151,12 +151,27 @@ void IncidentServer::Start() {
     throw std::runtime_error("serve: cannot listen on " + options_.bind + ":" +
                              std::to_string(options_.port) + " (port in use?)");
   }
+  if (live_ && !options_.mqtt.uri.empty()) {
+    MqttOptions mo = options_.mqtt;
+    if (mo.persist_dir.empty()) mo.persist_dir = (live_->work / "mqtt").string();
+    mqtt_ = std::make_unique<MqttBridge>(
+        mo,
+        [this](const std::string& stream, const std::string& body) { return Ingest(stream, body); },
+        [this](const std::string& node, const std::string& status) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          device_status_[node] = status;
+          state_.SetDeviceStatus(node, status);
+          state_.Advance(state_.now());
+        });
+    mqtt_->Start();
+  }
   http_thread_ = std::thread([this] { http_->server.listen_after_bind(); });
   replay_thread_ = std::thread([this] { live_ ? LiveLoop() : ReplayLoop(); });
 }
 
 void IncidentServer::Stop() {
   stop_ = true;
+  if (mqtt_) mqtt_->Stop();
   if (http_) http_->server.stop();
   if (http_thread_.joinable()) http_thread_.join();
   if (replay_thread_.joinable()) replay_thread_.join();
@@ -253,9 +268,20 @@ void IncidentServer::LiveLoop() {
                          [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
         IncidentState fresh(info_, options_.alerts);
         for (const auto& e : sink.rows) fresh.Apply(e);
-        if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
-        std::lock_guard<std::mutex> lock(mutex_);
-        state_ = std::move(fresh);
+        std::vector<std::pair<std::string, std::string>> to_publish;
+        {
+          std::lock_guard<std::mutex> lock(mutex_);
+          for (const auto& [node, status] : device_status_) fresh.SetDeviceStatus(node, status);
+          if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
+          state_ = std::move(fresh);
+          const nlohmann::json state = state_.ToJson();  // (a temporary would dangle in the loop)
+          for (const auto& n : state.at("nodes")) {
+            if (n.at("kind") == "agent") to_publish.emplace_back(n.at("id"), n.dump());
+          }
+        }
+        if (mqtt_) {
+          for (const auto& [node, json] : to_publish) mqtt_->PublishEstimate(node, json);
+        }
       } catch (const std::exception&) {
         ++stats_.rejected_requests;  // the journal holds rows the pipeline refuses; keep serving
       }

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "server/incident_state.h"
+#include "server/mqtt_bridge.h"
 #include "trailmark/geometry/segment.h"
 
 namespace trailmark::server {
@@ -31,6 +32,7 @@ struct ServerOptions {
   std::string pipeline = "pdr";
   std::map<std::string, std::string> pipeline_options;
   double live_period_s = 1.0;
+  MqttOptions mqtt;  ///< live mode: also ingest from an MQTT broker when `mqtt.uri` is set
   std::string bind = "127.0.0.1";
   int port = 8080;      ///< 0: any free port (see IncidentServer::port())
   std::string token;    ///< required; never empty
@@ -63,6 +65,7 @@ class IncidentServer {
   int port() const { return port_; }
   bool replay_done() const { return replay_done_; }
   const ServerStats& stats() const { return stats_; }
+  const MqttStats* mqtt_stats() const { return mqtt_ ? &mqtt_->stats() : nullptr; }
   /// The state JSON as GET /api/state returns it.
   nlohmann::json StateJson();
 
@@ -86,6 +89,8 @@ class IncidentServer {
   struct Live;
   std::unique_ptr<Live> live_;
   std::mutex ingest_mutex_;
+  std::unique_ptr<MqttBridge> mqtt_;
+  std::map<std::string, std::string> device_status_;
   int port_ = 0;
   ServerStats stats_;
 };

@@ -46,9 +46,17 @@ void IncidentState::Heard(const std::string& id, TimeS t) {
     it->second = std::max(it->second, t);
 }
 
+void IncidentState::SetDeviceStatus(const std::string& id, const std::string& status) {
+  device_status_[id] = status;
+}
+
 void IncidentState::Advance(TimeS now) {
   now_ = std::max(now_, now);
   alerts_.clear();
+  for (const auto& [id, status] : device_status_) {
+    if (status == "lost")
+      alerts_.push_back({id, "device-lost", id + ": the device was lost (MQTT last will)", now_});
+  }
   for (const auto& [id, n] : nodes_) {
     if (n.kind != NodeKind::kAgent) continue;
     const Estimate& e = n.estimate;

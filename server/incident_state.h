@@ -42,6 +42,8 @@ class IncidentState {
   /// A measurement from `id` arrived at time t (steps, RSSI, ranges, IMU...): the link is up
   /// even when no estimate changes (a firefighter standing still emits no steps).
   void Heard(const std::string& id, TimeS t);
+  /// A device's own status (MQTT last will): "lost" raises a device-lost alert until "online".
+  void SetDeviceStatus(const std::string& id, const std::string& status);
   /// Mission time now; recomputes the alerts.
   void Advance(TimeS now);
   TimeS now() const { return now_; }
@@ -57,6 +59,7 @@ class IncidentState {
   TimeS now_ = -1e300;
   std::map<std::string, NodeState> nodes_;
   std::map<std::string, TimeS> heard_;
+  std::map<std::string, std::string> device_status_;
   std::vector<Alert> alerts_;
   std::size_t stale_ = 0;
 };

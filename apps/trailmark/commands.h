@@ -73,6 +73,7 @@ struct ServeOptions {
   std::string token;     ///< empty: a random one is made and printed
   bool exit_after_replay = false;
   std::filesystem::path live, journal;  ///< live mode: mission.json directory and journal file
+  std::string mqtt_uri, incident = "incident", mqtt_user, mqtt_password;  ///< live mode over MQTT
 };
 int Serve(const ServeOptions& options);
 int ServeLive(const ServeOptions& options);

@@ -180,6 +180,10 @@ int main(int argc, char** argv) {
   auto* live_opt = serve->add_option("--live", serve_live, "live incident: directory with its mission.json; "
                                                           "measurements are POSTed to /api/ingest/<stream>");
   serve->add_option("--journal", serve_journal, "live mode: the SQLite journal file (created or resumed)");
+  serve->add_option("--mqtt", serve_options.mqtt_uri, "live mode: also ingest from this MQTT broker (tcp://host:port)");
+  serve->add_option("--incident", serve_options.incident, "MQTT topic tree trailmark/<incident>/... (default incident)");
+  serve->add_option("--mqtt-user", serve_options.mqtt_user, "MQTT user name");
+  serve->add_option("--mqtt-password", serve_options.mqtt_password, "MQTT password (also $TRAILMARK_MQTT_PASSWORD)");
   replay_opt->excludes(live_opt);
   serve->add_option("--pipeline", serve_options.pipeline, "pipeline (default: the most capable runnable one)");
   serve->add_option("--option", serve_kv, "pipeline option key=value (repeatable)");
@@ -270,6 +274,9 @@ int main(int argc, char** argv) {
     } else if (*serve) {
       if (serve_replay.empty() && serve_live.empty()) throw std::invalid_argument("serve needs --replay MISSION or --live DIR");
       serve_options.live = serve_live;
+      if (serve_options.mqtt_password.empty() && std::getenv("TRAILMARK_MQTT_PASSWORD")) {
+        serve_options.mqtt_password = std::getenv("TRAILMARK_MQTT_PASSWORD");
+      }
       serve_options.journal = serve_journal;
       serve_options.replay = serve_replay;
       serve_options.options = ParseKeyValues(serve_kv);

@@ -46,6 +46,10 @@ int ServeLive(const ServeOptions& o) {
   if (!FindPipeline(so.pipeline))
     throw std::invalid_argument("unknown pipeline '" + so.pipeline + "'");
   so.pipeline_options = o.options;
+  so.mqtt.uri = o.mqtt_uri;
+  so.mqtt.incident = o.incident;
+  so.mqtt.username = o.mqtt_user;
+  so.mqtt.password = o.mqtt_password;
   so.bind = o.bind;
   so.port = o.port;
   so.token = o.token.empty() ? RandomToken() : o.token;
@@ -55,6 +59,8 @@ int ServeLive(const ServeOptions& o) {
       "trailmark serve: live incident '{}', journal {}, pipeline {}, listening on http://{}:{}/\n",
       mission.info().name, o.journal.string(), so.pipeline, o.bind, srv.port());
   fmt::print("dashboard: http://{}:{}/?token={}\n", o.bind, srv.port(), so.token);
+  if (!o.mqtt_uri.empty())
+    fmt::print("mqtt: {}, topics trailmark/{}/<node>/<stream>\n", o.mqtt_uri, o.incident);
   std::fflush(stdout);
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
@@ -67,6 +73,10 @@ int ServeLive(const ServeOptions& o) {
       srv.stats().requests.load(), srv.stats().unauthorized.load(),
       srv.stats().rejected_requests.load(), srv.stats().ingested_rows.load(),
       srv.stats().duplicate_rows.load());
+  if (const auto* m = srv.mqtt_stats()) {
+    fmt::print("mqtt: {} messages received, {} ingested, {} rejected, {} estimates published\n",
+               m->received.load(), m->ingested.load(), m->rejected.load(), m->published.load());
+  }
   return 0;
 }
 
