@@ -100,6 +100,17 @@ void IncidentServer::Start() {
     res.set_header("WWW-Authenticate", "Bearer");
     res.set_content(R"({"error": "missing or wrong token"})", "application/json");
   };
+  // Errors raised by the HTTP layer itself (413 oversized body, 404, 400): counted, explained.
+  svr.set_error_handler([this](const httplib::Request&, httplib::Response& res) {
+    ++stats_.rejected_requests;
+    if (res.body.empty()) {
+      const std::string why = res.status == 413 ? "request body too large (at most " +
+                                                      std::to_string(options_.max_request_bytes) +
+                                                      " bytes; send CSV as Content-Type: text/csv)"
+                                                : "HTTP " + std::to_string(res.status);
+      res.set_content(nlohmann::json{{"error", why}}.dump(), "application/json");
+    }
+  });
   svr.Get("/api/health", [](const httplib::Request&, httplib::Response& res) {
     res.set_content(R"({"ok": true})", "application/json");
   });

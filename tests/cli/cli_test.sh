@@ -134,7 +134,7 @@ chunks=("$dir"/chunk.*)
 : > "$dir/acked.txt"
 post() {  # post CHUNK: 0 when acknowledged
   { echo "$header"; cat "$1"; } > "$dir/body.csv"
-  code=$(curl -s -o "$dir/ack.json" -w "%{http_code}" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
+  code=$(curl -s -o "$dir/ack.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
          "http://127.0.0.1:$lport/api/ingest/steps.csv" || true)
   [ "$code" = 200 ]
 }
@@ -149,7 +149,7 @@ for ((k = half - 1; k < ${#chunks[@]}; k++)); do  # one chunk sent again: a rede
 done
 grep -q '"duplicates":20' <(post "${chunks[0]}" && cat "$dir/ack.json") || fail "redelivered rows not detected"
 printf 't0,t1,agent,dx,dy\n1,2,ff1,abc,0\n' > "$dir/body.csv"
-code=$(curl -s -o "$dir/bad.json" -w "%{http_code}" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
+code=$(curl -s -o "$dir/bad.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
        "http://127.0.0.1:$lport/api/ingest/steps.csv")
 [ "$code" = 400 ] && grep -q "request body:2" "$dir/bad.json" || { cat "$dir/bad.json"; fail "bad live row"; }
 sleep 1.5
