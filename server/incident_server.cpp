@@ -28,12 +28,6 @@ struct IncidentServer::Live {
 
 namespace {
 
-class VectorSink : public EstimateSink {
- public:
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
-
 std::vector<std::string> Lines(const std::filesystem::path& file) {
   std::ifstream in(file);
   std::vector<std::string> lines;
@@ -88,10 +82,13 @@ nlohmann::json IncidentServer::StateJson() {
 void IncidentServer::Start() {
   httplib::Server& svr = http_->server;
   svr.set_payload_max_length(options_.max_request_bytes);
-  auto authorized = [this](const httplib::Request& req) {
+  // Counts the request; true when it carries the token (the API: Authorization: Bearer; the
+  // dashboard page may also take it as ?token=, the link a commander opens).
+  auto authorized = [this](const httplib::Request& req, bool query_token_too) {
     ++stats_.requests;
     const bool ok = req.get_header_value("Authorization") == "Bearer " + options_.token ||
-                    (req.has_param("token") && req.get_param_value("token") == options_.token);
+                    (query_token_too && req.has_param("token") &&
+                     req.get_param_value("token") == options_.token);
     if (!ok) ++stats_.unauthorized;
     return ok;
   };
@@ -116,22 +113,13 @@ void IncidentServer::Start() {
   });
   svr.Get("/api/state",
           [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
-            if (req.get_header_value("Authorization") != "Bearer " + options_.token) {
-              ++stats_.requests;
-              ++stats_.unauthorized;
-              return refuse(res);
-            }
-            ++stats_.requests;
+            if (!authorized(req, false)) return refuse(res);
             res.set_content(StateJson().dump(), "application/json");
           });
   if (live_) {
     svr.Post(R"(/api/ingest/([a-z]+\.csv))",
-             [this, refuse](const httplib::Request& req, httplib::Response& res) {
-               ++stats_.requests;
-               if (req.get_header_value("Authorization") != "Bearer " + options_.token) {
-                 ++stats_.unauthorized;
-                 return refuse(res);
-               }
+             [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
+               if (!authorized(req, false)) return refuse(res);
                try {
                  res.set_content(Ingest(req.matches[1], req.body).dump(), "application/json");
                } catch (const std::exception& e) {
@@ -141,18 +129,15 @@ void IncidentServer::Start() {
                }
              });
   }
-  svr.Get("/api/floorplan", [this, refuse](const httplib::Request& req, httplib::Response& res) {
-    ++stats_.requests;
-    if (req.get_header_value("Authorization") != "Bearer " + options_.token) {
-      ++stats_.unauthorized;
-      return refuse(res);
-    }
-    nlohmann::json walls = nlohmann::json::array();
-    for (const auto& w : walls_) walls.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
-    res.set_content(nlohmann::json{{"walls", walls}}.dump(), "application/json");
-  });
+  svr.Get("/api/floorplan",
+          [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
+            if (!authorized(req, false)) return refuse(res);
+            nlohmann::json walls = nlohmann::json::array();
+            for (const auto& w : walls_) walls.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
+            res.set_content(nlohmann::json{{"walls", walls}}.dump(), "application/json");
+          });
   svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {
-    if (!authorized(req)) return refuse(res);
+    if (!authorized(req, true)) return refuse(res);
     res.set_content(DashboardHtml(), "text/html; charset=utf-8");
   });
   port_ = options_.port == 0
@@ -275,8 +260,7 @@ void IncidentServer::LiveLoop() {
         VectorSink sink;
         if (p && p->CanRun(mission)) p->Run({mission, options_.pipeline_options}, sink);
         ++stats_.pipeline_runs;
-        std::stable_sort(sink.rows.begin(), sink.rows.end(),
-                         [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+        sink.rows = sink.TakeSortedByTime();
         IncidentState fresh(info_, options_.alerts);
         for (const auto& e : sink.rows) fresh.Apply(e);
         std::vector<std::pair<std::string, std::string>> to_publish;

@@ -68,12 +68,6 @@ MdsErrors Simulate(int n, double range_m, bool rssi_fill, double sigma_db, Rando
   return {aligned(mds), aligned(refined)};
 }
 
-class VectorSink : public EstimateSink {
- public:
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
-
 /// Runs `pipeline` on a simulated mission (written to `dir`) and returns the agents' error
 /// series (online semantics of eval/metrics.h).
 std::vector<double> AgentErrors(const fs::path& dir, const std::string& pipeline,
@@ -87,8 +81,7 @@ std::vector<double> AgentErrors(const fs::path& dir, const std::string& pipeline
   FindPipeline(pipeline)->Run(ctx, sink);
   if (wall_s)
     *wall_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::stable_sort(sink.rows.begin(), sink.rows.end(),
-                   [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+  sink.rows = sink.TakeSortedByTime();
   const MissionData data = ReadMissionData(mission);
   const Metrics m = Evaluate(data.info, data.truth, sink.rows);
   std::vector<double> e;
@@ -160,6 +153,23 @@ Runs RunLab(int seeds, const std::vector<Variant>& variants, const BeaconLabOpti
   return out;
 }
 
+/// A markdown table head: the leading columns, then one column per variant.
+std::string TableHead(const std::vector<std::string>& leading,
+                      const std::vector<Variant>& variants) {
+  std::string t = "|";
+  for (const auto& l : leading) t += " " + l + " |";
+  for (const auto& v : variants) t += " " + v.label + " |";
+  t += "\n|";
+  for (std::size_t k = 0; k < leading.size() + variants.size(); ++k) t += "---|";
+  return t + "\n";
+}
+
+double Mean(const std::vector<double>& v) {
+  double sum = 0;
+  for (double x : v) sum += x;
+  return v.empty() ? 0.0 : sum / v.size();
+}
+
 std::string Cell(std::vector<double> e) {
   if (e.empty()) return "-";
   return fmt::format("{:.2f} / {:.2f}", Percentile(e, 50), Percentile(e, 75));
@@ -194,11 +204,7 @@ std::string TrackingTables(int seeds, const fs::path& work) {
       "measurements/s "
       "(paper: ~5 Hz); 50 % / 75 % of the horizontal error (m) over every truth sample (10 Hz)\n\n",
       static_cast<double>(lab.beacons) / lab.missions, seeds, lab.ranges / lab.mission_s);
-  t += "| path | paper 50 % / 75 % |";
-  for (const auto& v : variants) t += " " + v.label + " |";
-  t += "\n|---|---|";
-  for (std::size_t v = 0; v < variants.size(); ++v) t += "---|";
-  t += "\n";
+  t += TableHead({"path", "paper 50 % / 75 %"}, variants);
   for (std::size_t k = 0; k <= kTraces.size(); ++k) {
     const bool overall = k == kTraces.size();
     t += overall ? "| **overall** | 1.93 / 3.70 |"
@@ -210,8 +216,7 @@ std::string TrackingTables(int seeds, const fs::path& work) {
     }
     t += "\n";
   }
-  double mds_mean = 0;
-  for (double e : lab.mds_final_m) mds_mean += e / std::max<std::size_t>(lab.mds_final_m.size(), 1);
+  const double mds_mean = Mean(lab.mds_final_m);
   t += fmt::format(
       "\nFig. 8 columns: beacon positions from MDS + SMACOF on the beacon-to-beacon ranges, "
       "anchored to the survey; their final error {:.2f} m mean (paper's MDS: 1-3 m).\n",
@@ -234,11 +239,8 @@ std::string TrackingTables(int seeds, const fs::path& work) {
       "\nHarsher ultrasound (40 % of the detections: {:.1f} measurements/s; 20 % multipath, 30 % "
       "reflections round corners, 15 % bearing outliers), all traces pooled, 50 % / 75 %:\n\n",
       h.ranges / h.mission_s);
-  t += "| paper (real data) |";
-  for (const auto& v : short_list) t += " " + v.label + " |";
-  t += "\n|---|";
-  for (std::size_t v = 0; v < short_list.size(); ++v) t += "---|";
-  t += "\n| 1.93 / 3.70 |";
+  t += TableHead({"paper (real data)"}, short_list);
+  t += "| 1.93 / 3.70 |";
   for (std::size_t v = 0; v < short_list.size(); ++v) t += " " + Cell(Pooled(h.errors[v])) + " |";
   t += "\n";
 
@@ -246,18 +248,13 @@ std::string TrackingTables(int seeds, const fs::path& work) {
   // tracker dropped them), trace c, then the retreat.
   const std::vector<Variant> deployed_variants = {variants[0], variants[1], variants[3]};
   const Runs d = RunLab(seeds, deployed_variants, BeaconLabOptions{}, true, work);
-  double beacon_mean = 0;
-  for (double e : d.beacon_final_m)
-    beacon_mean += e / std::max<std::size_t>(d.beacon_final_m.size(), 1);
+  const double beacon_mean = Mean(d.beacon_final_m);
   t += fmt::format(
       "\nDeployed trail (scenario beacon-trail: beacons dropped by the rules, positions unknown; "
       "{} seed(s)): beacons by `beacons-mds` {:.2f} m mean final error; responder 50 % / 75 %:\n\n",
       seeds, beacon_mean);
+  t += TableHead({}, deployed_variants);
   t += "|";
-  for (const auto& v : deployed_variants) t += " " + v.label + " |";
-  t += "\n|";
-  for (std::size_t v = 0; v < deployed_variants.size(); ++v) t += "---|";
-  t += "\n|";
   for (std::size_t v = 0; v < deployed_variants.size(); ++v)
     t += " " + Cell(Pooled(d.errors[v])) + " |";
   t += "\n";

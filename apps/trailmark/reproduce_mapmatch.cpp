@@ -18,12 +18,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-class VectorSink : public EstimateSink {
- public:
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
-
 struct Config {
   std::string label;
   std::map<std::string, std::string> options;

@@ -20,12 +20,6 @@ namespace {
 std::atomic<bool> g_stop{false};
 void OnSignal(int) { g_stop = true; }
 
-class VectorSink : public EstimateSink {
- public:
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
-
 std::string RandomToken() {
   std::random_device rd;
   return fmt::format("{:016x}{:016x}", (static_cast<unsigned long long>(rd()) << 32) ^ rd(),
@@ -110,8 +104,7 @@ int Serve(const ServeOptions& o) {
   if (!p) throw std::invalid_argument("unknown pipeline '" + pipeline + "'");
   VectorSink sink;
   p->Run({mission, o.options}, sink);
-  std::stable_sort(sink.rows.begin(), sink.rows.end(),
-                   [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+  sink.rows = sink.TakeSortedByTime();
   server::ServerOptions so;
   so.bind = o.bind;
   so.port = o.port;

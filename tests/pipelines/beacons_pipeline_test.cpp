@@ -17,11 +17,6 @@
 namespace trailmark {
 namespace {
 
-struct VectorSink : EstimateSink {
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
-
 struct Outcome {
   PipelineSummary summary;
   Metrics metrics;
@@ -38,8 +33,7 @@ Outcome RunOn(const Pipeline& pipeline, const MissionDirectory& mission, const M
     EXPECT_GT(e.sxx, 0) << e.id;
     EXPECT_GT(e.sxx * e.syy - e.sxy * e.sxy, 0) << e.id;
   }
-  std::stable_sort(sink.rows.begin(), sink.rows.end(),
-                   [](const auto& a, const auto& b) { return a.t < b.t; });
+  sink.rows = sink.TakeSortedByTime();
   o.metrics = Evaluate(data.info, data.truth, sink.rows);
   for (const auto& s : o.metrics.agents.series) o.agent_errors.push_back(s.error_m);
   return o;

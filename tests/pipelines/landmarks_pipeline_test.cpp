@@ -11,10 +11,6 @@
 namespace trailmark {
 namespace {
 
-struct VectorSink : EstimateSink {
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
 
 /// Runs `pipeline` on the mission; returns its summary and fills `rows`.
 PipelineSummary RunOn(const Pipeline& pipeline, const MissionDirectory& mission,

@@ -15,11 +15,6 @@
 namespace trailmark {
 namespace {
 
-struct VectorSink : EstimateSink {
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
-
 TEST(MapMatchPipeline, KnownStartStaysOnTheMapAndEveryEstimateIsValid) {
   HouseSearchOptions o;
   const SimulatedMission sim = SimulateHouseSearch(o, 1);
@@ -88,14 +83,17 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
     EXPECT_NE(std::string(e.what()).find("encloses no area"), std::string::npos) << e.what();
   }
   // A wall drawn a million kilometres away (a unit or typing error): refused, not allocated.
-  const FloorPlan far({{{0, 0}, {12.5, 0}}, {{12.5, 0}, {12.5, 10}}, {{12.5, 10}, {0, 10}}, {{0, 10}, {1e9, 0}}}, {}, {});
+  const FloorPlan far(
+      {{{0, 0}, {12.5, 0}}, {{12.5, 0}, {12.5, 10}}, {{12.5, 10}, {0, 10}}, {{0, 10}, {1e9, 0}}},
+      {}, {});
   WriteMissionDirectory(dir.path(), sim.data, &far);
   try {
     const MissionDirectory mission(dir.path());
     MapMatchPipeline().Run({mission, {}}, sink);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find("too large for a 1 m search grid"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("too large for a 1 m search grid"), std::string::npos)
+        << e.what();
   }
   // No floor plan at all: the pipeline cannot run and says so.
   sim.data.info.floorplan.reset();

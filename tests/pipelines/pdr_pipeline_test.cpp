@@ -14,11 +14,6 @@ namespace {
 
 using testing::TempDir;
 
-class VectorSink : public EstimateSink {
- public:
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
 
 TEST(PdrPipeline, ErrorFreeStepsReproduceTruthExactly) {
   OfficeLoopOptions o;

@@ -23,6 +23,15 @@ class EstimateSink {
   virtual void Add(const Estimate& estimate) = 0;
 };
 
+/// Keeps every estimate in memory (tests, reproductions, the server's replay).
+class VectorSink : public EstimateSink {
+ public:
+  void Add(const Estimate& estimate) override { rows.push_back(estimate); }
+  /// The rows in non-decreasing time (stable: equal times keep their order); empties the sink.
+  std::vector<Estimate> TakeSortedByTime();
+  std::vector<Estimate> rows;
+};
+
 /// Progress: fraction done in [0, 1].
 using ProgressCallback = std::function<void(double fraction)>;
 

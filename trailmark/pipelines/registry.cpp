@@ -1,5 +1,6 @@
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <fstream>
 #include <limits>
@@ -14,6 +15,14 @@
 #include "trailmark/pipelines/pipeline.h"
 
 namespace trailmark {
+
+std::vector<Estimate> VectorSink::TakeSortedByTime() {
+  std::vector<Estimate> out = std::move(rows);
+  rows.clear();
+  std::stable_sort(out.begin(), out.end(),
+                   [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+  return out;
+}
 
 const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
   static const auto* pipelines = [] {
@@ -88,8 +97,7 @@ RunResult RunPipeline(const Pipeline& pipeline, const PipelineContext& context,
   result.pipeline = pipeline.name();
   result.summary = pipeline.Run(context, sink);
   sink.Close();
-  result.wall_time_s =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  result.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   result.estimates = sink.count();
   nlohmann::json diag;
   diag["pipeline"] = pipeline.name();
