@@ -30,8 +30,9 @@ else
   echo "[install] all Debian packages present"
 fi
 
-# npm packages of the web front end (the report embeds Chart.js). Node.js from Debian only
-# where no node is installed (a newer Node.js conflicts with Debian's nodejs/npm packages).
+# npm packages of the web front end (the report embeds Chart.js; the dashboard is built with
+# TypeScript and Vite). Node.js from Debian only where no node is installed (a newer Node.js
+# conflicts with Debian's nodejs/npm packages).
 if ! command -v npm >/dev/null 2>&1; then
   echo "[install] installing nodejs and npm from Debian"
   export DEBIAN_FRONTEND=noninteractive
@@ -46,4 +47,8 @@ fi
 if [ ! -f "$here/web/report/node_modules/chart.js/dist/chart.umd.js" ]; then
   echo "[install] npm ci in web/report"
   (cd "$here/web/report" && npm ci --no-audit --no-fund --loglevel=error)
+fi
+if [ ! -x "$here/web/dashboard/node_modules/.bin/vite" ]; then
+  echo "[install] npm ci in web/dashboard (TypeScript and Vite, to build the dashboard)"
+  (cd "$here/web/dashboard" && npm ci --no-audit --no-fund --loglevel=error)
 fi

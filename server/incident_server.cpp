@@ -1,10 +1,12 @@
 #include "server/incident_server.h"
 
 #include <httplib.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
 #include <fstream>
+#include <future>
 #include <sstream>
 #include <stdexcept>
 
@@ -12,6 +14,7 @@
 #include "trailmark/core/error.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
+#include "trailmark/pipelines/live_estimator.h"
 #include "trailmark/pipelines/pipeline.h"
 
 namespace trailmark::server {
@@ -22,31 +25,72 @@ struct IncidentServer::Http {
 
 struct IncidentServer::Live {
   std::unique_ptr<Journal> journal;
-  std::filesystem::path work;  ///< scratch: POST bodies, the exported journal
-  std::size_t posts = 0;
+  std::filesystem::path work;  ///< scratch: the exported journal for batch re-runs
+  /// Null when the pipeline has no live form (then RerunOnJournal).
+  std::unique_ptr<LiveEstimator> estimator;
+  /// Group commit: requests wait here until the committer has journaled them.
+  struct Pending {
+    Journal::Batch batch;
+    std::vector<LiveRow> rows;
+    std::promise<Journal::AppendResult> done;
+  };
+  std::mutex queue_mutex;
+  std::condition_variable queue_cv;
+  std::vector<Pending*> queue;
+  std::thread committer;
+  /// Committed rows, in commit order, for the estimator.
+  std::mutex feed_mutex;
+  std::condition_variable feed_cv;
+  std::vector<LiveRow> feed;
 };
 
 namespace {
 
-std::vector<std::string> Lines(const std::filesystem::path& file) {
-  std::ifstream in(file);
-  std::vector<std::string> lines;
-  for (std::string line; std::getline(in, line);) lines.push_back(line);
-  return lines;
+/// Parses a CSV document of one stream into typed rows and its journal batch (canonical text,
+/// times, nodes, lines). Throws InputError naming `name` and the line.
+template <class Row>
+void Parse(const std::string& name, const std::string& body, Journal::Batch& batch,
+           std::vector<LiveRow>& typed) {
+  const std::vector<Row> rows = ParseAll<Row>(name, body, nullptr, &batch.lines);
+  std::vector<std::string> lines = FormatAll(rows);
+  batch.header = lines.front();
+  batch.rows.assign(std::make_move_iterator(lines.begin() + 1),
+                    std::make_move_iterator(lines.end()));
+  typed.reserve(rows.size());
+  for (const Row& r : rows) {
+    typed.emplace_back(r);
+    batch.t.push_back(RowTime(typed.back()));
+    batch.node.push_back(RowNode(typed.back()));
+  }
 }
 
-// The rows of a CSV document of one stream, checked by the mission readers, in canonical form.
-template <class Row>
-std::pair<std::string, std::vector<std::string>> Canonical(const std::filesystem::path& in,
-                                                           const std::filesystem::path& out) {
-  const std::vector<Row> rows = ReadAll<Row>(in.string());
-  WriteAll<Row>(out.string(), rows);
-  std::vector<std::string> lines = Lines(out);
-  if (lines.empty()) return {"", {}};
-  const std::string header = lines.front();
-  lines.erase(lines.begin());
-  return {header, lines};
+void ParseStream(const std::string& stream, const std::string& name, const std::string& body,
+                 Journal::Batch& batch, std::vector<LiveRow>& typed) {
+  batch.stream = stream;
+  if (stream == "steps.csv")
+    Parse<Step>(name, body, batch, typed);
+  else if (stream == "rssi.csv")
+    Parse<RssiPacket>(name, body, batch, typed);
+  else if (stream == "ranges.csv")
+    Parse<RangeMeasurement>(name, body, batch, typed);
+  else if (stream == "bearings.csv")
+    Parse<BearingMeasurement>(name, body, batch, typed);
+  else if (stream == "events.csv")
+    Parse<MissionEvent>(name, body, batch, typed);
+  else if (stream == "imu.csv")
+    Parse<ImuSample>(name, body, batch, typed);
+  else
+    throw std::invalid_argument("unknown stream '" + stream +
+                                "' (steps.csv, rssi.csv, ranges.csv, bearings.csv, events.csv, "
+                                "imu.csv)");
 }
+
+/// Collects a live estimator's output.
+class StateSink : public EstimateSink {
+ public:
+  void Add(const Estimate& e) override { rows.push_back(e); }
+  std::vector<Estimate> rows;
+};
 
 }  // namespace
 
@@ -63,12 +107,29 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
       http_(new Http) {
   if (options_.token.empty()) throw std::invalid_argument("serve: a token is required");
   if (!(options_.speed > 0)) throw std::invalid_argument("serve: speed must be > 0");
+  if (!options_.log) {
+    options_.log = [](const std::string& line) { spdlog::warn("{}", line); };
+  }
   if (!options_.journal_file.empty()) {
     live_ = std::make_unique<Live>();
     live_->journal = std::make_unique<Journal>(options_.journal_file);
     live_->work = std::filesystem::path(options_.journal_file.string() + ".work");
     std::filesystem::create_directories(live_->work);
-    dirty_ = live_->journal->size() > 0;  // a restart: rebuild the state from the journal
+    live_->estimator = MakeLiveEstimator(options_.pipeline, info_, options_.pipeline_options);
+    if (live_->estimator) {
+      // A restart: the journal's rows through the estimator again, in arrival order.
+      live_->journal->ForEach(
+          [this](const std::string& stream, const std::string& header, const std::string& row) {
+            Journal::Batch batch;
+            try {
+              ParseStream(stream, "journal", header + "\n" + row + "\n", batch, live_->feed);
+            } catch (const std::exception& e) {
+              Reject(std::string("journal row not re-read: ") + e.what());
+            }
+          });
+    } else {
+      dirty_ = live_->journal->size() > 0;  // a restart: rebuild the state from the journal
+    }
   }
 }
 
@@ -79,11 +140,62 @@ nlohmann::json IncidentServer::StateJson() {
   return state_.ToJson();
 }
 
+void IncidentServer::Reject(const std::string& reason) {
+  ++stats_.rejected_requests;
+  {
+    std::lock_guard<std::mutex> lock(log_mutex_);
+    const double now = std::chrono::duration<double>(
+                           std::chrono::system_clock::now().time_since_epoch())
+                           .count();
+    recent_rejections_.emplace_back(now, reason);
+    while (recent_rejections_.size() > 100) recent_rejections_.pop_front();
+  }
+  options_.log("rejected: " + reason);
+}
+
+void IncidentServer::Changed() {
+  {
+    std::lock_guard<std::mutex> lock(event_mutex_);
+    ++version_;
+  }
+  event_cv_.notify_all();
+}
+
+nlohmann::json IncidentServer::StatsJson() {
+  nlohmann::json j = {{"requests", stats_.requests.load()},
+                      {"unauthorized", stats_.unauthorized.load()},
+                      {"rejected", stats_.rejected_requests.load()},
+                      {"released_estimates", stats_.released_estimates.load()},
+                      {"ingested_rows", stats_.ingested_rows.load()},
+                      {"duplicate_rows", stats_.duplicate_rows.load()},
+                      {"journal_commits", stats_.commits.load()},
+                      {"estimated_rows", stats_.estimated_rows.load()},
+                      {"estimator_refusals", stats_.estimator_refusals.load()},
+                      {"pipeline_runs", stats_.pipeline_runs.load()},
+                      {"events_sent", stats_.events_sent.load()}};
+  if (const MqttStats* m = mqtt_stats()) {
+    j["mqtt"] = {{"received", m->received.load()},
+                 {"ingested", m->ingested.load()},
+                 {"rejected", m->rejected.load()},
+                 {"published", m->published.load()}};
+  }
+  nlohmann::json recent = nlohmann::json::array();
+  {
+    std::lock_guard<std::mutex> lock(log_mutex_);
+    for (const auto& [t, why] : recent_rejections_) recent.push_back({{"unix_time", t}, {"reason", why}});
+  }
+  j["recent_rejections"] = recent;
+  return j;
+}
+
 void IncidentServer::Start() {
   httplib::Server& svr = http_->server;
   svr.set_payload_max_length(options_.max_request_bytes);
+  svr.set_tcp_nodelay(true);  // small requests and events: no Nagle delay
+  const std::size_t threads = std::max<std::size_t>(4, options_.http_threads);
+  svr.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
   // Counts the request; true when it carries the token (the API: Authorization: Bearer; the
-  // dashboard page may also take it as ?token=, the link a commander opens).
+  // dashboard and its event stream may also take it as ?token=, the link a commander opens).
   auto authorized = [this](const httplib::Request& req, bool query_token_too) {
     ++stats_.requests;
     const bool ok = req.get_header_value("Authorization") == "Bearer " + options_.token ||
@@ -97,48 +209,107 @@ void IncidentServer::Start() {
     res.set_header("WWW-Authenticate", "Bearer");
     res.set_content(R"({"error": "missing or wrong token"})", "application/json");
   };
+  auto json = [](httplib::Response& res, const nlohmann::json& j) {
+    res.set_content(j.dump(), "application/json");
+  };
   // Errors raised by the HTTP layer itself (413 oversized body, 404, 400): counted, explained.
-  svr.set_error_handler([this](const httplib::Request&, httplib::Response& res) {
-    ++stats_.rejected_requests;
+  svr.set_error_handler([this](const httplib::Request& req, httplib::Response& res) {
+    if (res.status == 401) return;  // refused for the token: counted as unauthorized
     if (res.body.empty()) {
       const std::string why = res.status == 413 ? "request body too large (at most " +
                                                       std::to_string(options_.max_request_bytes) +
                                                       " bytes; send CSV as Content-Type: text/csv)"
                                                 : "HTTP " + std::to_string(res.status);
+      Reject(req.method + " " + req.path + ": " + why);
       res.set_content(nlohmann::json{{"error", why}}.dump(), "application/json");
     }
   });
   svr.Get("/api/health", [](const httplib::Request&, httplib::Response& res) {
     res.set_content(R"({"ok": true})", "application/json");
   });
-  svr.Get("/api/state",
-          [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
-            if (!authorized(req, false)) return refuse(res);
-            res.set_content(StateJson().dump(), "application/json");
-          });
+  svr.Get("/api/state", [this, authorized, refuse, json](const httplib::Request& req,
+                                                          httplib::Response& res) {
+    if (!authorized(req, false)) return refuse(res);
+    json(res, StateJson());
+  });
+  svr.Get("/api/history", [this, authorized, refuse, json](const httplib::Request& req,
+                                                            httplib::Response& res) {
+    if (!authorized(req, false)) return refuse(res);
+    nlohmann::json h;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      h = state_.HistoryJson();
+    }
+    json(res, h);
+  });
+  svr.Get("/api/stats", [this, authorized, refuse, json](const httplib::Request& req,
+                                                          httplib::Response& res) {
+    if (!authorized(req, false)) return refuse(res);
+    json(res, StatsJson());
+  });
+  svr.Get("/api/events", [this, authorized, refuse](const httplib::Request& req,
+                                                    httplib::Response& res) {
+    if (!authorized(req, true)) return refuse(res);
+    res.set_header("Cache-Control", "no-store");
+    auto last = std::make_shared<std::uint64_t>(~std::uint64_t{0});
+    res.set_chunked_content_provider(
+        "text/event-stream", [this, last](std::size_t, httplib::DataSink& sink) {
+          {
+            std::unique_lock<std::mutex> lock(event_mutex_);
+            event_cv_.wait_for(lock, std::chrono::seconds(10),
+                               [&] { return stop_.load() || version_ != *last; });
+            if (stop_) return false;
+            if (version_ == *last) {
+              const std::string keepalive = ": keep-alive\n\n";
+              return sink.write(keepalive.data(), keepalive.size());
+            }
+            *last = version_;
+          }
+          const std::string message = "data: " + StateJson().dump() + "\n\n";
+          if (!sink.write(message.data(), message.size())) return false;
+          ++stats_.events_sent;
+          // Coalesce: a client gets at most one message per interval, the latest state.
+          std::this_thread::sleep_for(std::chrono::duration<double>(options_.events_min_interval_s));
+          return !stop_.load();
+        });
+  });
   if (live_) {
-    svr.Post(R"(/api/ingest/([a-z]+\.csv))",
-             [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
-               if (!authorized(req, false)) return refuse(res);
-               try {
-                 res.set_content(Ingest(req.matches[1], req.body).dump(), "application/json");
-               } catch (const std::exception& e) {
-                 ++stats_.rejected_requests;
-                 res.status = 400;
-                 res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");
-               }
-             });
+    svr.Post(R"(/api/ingest/([a-z]+\.csv))", [this, authorized, refuse, json](
+                                                 const httplib::Request& req,
+                                                 httplib::Response& res) {
+      if (!authorized(req, false)) return refuse(res);
+      try {
+        json(res, Ingest(req.matches[1], req.body));
+      } catch (const std::invalid_argument& e) {
+        res.status = 400;
+        json(res, {{"error", e.what()}});
+      } catch (const std::exception& e) {
+        res.status = 503;  // the journal could not commit: not acknowledged, retry
+        json(res, {{"error", e.what()}});
+      }
+    });
   }
-  svr.Get("/api/floorplan",
-          [this, authorized, refuse](const httplib::Request& req, httplib::Response& res) {
-            if (!authorized(req, false)) return refuse(res);
-            nlohmann::json walls = nlohmann::json::array();
-            for (const auto& w : walls_) walls.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
-            res.set_content(nlohmann::json{{"walls", walls}}.dump(), "application/json");
-          });
+  svr.Get("/api/floorplan", [this, authorized, refuse, json](const httplib::Request& req,
+                                                              httplib::Response& res) {
+    if (!authorized(req, false)) return refuse(res);
+    nlohmann::json walls = nlohmann::json::array();
+    for (const auto& w : walls_) walls.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
+    json(res, {{"walls", walls}});
+  });
+  // The dashboard: index.html needs the token; its scripts and styles are public code.
   svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {
     if (!authorized(req, true)) return refuse(res);
-    res.set_content(DashboardHtml(), "text/html; charset=utf-8");
+    const WebAsset* index = FindWebAsset("/index.html");
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(std::string(index->content), std::string(index->mime));
+  });
+  svr.Get(R"(/assets/[A-Za-z0-9_.-]+)", [](const httplib::Request& req, httplib::Response& res) {
+    const WebAsset* a = FindWebAsset(req.path);
+    if (a == nullptr) {
+      res.status = 404;
+      return;
+    }
+    res.set_content(std::string(a->content), std::string(a->mime));
   });
   port_ = options_.port == 0
               ? svr.bind_to_any_port(options_.bind)
@@ -147,6 +318,7 @@ void IncidentServer::Start() {
     throw std::runtime_error("serve: cannot listen on " + options_.bind + ":" +
                              std::to_string(options_.port) + " (port in use?)");
   }
+  if (live_) live_->committer = std::thread([this] { CommitLoop(); });
   if (live_ && !options_.mqtt.uri.empty()) {
     MqttOptions mo = options_.mqtt;
     if (mo.persist_dir.empty()) mo.persist_dir = (live_->work / "mqtt").string();
@@ -154,11 +326,15 @@ void IncidentServer::Start() {
         mo,
         [this](const std::string& stream, const std::string& body) { return Ingest(stream, body); },
         [this](const std::string& node, const std::string& status) {
-          std::lock_guard<std::mutex> lock(mutex_);
-          device_status_[node] = status;
-          state_.SetDeviceStatus(node, status);
-          state_.Advance(state_.now());
-        });
+          {
+            std::lock_guard<std::mutex> lock(mutex_);
+            device_status_[node] = status;
+            state_.SetDeviceStatus(node, status);
+            state_.Advance(state_.now());
+          }
+          Changed();
+        },
+        [this](const std::string& reason) { Reject("mqtt: " + reason); });
     mqtt_->Start();
   }
   http_thread_ = std::thread([this] { http_->server.listen_after_bind(); });
@@ -167,9 +343,15 @@ void IncidentServer::Start() {
 
 void IncidentServer::Stop() {
   stop_ = true;
+  event_cv_.notify_all();
   if (mqtt_) mqtt_->Stop();
   if (http_) http_->server.stop();
   if (http_thread_.joinable()) http_thread_.join();
+  if (live_) {
+    live_->queue_cv.notify_all();
+    if (live_->committer.joinable()) live_->committer.join();
+    live_->feed_cv.notify_all();
+  }
   if (replay_thread_.joinable()) replay_thread_.join();
 }
 
@@ -193,160 +375,184 @@ void IncidentServer::ReplayLoop() {
       }
       state_.Advance(now);
     }
+    Changed();
     if (next >= estimates_.size()) replay_done_ = true;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
 }
 
 nlohmann::json IncidentServer::Ingest(const std::string& stream, const std::string& body) {
-  std::lock_guard<std::mutex> lock(ingest_mutex_);
-  const std::filesystem::path in = live_->work / ("post-" + stream);
-  const std::filesystem::path out = live_->work / ("canonical-" + stream);
-  {
-    std::ofstream f(in, std::ios::binary);
-    f << body;
-  }
-  std::pair<std::string, std::vector<std::string>> rows;
+  if (!live_) throw std::invalid_argument("not a live server");
+  Live::Pending pending;
   try {
-    if (stream == "steps.csv")
-      rows = Canonical<Step>(in, out);
-    else if (stream == "rssi.csv")
-      rows = Canonical<RssiPacket>(in, out);
-    else if (stream == "ranges.csv")
-      rows = Canonical<RangeMeasurement>(in, out);
-    else if (stream == "bearings.csv")
-      rows = Canonical<BearingMeasurement>(in, out);
-    else if (stream == "events.csv")
-      rows = Canonical<MissionEvent>(in, out);
-    else if (stream == "imu.csv")
-      rows = Canonical<ImuSample>(in, out);
-    else
-      throw std::invalid_argument("unknown stream '" + stream + "'");
-  } catch (const InputError& e) {
-    // Name the request, not the scratch file.
-    std::string what = e.what();
-    const std::string scratch = in.string();
-    if (what.rfind(scratch, 0) == 0) what = "request body" + what.substr(scratch.size());
-    throw std::invalid_argument(what);
+    ParseStream(stream, "request body", body, pending.batch, pending.rows);
+  } catch (const std::exception& e) {
+    Reject(stream + ": " + e.what());
+    throw std::invalid_argument(e.what());
   }
-  const Journal::AppendResult r = live_->journal->Append(stream, rows.first, rows.second);
+  std::future<Journal::AppendResult> done = pending.done.get_future();
+  {
+    std::lock_guard<std::mutex> lock(live_->queue_mutex);
+    if (stop_) throw std::runtime_error("the server is stopping");
+    live_->queue.push_back(&pending);
+  }
+  live_->queue_cv.notify_one();
+  const Journal::AppendResult r = done.get();  // rethrows a journal failure
+  if (!r.error.empty()) {
+    Reject(stream + ": " + r.error);
+    throw std::invalid_argument(r.error);
+  }
   stats_.ingested_rows += r.accepted;
   stats_.duplicate_rows += r.duplicates;
-  dirty_ = dirty_ || r.accepted > 0;
   return {{"accepted", r.accepted}, {"duplicates", r.duplicates}};
 }
 
-void IncidentServer::LiveLoop() {
-  const std::filesystem::path mission_json = options_.live_dir / "mission.json";
-  auto last = std::chrono::steady_clock::now() - std::chrono::hours(1);
-  while (!stop_) {
-    const auto now = std::chrono::steady_clock::now();
-    if (dirty_ && std::chrono::duration<double>(now - last).count() >= options_.live_period_s) {
-      dirty_ = false;
-      last = now;
-      try {
-        const std::filesystem::path dir = live_->work / "mission";
-        std::filesystem::remove_all(dir);
-        {
-          std::lock_guard<std::mutex> lock(ingest_mutex_);
-          live_->journal->Export(dir, mission_json);
+void IncidentServer::CommitLoop() {
+  while (true) {
+    std::vector<Live::Pending*> group;
+    {
+      std::unique_lock<std::mutex> lock(live_->queue_mutex);
+      live_->queue_cv.wait(lock, [&] { return stop_.load() || !live_->queue.empty(); });
+      group.swap(live_->queue);
+      if (group.empty() && stop_) return;
+    }
+    std::vector<const Journal::Batch*> batches;
+    for (auto* p : group) batches.push_back(&p->batch);
+    std::vector<Journal::AppendResult> results;
+    try {
+      results = live_->journal->AppendGroup(batches);  // one transaction, one disk flush
+      ++stats_.commits;
+    } catch (...) {
+      for (auto* p : group) p->done.set_exception(std::current_exception());
+      continue;
+    }
+    // Committed: hand the new rows to the estimator (in commit order), then acknowledge.
+    bool any = false;
+    {
+      std::lock_guard<std::mutex> lock(live_->feed_mutex);
+      for (std::size_t g = 0; g < group.size(); ++g) {
+        const auto& fresh = results[g].fresh;
+        for (std::size_t i = 0; i < fresh.size(); ++i) {
+          if (fresh[i]) live_->feed.push_back(std::move(group[g]->rows[i])), any = true;
         }
-        if (info_.floorplan && std::filesystem::exists(options_.live_dir / *info_.floorplan)) {
-          std::filesystem::copy_file(options_.live_dir / *info_.floorplan, dir / *info_.floorplan,
-                                     std::filesystem::copy_options::overwrite_existing);
-        }
-        const MissionDirectory mission(dir);
-        const Pipeline* p = FindPipeline(options_.pipeline);
-        VectorSink sink;
-        if (p && p->CanRun(mission)) p->Run({mission, options_.pipeline_options}, sink);
-        ++stats_.pipeline_runs;
-        sink.rows = sink.TakeSortedByTime();
-        IncidentState fresh(info_, options_.alerts);
-        for (const auto& e : sink.rows) fresh.Apply(e);
-        std::vector<std::pair<std::string, std::string>> to_publish;
-        {
-          std::lock_guard<std::mutex> lock(mutex_);
-          for (const auto& [node, status] : device_status_) fresh.SetDeviceStatus(node, status);
-          if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
-          state_ = std::move(fresh);
-          const nlohmann::json state = state_.ToJson();  // (a temporary would dangle in the loop)
-          for (const auto& n : state.at("nodes")) {
-            if (n.at("kind") == "agent") to_publish.emplace_back(n.at("id"), n.dump());
-          }
-        }
-        if (mqtt_) {
-          for (const auto& [node, json] : to_publish) mqtt_->PublishEstimate(node, json);
-        }
-      } catch (const std::exception&) {
-        ++stats_.rejected_requests;  // the journal holds rows the pipeline refuses; keep serving
       }
     }
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    if (any) {
+      dirty_ = true;
+      live_->feed_cv.notify_one();
+    }
+    for (std::size_t g = 0; g < group.size(); ++g) group[g]->done.set_value(std::move(results[g]));
   }
 }
 
-const char* DashboardHtml() {
-  return R"HTML(<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>trailmark — incident</title>
-<style>
-body{margin:0;font:14px system-ui,sans-serif;display:flex;flex-wrap:wrap;height:100vh}
-#map{flex:3 1 480px;min-height:60vh;background:#111}#side{flex:1 1 240px;padding:8px;overflow:auto}
-.alert{background:#fee;border-left:4px solid #c00;margin:4px 0;padding:4px}.node{cursor:pointer;padding:2px}
-.node.sel{background:#def}
-</style></head><body>
-<canvas id="map"></canvas>
-<div id="side"><h3>Firefighters</h3><div id="list"></div><h3>Alerts</h3><div id="alerts"></div>
-<p id="clock"></p></div>
-<script>
-const token = new URLSearchParams(location.search).get('token') || '';
-const canvas = document.getElementById('map'), ctx = canvas.getContext('2d');
-let selected = null, trails = {}, walls = [];
-fetch('/api/floorplan', {headers: {Authorization: 'Bearer ' + token}}).then(r => r.ok ? r.json() : {walls: []}).then(j => { walls = j.walls; });
-function ellipse(n, s, ox, oy) {
-  const a = (n.sxx + n.syy) / 2, d = Math.sqrt(Math.max(0, (n.sxx - n.syy) ** 2 / 4 + n.sxy ** 2));
-  const l1 = a + d, l2 = Math.max(0, a - d), ang = 0.5 * Math.atan2(2 * n.sxy, n.sxx - n.syy);
-  ctx.beginPath(); ctx.ellipse(ox + n.x * s, oy - n.y * s, Math.sqrt(5.991 * l1) * s, Math.sqrt(5.991 * l2) * s, -ang, 0, 2 * Math.PI);
-  ctx.stroke();
-}
-async function tick() {
-  const r = await fetch('/api/state', {headers: {Authorization: 'Bearer ' + token}});
-  if (!r.ok) { document.getElementById('clock').textContent = 'not authorized'; return; }
-  const st = await r.json();
-  canvas.width = canvas.clientWidth; canvas.height = canvas.clientHeight;
-  const xs = st.nodes.map(n => n.x), ys = st.nodes.map(n => n.y);
-  for (const w of walls) { xs.push(w[0], w[2]); ys.push(w[1], w[3]); }
-  for (const t of Object.values(trails)) for (const [x, y] of t) { xs.push(x); ys.push(y); }
-  const minx = Math.min(...xs, 0) - 2, maxx = Math.max(...xs, 0) + 2, miny = Math.min(...ys, 0) - 2, maxy = Math.max(...ys, 0) + 2;
-  const s = Math.min(canvas.width / (maxx - minx), canvas.height / (maxy - miny));
-  const ox = -minx * s, oy = canvas.height + miny * s;
-  ctx.strokeStyle = '#889'; ctx.lineWidth = 2;
-  for (const w of walls) { ctx.beginPath(); ctx.moveTo(ox + w[0] * s, oy - w[1] * s); ctx.lineTo(ox + w[2] * s, oy - w[3] * s); ctx.stroke(); }
-  ctx.lineWidth = 1;
-  const list = document.getElementById('list'); list.innerHTML = '';
-  for (const n of st.nodes) {
-    if (n.kind === 'agent') {
-      (trails[n.id] = trails[n.id] || []).push([n.x, n.y]);
-      ctx.strokeStyle = '#555'; ctx.beginPath();
-      trails[n.id].forEach(([x, y], i) => i ? ctx.lineTo(ox + x * s, oy - y * s) : ctx.moveTo(ox + x * s, oy - y * s));
-      ctx.stroke();
-      ctx.strokeStyle = n.id === selected ? '#ff0' : '#f80'; ellipse(n, s, ox, oy);
-      ctx.fillStyle = '#f33'; ctx.beginPath(); ctx.arc(ox + n.x * s, oy - n.y * s, 6, 0, 2 * Math.PI); ctx.fill();
-      ctx.fillStyle = '#fff'; ctx.fillText(n.id, ox + n.x * s + 8, oy - n.y * s - 8);
-      const div = document.createElement('div'); div.className = 'node' + (n.id === selected ? ' sel' : '');
-      div.dataset.id = n.id; div.textContent = `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`;
-      div.onclick = () => { selected = n.id; }; list.appendChild(div);
-    } else {
-      ctx.fillStyle = n.kind === 'base' ? '#4af' : '#8c8';
-      ctx.fillRect(ox + n.x * s - 3, oy - n.y * s - 3, 6, 6);
+void IncidentServer::LiveLoop() {
+  if (!live_->estimator) {
+    auto last = std::chrono::steady_clock::now() - std::chrono::hours(1);
+    while (!stop_) {
+      const auto now = std::chrono::steady_clock::now();
+      if (dirty_ && std::chrono::duration<double>(now - last).count() >= options_.live_period_s) {
+        dirty_ = false;
+        last = now;
+        RerunOnJournal();
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return;
+  }
+  auto last_publish = std::chrono::steady_clock::now() - std::chrono::hours(1);
+  StateSink sink;
+  std::vector<LiveRow> rows;
+  std::map<std::string, std::string> refusals;  // node -> last reason logged
+  while (!stop_) {
+    {
+      std::unique_lock<std::mutex> lock(live_->feed_mutex);
+      live_->feed_cv.wait_for(lock, std::chrono::milliseconds(100),
+                              [&] { return stop_.load() || !live_->feed.empty(); });
+      rows.clear();
+      rows.swap(live_->feed);
+    }
+    if (rows.empty()) continue;
+    TimeS newest = -1e300;
+    sink.rows.clear();
+    std::vector<std::pair<std::string, TimeS>> heard;
+    heard.reserve(rows.size());
+    for (const LiveRow& row : rows) {
+      heard.emplace_back(RowNode(row), RowTime(row));
+      newest = std::max(newest, RowTime(row));
+      try {
+        live_->estimator->Add(row, sink);
+      } catch (const std::invalid_argument& e) {
+        // Valid mission rows the estimator cannot use (e.g. steps of a non-agent): journaled,
+        // counted, logged once per node and reason.
+        ++stats_.estimator_refusals;
+        std::string& logged = refusals[RowNode(row)];
+        if (logged != e.what()) {
+          logged = e.what();
+          options_.log(options_.pipeline + ": " + e.what());
+        }
+      }
+    }
+    stats_.estimated_rows += rows.size();
+    std::vector<std::pair<std::string, std::string>> to_publish;
+    const bool publish = mqtt_ && std::chrono::steady_clock::now() - last_publish >
+                                      std::chrono::milliseconds(500);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (const auto& [id, t] : heard) state_.Heard(id, t);
+      for (const auto& e : sink.rows) state_.Apply(e);
+      state_.Advance(newest);
+      if (publish) {
+        const nlohmann::json state = state_.ToJson();  // (a temporary would dangle in the loop)
+        for (const auto& n : state.at("nodes")) {
+          if (n.at("kind") == "agent") to_publish.emplace_back(n.at("id"), n.dump());
+        }
+      }
+    }
+    Changed();
+    if (publish) {
+      last_publish = std::chrono::steady_clock::now();
+      for (const auto& [node, j] : to_publish) mqtt_->PublishEstimate(node, j);
     }
   }
-  document.getElementById('alerts').innerHTML = st.alerts.map(a => `<div class="alert">${a.message}</div>`).join('');
-  document.getElementById('clock').textContent = st.t === null ? '' : `mission time ${st.t.toFixed(1)} s`;
 }
-setInterval(tick, 500); tick();
-</script></body></html>
-)HTML";
+
+void IncidentServer::RerunOnJournal() {
+  const std::filesystem::path mission_json = options_.live_dir / "mission.json";
+  try {
+    const std::filesystem::path dir = live_->work / "mission";
+    std::filesystem::remove_all(dir);
+    live_->journal->Export(dir, mission_json);
+    if (info_.floorplan && std::filesystem::exists(options_.live_dir / *info_.floorplan)) {
+      std::filesystem::copy_file(options_.live_dir / *info_.floorplan, dir / *info_.floorplan,
+                                 std::filesystem::copy_options::overwrite_existing);
+    }
+    const MissionDirectory mission(dir);
+    const Pipeline* p = FindPipeline(options_.pipeline);
+    VectorSink sink;
+    if (p && p->CanRun(mission)) p->Run({mission, options_.pipeline_options}, sink);
+    ++stats_.pipeline_runs;
+    sink.rows = sink.TakeSortedByTime();
+    IncidentState fresh(info_, options_.alerts);
+    for (const auto& e : sink.rows) fresh.Apply(e);
+    std::vector<std::pair<std::string, std::string>> to_publish;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      for (const auto& [node, status] : device_status_) fresh.SetDeviceStatus(node, status);
+      if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
+      state_ = std::move(fresh);
+      const nlohmann::json state = state_.ToJson();  // (a temporary would dangle in the loop)
+      for (const auto& n : state.at("nodes")) {
+        if (n.at("kind") == "agent") to_publish.emplace_back(n.at("id"), n.dump());
+      }
+    }
+    Changed();
+    if (mqtt_) {
+      for (const auto& [node, json] : to_publish) mqtt_->PublishEstimate(node, json);
+    }
+  } catch (const std::exception& e) {
+    // The journal holds rows the pipeline refuses; keep serving, say why.
+    Reject(options_.pipeline + " on the journal: " + e.what());
+  }
 }
 
 }  // namespace trailmark::server

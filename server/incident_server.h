@@ -1,15 +1,25 @@
 #pragma once
-/// `trailmark serve`: the incident server (issue 7, first part). Replays a mission's online
-/// estimates at a chosen speed into an IncidentState and serves it over HTTP (cpp-httplib):
+/// `trailmark serve`: the incident server (issue 7). Replays a mission's online estimates at a
+/// chosen speed, or runs live on measurements POSTed over HTTP or received over MQTT (journaled
+/// first, then estimated incrementally), into an IncidentState that it serves over HTTP
+/// (cpp-httplib):
 ///   GET /api/state   (Authorization: Bearer TOKEN)  -> the state JSON, 401 without the token
-///   GET /?token=TOKEN                                -> the dashboard page
+///   GET /api/events  (bearer token or ?token=)      -> server-sent events: the state JSON on change
+///   GET /api/history (bearer token)                  -> trails and alert log for the timeline
+///   GET /?token=TOKEN                                -> the dashboard (web/, built with Vite)
 ///   GET /api/health                                  -> {"ok": true} (no token)
 ///   GET /api/floorplan (bearer token)                -> {"walls": [[x0, y0, x1, y1], ...]}
+///   GET /api/stats (bearer token)                    -> counters and the latest rejection reasons
 ///   POST /api/ingest/<stream> (bearer token; live mode) -> rows journaled, then acknowledged
 /// Binds to 127.0.0.1 unless told otherwise. Every request without the right token is refused
-/// and counted. See docs/server.md.
+/// and counted; every rejection is counted and logged with its reason. See docs/server.md.
 
 #include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <string_view>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -31,6 +41,8 @@ struct ServerOptions {
   std::filesystem::path live_dir, journal_file;
   std::string pipeline = "pdr";
   std::map<std::string, std::string> pipeline_options;
+  /// Pipelines without a live form (pipelines/live_estimator.h) are re-run on the whole journal
+  /// at most this often; those with one (pdr, ins) estimate each row as it is committed.
   double live_period_s = 1.0;
   MqttOptions mqtt;  ///< live mode: also ingest from an MQTT broker when `mqtt.uri` is set
   std::string bind = "127.0.0.1";
@@ -39,12 +51,18 @@ struct ServerOptions {
   double speed = 10.0;  ///< mission seconds per wall second
   AlertOptions alerts;
   std::size_t max_request_bytes = 1 << 20;
+  /// Server-sent events: at most one state message per client this often (coalescing).
+  double events_min_interval_s = 0.01;
+  std::size_t http_threads = 32;  ///< each dashboard's event stream holds one
+  /// Receives every rejection reason (also counted; the latest are in /api/stats); default:
+  /// a line on stderr.
+  std::function<void(const std::string&)> log;
 };
 
 struct ServerStats {
   std::atomic<std::size_t> requests{0}, unauthorized{0}, released_estimates{0};
   std::atomic<std::size_t> ingested_rows{0}, duplicate_rows{0}, rejected_requests{0},
-      pipeline_runs{0};
+      pipeline_runs{0}, estimated_rows{0}, estimator_refusals{0}, commits{0}, events_sent{0};
 };
 
 class IncidentServer {
@@ -68,12 +86,23 @@ class IncidentServer {
   const MqttStats* mqtt_stats() const { return mqtt_ ? &mqtt_->stats() : nullptr; }
   /// The state JSON as GET /api/state returns it.
   nlohmann::json StateJson();
+  /// Parses one CSV document of `stream` (an HTTP body, an MQTT payload), journals its rows
+  /// (group commit) and returns {"accepted", "duplicates"} once committed. Throws
+  /// std::invalid_argument for bad input (nothing journaled; the message names the line),
+  /// std::runtime_error when the journal cannot commit.
+  nlohmann::json Ingest(const std::string& stream, const std::string& body);
 
  private:
   void ReplayLoop();
   void LiveLoop();
-  /// Parses one POSTed CSV document of `stream`, journals its rows; returns the JSON answer.
-  nlohmann::json Ingest(const std::string& stream, const std::string& body);
+  void CommitLoop();
+  /// Live pipelines without a live form: the batch pipeline on the exported journal.
+  void RerunOnJournal();
+  /// Counts and logs a rejection.
+  void Reject(const std::string& reason);
+  /// The state changed: wake the event streams.
+  void Changed();
+  nlohmann::json StatsJson();
 
   MissionInfo info_;
   std::vector<Estimate> estimates_;
@@ -88,14 +117,21 @@ class IncidentServer {
   std::atomic<bool> stop_{false}, replay_done_{false}, dirty_{false};
   struct Live;
   std::unique_ptr<Live> live_;
-  std::mutex ingest_mutex_;
   std::unique_ptr<MqttBridge> mqtt_;
   std::map<std::string, std::string> device_status_;
   int port_ = 0;
   ServerStats stats_;
+  std::mutex event_mutex_;
+  std::condition_variable event_cv_;
+  std::uint64_t version_ = 0;
+  std::mutex log_mutex_;
+  std::deque<std::pair<double, std::string>> recent_rejections_;
 };
 
-/// The dashboard page served at / (self-contained, no network beyond this server).
-const char* DashboardHtml();
+/// A file of the dashboard (web/ built by Vite, embedded at build time): null when absent.
+struct WebAsset {
+  std::string_view content, mime;
+};
+const WebAsset* FindWebAsset(const std::string& path);
 
 }  // namespace trailmark::server

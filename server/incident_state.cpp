@@ -31,9 +31,17 @@ void IncidentState::Apply(const Estimate& e) {
   NodeState& n = it->second;
   n.estimate = e;
   if (n.kind == NodeKind::kAgent) {
-    n.recent.emplace_back(e.t, e.position_n.head<2>());
+    // The motionless window at the history's rate (a 100 Hz INS would keep 3,000 per agent).
+    if (n.recent.empty() || e.t >= n.recent.back().first + options_.history_period_s)
+      n.recent.emplace_back(e.t, e.position_n.head<2>());
     while (n.recent.size() > 1 && n.recent.front().first < e.t - options_.motionless_s)
       n.recent.pop_front();
+    if (n.history.empty() || e.t >= n.history.back().t + options_.history_period_s)
+      n.history.push_back(e);
+    if (e.sxx + e.syy <= options_.map_error_variance_m2)
+      n.variance_high_since = -1e300;
+    else if (n.variance_high_since < -1e299)
+      n.variance_high_since = e.t;
   }
   now_ = std::max(now_, e.t);
 }
@@ -52,7 +60,8 @@ void IncidentState::SetDeviceStatus(const std::string& id, const std::string& st
 
 void IncidentState::Advance(TimeS now) {
   now_ = std::max(now_, now);
-  alerts_.clear();
+  std::vector<Alert> before;
+  before.swap(alerts_);
   for (const auto& [id, status] : device_status_) {
     if (status == "lost")
       alerts_.push_back({id, "device-lost", id + ": the device was lost (MQTT last will)", now_});
@@ -72,7 +81,7 @@ void IncidentState::Advance(TimeS now) {
     if (!n.recent.empty() && e.t - n.recent.front().first >= options_.motionless_s - 1e-9) {
       double spread = 0;
       for (const auto& [t, p] : n.recent)
-        spread = std::max(spread, (p - n.recent.back().second).norm());
+        spread = std::max(spread, (p - e.position_n.head<2>()).norm());
       if (spread <= options_.motionless_radius_m) {
         alerts_.push_back(
             {id, "motionless",
@@ -85,7 +94,49 @@ void IncidentState::Advance(TimeS now) {
                          fmt::format("{} position uncertain: 95 % within {:.1f} m", id, a95),
                          now_});
     }
+    if (options_.map_error && n.variance_high_since > -1e299 &&
+        e.t - n.variance_high_since >= options_.map_error_min_s) {
+      alerts_.push_back(
+          {id, "map-error",
+           fmt::format("{}: variance {:.1f} m^2 for {:.0f} s on the floor plan near ({:.1f}, "
+                       "{:.1f}): map error (or not yet converged)",
+                       id, e.sxx + e.syy, e.t - n.variance_high_since, e.position_n.x(),
+                       e.position_n.y()),
+           now_});
+    }
   }
+  // The log keeps each alert once, when raised (a (node, kind) not active before).
+  for (const Alert& a : alerts_) {
+    const bool was_active = std::any_of(before.begin(), before.end(), [&](const Alert& b) {
+      return b.id == a.id && b.kind == a.kind;
+    });
+    if (!was_active) alert_log_.push_back(a);
+  }
+}
+
+nlohmann::json IncidentState::HistoryJson() const {
+  nlohmann::json trails = nlohmann::json::object();
+  for (const auto& [id, n] : nodes_) {
+    if (n.kind != NodeKind::kAgent) continue;
+    nlohmann::json rows = nlohmann::json::array();
+    for (const Estimate& e : n.history)
+      rows.push_back({e.t, e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy});
+    // and the latest, so that the timeline ends where the live view is
+    if (!n.history.empty() && n.history.back().t < n.estimate.t) {
+      const Estimate& e = n.estimate;
+      rows.push_back({e.t, e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy});
+    }
+    trails[id] = rows;
+  }
+  nlohmann::json log = nlohmann::json::array();
+  for (const auto& a : alert_log_)
+    log.push_back({{"id", a.id}, {"kind", a.kind}, {"t", a.t}, {"message", a.message}});
+  nlohmann::json j;
+  j["t"] = std::isfinite(now_) && now_ > -1e299 ? nlohmann::json(now_) : nlohmann::json(nullptr);
+  j["columns"] = {"t", "x", "y", "sxx", "sxy", "syy"};
+  j["trails"] = trails;
+  j["alerts"] = log;
+  return j;
 }
 
 nlohmann::json IncidentState::ToJson() const {

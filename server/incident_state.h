@@ -20,6 +20,15 @@ struct AlertOptions {
   double motionless_s = 30.0;        ///< PASS devices alarm after ~30 s without motion (NFPA 1982)
   double motionless_radius_m = 0.5;  ///< "without motion": within this radius
   double uncertainty_m = 5.0;        ///< 95 % ellipse semi-major axis above this
+  /// Map error (map-aided search paper, sec. V-E): a map-aided estimate whose variance
+  /// (sxx + syy) stays above map_error_variance_m2 for map_error_min_s means the floor plan
+  /// disagrees with the walk (or the filter has not converged yet). Only meaningful for
+  /// pipelines that use the floor plan: `serve` enables it for mapmatch.
+  bool map_error = false;
+  double map_error_variance_m2 = 3.0;
+  double map_error_min_s = 10.0;
+  /// The trail kept for the timeline: one position per agent every this many seconds.
+  double history_period_s = 0.5;
 };
 
 struct NodeState {
@@ -27,6 +36,8 @@ struct NodeState {
   NodeKind kind = NodeKind::kCrumb;
   Estimate estimate;
   std::deque<std::pair<TimeS, Vec2>> recent;  ///< agents: positions over the motionless window
+  std::vector<Estimate> history;  ///< agents: every history_period_s, for the timeline
+  TimeS variance_high_since = -1e300;  ///< map error: since when the variance is above the level
 };
 
 struct Alert {
@@ -52,6 +63,10 @@ class IncidentState {
   std::size_t stale_estimates() const { return stale_; }
   /// The contract of GET /api/state (docs/server.md).
   nlohmann::json ToJson() const;
+  /// Every alert as it was raised (a kind for a node, once until it clears), in time order.
+  const std::vector<Alert>& alert_log() const { return alert_log_; }
+  /// GET /api/history: the agents' trails and the alert log, for the dashboard's timeline.
+  nlohmann::json HistoryJson() const;
 
  private:
   MissionInfo info_;
@@ -61,6 +76,7 @@ class IncidentState {
   std::map<std::string, TimeS> heard_;
   std::map<std::string, std::string> device_status_;
   std::vector<Alert> alerts_;
+  std::vector<Alert> alert_log_;
   std::size_t stale_ = 0;
 };
 

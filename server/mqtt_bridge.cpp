@@ -2,7 +2,9 @@
 
 #include <mqtt/async_client.h>
 
+#include <chrono>
 #include <stdexcept>
+#include <thread>
 
 namespace trailmark::server {
 
@@ -10,11 +12,12 @@ struct MqttBridge::Impl {
   std::unique_ptr<mqtt::async_client> client;
 };
 
-MqttBridge::MqttBridge(MqttOptions options, IngestFn ingest, StatusFn status)
+MqttBridge::MqttBridge(MqttOptions options, IngestFn ingest, StatusFn status, RejectFn reject)
     : impl_(new Impl),
       options_(std::move(options)),
       ingest_(std::move(ingest)),
-      status_(std::move(status)) {}
+      status_(std::move(status)),
+      reject_(std::move(reject)) {}
 
 MqttBridge::~MqttBridge() { Stop(); }
 
@@ -29,10 +32,11 @@ void MqttBridge::Start() {
       ++stats_.received;
       const std::string topic = msg->get_topic();
       // trailmark/<incident>/<node>/<leaf>
-      const std::string rest = topic.substr(prefix.size());
+      const std::string rest = topic.rfind(prefix, 0) == 0 ? topic.substr(prefix.size()) : "";
       const auto slash = rest.find('/');
-      if (topic.rfind(prefix, 0) != 0 || slash == std::string::npos) {
+      if (slash == std::string::npos) {
         ++stats_.rejected;
+        reject_(topic + ": not trailmark/<incident>/<node>/<stream>");
         return;
       }
       const std::string node = rest.substr(0, slash), leaf = rest.substr(slash + 1);
@@ -41,11 +45,24 @@ void MqttBridge::Start() {
         status_(node, msg->to_string());
         return;
       }
-      try {
-        ingest_(leaf, msg->to_string());  // journaled before this returns: then the PUBACK
-        ++stats_.ingested;
-      } catch (const std::exception&) {
-        ++stats_.rejected;  // malformed: counted, never crashes the server
+      // The PUBACK leaves when this callback returns: only after the journal commit. A journal
+      // that cannot commit (disk full) holds the callback, retrying every second, so nothing
+      // is acknowledged that is not on disk; the broker keeps what follows.
+      for (int attempt = 0;; ++attempt) {
+        try {
+          ingest_(leaf, msg->to_string());
+          ++stats_.ingested;
+        } catch (const std::invalid_argument&) {
+          ++stats_.rejected;  // malformed: counted (the server logged why), never crashes it
+        } catch (const std::exception& e) {
+          if (attempt == 0) reject_(topic + ": " + e.what() + " (retrying)");
+          if (!stopping_) {
+            std::this_thread::sleep_for(std::chrono::seconds(1));
+            continue;
+          }
+          ++stats_.rejected;
+        }
+        break;
       }
     });
     auto opts =
@@ -62,6 +79,7 @@ void MqttBridge::Start() {
 }
 
 void MqttBridge::Stop() {
+  stopping_ = true;
   if (!impl_ || !impl_->client) return;
   try {
     if (impl_->client->is_connected()) impl_->client->disconnect()->wait();

@@ -35,7 +35,9 @@ class MqttBridge {
   using IngestFn =
       std::function<nlohmann::json(const std::string& stream, const std::string& body)>;
   using StatusFn = std::function<void(const std::string& node, const std::string& status)>;
-  MqttBridge(MqttOptions options, IngestFn ingest, StatusFn status);
+  using RejectFn = std::function<void(const std::string& reason)>;
+  /// `reject` receives the reason of every message dropped as malformed (also counted).
+  MqttBridge(MqttOptions options, IngestFn ingest, StatusFn status, RejectFn reject);
   ~MqttBridge();
   /// Connects (persistent session) and subscribes; throws std::runtime_error when it cannot.
   void Start();
@@ -50,7 +52,9 @@ class MqttBridge {
   MqttOptions options_;
   IngestFn ingest_;
   StatusFn status_;
+  RejectFn reject_;
   MqttStats stats_;
+  std::atomic<bool> stopping_{false};
 };
 
 }  // namespace trailmark::server

@@ -29,13 +29,7 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     else if (imu.motion == "crawl") o.motion = FootMotion::kCrawl;
     else if (imu.motion == "stairs") o.motion = FootMotion::kStairs;
     else throw std::invalid_argument("unknown --imu-motion '" + imu.motion + "' (walk, crawl, stairs)");
-    Random rng(seed ^ 0x1e1e1e1eULL);
-    for (const auto& [id, walk] : sim.walks) {
-      const SimulatedImu s = SimulateFootImu(walk, id, o, rng.Fork());
-      sim.data.imu.insert(sim.data.imu.end(), s.samples.begin(), s.samples.end());
-    }
-    std::stable_sort(sim.data.imu.begin(), sim.data.imu.end(),
-                     [](const ImuSample& a, const ImuSample& b) { return a.t < b.t; });
+    AddFootImu(sim, o, seed ^ 0x1e1e1e1eULL);
     sim.data.info.description += ". Foot IMU at " + fmt::format("{:g}", imu.rate_hz) + " Hz, " +
                                  o.grade.name + " grade, " + imu.motion + ".";
     if (imu.drop_steps) sim.data.steps.clear();

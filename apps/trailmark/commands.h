@@ -3,6 +3,8 @@
 
 #include <cstdint>
 #include <filesystem>
+
+#include "server/load_test.h"
 #include <map>
 #include <string>
 #include <vector>
@@ -40,6 +42,8 @@ int Bench(std::size_t rows, const std::filesystem::path& json_out);
 /// `trailmark bench breadcrumb`: the large-incident benchmark of the breadcrumb localizer.
 int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
                     double covariance_period_s, const std::filesystem::path& json_out);
+/// `trailmark bench load`: the live server under load on loopback (server/load_test.h).
+int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out);
 /// `trailmark reproduce ins`: the INS on the recorded foot-IMU sets under data_dir.
 int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::path& out,
                  const std::map<std::string, std::string>& options = {});

@@ -103,7 +103,15 @@ int main(int argc, char** argv) {
   bench->add_option("--json", bench_json, "write the results as JSON");
   std::string bench_what;
   bench->add_option("what", bench_what,
-                    "empty: I/O and pdr; 'breadcrumb': the large-incident benchmark (issue 8)");
+                    "empty: I/O and pdr; 'breadcrumb': the large-incident benchmark (issue 8); "
+                    "'load': the live server under load on loopback (issue 7)");
+  server::LoadTestOptions load;
+  bench->add_option("--firefighters", load.firefighters, "load: firefighters sending at once");
+  bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
+  bench->add_option("--batch", load.batch_s, "load: seconds of IMU per request");
+  bench->add_option("--pipeline", load.pipeline, "load: the live pipeline (ins, pdr, ...)");
+  std::string load_dir = ".";
+  bench->add_option("--dir", load_dir, "load: where the journal goes (a real disk)");
   IncidentOptions incident;
   double solve_period = 1.0, covariance_period = 5.0;
   bench->add_option("--agents", incident.agents, "breadcrumb: firefighters");
@@ -233,6 +241,10 @@ int main(int argc, char** argv) {
     } else if (*bench) {
       if (bench_what == "breadcrumb") {
         return cli::BenchBreadcrumb(incident, solve_period, covariance_period, bench_json);
+      }
+      if (bench_what == "load") {
+        load.work_dir = load_dir;
+        return cli::BenchLoad(load, bench_json);
       }
       if (!bench_what.empty()) throw std::invalid_argument("unknown benchmark '" + bench_what + "'");
       return cli::Bench(bench_rows, bench_json);

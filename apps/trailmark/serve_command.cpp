@@ -5,6 +5,7 @@
 #include <atomic>
 #include <chrono>
 #include <csignal>
+#include <fstream>
 #include <random>
 #include <thread>
 
@@ -12,6 +13,7 @@
 #include "server/incident_server.h"
 #include "server/journal.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/live_estimator.h"
 
 namespace trailmark::cli {
 
@@ -47,11 +49,25 @@ int ServeLive(const ServeOptions& o) {
   so.bind = o.bind;
   so.port = o.port;
   so.token = o.token.empty() ? RandomToken() : o.token;
-  server::IncidentServer srv(mission.info(), {}, so);
+  so.alerts.map_error = so.pipeline == "mapmatch";
+  std::vector<Segment2> walls;
+  if (mission.info().floorplan && !mission.Has(*mission.info().floorplan)) {
+    fmt::print("note: mission.json names the floor plan '{}', which {} does not hold: the "
+               "dashboard shows no walls\n",
+               *mission.info().floorplan, o.live.string());
+  } else if (const auto plan = mission.LoadFloorPlan()) {
+    walls = plan->solid_walls();
+  }
+  server::IncidentServer srv(mission.info(), {}, so, {}, std::move(walls));
   srv.Start();
   fmt::print(
-      "trailmark serve: live incident '{}', journal {}, pipeline {}, listening on http://{}:{}/\n",
-      mission.info().name, o.journal.string(), so.pipeline, o.bind, srv.port());
+      "trailmark serve: live incident '{}', journal {}, pipeline {} ({}), listening on "
+      "http://{}:{}/\n",
+      mission.info().name, o.journal.string(), so.pipeline,
+      MakeLiveEstimator(so.pipeline, mission.info(), so.pipeline_options)
+          ? "incremental"
+          : "re-run on the journal every second",
+      o.bind, srv.port());
   fmt::print("dashboard: http://{}:{}/?token={}\n", o.bind, srv.port(), so.token);
   if (!o.mqtt_uri.empty())
     fmt::print("mqtt: {}, topics trailmark/{}/<node>/<stream>\n", o.mqtt_uri, o.incident);
@@ -110,6 +126,7 @@ int Serve(const ServeOptions& o) {
   so.port = o.port;
   so.speed = o.speed;
   so.token = o.token.empty() ? RandomToken() : o.token;
+  so.alerts.map_error = pipeline == "mapmatch";
   // When each node was heard (for the link-lost alert): every row of the measurement streams.
   const MissionData data = ReadMissionData(mission);
   std::vector<std::pair<TimeS, std::string>> heard;
@@ -141,6 +158,33 @@ int Serve(const ServeOptions& o) {
       "released\n",
       srv.stats().requests.load(), srv.stats().unauthorized.load(),
       srv.stats().released_estimates.load());
+  return 0;
+}
+
+int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out) {
+  fmt::print("bench load: {} firefighters x {:g} min of {:g} Hz IMU + RSSI, {:g} s per request, "
+             "pipeline {}, journal under {}\n",
+             options.firefighters, options.minutes, options.imu_hz, options.batch_s,
+             options.pipeline, std::filesystem::absolute(options.work_dir).string());
+  std::fflush(stdout);
+  const nlohmann::json r = server::RunLoadTest(options);
+  fmt::print("rows sent and journaled   {} ({} IMU, {} RSSI) in {} requests\n",
+             r["rows"].get<std::size_t>(), r["imu_rows"].get<std::size_t>(),
+             r["rssi_rows"].get<std::size_t>(), r["requests"].get<std::size_t>());
+  fmt::print("sustained                 {:.0f} rows/s, {:.0f} requests/s ({:.0f}x real time per "
+             "firefighter)\n",
+             r["rows_per_s"].get<double>(), r["requests_per_s"].get<double>(),
+             r["real_time_factor"].get<double>());
+  fmt::print("group commits             {} ({:.0f} rows per fsync)\n",
+             r["journal_commits"].get<std::size_t>(), r["rows_per_commit"].get<double>());
+  fmt::print("latency POST -> event     p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms ({} batches)\n",
+             r["latency_ms_p50"].get<double>(), r["latency_ms_p99"].get<double>(),
+             r["latency_ms_max"].get<double>(), r["latency_samples"].get<std::size_t>());
+  fmt::print("CPU                       {:.1f} s, {:.2f} cores busy (server and clients, one "
+             "process)\n",
+             r["cpu_s"].get<double>(), r["cpu_cores_busy"].get<double>());
+  fmt::print("peak memory               {:.0f} MB resident\n", r["peak_rss_mb"].get<double>());
+  if (!json_out.empty()) std::ofstream(json_out) << r.dump(2) << "\n";
   return 0;
 }
 

@@ -1,6 +1,8 @@
 // The dashboard of `trailmark serve` in Debian's Chromium (headless, through playwright-core):
 // after a few seconds of replay the page lists the right firefighters near the positions the
-// API reports, a click selects one, and a screenshot is written.
+// API reports and keeps following them live (server-sent events); a click selects one; the
+// timeline scrubs back to the start of the incident and LIVE returns; on a tablet-sized
+// portrait screen the panel goes below the map; screenshots are written.
 // usage: node dashboard.mjs URL TOKEN EXPECTED_AGENTS SCREENSHOT.png
 import { chromium } from 'playwright-core';
 
@@ -8,29 +10,63 @@ const [url, token, expected, shot] = process.argv.slice(2);
 const fail = (msg) => { console.error('FAIL: ' + msg); process.exit(1); };
 const browser = await chromium.launch({ executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
                                         args: ['--no-sandbox', '--headless=new'] });
+const positions = (page) => page.$$eval('#list .node', (els) => els.map((e) => {
+  const m = e.querySelector('.pos').textContent.match(/^(\S+): \((-?[\d.]+), (-?[\d.]+)\) m$/);
+  return m ? { id: m[1], x: Number(m[2]), y: Number(m[3]) } : { bad: e.textContent };
+}));
+const clock = (page) => page.$eval('#clock', (e) => e.textContent);
 try {
   const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
   await page.goto(`${url}/?token=${token}`);
   await page.waitForSelector('#list .node', { timeout: 10000 });
   await page.waitForTimeout(3000);
-  const names = await page.$$eval('#list .node', (els) => els.map((e) => e.dataset.id));
-  if (names.length !== Number(expected)) fail(`expected ${expected} firefighters, the page lists ${names.join(', ')}`);
+  const shown = await positions(page);
+  if (shown.length !== Number(expected)) fail(`expected ${expected} firefighters, the page lists ${JSON.stringify(shown)}`);
   // The page shows the positions the API gives (within what moves in half a second of replay).
   const state = await (await fetch(`${url}/api/state`, { headers: { Authorization: `Bearer ${token}` } })).json();
-  for (const el of await page.$$eval('#list .node', (els) => els.map((e) => e.textContent))) {
-    const m = el.match(/^(\S+): \((-?[\d.]+), (-?[\d.]+)\) m$/);
-    if (!m) fail(`unexpected entry '${el}'`);
-    const node = state.nodes.find((n) => n.id === m[1]);
-    if (!node) fail(`${m[1]} is not in /api/state`);
-    const d = Math.hypot(node.x - Number(m[2]), node.y - Number(m[3]));
-    if (d > 15) fail(`${m[1]} shown ${d.toFixed(1)} m from the API position`);
+  for (const s of shown) {
+    if (s.bad) fail(`unexpected entry '${s.bad}'`);
+    const node = state.nodes.find((n) => n.id === s.id);
+    if (!node) fail(`${s.id} is not in /api/state`);
+    const d = Math.hypot(node.x - s.x, node.y - s.y);
+    if (d > 15) fail(`${s.id} shown ${d.toFixed(1)} m from the API position`);
   }
+  // Live: without a reload, the clock and the positions move on (server-sent events).
+  const t1 = await clock(page);
+  await page.waitForTimeout(1500);
+  const t2 = await clock(page);
+  if (!/^live — mission time/.test(t2) || t1 === t2) fail(`the live clock did not advance: '${t1}' then '${t2}'`);
+  const names = shown.map((s) => s.id);
   await page.click(`#list .node[data-id="${names[0]}"]`);
-  await page.waitForTimeout(700);
+  await page.waitForTimeout(300);
   const selected = await page.$$eval('#list .node.sel', (els) => els.map((e) => e.dataset.id));
   if (selected.length !== 1 || selected[0] !== names[0]) fail(`click did not select ${names[0]}: ${selected}`);
   await page.screenshot({ path: shot });
-  console.log(`dashboard: ${names.length} firefighters (${names.join(', ')}), ${names[0]} selected, screenshot ${shot}`);
+  // Timeline: back to the start shows the firefighters where they were then (at the entry).
+  await page.$eval('#timeline', (el) => { el.value = el.min; el.dispatchEvent(new Event('input')); });
+  await page.waitForTimeout(300);
+  const early = await positions(page);
+  const c = await clock(page);
+  if (!/^replay — mission time/.test(c)) fail(`scrubbing back did not leave live mode: '${c}'`);
+  const moved = early.filter((e) => { const now = shown.find((s) => s.id === e.id); return now && Math.hypot(now.x - e.x, now.y - e.y) > 2; });
+  if (moved.length === 0) fail(`the timeline at its start shows the same positions as live: ${JSON.stringify(early)}`);
+  await page.click('#live');
+  await page.waitForTimeout(800);
+  if (!/^live/.test(await clock(page))) fail('LIVE did not return to live mode');
+  // Tablet, portrait: the panel goes below the map.
+  const tablet = await browser.newPage({ viewport: { width: 768, height: 1024 }, hasTouch: true });
+  await tablet.goto(`${url}/?token=${token}`);
+  await tablet.waitForSelector('#list .node', { timeout: 10000 });
+  const [map, side] = await Promise.all([tablet.$eval('#map', (e) => e.getBoundingClientRect().toJSON()),
+                                         tablet.$eval('#side', (e) => e.getBoundingClientRect().toJSON())]);
+  if (!(side.top >= map.bottom - 1 && map.width > 700)) fail(`tablet layout: map ${JSON.stringify(map)}, panel ${JSON.stringify(side)}`);
+  await tablet.tap(`#list .node[data-id="${names[1] ?? names[0]}"]`);
+  await tablet.screenshot({ path: shot.replace(/\.png$/, '-tablet.png') });
+  // Without the token: no data.
+  const denied = await browser.newPage();
+  const resp = await denied.goto(`${url}/?token=wrong`);
+  if (resp.status() !== 401) fail(`a wrong token got HTTP ${resp.status()}`);
+  console.log(`dashboard: ${names.length} firefighters (${names.join(', ')}) live, ${names[0]} selected, timeline scrubbed, tablet layout, screenshots ${shot}`);
 } finally {
   await browser.close();
 }

@@ -152,9 +152,35 @@ printf 't0,t1,agent,dx,dy\n1,2,ff1,abc,0\n' > "$dir/body.csv"
 code=$(curl -s -o "$dir/bad.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
        "http://127.0.0.1:$lport/api/ingest/steps.csv")
 [ "$code" = 400 ] && grep -q "request body:2" "$dir/bad.json" || { cat "$dir/bad.json"; fail "bad live row"; }
-sleep 1.5
-curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/state" | grep -q '"id":"ff1"' || fail "live state"
+# A row older than the last accepted one of its device (not a repeat): refused, reason logged.
+printf 't0,t1,agent,dx,dy\n0.05,0.1,ff1,0.3,0\n' > "$dir/body.csv"
+code=$(curl -s -o "$dir/old.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
+       "http://127.0.0.1:$lport/api/ingest/steps.csv")
+[ "$code" = 400 ] && grep -q "time order" "$dir/old.json" || { cat "$dir/old.json"; fail "row out of time order across requests"; }
+curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/stats" > "$dir/stats.json"
+grep -q '"recent_rejections":\[{' "$dir/stats.json" && grep -q "time order" "$dir/stats.json" \
+  || { cat "$dir/stats.json"; fail "rejection reasons in /api/stats"; }
+grep -q "rejected: steps.csv: request body:2: t=0.1" "$dir/live.log" || { cat "$dir/live.log"; fail "rejection not logged"; }
+sleep 0.5
+curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/state" > "$dir/lstate.json"
+grep -q '"id":"ff1"' "$dir/lstate.json" || fail "live state"
+# The incremental live pdr (re-fed from the journal after the restart) ends exactly where the
+# batch pipeline ends on the whole mission.
+"$TM" run --pipeline pdr "$dir/m2" --out "$dir/m2run" > /dev/null
+want=$(awk -F, 'NR > 1 && $2 == "ff1" { x = $3; y = $4 } END { printf "%.6f %.6f", x, y }' "$dir/m2run/estimates.csv")
+got=$(sed 's/.*"id":"ff1"[^}]*"x":\([-0-9.e]*\),"y":\([-0-9.e]*\).*/\1 \2/' "$dir/lstate.json" | awk '{ printf "%.6f %.6f", $1, $2 }')
+echo "live pdr end: $got (batch: $want)" >&2; [ "$want" = "$got" ] && [ "$want" != "0.000000 0.000000" ] || fail "live pdr ended at ($got), the batch pdr at ($want)"
+curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/history" | grep -q '"trails":{"ff1":\[\[' || fail "history"
+# Server-sent events: the state as a stream (the dashboard's live updates).
+curl -s -N --max-time 1 "http://127.0.0.1:$lport/api/events?token=T" > "$dir/events.txt" || true
+grep -q '^data: {"alerts":' "$dir/events.txt" || { head -c 300 "$dir/events.txt"; fail "event stream"; }
+code=$(curl -s -o /dev/null -w "%{http_code}" --max-time 1 "http://127.0.0.1:$lport/api/events?token=wrong")
+[ "$code" = 401 ] || fail "event stream without the token gave $code"
 kill $live_pid; wait $live_pid || true
+# A bounded load test (3 firefighters, 30 s each, as fast as possible): fails unless every row
+# sent is acknowledged and journaled.
+"$TM" bench load --firefighters 3 --minutes 0.5 --dir "$dir/load" > "$dir/load.log" 2>&1 \
+  && grep -q "rows sent and journaled" "$dir/load.log" || { cat "$dir/load.log"; fail "bench load"; }
 "$TM" journal export "$dir/j.db" --mission "$dir/live" --out "$dir/exported" > /dev/null || fail "journal export"
 sort -u "$dir/acked.txt" > "$dir/acked.sorted"
 tail -n +2 "$dir/exported/steps.csv" | sort > "$dir/journal.sorted"

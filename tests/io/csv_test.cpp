@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "test_util.h"
 #include "trailmark/core/error.h"
@@ -241,6 +242,45 @@ TEST(CsvReader, DropEventNeedsNode) {
   TempDir dir;
   EXPECT_THAT(ErrorOf<MissionEvent>(dir.File("events.csv", "t,agent,event,node\n0,ff1,drop,\n")),
               HasSubstr("needs the dropped node"));
+}
+
+}  // namespace
+}  // namespace trailmark
+
+namespace trailmark {
+namespace {
+
+TEST(CsvMemory, ParsesADocumentInMemoryLikeAFile) {
+  const std::vector<Step> steps = SyntheticSteps(300, 7);
+  TempDir dir;
+  const std::string path = (dir.path() / "steps.csv").string();
+  WriteAll(path, steps);
+  std::ifstream in(path);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::vector<Step> from_memory = ParseAll<Step>("request body", text);
+  ASSERT_EQ(from_memory.size(), steps.size());
+  // FormatAll gives the very lines WriteAll wrote (header first).
+  const std::vector<std::string> lines = FormatAll(from_memory);
+  std::string joined;
+  for (const auto& l : lines) joined += l + "\n";
+  EXPECT_EQ(joined, text);
+}
+
+TEST(CsvMemory, ErrorsNameTheDocumentAndLine) {
+  auto error_of = [](std::string_view text) {
+    try {
+      ParseAll<Step>("request body", text);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_THAT(error_of("t0,t1,agent,dx,dy\n0,1,ff1,0.5,0\n1,2,ff1,abc,0\n"),
+              AllOf(HasSubstr("request body:3:"), HasSubstr("'dx'")));
+  EXPECT_THAT(error_of(""), AllOf(HasSubstr("request body"), HasSubstr("empty")));
+  EXPECT_THAT(error_of("t0,t1,agent,dx\n"), HasSubstr("missing column 'dy'"));
+  EXPECT_THAT(error_of(std::string("t0,t1,agent,dx,dy\n0,1,ff\0,1,0\n", 30)), HasSubstr("NUL"));
+  EXPECT_EQ(error_of("t0,t1,agent,dx,dy\n"), "");  // a header alone: no rows, no error
 }
 
 }  // namespace

@@ -74,6 +74,9 @@ TEST(MissionJson, BadInputNamesTheProblem) {
   EXPECT_THAT(ErrorOfMission("{\n  \"nodes\": [\n    {\"id\": \"a\",, }\n]}"),
               AllOf(HasSubstr("mission.json:3:"), HasSubstr("invalid JSON")));
   EXPECT_THAT(ErrorOfMission(""), HasSubstr("invalid JSON"));
+  // A number beyond double range is an error, not a crash (found by the fuzzer).
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"b","kind":"base","position":[5e500,0,0]}]})"),
+              AllOf(HasSubstr("invalid JSON"), HasSubstr("number overflow")));
   EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"robot"}]})"),
               AllOf(HasSubstr("/nodes/0/kind"), HasSubstr("unknown kind 'robot'")));
   EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"agent"},{"id":"a","kind":"agent"}]})"),

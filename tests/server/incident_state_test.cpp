@@ -67,5 +67,50 @@ TEST(IncidentState, AlertsForLinkLostMotionlessAndUncertainty) {
   EXPECT_NEAR(Ellipse95SemiMajor(4, 0, 1), std::sqrt(5.991 * 4), 1e-12);
 }
 
+TEST(IncidentState, MapErrorAlertWhenTheVarianceStaysHighOnAMapAidedPipeline) {
+  AlertOptions o;
+  o.map_error = true;  // (the default is off: only map-aided pipelines mean a map error by it)
+  IncidentState s(Info(), o);
+  auto active = [&](const std::string& kind) {
+    for (const auto& a : s.alerts())
+      if (a.id == "ff1" && a.kind == kind) return true;
+    return false;
+  };
+  // Converged (variance 2 x 0.1 m^2), then 2 x 2 m^2 = 4 m^2 > 3 m^2 from t = 20 s.
+  for (int k = 0; k <= 29; ++k) s.Apply(At("ff1", k, 0.5 * k, k >= 20 ? 2.0 : 0.1));
+  s.Advance(29);
+  EXPECT_FALSE(active("map-error"));  // 9 s above the level: not yet
+  s.Apply(At("ff1", 30, 15, 2.0));
+  s.Advance(30);
+  EXPECT_TRUE(active("map-error"));  // 10 s
+  s.Apply(At("ff1", 31, 15.5, 0.1));  // converged again: cleared
+  s.Advance(31);
+  EXPECT_FALSE(active("map-error"));
+  // The same walk with the option off (pdr, say) raises no map error.
+  IncidentState plain(Info());
+  for (int k = 0; k <= 30; ++k) plain.Apply(At("ff1", k, 0.5 * k, k >= 20 ? 2.0 : 0.1));
+  plain.Advance(30);
+  for (const auto& a : plain.alerts()) EXPECT_NE(a.kind, "map-error");
+  // The log holds the alert once, raised at t = 30 s.
+  ASSERT_EQ(s.alert_log().size(), 1u);
+  EXPECT_EQ(s.alert_log()[0].kind, "map-error");
+  EXPECT_DOUBLE_EQ(s.alert_log()[0].t, 30.0);
+}
+
+TEST(IncidentState, HistoryKeepsTheTrailAtItsPeriodAndTheLatestEstimate) {
+  IncidentState s(Info());
+  for (int k = 0; k <= 40; ++k) s.Apply(At("ff1", 0.1 * k, k));  // 10 Hz for 4 s
+  s.Apply(At("base", 0, 0));
+  const auto h = s.HistoryJson();
+  ASSERT_TRUE(h.at("trails").contains("ff1"));
+  EXPECT_FALSE(h.at("trails").contains("base"));  // agents only
+  const auto& rows = h.at("trails").at("ff1");
+  // every 0.5 s: t = 0, 0.5, ..., 4.0 (9 rows)
+  ASSERT_EQ(rows.size(), 9u);
+  EXPECT_NEAR(rows[1][0].get<double>(), 0.5, 1e-9);
+  EXPECT_DOUBLE_EQ(rows.back()[1].get<double>(), 40.0);
+  EXPECT_EQ(h.at("columns").size(), 6u);
+}
+
 }  // namespace
 }  // namespace trailmark::server

@@ -54,6 +54,34 @@ CsvReader::CsvReader(std::string path, Options options)
     throw InputError(path_, 0, fmt::format("cannot open: {}", std::strerror(errno)));
   }
   file_size_ = static_cast<std::size_t>(std::filesystem::file_size(path_, ec));
+  ReadHeaderOrClose();
+}
+
+CsvReader::CsvReader(std::string name, std::string_view content, Options options)
+    : path_(std::move(name)), options_(options) {
+  if (content.empty()) {
+    throw InputError(path_, 0, "empty file: expected a header line naming the columns");
+  }
+  // fmemopen reads the caller's buffer in place (read-only mode never writes to it).
+  file_ = fmemopen(const_cast<char*>(content.data()), content.size(), "r");
+  if (file_ == nullptr) {
+    throw InputError(path_, 0, fmt::format("cannot read: {}", std::strerror(errno)));
+  }
+  file_size_ = content.size();
+  ReadHeaderOrClose();
+}
+
+void CsvReader::ReadHeaderOrClose() {
+  try {
+    ReadHeader();
+  } catch (...) {
+    std::fclose(file_);  // the destructor does not run when a constructor throws
+    file_ = nullptr;
+    throw;
+  }
+}
+
+void CsvReader::ReadHeader() {
   buffer_.resize(std::max(options_.chunk_bytes, options_.max_line_bytes) * 2);
 
   std::string_view line;
@@ -259,6 +287,14 @@ CsvWriter::CsvWriter(std::string path, const std::vector<std::string>& header)
   rows_ = 0;
 }
 
+CsvWriter::CsvWriter(std::string name, const std::vector<std::string>& header,
+                     std::vector<std::string>* lines)
+    : path_(std::move(name)), lines_(lines), columns_(header.size()) {
+  for (const auto& h : header) Add(std::string_view(h));
+  EndRow();
+  rows_ = 0;
+}
+
 CsvWriter::~CsvWriter() {
   if (file_ != nullptr) std::fclose(file_);
 }
@@ -294,8 +330,12 @@ void CsvWriter::EndRow() {
     throw std::logic_error(fmt::format("{}: row {} has {} cells for {} columns", path_, rows_ + 1,
                                        cells_in_row_, columns_));
   }
-  row_ += '\n';
-  std::fwrite(row_.data(), 1, row_.size(), file_);
+  if (lines_ != nullptr) {
+    lines_->push_back(row_);
+  } else {
+    row_ += '\n';
+    std::fwrite(row_.data(), 1, row_.size(), file_);
+  }
   row_.clear();
   cells_in_row_ = 0;
   ++rows_;

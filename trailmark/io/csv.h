@@ -27,6 +27,9 @@ class CsvReader {
   /// Opens the file and reads its header. Throws InputError when the file is missing,
   /// unreadable, empty, binary, or its header is malformed.
   explicit CsvReader(std::string path, Options options = {});
+  /// Reads `content` (a whole CSV document held in memory, e.g. an HTTP request body) under
+  /// the name `name`, which errors use in place of a file path. `content` must outlive the reader.
+  CsvReader(std::string name, std::string_view content, Options options);
   ~CsvReader();
   CsvReader(const CsvReader&) = delete;
   CsvReader& operator=(const CsvReader&) = delete;
@@ -57,6 +60,8 @@ class CsvReader {
   [[noreturn]] void Fail(const std::string& problem) const;
 
  private:
+  void ReadHeader();
+  void ReadHeaderOrClose();
   bool ReadLine(std::string_view* line);
   void SplitFields(std::string_view line);
   std::string ColumnName(int col) const;
@@ -84,6 +89,9 @@ std::optional<double> ParseFiniteDouble(std::string_view text);
 class CsvWriter {
  public:
   CsvWriter(std::string path, const std::vector<std::string>& header);
+  /// Writes each line (header first, without its newline) to `lines` instead of a file.
+  CsvWriter(std::string name, const std::vector<std::string>& header,
+            std::vector<std::string>* lines);
   ~CsvWriter();
   CsvWriter(const CsvWriter&) = delete;
   CsvWriter& operator=(const CsvWriter&) = delete;
@@ -101,6 +109,7 @@ class CsvWriter {
   void Separator();
   std::string path_;
   std::FILE* file_ = nullptr;
+  std::vector<std::string>* lines_ = nullptr;
   std::string row_;
   std::size_t columns_ = 0;
   std::size_t cells_in_row_ = 0;

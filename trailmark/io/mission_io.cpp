@@ -45,6 +45,12 @@ json ParseJson(const std::string& text, const std::string& source) {
     const auto pos = what.find("] ");
     if (pos != std::string::npos) what = what.substr(pos + 2);
     throw InputError(source, LineOf(text, e.byte), "invalid JSON: " + what);
+  } catch (const json::exception& e) {
+    // e.g. out_of_range.406 "number overflow parsing '5e500'" (found by the fuzzer)
+    std::string what = e.what();
+    const auto pos = what.find("] ");
+    if (pos != std::string::npos) what = what.substr(pos + 2);
+    throw InputError(source, 0, "invalid JSON: " + what);
   }
 }
 

@@ -232,6 +232,15 @@ RowReader<Row>::RowReader(std::string path, const NodeRegistry* registry,
 }
 
 template <class Row>
+RowReader<Row>::RowReader(std::string name, std::string_view content,
+                          const NodeRegistry* registry, CsvReader::Options options)
+    : csv_(std::move(name), content, options), registry_(registry) {
+  for (const auto& c : Layout<Row>::kColumns) {
+    columns_.push_back(c.required ? csv_.RequireColumn(c.name) : csv_.Column(c.name));
+  }
+}
+
+template <class Row>
 RowReader<Row>::~RowReader() = default;
 
 template <class Row>
@@ -262,6 +271,10 @@ bool RowReader<Row>::Next(Row& row) {
 
 template <class Row>
 RowWriter<Row>::RowWriter(std::string path) : csv_(std::move(path), Header<Row>()) {}
+
+template <class Row>
+RowWriter<Row>::RowWriter(std::string name, std::vector<std::string>* lines)
+    : csv_(std::move(name), Header<Row>(), lines) {}
 
 template <class Row>
 void RowWriter<Row>::Write(const Row& row) {

@@ -8,6 +8,7 @@
 /// Each row is checked as it is read: required columns present, numbers finite, node ids
 /// well formed and (when a registry is given) declared, rows in non-decreasing time.
 
+#include <algorithm>
 #include <functional>
 #include <set>
 #include <string>
@@ -39,6 +40,9 @@ class RowReader {
   /// `registry` may be null (then ids are only checked for their syntax).
   explicit RowReader(std::string path, const NodeRegistry* registry = nullptr,
                      CsvReader::Options options = {});
+  /// A document held in memory (see CsvReader); `content` must outlive the reader.
+  RowReader(std::string name, std::string_view content, const NodeRegistry* registry,
+            CsvReader::Options options);
   ~RowReader();
   /// Reads the next row into `row`; false at end of file. Throws InputError on bad input.
   bool Next(Row& row);
@@ -58,6 +62,8 @@ template <class Row>
 class RowWriter {
  public:
   explicit RowWriter(std::string path);
+  /// Canonical lines (header first, no newlines) into `lines` instead of a file.
+  RowWriter(std::string name, std::vector<std::string>* lines);
   void Write(const Row& row);
   void Close() { csv_.Close(); }
   std::size_t rows() const { return csv_.rows(); }
@@ -74,6 +80,35 @@ std::vector<Row> ReadAll(const std::string& path, const NodeRegistry* registry =
   Row row;
   while (reader.Next(row)) rows.push_back(row);
   return rows;
+}
+
+/// Parses a whole CSV document held in memory (e.g. a request body) named `name` in errors;
+/// `lines` (when not null) receives each row's 1-based line in the document.
+template <class Row>
+std::vector<Row> ParseAll(const std::string& name, std::string_view content,
+                          const NodeRegistry* registry = nullptr,
+                          std::vector<std::size_t>* lines = nullptr) {
+  CsvReader::Options options;
+  // No line is longer than the document: a buffer of its size suffices.
+  options.chunk_bytes = std::min<std::size_t>(options.chunk_bytes, content.size() + 1);
+  options.max_line_bytes = std::min<std::size_t>(options.max_line_bytes, content.size() + 1);
+  RowReader<Row> reader(name, content, registry, options);
+  std::vector<Row> rows;
+  Row row;
+  while (reader.Next(row)) {
+    rows.push_back(row);
+    if (lines) lines->push_back(reader.csv().line());
+  }
+  return rows;
+}
+
+/// The canonical CSV lines of rows (first the header), as WriteAll would write them.
+template <class Row>
+std::vector<std::string> FormatAll(const std::vector<Row>& rows) {
+  std::vector<std::string> lines;
+  RowWriter<Row> writer("(memory)", &lines);
+  for (const auto& r : rows) writer.Write(r);
+  return lines;
 }
 
 template <class Row>

@@ -7,6 +7,7 @@
 #include <memory>
 
 #include "trailmark/core/error.h"
+#include "trailmark/pipelines/live_ins.h"
 #include "trailmark/pipelines/pipeline_options.h"
 
 namespace trailmark {
@@ -46,112 +47,60 @@ ins::InsOptions InsOptionsFrom(const std::map<std::string, std::string>& values,
   return x;
 }
 
-namespace {
-
-/// One INS per agent, created at the agent's first sample.
-struct AgentIns {
-  std::unique_ptr<ins::ZuptIns> ins;
-  double next_output = -1e300;
-};
-
-ins::InsOptions ForAgent(const MissionDirectory& mission, const std::string& id,
-                         ins::InsOptions o) {
-  if (const NodeInfo* n = mission.info().Find(id)) {
-    if (auto start = mission.info().AgentStart(*n)) o.initial_position_n = *start;
-    if (n->start_heading_rad) o.initial_yaw_rad = *n->start_heading_rad;
-  }
-  return o;
-}
-
-}  // namespace
-
 PipelineSummary InsPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
   const MissionDirectory& mission = context.mission;
   mission.Require("imu.csv", "the ins pipeline");
-  double output_hz = 0;
-  const ins::InsOptions options = InsOptionsFrom(context.options, &output_hz);
-  std::map<std::string, AgentIns> agents;
+  LiveIns ins(mission.info(), context.options);
   auto reader = mission.OpenStream<ImuSample>();
   const double size = std::max<double>(1.0, static_cast<double>(reader.csv().file_size()));
   ImuSample s;
   std::size_t rows = 0;
   while (reader.Next(s)) {
-    auto it = agents.find(s.agent);
-    if (it == agents.end()) {
-      const NodeInfo* node = mission.info().Find(s.agent);
-      if (node == nullptr || node->kind != NodeKind::kAgent) {
-        reader.csv().Fail(fmt::format("'{}' has IMU samples but is not an agent in mission.json",
-                                      s.agent));
-      }
-      it = agents.emplace(s.agent, AgentIns{}).first;
-      it->second.ins = std::make_unique<ins::ZuptIns>(ForAgent(mission, s.agent, options));
-      const std::string id = s.agent;
-      AgentIns* a = &it->second;
-      a->ins->on_state = [&sink, id, a, output_hz](const ins::InsState& st) {
-        if (output_hz > 0 && st.t < a->next_output) return;
-        a->next_output = st.t + (output_hz > 0 ? 1.0 / output_hz : 0.0);
-        const auto& c = st.position_cov;
-        sink.Add({st.t, id, st.position_n, c(0, 0), c(0, 1), c(1, 1)});
-      };
-    }
     try {
-      it->second.ins->Add(s);
+      ins.Add(s, &sink);
     } catch (const std::invalid_argument& e) {
       reader.csv().Fail(e.what());
     }
     if ((++rows & 0xffff) == 0) context.progress(reader.csv().bytes_read() / size);
   }
-  PipelineSummary summary;
-  for (auto& [id, a] : agents) {
-    try {
-      a.ins->Finish();
-    } catch (const std::invalid_argument& e) {
-      throw InputError(mission.Path("imu.csv").string(), 0, id + ": " + e.what());
-    }
-    const auto& s = a.ins->summary();
-    summary.numbers[id + ".samples"] = static_cast<double>(s.samples);
-    summary.numbers[id + ".steps"] = static_cast<double>(s.steps);
-    summary.numbers[id + ".stance_fraction"] =
-        s.samples ? static_cast<double>(s.stance_samples) / s.samples : 0.0;
-    summary.numbers[id + ".distance_m"] = s.distance_m;
-    summary.numbers[id + ".gaps"] = static_cast<double>(s.gaps);
-    summary.numbers[id + ".saturated_samples"] = static_cast<double>(s.saturated);
-    summary.numbers[id + ".gyro_bias_z_deg_per_h"] = s.gyro_bias.z() * 180 / 3.14159265358979 * 3600;
-    for (const auto& w : s.warnings) summary.notes.push_back(id + ": " + w);
+  try {
+    ins.Finish(&sink);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(mission.Path("imu.csv").string(), 0, e.what());
   }
-  summary.notes.push_back("detector: " + ins::ToString(options.detector.kind));
   context.progress(1.0);
-  return summary;
+  return ins.Summary();
 }
 
-std::vector<Step> InsStepsFromImu(const MissionDirectory& mission, const ins::InsOptions& options,
+std::vector<Step> InsStepsFromImu(const MissionDirectory& mission,
+                                  const std::map<std::string, std::string>& ins_options,
                                   PipelineSummary* summary) {
-  std::map<std::string, std::unique_ptr<ins::ZuptIns>> agents;
+  LiveIns ins(mission.info(), ins_options);
   std::vector<Step> steps;
+  ins.on_step = [&steps](const Step& st) { steps.push_back(st); };
   auto reader = mission.OpenStream<ImuSample>();
   ImuSample s;
   while (reader.Next(s)) {
-    auto& ins = agents[s.agent];
-    if (!ins) {
-      const NodeInfo* node = mission.info().Find(s.agent);
-      if (node == nullptr || node->kind != NodeKind::kAgent) {
-        reader.csv().Fail(fmt::format("'{}' has IMU samples but is not an agent in mission.json",
-                                      s.agent));
-      }
-      ins = std::make_unique<ins::ZuptIns>(ForAgent(mission, s.agent, options));
-      ins->on_step = [&steps](const Step& st) { steps.push_back(st); };
-    }
     try {
-      ins->Add(s);
+      ins.Add(s, nullptr);
     } catch (const std::invalid_argument& e) {
       reader.csv().Fail(e.what());
     }
   }
-  for (auto& [id, ins] : agents) {
-    ins->Finish();
-    if (summary) {
-      summary->numbers["ins." + id + ".steps"] = static_cast<double>(ins->summary().steps);
-      for (const auto& w : ins->summary().warnings) summary->notes.push_back("ins " + id + ": " + w);
+  try {
+    ins.Finish(nullptr);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(mission.Path("imu.csv").string(), 0, e.what());
+  }
+  if (summary) {
+    const PipelineSummary s = ins.Summary();
+    for (const auto& [key, value] : s.numbers) {
+      if (key.size() > 6 && key.compare(key.size() - 6, 6, ".steps") == 0) {
+        summary->numbers["ins." + key] = value;
+      }
+    }
+    for (const auto& note : s.notes) {
+      if (note.rfind("detector: ", 0) != 0) summary->notes.push_back("ins " + note);
     }
   }
   std::stable_sort(steps.begin(), steps.end(), [](const Step& a, const Step& b) { return a.t1 < b.t1; });

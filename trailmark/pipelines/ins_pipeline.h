@@ -28,8 +28,9 @@ ins::InsOptions InsOptionsFrom(const std::map<std::string, std::string>& values,
                                double* output_hz = nullptr);
 
 /// Runs the INS over every agent of the mission's imu.csv and returns the steps (ordered by t1).
-/// `options` as InsOptionsFrom; agents' start and heading from mission.json.
-std::vector<Step> InsStepsFromImu(const MissionDirectory& mission, const ins::InsOptions& options,
+/// `ins_options` as InsOptionsFrom; agents' start and heading from mission.json.
+std::vector<Step> InsStepsFromImu(const MissionDirectory& mission,
+                                  const std::map<std::string, std::string>& ins_options,
                                   PipelineSummary* summary = nullptr);
 
 }  // namespace trailmark

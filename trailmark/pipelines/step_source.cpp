@@ -32,7 +32,7 @@ std::optional<std::vector<Step>> InsStepsUnlessStepFile(
     return std::nullopt;
   }
   if (!mission.Has("imu.csv")) mission.Require("steps.csv", who + " (or imu.csv for the INS)");
-  std::vector<Step> steps = InsStepsFromImu(mission, InsOptionsFrom(ins_options), summary);
+  std::vector<Step> steps = InsStepsFromImu(mission, ins_options, summary);
   if (summary) {
     summary->notes.push_back("steps from imu.csv through the ZUPT INS (" +
                              std::to_string(steps.size()) + " steps)");

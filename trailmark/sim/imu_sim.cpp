@@ -212,4 +212,14 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   return out;
 }
 
+void AddFootImu(SimulatedMission& sim, const ImuSimOptions& options, std::uint64_t seed) {
+  Random rng(seed);
+  for (const auto& [id, walk] : sim.walks) {
+    const SimulatedImu s = SimulateFootImu(walk, id, options, rng.Fork());
+    sim.data.imu.insert(sim.data.imu.end(), s.samples.begin(), s.samples.end());
+  }
+  std::stable_sort(sim.data.imu.begin(), sim.data.imu.end(),
+                   [](const ImuSample& a, const ImuSample& b) { return a.t < b.t; });
+}
+
 }  // namespace trailmark

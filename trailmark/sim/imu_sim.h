@@ -20,6 +20,7 @@
 
 #include "trailmark/core/measurements.h"
 #include "trailmark/core/random.h"
+#include "trailmark/sim/mission_sim.h"
 #include "trailmark/sim/walker.h"
 
 namespace trailmark {
@@ -74,5 +75,9 @@ struct SimulatedImu {
 /// second footprint. Deterministic given `rng`.
 SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent,
                              const ImuSimOptions& options, Random rng);
+
+/// Adds a foot IMU to every walking agent of a simulated mission (`data.imu`, in time order).
+/// Deterministic given `seed`.
+void AddFootImu(SimulatedMission& sim, const ImuSimOptions& options, std::uint64_t seed);
 
 }  // namespace trailmark

@@ -1,0 +1,283 @@
+#include "server/load_test.h"
+
+#include <fmt/format.h>
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <deque>
+#include <fstream>
+#include <mutex>
+#include <thread>
+
+#include "server/incident_server.h"
+#include "server/journal.h"
+#include "trailmark/eval/metrics.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/io/streams.h"
+#include "trailmark/sim/imu_sim.h"
+#include "trailmark/sim/scenarios.h"
+
+// After Eigen: <resolv.h>, which httplib includes, defines a macro `_res` that Eigen uses as a name.
+#include <httplib.h>
+
+namespace trailmark::server {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Request {
+  std::string stream, body;
+  double t_last = 0;  ///< IMU: the batch's last sample time (latency matching)
+};
+
+/// One firefighter's requests in send order: IMU batches, each followed by the RSSI packets of
+/// its time window.
+std::vector<Request> Requests(const std::string& id, const std::vector<ImuSample>& imu,
+                              const std::vector<RssiPacket>& rssi, double batch_s) {
+  std::vector<Request> out;
+  std::size_t r = 0;
+  for (std::size_t i = 0; i < imu.size();) {
+    const double end = imu[i].t + batch_s - 1e-9;
+    std::vector<ImuSample> batch;
+    for (; i < imu.size() && imu[i].t <= end; ++i) {
+      batch.push_back(imu[i]);
+      batch.back().agent = id;
+    }
+    std::string body;
+    for (const auto& line : FormatAll(batch)) body += line + "\n";
+    out.push_back({"imu.csv", std::move(body), batch.back().t});
+    std::vector<RssiPacket> packets;
+    for (; r < rssi.size() && rssi[r].t <= batch.back().t; ++r) {
+      packets.push_back(rssi[r]);
+      packets.back().rx = id;
+    }
+    if (!packets.empty()) {
+      std::string rb;
+      for (const auto& line : FormatAll(packets)) rb += line + "\n";
+      out.push_back({"rssi.csv", std::move(rb), 0});
+    }
+  }
+  return out;
+}
+
+double CpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_utime.tv_sec + u.ru_utime.tv_usec * 1e-6 + u.ru_stime.tv_sec +
+         u.ru_stime.tv_usec * 1e-6;
+}
+
+double PeakRssMb() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;
+}
+
+}  // namespace
+
+nlohmann::json RunLoadTest(const LoadTestOptions& o) {
+  if (o.firefighters < 1 || !(o.minutes > 0) || !(o.batch_s > 0) || !(o.imu_hz > 0))
+    throw std::invalid_argument("bench load: firefighters >= 1; minutes, batch, rate > 0");
+  // One walk with a foot IMU (the office loop: it ends where it began), repeated until the
+  // incident time is covered; every firefighter sends it under its own id.
+  OfficeLoopOptions loop;
+  SimulatedMission sim = SimulateOfficeLoop(loop, o.seed);
+  ImuSimOptions imu_options;
+  imu_options.rate_hz = o.imu_hz;
+  AddFootImu(sim, imu_options, o.seed);
+  const std::string agent = sim.walks.begin()->first;
+  std::vector<ImuSample> one;
+  for (const auto& s : sim.data.imu)
+    if (s.agent == agent) one.push_back(s);
+  std::vector<RssiPacket> one_rssi;
+  for (const auto& p : sim.data.rssi)
+    if (p.rx == agent) one_rssi.push_back(p);
+  const double span = one.back().t - one.front().t + 1.0 / o.imu_hz;
+  const double t0 = one.front().t, duration_s = o.minutes * 60.0;
+  std::vector<ImuSample> imu;
+  std::vector<RssiPacket> rssi;
+  for (int rep = 0; rep * span < duration_s; ++rep) {
+    for (auto s : one) {
+      s.t += rep * span;
+      if (s.t - t0 < duration_s) imu.push_back(s);
+    }
+    for (auto p : one_rssi) {
+      p.t += rep * span;
+      if (p.t - t0 < duration_s) rssi.push_back(p);
+    }
+  }
+  // The incident: N firefighters starting where the walk starts.
+  const NodeInfo* original = sim.data.info.Find(agent);
+  MissionInfo info;
+  info.name = "load test";
+  for (const NodeInfo& n : sim.data.info.nodes)
+    if (n.kind != NodeKind::kAgent) info.nodes.push_back(n);
+  std::vector<std::string> ids;
+  for (int k = 1; k <= o.firefighters; ++k) {
+    ids.push_back(fmt::format("ff{}", k));
+    NodeInfo n = *original;
+    n.id = ids.back();
+    info.nodes.push_back(n);
+  }
+  const std::filesystem::path dir = o.work_dir / "load-test";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir / "incident");
+  WriteMissionInfo(dir / "incident" / "mission.json", info);
+
+  std::vector<std::vector<Request>> requests;
+  std::size_t rows_total = 0, requests_total = 0;
+  std::size_t imu_batches = 0;
+  for (const auto& id : ids) {
+    requests.push_back(Requests(id, imu, rssi, o.batch_s));
+    requests_total += requests.back().size();
+    for (const auto& r : requests.back()) imu_batches += r.stream == "imu.csv";
+  }
+  rows_total = ids.size() * (imu.size() + rssi.size());
+
+  ServerOptions so;
+  so.live_dir = dir / "incident";
+  so.journal_file = dir / "journal.db";
+  so.pipeline = o.pipeline;
+  so.pipeline_options = o.pipeline_options;
+  so.port = 0;
+  so.token = "load-test";
+  so.http_threads = static_cast<std::size_t>(o.firefighters) + 8;
+  std::atomic<std::size_t> logged{0};
+  so.log = [&logged](const std::string&) { ++logged; };
+  IncidentServer server(info, {}, so);
+  server.Start();
+
+  // The dashboard client: every event's agent times, matched against the batches in flight.
+  struct InFlight {
+    double t_last;
+    Clock::time_point sent;
+  };
+  std::mutex flight_mutex;
+  std::map<std::string, std::deque<InFlight>> in_flight;
+  std::vector<double> latencies_ms;
+  latencies_ms.reserve(requests_total);
+  std::atomic<bool> done{false};
+  std::atomic<std::size_t> events{0};
+  std::thread dashboard([&] {
+    httplib::Client client("127.0.0.1", server.port());
+    client.set_read_timeout(std::chrono::seconds(5));
+    std::string buffer;
+    client.Get("/api/events?token=load-test", [&](const char* data, std::size_t n) {
+      buffer.append(data, n);
+      for (std::size_t end; (end = buffer.find("\n\n")) != std::string::npos;) {
+        const std::string message = buffer.substr(0, end);
+        buffer.erase(0, end + 2);
+        if (message.rfind("data: ", 0) != 0) continue;
+        const auto now = Clock::now();
+        ++events;
+        const auto state = nlohmann::json::parse(message.substr(6));
+        std::lock_guard<std::mutex> lock(flight_mutex);
+        for (const auto& node : state.at("nodes")) {
+          auto it = in_flight.find(node.at("id").get<std::string>());
+          if (it == in_flight.end()) continue;
+          const double t = node.at("t").get<double>();
+          while (!it->second.empty() && it->second.front().t_last <= t + 1e-9) {
+            latencies_ms.push_back(
+                std::chrono::duration<double, std::milli>(now - it->second.front().sent).count());
+            it->second.pop_front();
+          }
+        }
+      }
+      return !done.load();
+    });
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));  // the stream is open
+
+  std::atomic<std::size_t> accepted{0}, refused{0};
+  std::string first_refusal;
+  const double cpu0 = CpuSeconds();
+  const auto wall0 = Clock::now();
+  std::vector<std::thread> devices;
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    devices.emplace_back([&, k] {
+      httplib::Client client("127.0.0.1", server.port());
+      client.set_keep_alive(true);
+      client.set_tcp_nodelay(true);
+      const httplib::Headers auth{{"Authorization", "Bearer load-test"}};
+      for (const Request& r : requests[k]) {
+        if (r.stream == "imu.csv") {
+          std::lock_guard<std::mutex> lock(flight_mutex);
+          in_flight[ids[k]].push_back({r.t_last, Clock::now()});
+        }
+        const auto res = client.Post("/api/ingest/" + r.stream, auth, r.body, "text/csv");
+        if (!res || res->status != 200) {
+          if (refused++ == 0) {
+            std::lock_guard<std::mutex> lock(flight_mutex);
+            first_refusal = res ? fmt::format("HTTP {} {}", res->status, res->body)
+                                : httplib::to_string(res.error());
+          }
+          continue;
+        }
+        accepted += nlohmann::json::parse(res->body).at("accepted").get<std::size_t>();
+      }
+    });
+  }
+  for (auto& d : devices) d.join();
+  const double ingest_s = std::chrono::duration<double>(Clock::now() - wall0).count();
+  // Until the estimator has caught up: every batch's event, or nothing new for a second (the
+  // INS holds its last samples until the detector window after them arrives: a device's final
+  // batch waits for data that never comes).
+  std::size_t seen = 0;
+  auto last_change = Clock::now();
+  while (Clock::now() - last_change < std::chrono::seconds(1)) {
+    std::size_t now_seen;
+    {
+      std::lock_guard<std::mutex> lock(flight_mutex);
+      now_seen = latencies_ms.size();
+    }
+    if (now_seen >= imu_batches) break;
+    if (now_seen != seen) seen = now_seen, last_change = Clock::now();
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  const double total_s = std::chrono::duration<double>(last_change - wall0).count();
+  const double cpu_s = CpuSeconds() - cpu0;
+  done = true;
+  const std::size_t estimated = server.stats().estimated_rows.load();
+  const std::size_t commits = server.stats().commits.load();
+  server.Stop();
+  dashboard.join();
+  const std::size_t journaled = Journal(so.journal_file).size();
+  std::size_t unmatched = 0;
+  for (const auto& [id, q] : in_flight) unmatched += q.size();
+  if (refused > 0 || journaled != rows_total || accepted != rows_total) {
+    throw std::runtime_error(fmt::format(
+        "bench load: {} requests refused (first: {}), {} rows accepted, {} journaled of {} sent",
+        refused.load(), first_refusal, accepted.load(), journaled, rows_total));
+  }
+  return {{"firefighters", o.firefighters},
+          {"incident_minutes", o.minutes},
+          {"imu_hz", o.imu_hz},
+          {"batch_s", o.batch_s},
+          {"pipeline", o.pipeline},
+          {"requests", requests_total},
+          {"rows", rows_total},
+          {"imu_rows", ids.size() * imu.size()},
+          {"rssi_rows", ids.size() * rssi.size()},
+          {"ingest_wall_s", ingest_s},
+          {"rows_per_s", rows_total / ingest_s},
+          {"requests_per_s", requests_total / ingest_s},
+          {"real_time_factor", duration_s / ingest_s},
+          {"estimated_rows", estimated},
+          {"journal_commits", commits},
+          {"rows_per_commit", static_cast<double>(rows_total) / std::max<std::size_t>(1, commits)},
+          {"latency_ms_p50", Percentile(latencies_ms, 50)},
+          {"latency_ms_p99", Percentile(latencies_ms, 99)},
+          {"latency_ms_max", Percentile(latencies_ms, 100)},
+          {"latency_samples", latencies_ms.size()},
+          {"batches_without_event", unmatched},
+          {"events", events.load()},
+          {"cpu_s", cpu_s},
+          {"cpu_cores_busy", cpu_s / std::max(total_s, ingest_s)},
+          {"peak_rss_mb", PeakRssMb()},
+          {"rejections_logged", logged.load()}};
+}
+
+}  // namespace trailmark::server

@@ -1,0 +1,31 @@
+#pragma once
+/// The live server under load (issue 7, item 7), on loopback in one process: N simulated
+/// firefighters, each a client thread that POSTs its foot IMU (100 Hz) in batches and its RSSI
+/// packets as fast as the server acknowledges them, and one dashboard client on the event
+/// stream (server-sent events). Reports sustained rows/s, end-to-end latency (the POST of a
+/// batch -> the first event whose state has that firefighter's estimate at or past the batch's
+/// last sample), journal commits, CPU and peak memory. Not a unit test: `trailmark bench load`.
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+namespace trailmark::server {
+
+struct LoadTestOptions {
+  int firefighters = 20;
+  double minutes = 10.0;    ///< incident time each firefighter sends
+  double batch_s = 0.1;     ///< IMU per request (10 samples at 100 Hz)
+  double imu_hz = 100.0;
+  std::string pipeline = "ins";
+  std::map<std::string, std::string> pipeline_options;
+  /// Where the journal goes (a real disk: each group commit is an fsync).
+  std::filesystem::path work_dir;
+  std::uint64_t seed = 1;
+};
+
+/// Runs the load test; throws std::runtime_error when the server refuses rows or loses any
+/// (the journal must end with exactly the rows sent).
+nlohmann::json RunLoadTest(const LoadTestOptions& options);
+
+}  // namespace trailmark::server

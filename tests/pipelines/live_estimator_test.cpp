@@ -1,0 +1,146 @@
+// The live (incremental) pipelines against their batch forms: the same rows, fed one at a time
+// with the agents interleaved differently, give exactly the batch estimates of each agent.
+#include "trailmark/pipelines/live_estimator.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "test_util.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/ins_pipeline.h"
+#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/imu_sim.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark {
+namespace {
+
+using testing::TempDir;
+
+SimulatedMission TwoAgentsWithImu(bool keep_steps) {
+  TrainingBuildingOptions o;  // two firefighters
+  o.rooms_per_side = 2;
+  SimulatedMission sim = SimulateTrainingBuilding(o, 5);
+  ImuSimOptions imu;
+  imu.rate_hz = 100;
+  AddFootImu(sim, imu, 9);
+  if (!keep_steps) sim.data.steps.clear();
+  return sim;
+}
+
+std::map<std::string, std::vector<Estimate>> ByNode(const std::vector<Estimate>& rows) {
+  std::map<std::string, std::vector<Estimate>> by;
+  for (const auto& e : rows) by[e.id].push_back(e);
+  return by;
+}
+
+void ExpectSameEstimates(const std::vector<Estimate>& batch, const std::vector<Estimate>& live) {
+  const auto a = ByNode(batch), b = ByNode(live);
+  ASSERT_EQ(a.size(), b.size());
+  for (const auto& [id, rows] : a) {
+    const auto& other = b.at(id);
+    ASSERT_EQ(rows.size(), other.size()) << id;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      ASSERT_EQ(rows[i].t, other[i].t) << id << " " << i;
+      ASSERT_EQ(rows[i].position_n, other[i].position_n) << id << " " << i;
+      ASSERT_EQ(rows[i].sxx, other[i].sxx);
+      ASSERT_EQ(rows[i].sxy, other[i].sxy);
+      ASSERT_EQ(rows[i].syy, other[i].syy);
+    }
+  }
+}
+
+/// The batch run flushes each agent's INS at the end of the file; a live one never sees an end,
+/// so its estimates are the batch ones but the last `at_most_missing` of each agent.
+void ExpectBatchPrefix(const std::vector<Estimate>& batch, const std::vector<Estimate>& live,
+                       std::size_t at_most_missing) {
+  auto batch_by = ByNode(batch);
+  const auto live_by = ByNode(live);
+  ASSERT_EQ(batch_by.size(), live_by.size());
+  std::vector<Estimate> head;
+  for (auto& [id, rows] : batch_by) {
+    const std::size_t n = live_by.at(id).size();
+    ASSERT_LE(n, rows.size()) << id;
+    ASSERT_GE(n + at_most_missing, rows.size()) << id;
+    head.insert(head.end(), rows.begin(), rows.begin() + static_cast<std::ptrdiff_t>(n));
+  }
+  ExpectSameEstimates(head, live);
+}
+
+/// Every row of the mission, one agent's rows after the other's (a worst-case interleaving:
+/// each agent's rows in time order, the agents not at all).
+template <class Row>
+std::vector<LiveRow> AgentAfterAgent(const std::vector<Row>& rows) {
+  std::vector<LiveRow> out(rows.begin(), rows.end());
+  std::stable_sort(out.begin(), out.end(),
+                   [](const LiveRow& x, const LiveRow& y) { return RowNode(x) < RowNode(y); });
+  return out;
+}
+
+TEST(LiveEstimator, PdrFromStepsEqualsTheBatchPipeline) {
+  const SimulatedMission sim = TwoAgentsWithImu(true);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  VectorSink batch;
+  PdrPipeline().Run({mission, {}}, batch);
+
+  auto live = MakeLiveEstimator("pdr", sim.data.info, {});
+  ASSERT_NE(live, nullptr);
+  VectorSink sink;
+  for (const auto& row : AgentAfterAgent(sim.data.steps)) live->Add(row, sink);
+  for (const auto& p : sim.data.rssi) live->Add(p, sink);  // not used by pdr: counted
+  ExpectSameEstimates(batch.rows, sink.rows);
+  EXPECT_EQ(live->Summary().numbers.at("steps"), static_cast<double>(sim.data.steps.size()));
+  EXPECT_EQ(live->Summary().numbers.at("rows_ignored"), static_cast<double>(sim.data.rssi.size()));
+}
+
+TEST(LiveEstimator, PdrFromImuEqualsTheBatchPipeline) {
+  const SimulatedMission sim = TwoAgentsWithImu(false);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  VectorSink batch;
+  PdrPipeline().Run({mission, {}}, batch);
+  ASSERT_GT(batch.rows.size(), 100u);
+
+  auto live = MakeLiveEstimator("pdr", sim.data.info, {});
+  VectorSink sink;
+  for (const auto& row : AgentAfterAgent(sim.data.imu)) live->Add(row, sink);
+  ExpectBatchPrefix(batch.rows, sink.rows, 1);
+}
+
+TEST(LiveEstimator, InsEqualsTheBatchPipelineAtItsOutputRate) {
+  const SimulatedMission sim = TwoAgentsWithImu(false);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const std::map<std::string, std::string> options{{"output_hz", "5"}};
+  VectorSink batch;
+  InsPipeline().Run({mission, options}, batch);
+  ASSERT_GT(batch.rows.size(), 100u);
+
+  auto live = MakeLiveEstimator("ins", sim.data.info, options);
+  VectorSink sink;
+  for (const auto& row : AgentAfterAgent(sim.data.imu)) live->Add(row, sink);
+  ExpectBatchPrefix(batch.rows, sink.rows, 2);
+}
+
+TEST(LiveEstimator, RefusesNonAgentsAndUnknownNames) {
+  MissionInfo info;
+  info.nodes.push_back({.id = "ff1", .kind = NodeKind::kAgent, .start = Vec3::Zero()});
+  info.nodes.push_back({.id = "lm", .kind = NodeKind::kLandmark, .position = Vec3(1, 0, 0)});
+  auto live = MakeLiveEstimator("pdr", info, {});
+  VectorSink sink;
+  live->Add(Step{0, 1, "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+  EXPECT_EQ(sink.rows.size(), 2u);  // the start, then the step
+  EXPECT_THROW(live->Add(Step{1, 2, "lm", Vec3(0.7, 0, 0), std::nullopt}, sink),
+               std::invalid_argument);
+  EXPECT_EQ(MakeLiveEstimator("no-such-pipeline", info, {}), nullptr);
+  EXPECT_THROW(MakeLiveEstimator("pdr", info, {{"bogus", "1"}}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace trailmark

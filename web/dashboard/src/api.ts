@@ -1,0 +1,66 @@
+// The server's JSON contract (docs/server.md): GET /api/state, /api/history, /api/floorplan and
+// the server-sent events of /api/events (each message: the state).
+
+export interface NodeState {
+  id: string;
+  kind: 'agent' | 'crumb' | 'landmark' | 'base';
+  t: number;
+  x: number;
+  y: number;
+  z: number;
+  sxx: number;
+  sxy: number;
+  syy: number;
+}
+
+export interface Alert {
+  id: string;
+  kind: string; // no-data, motionless, uncertainty, map-error, device-lost
+  t: number;
+  message: string;
+}
+
+export interface State {
+  t: number | null;
+  nodes: NodeState[];
+  alerts: Alert[];
+}
+
+/** Rows [t, x, y, sxx, sxy, syy] of each agent, oldest first. */
+export type TrailRow = [number, number, number, number, number, number];
+
+export interface History {
+  t: number | null;
+  trails: Record<string, TrailRow[]>;
+  alerts: Alert[];
+}
+
+export type Wall = [number, number, number, number];
+
+export class Api {
+  constructor(private readonly token: string) {}
+
+  private async get<T>(path: string): Promise<T> {
+    const r = await fetch(path, { headers: { Authorization: `Bearer ${this.token}` } });
+    if (!r.ok) throw new Error(`${path}: HTTP ${r.status}`);
+    return (await r.json()) as T;
+  }
+
+  state(): Promise<State> {
+    return this.get<State>('/api/state');
+  }
+  history(): Promise<History> {
+    return this.get<History>('/api/history');
+  }
+  async walls(): Promise<Wall[]> {
+    return (await this.get<{ walls: Wall[] }>('/api/floorplan')).walls;
+  }
+  /** Live states; `onState` for each message, `onStatus` for the connection. */
+  events(onState: (s: State) => void, onStatus: (ok: boolean) => void): EventSource {
+    const es = new EventSource(`/api/events?token=${encodeURIComponent(this.token)}`);
+    es.onmessage = (m) => onState(JSON.parse(m.data) as State);
+    es.onopen = () => onStatus(true);
+    es.onerror = () => onStatus(false); // EventSource reconnects by itself
+    return es;
+  }
+}

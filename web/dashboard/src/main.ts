@@ -1,0 +1,258 @@
+// The incident commander's dashboard: floor plan, every firefighter with position, 95 % ellipse,
+// trail and name; crumbs, landmarks, the base; status and alerts per firefighter; a timeline
+// to scrub back. Live through server-sent events; history from /api/history.
+import './style.css';
+import { Api, type Alert, type History, type NodeState, type State, type TrailRow, type Wall } from './api';
+import { ellipse95, fitView, rowAt, toScreen, type View } from './geometry';
+
+const token = new URLSearchParams(location.search).get('token') ?? '';
+const api = new Api(token);
+const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
+const canvas = $<HTMLCanvasElement>('map');
+const ctx = canvas.getContext('2d')!;
+const timeline = $<HTMLInputElement>('timeline');
+const liveButton = $<HTMLButtonElement>('live');
+
+let walls: Wall[] = [];
+let live: State = { t: null, nodes: [], alerts: [] };
+let trails: Record<string, TrailRow[]> = {};
+let alertLog: Alert[] = [];
+let following = true; // the timeline follows the incident
+let selected: string | null = null;
+let view: View = { scale: 1, ox: 0, oy: 0 };
+const TRAIL_PERIOD_S = 0.5;
+
+const ALERT_LABEL: Record<string, string> = {
+  'no-data': 'LINK LOST',
+  motionless: 'MOTIONLESS',
+  uncertainty: 'UNCERTAIN',
+  'map-error': 'MAP ERROR',
+  'device-lost': 'DEVICE LOST',
+};
+
+function mergeHistory(h: History): void {
+  for (const [id, rows] of Object.entries(h.trails)) {
+    // the history, then what came live after its end
+    const end = rows.length ? rows[rows.length - 1][0] : -Infinity;
+    trails[id] = rows.concat((trails[id] ?? []).filter((r) => r[0] > end));
+  }
+  alertLog = h.alerts;
+}
+
+function onState(s: State): void {
+  live = s;
+  for (const n of s.nodes) {
+    if (n.kind !== 'agent') continue;
+    const trail = (trails[n.id] ??= []);
+    const last = trail[trail.length - 1];
+    if (!last || n.t >= last[0] + TRAIL_PERIOD_S) trail.push([n.t, n.x, n.y, n.sxx, n.sxy, n.syy]);
+  }
+  for (const a of s.alerts) {
+    if (!alertLog.some((b) => b.id === a.id && b.kind === a.kind && Math.abs(b.t - a.t) < 60)) alertLog.push(a);
+  }
+  updateTimeline();
+  render();
+}
+
+/** The time shown: the live clock, or where the timeline was dragged. */
+function shownTime(): number | null {
+  if (following) return live.t;
+  return Number(timeline.value);
+}
+
+function timeRange(): [number, number] | null {
+  let t0 = Infinity;
+  for (const rows of Object.values(trails)) if (rows.length) t0 = Math.min(t0, rows[0][0]);
+  if (live.t === null || !Number.isFinite(t0)) return null;
+  return [t0, Math.max(t0, live.t)];
+}
+
+function updateTimeline(): void {
+  const r = timeRange();
+  if (!r) return;
+  timeline.min = String(r[0]);
+  timeline.max = String(r[1]);
+  if (following) timeline.value = String(r[1]);
+}
+
+/** Agents at time t: the live state when following, else the trails. */
+function agentsAt(t: number | null): NodeState[] {
+  const agents = live.nodes.filter((n) => n.kind === 'agent');
+  if (following || t === null) return agents;
+  const out: NodeState[] = [];
+  for (const [id, rows] of Object.entries(trails)) {
+    const r = rowAt(rows, t);
+    if (r) out.push({ id, kind: 'agent', t: r[0], x: r[1], y: r[2], z: 0, sxx: r[3], sxy: r[4], syy: r[5] });
+  }
+  return out.sort((a, b) => a.id.localeCompare(b.id));
+}
+
+/** Alerts active at t: live ones, or those raised within the minute before t when scrubbing. */
+function alertsAt(t: number | null): Alert[] {
+  if (following || t === null) return live.alerts;
+  return alertLog.filter((a) => a.t <= t && a.t > t - 60);
+}
+
+function resize(): void {
+  const r = canvas.getBoundingClientRect();
+  const dpr = window.devicePixelRatio || 1;
+  canvas.width = Math.max(1, Math.round(r.width * dpr));
+  canvas.height = Math.max(1, Math.round(r.height * dpr));
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+}
+
+function render(): void {
+  const t = shownTime();
+  const agents = agentsAt(t);
+  const alerts = alertsAt(t);
+  const others = live.nodes.filter((n) => n.kind !== 'agent');
+  const w = canvas.clientWidth;
+  const h = canvas.clientHeight;
+  const xs: number[] = [];
+  const ys: number[] = [];
+  for (const wl of walls) xs.push(wl[0], wl[2]), ys.push(wl[1], wl[3]);
+  for (const n of [...agents, ...others]) xs.push(n.x), ys.push(n.y);
+  for (const rows of Object.values(trails)) for (const r of rows) xs.push(r[1]), ys.push(r[2]);
+  view = fitView(xs, ys, w, h);
+  ctx.clearRect(0, 0, w, h);
+  ctx.fillStyle = '#101418';
+  ctx.fillRect(0, 0, w, h);
+  ctx.strokeStyle = '#8a93a0';
+  ctx.lineWidth = 2;
+  for (const wl of walls) {
+    ctx.beginPath();
+    ctx.moveTo(...toScreen(view, wl[0], wl[1]));
+    ctx.lineTo(...toScreen(view, wl[2], wl[3]));
+    ctx.stroke();
+  }
+  for (const n of others) {
+    const [px, py] = toScreen(view, n.x, n.y);
+    ctx.fillStyle = n.kind === 'base' ? '#4aa8ff' : n.kind === 'landmark' ? '#c8a2ff' : '#7fd17f';
+    ctx.fillRect(px - 4, py - 4, 8, 8);
+    ctx.fillStyle = '#9aa4ae';
+    ctx.font = '11px system-ui, sans-serif';
+    ctx.fillText(n.id, px + 6, py + 12);
+  }
+  const alerted = new Set(alerts.map((a) => a.id));
+  for (const n of agents) {
+    const rows = trails[n.id] ?? [];
+    ctx.strokeStyle = n.id === selected ? '#ffe066' : '#5b6470';
+    ctx.lineWidth = n.id === selected ? 2 : 1;
+    ctx.beginPath();
+    let first = true;
+    for (const r of rows) {
+      if (t !== null && r[0] > t) break;
+      const [px, py] = toScreen(view, r[1], r[2]);
+      if (first) ctx.moveTo(px, py);
+      else ctx.lineTo(px, py);
+      first = false;
+    }
+    ctx.stroke();
+    const e = ellipse95(n.sxx, n.sxy, n.syy);
+    const [px, py] = toScreen(view, n.x, n.y);
+    ctx.strokeStyle = n.id === selected ? '#ffe066' : '#ff9a3c';
+    ctx.lineWidth = 1.5;
+    ctx.beginPath();
+    ctx.ellipse(px, py, Math.max(1, e.a * view.scale), Math.max(1, e.b * view.scale), -e.angle, 0, 2 * Math.PI);
+    ctx.stroke();
+    ctx.fillStyle = alerted.has(n.id) ? '#ff3b3b' : '#ff6a3c';
+    ctx.beginPath();
+    ctx.arc(px, py, n.id === selected ? 8 : 6, 0, 2 * Math.PI);
+    ctx.fill();
+    ctx.fillStyle = '#ffffff';
+    ctx.font = 'bold 13px system-ui, sans-serif';
+    ctx.fillText(n.id, px + 9, py - 9);
+  }
+  renderSide(agents, alerts, t);
+}
+
+function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): void {
+  const list = $('list');
+  list.replaceChildren(
+    ...agents.map((n) => {
+      const div = document.createElement('div');
+      div.className = 'node' + (n.id === selected ? ' sel' : '');
+      div.dataset.id = n.id;
+      const name = document.createElement('span');
+      name.className = 'pos';
+      name.textContent = `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`;
+      div.append(name);
+      const a95 = ellipse95(n.sxx, n.sxy, n.syy).a;
+      const detail = document.createElement('small');
+      detail.textContent = ` ±${a95.toFixed(1)} m`;
+      div.append(detail);
+      for (const a of alerts.filter((x) => x.id === n.id)) {
+        const badge = document.createElement('span');
+        badge.className = `badge ${a.kind}`;
+        badge.textContent = ALERT_LABEL[a.kind] ?? a.kind;
+        div.append(badge);
+      }
+      div.onclick = () => select(n.id);
+      return div;
+    }),
+  );
+  $('alerts').replaceChildren(
+    ...alerts.map((a) => {
+      const div = document.createElement('div');
+      div.className = `alert ${a.kind}`;
+      div.dataset.kind = a.kind;
+      div.textContent = `${a.t.toFixed(0)} s — ${a.message}`;
+      return div;
+    }),
+  );
+  $('clock').textContent = t === null ? 'waiting for data…' : `${following ? 'live' : 'replay'} — mission time ${t.toFixed(1)} s`;
+}
+
+function select(id: string): void {
+  selected = selected === id ? null : id;
+  render();
+}
+
+canvas.addEventListener('pointerdown', (ev) => {
+  const r = canvas.getBoundingClientRect();
+  const x = ev.clientX - r.left;
+  const y = ev.clientY - r.top;
+  let best: string | null = null;
+  let bestD = 24; // px: a finger on a tablet
+  for (const n of agentsAt(shownTime())) {
+    const [px, py] = toScreen(view, n.x, n.y);
+    const d = Math.hypot(px - x, py - y);
+    if (d < bestD) (bestD = d), (best = n.id);
+  }
+  if (best) select(best);
+});
+timeline.addEventListener('input', () => {
+  following = Number(timeline.value) >= Number(timeline.max) - 1e-6;
+  liveButton.classList.toggle('on', following);
+  render();
+});
+liveButton.addEventListener('click', () => {
+  following = true;
+  liveButton.classList.add('on');
+  updateTimeline();
+  render();
+});
+window.addEventListener('resize', () => {
+  resize();
+  render();
+});
+
+async function start(): Promise<void> {
+  resize();
+  try {
+    walls = await api.walls();
+    mergeHistory(await api.history());
+    onState(await api.state());
+  } catch (e) {
+    $('conn').textContent = `not authorized or server unreachable (${(e as Error).message})`;
+    return;
+  }
+  api.events(onState, (ok) => {
+    $('conn').textContent = ok ? 'connected (live)' : 'connection lost — reconnecting…';
+    $('conn').className = ok ? 'muted' : 'warn';
+  });
+  // The history catches up what a reconnect missed.
+  setInterval(() => void api.history().then(mergeHistory).catch(() => undefined), 10000);
+}
+
+void start();
