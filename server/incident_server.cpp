@@ -20,7 +20,7 @@
 namespace trailmark::server {
 
 struct IncidentServer::Http {
-  httplib::Server server;
+  std::unique_ptr<httplib::Server> server;  ///< an httplib::SSLServer for HTTPS
 };
 
 struct IncidentServer::Live {
@@ -189,9 +189,30 @@ nlohmann::json IncidentServer::StatsJson() {
 }
 
 void IncidentServer::Start() {
-  httplib::Server& svr = http_->server;
+  if (options_.tls_cert_file.empty() != options_.tls_key_file.empty())
+    throw std::invalid_argument("serve: HTTPS needs both a certificate and its key");
+  if (options_.tls_cert_file.empty()) {
+    http_->server = std::make_unique<httplib::Server>();
+  } else {
+    for (const auto& f : {options_.tls_cert_file, options_.tls_key_file}) {
+      if (!std::filesystem::exists(f)) throw std::invalid_argument("serve: " + f + ": no such file");
+    }
+    auto ssl = std::make_unique<httplib::SSLServer>(options_.tls_cert_file.c_str(),
+                                                    options_.tls_key_file.c_str());
+    if (!ssl->is_valid()) {
+      throw std::invalid_argument("serve: " + options_.tls_cert_file + " / " +
+                                  options_.tls_key_file +
+                                  ": not a PEM certificate chain and its private key");
+    }
+    http_->server = std::move(ssl);
+  }
+  httplib::Server& svr = *http_->server;
   svr.set_payload_max_length(options_.max_request_bytes);
   svr.set_tcp_nodelay(true);  // small requests and events: no Nagle delay
+  // A device keeps its connection (cpp-httplib closes one after 5 requests by default, and a
+  // reconnect storm meets its listen backlog of 5: 1 s SYN retransmits).
+  svr.set_keep_alive_max_count(1u << 30);
+  svr.set_keep_alive_timeout(10);
   const std::size_t threads = std::max<std::size_t>(4, options_.http_threads);
   svr.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
   // Counts the request; true when it carries the token (the API: Authorization: Bearer; the
@@ -337,7 +358,7 @@ void IncidentServer::Start() {
         [this](const std::string& reason) { Reject("mqtt: " + reason); });
     mqtt_->Start();
   }
-  http_thread_ = std::thread([this] { http_->server.listen_after_bind(); });
+  http_thread_ = std::thread([this] { http_->server->listen_after_bind(); });
   replay_thread_ = std::thread([this] { live_ ? LiveLoop() : ReplayLoop(); });
 }
 
@@ -345,7 +366,7 @@ void IncidentServer::Stop() {
   stop_ = true;
   event_cv_.notify_all();
   if (mqtt_) mqtt_->Stop();
-  if (http_) http_->server.stop();
+  if (http_ && http_->server) http_->server->stop();
   if (http_thread_.joinable()) http_thread_.join();
   if (live_) {
     live_->queue_cv.notify_all();

@@ -45,6 +45,8 @@ struct ServerOptions {
   /// at most this often; those with one (pdr, ins) estimate each row as it is committed.
   double live_period_s = 1.0;
   MqttOptions mqtt;  ///< live mode: also ingest from an MQTT broker when `mqtt.uri` is set
+  /// HTTPS when both are set: the certificate chain and private key files (PEM).
+  std::string tls_cert_file, tls_key_file;
   std::string bind = "127.0.0.1";
   int port = 8080;      ///< 0: any free port (see IncidentServer::port())
   std::string token;    ///< required; never empty
@@ -53,7 +55,7 @@ struct ServerOptions {
   std::size_t max_request_bytes = 1 << 20;
   /// Server-sent events: at most one state message per client this often (coalescing).
   double events_min_interval_s = 0.01;
-  std::size_t http_threads = 32;  ///< each dashboard's event stream holds one
+  std::size_t http_threads = 64;  ///< each connected device and dashboard holds one
   /// Receives every rejection reason (also counted; the latest are in /api/stats); default:
   /// a line on stderr.
   std::function<void(const std::string&)> log;
@@ -81,6 +83,7 @@ class IncidentServer {
   void Start();
   void Stop();
   int port() const { return port_; }
+  const char* scheme() const { return options_.tls_cert_file.empty() ? "http" : "https"; }
   bool replay_done() const { return replay_done_; }
   const ServerStats& stats() const { return stats_; }
   const MqttStats* mqtt_stats() const { return mqtt_ ? &mqtt_->stats() : nullptr; }

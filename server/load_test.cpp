@@ -158,6 +158,8 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   std::mutex flight_mutex;
   std::map<std::string, std::deque<InFlight>> in_flight;
   std::vector<double> latencies_ms;
+  double worst_ms = 0;
+  std::pair<std::string, double> worst_at;  ///< firefighter and batch time of the worst latency
   latencies_ms.reserve(requests_total);
   std::atomic<bool> done{false};
   std::atomic<std::size_t> events{0};
@@ -182,6 +184,10 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           while (!it->second.empty() && it->second.front().t_last <= t + 1e-9) {
             latencies_ms.push_back(
                 std::chrono::duration<double, std::milli>(now - it->second.front().sent).count());
+            if (latencies_ms.back() > worst_ms) {
+              worst_ms = latencies_ms.back();
+              worst_at = {it->first, it->second.front().t_last};
+            }
             it->second.pop_front();
           }
         }
@@ -193,14 +199,22 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
 
   std::atomic<std::size_t> accepted{0}, refused{0};
   std::string first_refusal;
+  // Every device connects first, one after the other (cpp-httplib listens with a backlog of 5:
+  // a storm of simultaneous connects waits for SYN retransmission, 1 s), then all send at once.
+  std::vector<std::unique_ptr<httplib::Client>> clients;
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    clients.push_back(std::make_unique<httplib::Client>("127.0.0.1", server.port()));
+    clients.back()->set_keep_alive(true);
+    clients.back()->set_tcp_nodelay(true);
+    if (!clients.back()->Get("/api/health"))
+      throw std::runtime_error("bench load: a device could not connect");
+  }
   const double cpu0 = CpuSeconds();
   const auto wall0 = Clock::now();
   std::vector<std::thread> devices;
   for (std::size_t k = 0; k < ids.size(); ++k) {
     devices.emplace_back([&, k] {
-      httplib::Client client("127.0.0.1", server.port());
-      client.set_keep_alive(true);
-      client.set_tcp_nodelay(true);
+      httplib::Client& client = *clients[k];
       const httplib::Headers auth{{"Authorization", "Bearer load-test"}};
       for (const Request& r : requests[k]) {
         if (r.stream == "imu.csv") {
@@ -272,6 +286,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"latency_ms_p99", Percentile(latencies_ms, 99)},
           {"latency_ms_max", Percentile(latencies_ms, 100)},
           {"latency_samples", latencies_ms.size()},
+          {"latency_max_batch", {{"firefighter", worst_at.first}, {"t_last", worst_at.second}}},
           {"batches_without_event", unmatched},
           {"events", events.load()},
           {"cpu_s", cpu_s},

@@ -71,6 +71,11 @@ void MqttBridge::Start() {
       opts.set_user_name(options_.username);
       opts.set_password(options_.password);
     }
+    if (options_.uri.rfind("ssl://", 0) == 0 || options_.uri.rfind("mqtts://", 0) == 0) {
+      auto ssl = mqtt::ssl_options_builder().enable_server_cert_auth(true).verify(true);
+      if (!options_.ca_file.empty()) ssl.trust_store(options_.ca_file);
+      opts.set_ssl(ssl.finalize());
+    }
     impl_->client->connect(opts)->wait();
     impl_->client->subscribe(prefix + "+/+", 1)->wait();
   } catch (const mqtt::exception& e) {

@@ -24,6 +24,7 @@ struct MqttOptions {
   std::string client_id = "trailmark-server";
   std::string username, password;
   std::string persist_dir;  ///< client-side persistence of outgoing QoS 1 messages
+  std::string ca_file;      ///< ssl:// URIs: the CA certificate (PEM) that signed the broker's
 };
 
 struct MqttStats {

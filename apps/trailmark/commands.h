@@ -78,6 +78,8 @@ struct ServeOptions {
   bool exit_after_replay = false;
   std::filesystem::path live, journal;  ///< live mode: mission.json directory and journal file
   std::string mqtt_uri, incident = "incident", mqtt_user, mqtt_password;  ///< live mode over MQTT
+  std::string mqtt_ca;               ///< CA certificate (PEM) that signed the broker's (ssl://)
+  std::string tls_cert, tls_key;     ///< HTTPS: the server's certificate chain and key (PEM)
 };
 int Serve(const ServeOptions& options);
 int ServeLive(const ServeOptions& options);

@@ -192,6 +192,9 @@ int main(int argc, char** argv) {
   serve->add_option("--incident", serve_options.incident, "MQTT topic tree trailmark/<incident>/... (default incident)");
   serve->add_option("--mqtt-user", serve_options.mqtt_user, "MQTT user name");
   serve->add_option("--mqtt-password", serve_options.mqtt_password, "MQTT password (also $TRAILMARK_MQTT_PASSWORD)");
+  serve->add_option("--mqtt-ca", serve_options.mqtt_ca, "ssl:// brokers: the CA certificate (PEM) to trust");
+  serve->add_option("--tls-cert", serve_options.tls_cert, "serve HTTPS with this certificate chain (PEM)");
+  serve->add_option("--tls-key", serve_options.tls_key, "the private key (PEM) of --tls-cert");
   replay_opt->excludes(live_opt);
   serve->add_option("--pipeline", serve_options.pipeline, "pipeline (default: the most capable runnable one)");
   serve->add_option("--option", serve_kv, "pipeline option key=value (repeatable)");

@@ -46,6 +46,9 @@ int ServeLive(const ServeOptions& o) {
   so.mqtt.incident = o.incident;
   so.mqtt.username = o.mqtt_user;
   so.mqtt.password = o.mqtt_password;
+  so.mqtt.ca_file = o.mqtt_ca;
+  so.tls_cert_file = o.tls_cert;
+  so.tls_key_file = o.tls_key;
   so.bind = o.bind;
   so.port = o.port;
   so.token = o.token.empty() ? RandomToken() : o.token;
@@ -62,13 +65,13 @@ int ServeLive(const ServeOptions& o) {
   srv.Start();
   fmt::print(
       "trailmark serve: live incident '{}', journal {}, pipeline {} ({}), listening on "
-      "http://{}:{}/\n",
+      "{}://{}:{}/\n",
       mission.info().name, o.journal.string(), so.pipeline,
       MakeLiveEstimator(so.pipeline, mission.info(), so.pipeline_options)
           ? "incremental"
           : "re-run on the journal every second",
-      o.bind, srv.port());
-  fmt::print("dashboard: http://{}:{}/?token={}\n", o.bind, srv.port(), so.token);
+      srv.scheme(), o.bind, srv.port());
+  fmt::print("dashboard: {}://{}:{}/?token={}\n", srv.scheme(), o.bind, srv.port(), so.token);
   if (!o.mqtt_uri.empty())
     fmt::print("mqtt: {}, topics trailmark/{}/<node>/<stream>\n", o.mqtt_uri, o.incident);
   std::fflush(stdout);
@@ -124,6 +127,8 @@ int Serve(const ServeOptions& o) {
   server::ServerOptions so;
   so.bind = o.bind;
   so.port = o.port;
+  so.tls_cert_file = o.tls_cert;
+  so.tls_key_file = o.tls_key;
   so.speed = o.speed;
   so.token = o.token.empty() ? RandomToken() : o.token;
   so.alerts.map_error = pipeline == "mapmatch";
@@ -142,9 +147,9 @@ int Serve(const ServeOptions& o) {
   server::IncidentServer srv(mission.info(), std::move(sink.rows), so, std::move(heard),
                              std::move(walls));
   srv.Start();
-  fmt::print("trailmark serve: {} on '{}' at {}x, listening on http://{}:{}/\n", pipeline,
-             mission.info().name, o.speed, o.bind, srv.port());
-  fmt::print("dashboard: http://{}:{}/?token={}\n", o.bind, srv.port(), so.token);
+  fmt::print("trailmark serve: {} on '{}' at {}x, listening on {}://{}:{}/\n", pipeline,
+             mission.info().name, o.speed, srv.scheme(), o.bind, srv.port());
+  fmt::print("dashboard: {}://{}:{}/?token={}\n", srv.scheme(), o.bind, srv.port(), so.token);
   std::fflush(stdout);
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);

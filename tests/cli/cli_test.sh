@@ -117,6 +117,11 @@ code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=wro
 [ "$code" = 401 ] || fail "serve: dashboard with a wrong token gave $code"
 kill $serve_pid; wait $serve_pid || true
 grep -q "2 refused without the token" "$dir/serve.log" || { cat "$dir/serve.log"; fail "serve: refusals counted"; }
+run_failing "$TM" serve --replay "$dir/bt" --port 0 --token x --tls-cert "$dir/none.pem" --tls-key "$dir/none.key"
+[ $rc -ne 0 ] && grep -q "none.pem: no such file" "$dir/err" || { cat "$dir/err"; fail "serve with a missing certificate"; }
+printf 'not a certificate\n' > "$dir/bad.pem"
+run_failing "$TM" serve --replay "$dir/bt" --port 0 --token x --tls-cert "$dir/bad.pem" --tls-key "$dir/bad.pem"
+[ $rc -ne 0 ] && grep -q "not a PEM certificate chain" "$dir/err" || { cat "$dir/err"; fail "serve with a bad certificate"; }
 # Live ingest into the durable journal, with the server killed (-9) mid-stream and restarted:
 # nothing acknowledged may be lost, redelivered rows are dropped as duplicates.
 mkdir -p "$dir/live"
