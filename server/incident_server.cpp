@@ -315,7 +315,17 @@ void IncidentServer::Start() {
     if (!authorized(req, false)) return refuse(res);
     nlohmann::json walls = nlohmann::json::array();
     for (const auto& w : walls_) walls.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
-    json(res, {{"walls", walls}});
+    // Nodes known a priori (the base, surveyed landmarks): drawn even before any estimate.
+    nlohmann::json known = nlohmann::json::array();
+    for (const NodeInfo& n : info_.nodes) {
+      if (n.position) {
+        known.push_back({{"id", n.id},
+                         {"kind", std::string(ToString(n.kind))},
+                         {"x", n.position->x()},
+                         {"y", n.position->y()}});
+      }
+    }
+    json(res, {{"walls", walls}, {"nodes", known}});
   });
   // The dashboard: index.html needs the token; its scripts and styles are public code.
   svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {

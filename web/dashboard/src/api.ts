@@ -37,6 +37,19 @@ export interface History {
 
 export type Wall = [number, number, number, number];
 
+/** A node known a priori (mission.json `position`): the base, surveyed landmarks. */
+export interface KnownNode {
+  id: string;
+  kind: NodeState['kind'];
+  x: number;
+  y: number;
+}
+
+export interface FloorPlan {
+  walls: Wall[];
+  nodes: KnownNode[];
+}
+
 export class Api {
   constructor(private readonly token: string) {}
 
@@ -52,8 +65,8 @@ export class Api {
   history(): Promise<History> {
     return this.get<History>('/api/history');
   }
-  async walls(): Promise<Wall[]> {
-    return (await this.get<{ walls: Wall[] }>('/api/floorplan')).walls;
+  floorPlan(): Promise<FloorPlan> {
+    return this.get<FloorPlan>('/api/floorplan');
   }
   /** Live states; `onState` for each message, `onStatus` for the connection. */
   events(onState: (s: State) => void, onStatus: (ok: boolean) => void): EventSource {

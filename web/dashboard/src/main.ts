@@ -2,7 +2,7 @@
 // trail and name; crumbs, landmarks, the base; status and alerts per firefighter; a timeline
 // to scrub back. Live through server-sent events; history from /api/history.
 import './style.css';
-import { Api, type Alert, type History, type NodeState, type State, type TrailRow, type Wall } from './api';
+import { Api, type Alert, type History, type KnownNode, type NodeState, type State, type TrailRow, type Wall } from './api';
 import { ellipse95, fitView, rowAt, toScreen, type View } from './geometry';
 
 const token = new URLSearchParams(location.search).get('token') ?? '';
@@ -14,6 +14,7 @@ const timeline = $<HTMLInputElement>('timeline');
 const liveButton = $<HTMLButtonElement>('live');
 
 let walls: Wall[] = [];
+let known: KnownNode[] = [];
 let live: State = { t: null, nodes: [], alerts: [] };
 let trails: Record<string, TrailRow[]> = {};
 let alertLog: Alert[] = [];
@@ -105,7 +106,12 @@ function render(): void {
   const t = shownTime();
   const agents = agentsAt(t);
   const alerts = alertsAt(t);
-  const others = live.nodes.filter((n) => n.kind !== 'agent');
+  const estimated = live.nodes.filter((n) => n.kind !== 'agent');
+  // known nodes (the base, surveyed landmarks) where no estimate replaces them
+  const others: Array<Pick<NodeState, 'id' | 'kind' | 'x' | 'y'>> = [
+    ...estimated,
+    ...known.filter((k) => !estimated.some((n) => n.id === k.id)),
+  ];
   const w = canvas.clientWidth;
   const h = canvas.clientHeight;
   const xs: number[] = [];
@@ -240,7 +246,9 @@ window.addEventListener('resize', () => {
 async function start(): Promise<void> {
   resize();
   try {
-    walls = await api.walls();
+    const plan = await api.floorPlan();
+    walls = plan.walls;
+    known = plan.nodes;
     mergeHistory(await api.history());
     onState(await api.state());
   } catch (e) {
