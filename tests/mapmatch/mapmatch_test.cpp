@@ -175,5 +175,29 @@ TEST(MapParticleFilter, NoParticleEverEndsAStepThroughAWall) {
   }
 }
 
+TEST(MapParticleFilter, BlockedMassIsTheShareOfTheBeliefAStepDrivesIntoWalls) {
+  // A 6 x 4 m room (door on the west wall); the particles 0.5 m from the east wall.
+  const FloorPlan plan = Room(6, 4);
+  const SearchGrid grid(plan);
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  MapParticleFilterOptions o;
+  o.position_noise_m = 0.01;
+  o.heading_noise_rad_per_m = 0;
+  MapParticleFilter pf(grid, seqs, o);
+  pf.InitializeKnown(Vec2(5.5, 2), 0.0, 0.02, 0.0);
+  pf.Predict(Vec2(0, 0.4));  // along the wall: nothing blocked
+  EXPECT_EQ(pf.LastBlockedMass(), 0.0);
+  pf.Predict(Vec2(1.0, 0));  // through the east wall: every particle blocked
+  EXPECT_EQ(pf.LastBlockedMass(), 1.0);
+  pf.InitializeKnown(Vec2(5.5, 2), 0.0, 0.3, 0.0);
+  pf.Predict(Vec2(0.5, 0));  // half the spread crosses the wall at x = 6
+  EXPECT_GT(pf.LastBlockedMass(), 0.3);
+  EXPECT_LT(pf.LastBlockedMass(), 0.7);
+  MapParticleFilterOptions bad;
+  bad.relocalize_above_variance_m2 = -1;
+  std::string why;
+  EXPECT_FALSE(bad.IsValid(&why));
+}
+
 }  // namespace
 }  // namespace trailmark::mapmatch

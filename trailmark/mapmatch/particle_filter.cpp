@@ -52,6 +52,8 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
     return fail("resample_fraction must be within [0, 1]");
   if (!(resample_position_sigma_m >= 0) || !(resample_heading_sigma_rad >= 0))
     return fail("resample noises >= 0");
+  if (!(relocalize_above_variance_m2 >= 0))
+    return fail("relocalize_above_variance_m2 must be >= 0");
   if (!(max_match_rmse_m > 0)) return fail("max_match_rmse_m must be > 0");
   return true;
 }
@@ -113,6 +115,7 @@ Vec2 MapParticleFilter::RandomInsidePoint() {
 
 void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
   uniform_start_ = false;
+  converged_ = false;
   for (auto& q : particles_) {
     q.position_n = p + Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
     q.heading_offset_rad = offset + rng_.Normal(0, hs);
@@ -123,6 +126,7 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
 
 void MapParticleFilter::InitializeUniform() {
   uniform_start_ = true;
+  converged_ = false;
   for (auto& q : particles_) {
     q.position_n = q.step_from_n = RandomInsidePoint();
     q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
@@ -192,6 +196,7 @@ void MapParticleFilter::SystematicResample() {
 
 void MapParticleFilter::Predict(const Vec2& d) {
   ++summary_.time_updates;
+  NoteConvergence();
   const double len = d.norm();
   const FloorPlan& plan = grid_.plan();
   const std::vector<Particle> before = particles_;
@@ -205,8 +210,10 @@ void MapParticleFilter::Predict(const Vec2& d) {
     }
     std::vector<char> dead(particles_.size(), 0);
     std::size_t n_dead = 0;
+    double mass_dead = 0, mass = 0;
     for (std::size_t i = 0; i < particles_.size(); ++i) {
       auto& q = particles_[i];
+      mass += q.weight;
       q.step_from_n = q.position_n;
       const double ps = widen * options_.position_noise_m;
       const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d +
@@ -216,10 +223,13 @@ void MapParticleFilter::Predict(const Vec2& d) {
       if (plan.Crosses(q.position_n, next)) {
         dead[i] = 1;
         ++n_dead;
+        mass_dead += q.weight;
       }
       q.position_n = next;
     }
     summary_.wall_eliminations += n_dead;
+    // The first attempt's share says how much of the belief the walk drove into walls.
+    if (attempt == 0) last_blocked_mass_ = mass > 0 ? mass_dead / mass : 0.0;
     if (n_dead < particles_.size() || attempt == 3) {
       if (n_dead > 0) ReplaceFromSurvivors(dead);
       return;
@@ -262,7 +272,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   for (const auto& sc : pc.sequences) {
     for (const auto& r : sc.rmse_m) best_anywhere = std::min({best_anywhere, r[0], r[1]});
   }
-  if (Covariance().trace() <= options_.use_patterns_above_variance_m2) {
+  if (Covariance().trace() <= PatternThreshold()) {
     ++summary_.skipped_converged;
     return;
   }
@@ -352,8 +362,20 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
 }
 
 bool MapParticleFilter::WantsPatterns() const {
-  return options_.pseudo_observations &&
-         Covariance().trace() > options_.use_patterns_above_variance_m2;
+  return options_.pseudo_observations && Covariance().trace() > PatternThreshold();
+}
+
+double MapParticleFilter::PatternThreshold() const {
+  return converged_ ? std::max(options_.use_patterns_above_variance_m2,
+                               options_.relocalize_above_variance_m2)
+                    : options_.use_patterns_above_variance_m2;
+}
+
+void MapParticleFilter::NoteConvergence() {
+  if (!converged_ && options_.use_patterns_above_variance_m2 > 0 &&
+      Covariance().trace() <= options_.use_patterns_above_variance_m2) {
+    converged_ = true;
+  }
 }
 
 Vec2 MapParticleFilter::Mean() const {

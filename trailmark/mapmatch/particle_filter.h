@@ -52,6 +52,11 @@ struct MapParticleFilterOptions {
   /// observations are used only while the position variance (trace) exceeds this. 0 = always
   /// (the paper; `trailmark reproduce mapmatch` shows both).
   double use_patterns_above_variance_m2 = 2.0;
+  /// Ours: once the filter has converged (variance at or below the level above), the pattern
+  /// observations come back only when it is lost again: variance above this (hysteresis; a
+  /// converged filter that drifts a little is better served by the walls than by a comparison
+  /// that furniture can fool). 0 = no hysteresis.
+  double relocalize_above_variance_m2 = 0.0;
   /// Weight (x 1/N) of a particle drawn from the pseudo observations; 1 = as much as an
   /// average particle (ours: the paper does not say).
   double new_particle_weight = 1.0;
@@ -97,6 +102,11 @@ class MapParticleFilter {
   /// filter uncertain enough): callers skip the costly comparison otherwise.
   bool WantsPatterns() const;
 
+  /// Share (by weight) of the belief whose last time update crossed a wall (before any
+  /// backtracking): near 1 when the walk went where the map has a wall — a map error, or
+  /// furniture-free odometry error — the map-error evidence of the mapmatch pipeline.
+  double LastBlockedMass() const { return last_blocked_mass_; }
+
   Vec2 Mean() const;
   Mat2 Covariance() const;
   double MeanHeadingOffset() const;
@@ -109,6 +119,8 @@ class MapParticleFilter {
   void SystematicResample();
   Vec2 RandomInsidePoint();
   bool InsideBuilding(const Vec2& p) const;
+  double PatternThreshold() const;
+  void NoteConvergence();
   double Uniform() { return rng_.Uniform(); }
 
   const SearchGrid& grid_;
@@ -122,6 +134,8 @@ class MapParticleFilter {
   struct NodeIndex;
   std::unique_ptr<NodeIndex> nodes_;
   MapParticleFilterSummary summary_;
+  double last_blocked_mass_ = 0;
+  bool converged_ = false;
 };
 
 }  // namespace trailmark::mapmatch
