@@ -3,21 +3,8 @@
 # --live --mqtt`, devices publishing rows (QoS 1), a malformed message, a last-will "lost"; the
 # state over HTTP, the retained estimate over MQTT, and the journal equal to what was published.
 set -euo pipefail
-TM="$1"
-dir=$(mktemp -d)
-cleanup() { kill $serve_pid $broker_pid 2>/dev/null || true; rm -rf "$dir"; }
-serve_pid=""; broker_pid=""
-trap cleanup EXIT
-fail() { echo "FAIL: $*"; cat "$dir"/*.log 2>/dev/null | tail -20; exit 1; }
-command -v mosquitto > /dev/null || fail "mosquitto not installed (scripts/install-deps.sh)"
-for _ in $(seq 20); do  # a free port
-  port=$(( 20000 + RANDOM % 20000 ))
-  printf 'listener %s 127.0.0.1\nallow_anonymous true\npersistence false\n' "$port" > "$dir/mosquitto.conf"
-  mosquitto -c "$dir/mosquitto.conf" > "$dir/broker.log" 2>&1 &
-  broker_pid=$!
-  sleep 0.3
-  kill -0 $broker_pid 2>/dev/null && break
-done
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh" "$1"
+start_broker "allow_anonymous true"
 "$TM" simulate office-loop-1lap --seed 4 --out "$dir/m" > /dev/null
 mkdir -p "$dir/live" && cp "$dir/m/mission.json" "$dir/live/"
 "$TM" serve --live "$dir/live" --journal "$dir/j.db" --mqtt "tcp://127.0.0.1:$port" --incident inc7 \

@@ -5,36 +5,19 @@
 # with the certificate trusted, the broker refuses an anonymous device and accepts the server,
 # rows published over TLS are journaled and estimated, plain HTTP is not served.
 set -euo pipefail
-TM="$1"
-dir=$(mktemp -d)
-cleanup() { kill $serve_pid $broker_pid 2>/dev/null || true; rm -rf "$dir"; }
-serve_pid=""; broker_pid=""
-trap cleanup EXIT
-fail() { echo "FAIL: $*"; cat "$dir"/*.log 2>/dev/null | tail -20; exit 1; }
-command -v mosquitto > /dev/null && command -v openssl > /dev/null \
-  || fail "mosquitto and openssl needed (scripts/install-deps.sh)"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh" "$1"
+command -v openssl > /dev/null || fail "openssl needed (scripts/install-deps.sh)"
 openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=localhost \
   -addext "subjectAltName=DNS:localhost,IP:127.0.0.1" \
   -keyout "$dir/key.pem" -out "$dir/cert.pem" > "$dir/openssl.log" 2>&1 || fail "openssl"
 mosquitto_passwd -b -c "$dir/passwd" trailmark s3cret > /dev/null 2>&1 || fail "mosquitto_passwd"
 # Mosquitto started as root drops to the mosquitto user: it must be able to read these.
 chmod 755 "$dir" && chmod 644 "$dir/passwd" "$dir/key.pem" "$dir/cert.pem"
-for _ in $(seq 20); do  # a free port
-  port=$(( 20000 + RANDOM % 20000 ))
-  cat > "$dir/mosquitto.conf" <<CONF
-listener $port 127.0.0.1
-cafile $dir/cert.pem
+start_broker "cafile $dir/cert.pem
 certfile $dir/cert.pem
 keyfile $dir/key.pem
 allow_anonymous false
-password_file $dir/passwd
-persistence false
-CONF
-  mosquitto -c "$dir/mosquitto.conf" > "$dir/broker.log" 2>&1 &
-  broker_pid=$!
-  sleep 0.3
-  kill -0 $broker_pid 2>/dev/null && break
-done
+password_file $dir/passwd"
 "$TM" simulate office-loop-1lap --seed 4 --out "$dir/m" > /dev/null
 mkdir -p "$dir/live" && cp "$dir/m/mission.json" "$dir/live/"
 TRAILMARK_MQTT_PASSWORD=s3cret "$TM" serve --live "$dir/live" --journal "$dir/j.db" \
