@@ -63,6 +63,7 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
   mapmatch::PatternComparisonOptions co;
   co.pattern_length_m = po.Double("pattern_length_m", co.pattern_length_m);
   co.point_spacing_m = po.Double("point_spacing_m", co.point_spacing_m);
+  co.icp.trim_fraction = po.Double("icp_trim", co.icp.trim_fraction);
   const double compare_every_m = po.Double("compare_every_m", 2.0);
   const double alarm_m2 = po.Double("variance_alarm_m2", 3.0);
   const double alarm_min_s = po.Double("variance_alarm_min_s", 10.0);
