@@ -417,6 +417,18 @@ nlohmann::json IncidentServer::Ingest(const std::string& stream, const std::stri
   Live::Pending pending;
   try {
     ParseStream(stream, "request body", body, pending.batch, pending.rows);
+    // IMU, steps and events come from an agent's own device: it must be one of the incident's
+    // agents (radio rows may name crumbs that a later drop event introduces).
+    if (stream == "imu.csv" || stream == "steps.csv" || stream == "events.csv") {
+      for (std::size_t i = 0; i < pending.rows.size(); ++i) {
+        const NodeInfo* n = info_.Find(pending.batch.node[i]);
+        if (n == nullptr || n->kind != NodeKind::kAgent) {
+          throw std::invalid_argument("request body:" + std::to_string(pending.batch.lines[i]) +
+                                      ": '" + pending.batch.node[i] +
+                                      "' is not an agent of this incident (mission.json)");
+        }
+      }
+    }
   } catch (const std::exception& e) {
     Reject(stream + ": " + e.what());
     throw std::invalid_argument(e.what());

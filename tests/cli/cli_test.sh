@@ -157,6 +157,11 @@ printf 't0,t1,agent,dx,dy\n1,2,ff1,abc,0\n' > "$dir/body.csv"
 code=$(curl -s -o "$dir/bad.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
        "http://127.0.0.1:$lport/api/ingest/steps.csv")
 [ "$code" = 400 ] && grep -q "request body:2" "$dir/bad.json" || { cat "$dir/bad.json"; fail "bad live row"; }
+# Steps of a node that is not an agent of the incident: refused at the door.
+printf 't0,t1,agent,dx,dy\n100,101,ghost,0.3,0\n' > "$dir/body.csv"
+code=$(curl -s -o "$dir/ghost.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
+       "http://127.0.0.1:$lport/api/ingest/steps.csv")
+[ "$code" = 400 ] && grep -q "request body:2: 'ghost' is not an agent" "$dir/ghost.json" || { cat "$dir/ghost.json"; fail "steps of a non-agent"; }
 # A row older than the last accepted one of its device (not a repeat): refused, reason logged.
 printf 't0,t1,agent,dx,dy\n0.05,0.1,ff1,0.3,0\n' > "$dir/body.csv"
 code=$(curl -s -o "$dir/old.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
