@@ -51,7 +51,8 @@ std::vector<double> ErrorsAt(const fs::path& dir, const MissionData& data,
 int ReproduceMapMatch(int seeds, const fs::path& out,
                       const std::map<std::string, std::string>& extra) {
   const std::map<std::string, std::string> paper{{"patterns_above_variance_m2", "0"},
-                                                 {"max_match_rmse_m", "1e9"}};
+                                                 {"max_match_rmse_m", "1e9"},
+                                                 {"recover", "false"}};
   auto with = [](std::map<std::string, std::string> a,
                  const std::map<std::string, std::string>& b) {
     a.insert(b.begin(), b.end());

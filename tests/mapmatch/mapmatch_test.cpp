@@ -199,5 +199,31 @@ TEST(MapParticleFilter, BlockedMassIsTheShareOfTheBeliefAStepDrivesIntoWalls) {
   EXPECT_FALSE(bad.IsValid(&why));
 }
 
+TEST(MapParticleFilter, AWalkIntoAWallRaisesTheWallAlarmAndRecovers) {
+  const FloorPlan plan = Room(6, 4);
+  const SearchGrid grid(plan);
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  for (bool pseudo : {true, false}) {
+    MapParticleFilterOptions o;
+    o.pseudo_observations = pseudo;
+    MapParticleFilter pf(grid, seqs, o);
+    pf.InitializeKnown(Vec2(5.4, 2), 0.0, 0.05, 0.0);
+    pf.Predict(Vec2(0, 0.1));
+    EXPECT_FALSE(pf.WantsPatterns());  // converged: variance far below 2 m^2
+    // Blocked share 1 per step: the CUSUM (k 0.2) passes h = 1.75 at the third step.
+    int alarm_at = -1;
+    for (int k = 1; k <= 3; ++k) {
+      pf.Predict(Vec2(1.0, 0));
+      if (pf.LastStepRaisedWallAlarm() && alarm_at < 0) alarm_at = k;
+    }
+    EXPECT_EQ(alarm_at, 3);
+    EXPECT_EQ(pf.summary().wall_alarms, 1u);
+    // With pseudo observations the filter spreads and asks for patterns; without, alarm only.
+    EXPECT_EQ(pf.summary().recoveries, pseudo ? 1u : 0u);
+    EXPECT_EQ(pf.WantsPatterns(), pseudo);
+    for (const auto& q : pf.particles()) ASSERT_TRUE(q.position_n.allFinite());
+  }
+}
+
 }  // namespace
 }  // namespace trailmark::mapmatch

@@ -54,6 +54,11 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
     return fail("resample noises >= 0");
   if (!(relocalize_above_variance_m2 >= 0))
     return fail("relocalize_above_variance_m2 must be >= 0");
+  if (!(wall_alarm_k >= 0 && wall_alarm_k < 1) || !(wall_alarm_h > 0))
+    return fail("wall_alarm_k must be within [0, 1) and wall_alarm_h > 0");
+  if (!(recover_position_sigma_m >= 0) || !(recover_heading_sigma_rad >= 0) ||
+      recover_pattern_updates < 0)
+    return fail("recovery spreads and updates must be >= 0");
   if (!(max_match_rmse_m > 0)) return fail("max_match_rmse_m must be > 0");
   return true;
 }
@@ -116,6 +121,8 @@ Vec2 MapParticleFilter::RandomInsidePoint() {
 void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
   uniform_start_ = false;
   converged_ = false;
+  wall_cusum_ = 0;
+  forced_pattern_updates_ = 0;
   for (auto& q : particles_) {
     q.position_n = p + Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
     q.heading_offset_rad = offset + rng_.Normal(0, hs);
@@ -127,6 +134,8 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
 void MapParticleFilter::InitializeUniform() {
   uniform_start_ = true;
   converged_ = false;
+  wall_cusum_ = 0;
+  forced_pattern_updates_ = 0;
   for (auto& q : particles_) {
     q.position_n = q.step_from_n = RandomInsidePoint();
     q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
@@ -229,9 +238,19 @@ void MapParticleFilter::Predict(const Vec2& d) {
     }
     summary_.wall_eliminations += n_dead;
     // The first attempt's share says how much of the belief the walk drove into walls.
-    if (attempt == 0) last_blocked_mass_ = mass > 0 ? mass_dead / mass : 0.0;
+    if (attempt == 0) {
+      last_blocked_mass_ = mass > 0 ? mass_dead / mass : 0.0;
+      wall_cusum_ = std::max(0.0, wall_cusum_ + last_blocked_mass_ - options_.wall_alarm_k);
+      last_step_alarm_ = wall_cusum_ > options_.wall_alarm_h;
+      if (last_step_alarm_) {
+        wall_cusum_ = 0;
+        ++summary_.wall_alarms;
+      }
+    }
     if (n_dead < particles_.size() || attempt == 3) {
       if (n_dead > 0) ReplaceFromSurvivors(dead);
+      if (last_step_alarm_ && options_.recover_on_wall_alarm && options_.pseudo_observations)
+        Recover();
       return;
     }
   }
@@ -272,7 +291,9 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   for (const auto& sc : pc.sequences) {
     for (const auto& r : sc.rmse_m) best_anywhere = std::min({best_anywhere, r[0], r[1]});
   }
-  if (Covariance().trace() <= PatternThreshold()) {
+  if (forced_pattern_updates_ > 0) {
+    --forced_pattern_updates_;
+  } else if (Covariance().trace() <= PatternThreshold()) {
     ++summary_.skipped_converged;
     return;
   }
@@ -362,7 +383,21 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
 }
 
 bool MapParticleFilter::WantsPatterns() const {
-  return options_.pseudo_observations && Covariance().trace() > PatternThreshold();
+  return options_.pseudo_observations &&
+         (forced_pattern_updates_ > 0 || Covariance().trace() > PatternThreshold());
+}
+
+void MapParticleFilter::Recover() {
+  ++summary_.recoveries;
+  for (auto& q : particles_) {
+    const Vec2 p = q.position_n + Vec2(rng_.Normal(0, options_.recover_position_sigma_m),
+                                       rng_.Normal(0, options_.recover_position_sigma_m));
+    if (InsideBuilding(p)) q.position_n = p;
+    q.heading_offset_rad =
+        WrapAngle(q.heading_offset_rad + rng_.Normal(0, options_.recover_heading_sigma_rad));
+  }
+  forced_pattern_updates_ = options_.recover_pattern_updates;
+  converged_ = false;
 }
 
 double MapParticleFilter::PatternThreshold() const {

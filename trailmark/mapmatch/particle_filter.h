@@ -57,6 +57,22 @@ struct MapParticleFilterOptions {
   /// converged filter that drifts a little is better served by the walls than by a comparison
   /// that furniture can fool). 0 = no hysteresis.
   double relocalize_above_variance_m2 = 0.0;
+  /// Ours: map-error and lost-track evidence — the share of the belief that a step drives into
+  /// walls (LastBlockedMass) accumulated as a one-sided CUSUM with reference k; above h, a
+  /// wall alarm: the walk keeps crossing the map's walls (a map error, or a converged filter
+  /// that has drifted off the track). Chosen on house-1 searches, seeds 1-10 (docs/mapmatch.md).
+  double wall_alarm_k = 0.2;
+  double wall_alarm_h = 1.75;
+  /// Ours: on a wall alarm, with pseudo observations on, the filter recovers: every particle is
+  /// spread by these (staying inside the building) and the pattern observations are used for
+  /// the next recover_pattern_updates comparisons whatever the variance. A converged filter's
+  /// particles collapse (wall eliminations replace them by copies of the survivors) and then
+  /// drift off the track with the odometry's heading error; the walls tell. Chosen on seeds
+  /// 1-30 of both houses, checked on seeds 31-60 (docs/mapmatch.md). false: alarm only.
+  bool recover_on_wall_alarm = true;
+  double recover_position_sigma_m = 2.0;
+  double recover_heading_sigma_rad = 0.3;
+  int recover_pattern_updates = 5;
   /// Weight (x 1/N) of a particle drawn from the pseudo observations; 1 = as much as an
   /// average particle (ours: the paper does not say).
   double new_particle_weight = 1.0;
@@ -68,6 +84,7 @@ struct MapParticleFilterSummary {
   std::size_t time_updates = 0, pattern_updates = 0, uninformative_updates = 0;
   std::size_t wall_eliminations = 0, floor_replacements = 0, pattern_resamples = 0;
   std::size_t systematic_resamples = 0, backtracks = 0, restarts = 0, skipped_converged = 0;
+  std::size_t wall_alarms = 0, recoveries = 0;
   std::string BriefReport() const;
 };
 
@@ -106,6 +123,8 @@ class MapParticleFilter {
   /// backtracking): near 1 when the walk went where the map has a wall — a map error, or
   /// furniture-free odometry error — the map-error evidence of the mapmatch pipeline.
   double LastBlockedMass() const { return last_blocked_mass_; }
+  /// Whether the last time update raised a wall alarm (see wall_alarm_h).
+  bool LastStepRaisedWallAlarm() const { return last_step_alarm_; }
 
   Vec2 Mean() const;
   Mat2 Covariance() const;
@@ -136,6 +155,10 @@ class MapParticleFilter {
   MapParticleFilterSummary summary_;
   double last_blocked_mass_ = 0;
   bool converged_ = false;
+  double wall_cusum_ = 0;
+  bool last_step_alarm_ = false;
+  int forced_pattern_updates_ = 0;
+  void Recover();
 };
 
 }  // namespace trailmark::mapmatch

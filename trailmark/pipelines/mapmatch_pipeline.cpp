@@ -29,7 +29,6 @@ struct AgentTrack {
   bool alarm = false;
   TimeS alarm_since = 0;
   std::vector<std::pair<TimeS, TimeS>> alarms;
-  double wall_cusum = 0;
   std::vector<std::string> wall_alarms;  ///< when and where the walk crossed the map's walls
   std::size_t comparisons = 0, skipped_comparisons = 0;
 };
@@ -67,20 +66,21 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
   const double compare_every_m = po.Double("compare_every_m", 2.0);
   const double alarm_m2 = po.Double("variance_alarm_m2", 3.0);
   const double alarm_min_s = po.Double("variance_alarm_min_s", 10.0);
-  // Wall-crossing CUSUM (ours): k and h chosen on house-1 searches with seeds 1-10, evaluated
-  // on seeds 11-30 (docs/mapmatch.md).
-  const double wall_alarm_k = po.Double("wall_alarm_k", 0.2);
-  const double wall_alarm_h = po.Double("wall_alarm_h", 1.75);
+  fo.wall_alarm_k = po.Double("wall_alarm_k", fo.wall_alarm_k);
+  fo.wall_alarm_h = po.Double("wall_alarm_h", fo.wall_alarm_h);
+  fo.recover_on_wall_alarm = po.Bool("recover", fo.recover_on_wall_alarm);
+  fo.recover_position_sigma_m = po.Double("recover_position_sigma_m", fo.recover_position_sigma_m);
+  fo.recover_heading_sigma_rad =
+      po.Double("recover_heading_sigma_rad", fo.recover_heading_sigma_rad);
+  fo.recover_pattern_updates =
+      static_cast<int>(po.Double("recover_pattern_updates", fo.recover_pattern_updates));
   po.RejectUnknown();
   std::string why;
   if (!fo.IsValid(&why) || !so.grid.IsValid(&why) || !co.IsValid(&why) || !(compare_every_m > 0) ||
-      !(alarm_m2 > 0) || !(alarm_min_s >= 0) || !(wall_alarm_k >= 0 && wall_alarm_k < 1) ||
-      !(wall_alarm_h > 0)) {
+      !(alarm_m2 > 0) || !(alarm_min_s >= 0)) {
     throw std::invalid_argument(
         "pipeline mapmatch: " +
-        (why.empty() ? "compare_every_m, variance_alarm_m2, wall_alarm_h must be > 0 and "
-                       "wall_alarm_k in [0, 1)"
-                     : why));
+        (why.empty() ? "compare_every_m and variance_alarm_m2 must be > 0" : why));
   }
 
   PipelineSummary summary;
@@ -193,16 +193,12 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
       }
     }
     emit(step.t1, step.agent, a);
-    // Map-error evidence (ours): the share of the belief that the step drove into walls, as a
-    // one-sided CUSUM. Walking where the map has a wall (a door drawn in the wrong place) blocks
-    // most particles step after step; odometry noise near a doorway blocks a few, briefly.
-    const double blocked = a.filter->LastBlockedMass();
-    a.wall_cusum = std::max(0.0, a.wall_cusum + blocked - wall_alarm_k);
-    if (a.wall_cusum > wall_alarm_h) {
+    // Map-error evidence (ours): the walk keeps crossing the map's walls (the filter's CUSUM
+    // of the blocked share of the belief).
+    if (a.filter->LastStepRaisedWallAlarm()) {
       const Vec2 where = a.filter->Mean();
       a.wall_alarms.push_back(fmt::format("t={:.1f} s near ({:.1f}, {:.1f})", step.t1, where.x(),
                                           where.y()));
-      a.wall_cusum = 0;
     }
     // Map-error indicator (sec. V-E): the estimated variance above the alarm level.
     const double variance = a.filter->Covariance().trace();
