@@ -79,13 +79,21 @@ std::vector<LiveRow> AgentAfterAgent(const std::vector<Row>& rows) {
   return out;
 }
 
-TEST(LiveEstimator, PdrFromStepsEqualsTheBatchPipeline) {
-  const SimulatedMission sim = TwoAgentsWithImu(true);
+/// The batch pipeline's estimates on the simulated mission (written to a scratch directory).
+std::vector<Estimate> Batch(const Pipeline& pipeline, const SimulatedMission& sim,
+                            const std::map<std::string, std::string>& options = {}) {
   TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
+  VectorSink sink;
+  pipeline.Run({mission, options}, sink);
+  return sink.rows;
+}
+
+TEST(LiveEstimator, PdrFromStepsEqualsTheBatchPipeline) {
+  const SimulatedMission sim = TwoAgentsWithImu(true);
   VectorSink batch;
-  PdrPipeline().Run({mission, {}}, batch);
+  batch.rows = Batch(PdrPipeline(), sim);
 
   auto live = MakeLiveEstimator("pdr", sim.data.info, {});
   ASSERT_NE(live, nullptr);
@@ -99,11 +107,8 @@ TEST(LiveEstimator, PdrFromStepsEqualsTheBatchPipeline) {
 
 TEST(LiveEstimator, PdrFromImuEqualsTheBatchPipeline) {
   const SimulatedMission sim = TwoAgentsWithImu(false);
-  TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
   VectorSink batch;
-  PdrPipeline().Run({mission, {}}, batch);
+  batch.rows = Batch(PdrPipeline(), sim);
   ASSERT_GT(batch.rows.size(), 100u);
 
   auto live = MakeLiveEstimator("pdr", sim.data.info, {});
@@ -114,12 +119,9 @@ TEST(LiveEstimator, PdrFromImuEqualsTheBatchPipeline) {
 
 TEST(LiveEstimator, InsEqualsTheBatchPipelineAtItsOutputRate) {
   const SimulatedMission sim = TwoAgentsWithImu(false);
-  TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
   const std::map<std::string, std::string> options{{"output_hz", "5"}};
   VectorSink batch;
-  InsPipeline().Run({mission, options}, batch);
+  batch.rows = Batch(InsPipeline(), sim, options);
   ASSERT_GT(batch.rows.size(), 100u);
 
   auto live = MakeLiveEstimator("ins", sim.data.info, options);
