@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <map>
 
 #include "trailmark/core/error.h"
@@ -62,130 +63,119 @@ LocalizerOptions BreadcrumbOptionsFrom(const std::map<std::string, std::string>&
 
 bool BreadcrumbPipeline::CanRun(const MissionDirectory& mission) const { return HasSteps(mission); }
 
-PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
-  const MissionDirectory& mission = context.mission;
-  const auto [ins_options, rest] = SplitInsOptions(context.options);
-  double static_period_s = 1.0;
-  LocalizerOptions options = BreadcrumbOptionsFrom(rest, &static_period_s);
-  PipelineSummary summary;
-  // Steps from steps.csv, or from imu.csv through the INS (then merged from memory).
-  const auto ins_steps = InsStepsUnlessStepFile(mission, ins_options, "the breadcrumb pipeline", &summary);
-  if (mission.info().radio) {
-    options.radio = radio::LogDistanceModel::From(*mission.info().radio);
-  } else {
-    summary.notes.push_back(
+BreadcrumbSession::BreadcrumbSession(const MissionInfo& info,
+                                     const std::map<std::string, std::string>& options,
+                                     PipelineSummary* notes)
+    : options_(BreadcrumbOptionsFrom(options, &static_period_s_)) {
+  if (info.radio) {
+    options_.radio = radio::LogDistanceModel::From(*info.radio);
+  } else if (notes) {
+    notes->notes.push_back(
         "mission.json has no radio calibration: default log-distance model (alpha -40 dBm at "
         "1 m, n 2.3, sigma 4 dB)");
   }
-  BreadcrumbLocalizer loc(options);
-  std::map<std::string, double> agent_z;
-  for (const NodeInfo& n : mission.info().nodes) {
+  loc_ = std::make_unique<BreadcrumbLocalizer>(options_);
+  for (const NodeInfo& n : info.nodes) {
     switch (n.kind) {
       case NodeKind::kAgent: {
-        const auto start = mission.info().AgentStart(n);
-        loc.AddAgent(n.id, start ? std::optional<Vec2>(start->head<2>()) : std::nullopt,
-                     n.start_sigma_m.value_or(options.known_start_sigma_m),
-                     n.start_heading_sigma_rad);
-        agent_z[n.id] = start ? start->z() : 0.0;
-        if (!start) {
-          summary.notes.push_back(fmt::format(
+        const auto start = info.AgentStart(n);
+        loc_->AddAgent(n.id, start ? std::optional<Vec2>(start->head<2>()) : std::nullopt,
+                       n.start_sigma_m.value_or(options_.known_start_sigma_m),
+                       n.start_heading_sigma_rad);
+        agent_z_[n.id] = start ? start->z() : 0.0;
+        if (start) known_starts_.push_back(n.id);
+        if (!start && notes) {
+          notes->notes.push_back(fmt::format(
               "agent '{}' has no start: it is localized from its ranges only (1 km prior)", n.id));
         }
         break;
       }
       default:
         if (n.position) {
-          loc.AddKnownNode(n.id, n.position->head<2>(), n.position_sigma_m.value_or(0.0));
+          loc_->AddKnownNode(n.id, n.position->head<2>(), n.position_sigma_m.value_or(0.0));
         } else {
-          loc.AddUnknownNode(n.id);
+          loc_->AddUnknownNode(n.id);
         }
     }
   }
+}
 
-  std::map<std::string, Vec2> last_static;  // last emitted static positions
-  auto emit_agent = [&](const std::string& id) {
-    if (auto e = loc.Estimate(id)) {
-      const Mat2& c = e->covariance;
-      sink.Add({loc.AgentTime(id), id, Vec3(e->position_n.x(), e->position_n.y(), agent_z[id]),
-                c(0, 0), c(0, 1), c(1, 1)});
-    }
-  };
-  auto emit_static = [&](TimeS t, bool all) {
-    for (const auto& id : loc.StaticNodes()) {
-      auto e = loc.Estimate(id);
-      if (!e) continue;
-      auto it = last_static.find(id);
-      if (!all && it != last_static.end() && (it->second - e->position_n).norm() < 0.02) continue;
-      last_static[id] = e->position_n;
-      const Mat2& c = e->covariance;
-      sink.Add({t, id, Vec3(e->position_n.x(), e->position_n.y(), 0.0), c(0, 0), c(0, 1), c(1, 1)});
-    }
-  };
+BreadcrumbSession::~BreadcrumbSession() = default;
 
-  MergedStream stream(mission, {.events = true, .steps = true, .ranges = true, .bearings = false,
-                                .rssi = true, .steps_override = ins_steps ? &*ins_steps : nullptr});
-  MissionRow row;
-  std::size_t rows = 0;
-  std::vector<float> latency_us;
-  TimeS t_last = 0, next_static = -1e300;
-  bool any = false;
-  while (stream.Next(row)) {
-    const TimeS t = RowTime(row);
-    if (!any) {
-      // Emit the known nodes (base, surveyed landmarks) and the agents' starts once, at the
-      // first time in the data (a first step's t0: the start is known a priori).
-      const auto* first_step = std::get_if<Step>(&row);
-      const TimeS t_start = first_step ? std::min(first_step->t0, t) : t;
-      emit_static(t_start, true);
-      for (const NodeInfo& n : mission.info().nodes) {
-        if (n.kind != NodeKind::kAgent || !mission.info().AgentStart(n)) continue;
-        if (auto e = loc.Estimate(n.id)) {
-          const Mat2& c = e->covariance;
-          sink.Add({t_start, n.id, Vec3(e->position_n.x(), e->position_n.y(), agent_z[n.id]),
-                    c(0, 0), c(0, 1), c(1, 1)});
-        }
+void BreadcrumbSession::EmitAgent(const std::string& id, EstimateSink& sink) {
+  if (auto e = loc_->Estimate(id)) {
+    const Mat2& c = e->covariance;
+    sink.Add({loc_->AgentTime(id), id, Vec3(e->position_n.x(), e->position_n.y(), agent_z_[id]),
+              c(0, 0), c(0, 1), c(1, 1)});
+  }
+}
+
+void BreadcrumbSession::EmitStatic(TimeS t, bool all, EstimateSink& sink) {
+  for (const auto& id : loc_->StaticNodes()) {
+    auto e = loc_->Estimate(id);
+    if (!e) continue;
+    auto it = last_static_.find(id);
+    if (!all && it != last_static_.end() && (it->second - e->position_n).norm() < 0.02) continue;
+    last_static_[id] = e->position_n;
+    const Mat2& c = e->covariance;
+    sink.Add({t, id, Vec3(e->position_n.x(), e->position_n.y(), 0.0), c(0, 0), c(0, 1), c(1, 1)});
+  }
+}
+
+void BreadcrumbSession::Add(const MissionRow& row, EstimateSink& sink) {
+  const TimeS t = RowTime(row);
+  if (!any_) {
+    // Emit the known nodes (base, surveyed landmarks) and the agents' starts once, at the
+    // first time in the data (a first step's t0: the start is known a priori).
+    const auto* first_step = std::get_if<Step>(&row);
+    const TimeS t_start = first_step ? std::min(first_step->t0, t) : t;
+    EmitStatic(t_start, true, sink);
+    for (const auto& id : known_starts_) {
+      if (auto e = loc_->Estimate(id)) {
+        const Mat2& c = e->covariance;
+        sink.Add({t_start, id, Vec3(e->position_n.x(), e->position_n.y(), agent_z_[id]), c(0, 0),
+                  c(0, 1), c(1, 1)});
       }
-      next_static = t + static_period_s;
-      any = true;
     }
-    t_last = std::max(t_last, t);
-    const auto clock0 = std::chrono::steady_clock::now();
-    try {
-      if (const auto* step = std::get_if<Step>(&row)) {
-        if (!loc.IsAgent(step->agent)) {
-          throw std::invalid_argument(fmt::format(
-              "'{}' has steps but is not an agent in mission.json", step->agent));
-        }
-        loc.AddStep(*step);
-        emit_agent(step->agent);
-      } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
-        loc.AddRssi(*p);
-      } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
-        loc.AddRange(*r);
-      } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
-        loc.AddEvent(*e);
-      }
-    } catch (const std::invalid_argument& e) {
-      throw InputError(mission.dir().string(), 0, e.what());
-    }
-    if (t >= next_static) {
-      emit_static(t, false);
-      next_static = t + static_period_s;
-    }
-    // Per-row latency: the row's processing plus any estimate it produced.
-    latency_us.push_back(static_cast<float>(
-        std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0)
-            .count()));
-    if ((++rows & 0xfff) == 0) context.progress(stream.Progress());
+    next_static_ = t + static_period_s_;
+    any_ = true;
   }
-  loc.Finish();
-  for (const NodeInfo& n : mission.info().nodes) {
-    if (n.kind == NodeKind::kAgent && std::isfinite(loc.AgentTime(n.id))) emit_agent(n.id);
+  t_last_ = std::max(t_last_, t);
+  const auto clock0 = std::chrono::steady_clock::now();
+  if (const auto* step = std::get_if<Step>(&row)) {
+    if (!loc_->IsAgent(step->agent)) {
+      throw std::invalid_argument(
+          fmt::format("'{}' has steps but is not an agent in mission.json", step->agent));
+    }
+    loc_->AddStep(*step);
+    EmitAgent(step->agent, sink);
+  } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
+    loc_->AddRssi(*p);
+  } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
+    loc_->AddRange(*r);
+  } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
+    loc_->AddEvent(*e);
   }
-  emit_static(t_last, true);
-  context.progress(1.0);
+  if (t >= next_static_) {
+    EmitStatic(t, false, sink);
+    next_static_ = t + static_period_s_;
+  }
+  // Per-row latency: the row's processing plus any estimate it produced.
+  latency_us_.push_back(static_cast<float>(
+      std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0)
+          .count()));
+}
 
-  const auto& s = loc.summary();
+void BreadcrumbSession::Finish(const MissionInfo& info, EstimateSink& sink) {
+  loc_->Finish();
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind == NodeKind::kAgent && std::isfinite(loc_->AgentTime(n.id))) EmitAgent(n.id, sink);
+  }
+  EmitStatic(t_last_, true, sink);
+}
+
+void BreadcrumbSession::Summarize(PipelineSummary& summary) {
+  const auto& s = loc_->summary();
   auto& num = summary.numbers;
   num["steps"] = static_cast<double>(s.steps);
   num["steps_rejected"] = static_cast<double>(s.steps_rejected);
@@ -204,11 +194,12 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
   num["static_nodes_never_localized"] = static_cast<double>(s.pending_uninitialized);
   num["unusable"] = static_cast<double>(s.unusable);
   num["factorizations"] = static_cast<double>(s.factorizations);
-  if (!latency_us.empty()) {
+  if (!latency_us_.empty()) {
+    std::vector<float> l = latency_us_;
     auto pct = [&](double q) {
-      const auto k = static_cast<std::size_t>(q / 100.0 * (latency_us.size() - 1));
-      std::nth_element(latency_us.begin(), latency_us.begin() + k, latency_us.end());
-      return static_cast<double>(latency_us[k]);
+      const auto k = static_cast<std::size_t>(q / 100.0 * (l.size() - 1));
+      std::nth_element(l.begin(), l.begin() + k, l.end());
+      return static_cast<double>(l[k]);
     };
     num["update_latency_us_p50"] = pct(50);
     num["update_latency_us_p99"] = pct(99);
@@ -223,15 +214,39 @@ PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, Estimate
     num["calibrated_body_loss_db"] = s.calibration->model.body_loss_db;
   }
   for (const char* kind : {"uwb", "ultrasound", "rssi", ""}) {
-    if (auto b = loc.RangeBias(kind)) {
+    if (auto b = loc_->RangeBias(kind)) {
       num[std::string("range_offset_m_") + (*kind ? kind : "unknown")] = b->x();
       num[std::string("range_scale_") + (*kind ? kind : "unknown")] = b->y();
     }
   }
   for (const auto& n : s.notes) summary.notes.push_back(n);
-  for (const auto& [t, id] : loc.MovedNodes()) {
+  for (const auto& [t, id] : loc_->MovedNodes()) {
     summary.notes.push_back(fmt::format("t={:.1f}: breadcrumb '{}' detected as moved", t, id));
   }
+}
+
+PipelineSummary BreadcrumbPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
+  const MissionDirectory& mission = context.mission;
+  const auto [ins_options, rest] = SplitInsOptions(context.options);
+  PipelineSummary summary;
+  BreadcrumbSession session(mission.info(), rest, &summary);
+  // Steps from steps.csv, or from imu.csv through the INS (then merged from memory).
+  const auto ins_steps = InsStepsUnlessStepFile(mission, ins_options, "the breadcrumb pipeline", &summary);
+  MergedStream stream(mission, {.events = true, .steps = true, .ranges = true, .bearings = false,
+                                .rssi = true, .steps_override = ins_steps ? &*ins_steps : nullptr});
+  MissionRow row;
+  std::size_t rows = 0;
+  while (stream.Next(row)) {
+    try {
+      session.Add(row, sink);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(mission.dir().string(), 0, e.what());
+    }
+    if ((++rows & 0xfff) == 0) context.progress(stream.Progress());
+  }
+  session.Finish(mission.info(), sink);
+  context.progress(1.0);
+  session.Summarize(summary);
   return summary;
 }
 

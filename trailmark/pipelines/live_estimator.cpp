@@ -2,8 +2,11 @@
 
 #include <fmt/format.h>
 
+#include <queue>
 #include <stdexcept>
+#include <tuple>
 
+#include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
 #include "trailmark/pipelines/live_ins.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
@@ -45,6 +48,24 @@ const NodeInfo& RequireAgent(const MissionInfo& info, const std::string& id, con
   return *node;
 }
 
+/// Each agent's steps come from its steps rows or from its IMU samples through the INS:
+/// whichever arrives first is its source; rows of the other kind are ignored and counted.
+class StepSourceChoice {
+ public:
+  enum Kind { kSteps, kImu };
+  bool Use(const std::string& agent, Kind kind) {
+    const auto [it, first] = source_.emplace(agent, kind);
+    if (it->second == kind) return true;
+    ++ignored_;
+    return false;
+  }
+  std::size_t ignored() const { return ignored_; }
+
+ private:
+  std::map<std::string, Kind> source_;
+  std::size_t ignored_ = 0;
+};
+
 /// `pdr` live: each agent's steps (from steps rows, or from its IMU samples through the INS:
 /// whichever arrives first is the agent's source) added to its start.
 class LivePdr : public LiveEstimator {
@@ -57,9 +78,9 @@ class LivePdr : public LiveEstimator {
   void Add(const LiveRow& row, EstimateSink& sink) override {
     sink_ = &sink;
     if (const auto* step = std::get_if<Step>(&row)) {
-      if (Source(step->agent, kSteps)) AddStep(*step, sink);
+      if (source_.Use(step->agent, StepSourceChoice::kSteps)) AddStep(*step, sink);
     } else if (const auto* imu = std::get_if<ImuSample>(&row)) {
-      if (Source(imu->agent, kImu)) ins_.Add(*imu, nullptr);
+      if (source_.Use(imu->agent, StepSourceChoice::kImu)) ins_.Add(*imu, nullptr);
     } else {
       ++ignored_;
     }
@@ -68,24 +89,16 @@ class LivePdr : public LiveEstimator {
   PipelineSummary Summary() const override {
     PipelineSummary s = ins_.Summary();
     s.numbers["steps"] = static_cast<double>(steps_);
-    s.numbers["rows_ignored"] = static_cast<double>(ignored_);
+    s.numbers["rows_ignored"] = static_cast<double>(ignored_ + source_.ignored());
     s.numbers["agents"] = static_cast<double>(agents_.size());
     return s;
   }
 
  private:
-  enum SourceKind { kSteps, kImu };
   static std::map<std::string, std::string> InsOnly(const std::map<std::string, std::string>& o) {
     const auto [ins, rest] = SplitInsOptions(o);
     PipelineOptions(rest, "pdr").RejectUnknown();
     return ins;
-  }
-  /// True when `kind` is the agent's source of steps (the first that arrived).
-  bool Source(const std::string& agent, SourceKind kind) {
-    const auto [it, first] = source_.emplace(agent, kind);
-    if (it->second == kind) return true;
-    ++ignored_;
-    return false;
   }
   void AddStep(const Step& step, EstimateSink& sink) {
     auto it = agents_.find(step.agent);
@@ -112,7 +125,7 @@ class LivePdr : public LiveEstimator {
   const MissionInfo& info_;
   LiveIns ins_;
   EstimateSink* sink_ = nullptr;
-  std::map<std::string, SourceKind> source_;
+  StepSourceChoice source_;
   std::map<std::string, DeadReckoning> agents_;
   std::size_t steps_ = 0, ignored_ = 0;
 };
@@ -140,12 +153,107 @@ class LiveInsEstimator : public LiveEstimator {
   std::size_t ignored_ = 0;
 };
 
+/// `breadcrumb` live: the batch pipeline's session behind a reordering buffer. Devices deliver
+/// their own rows in time order but not in step with each other; the localizer needs all rows
+/// in time order. Rows wait until they are `reorder_s` older than the newest row seen, then go
+/// in by (time, kind as the batch merges them, arrival); a row that comes later than that is
+/// processed at once (counted as late). Estimates lag the data by reorder_s.
+class LiveBreadcrumb : public LiveEstimator {
+ public:
+  LiveBreadcrumb(const MissionInfo& info, const std::map<std::string, std::string>& options)
+      : info_(info),
+        reorder_s_(ReorderOption(options)),
+        ins_(info, SplitInsOptions(options).first),
+        session_(info, WithoutReorder(SplitInsOptions(options).second), &notes_) {
+    ins_.on_step = [this](const Step& step) { Buffer(step); };
+  }
+
+  void Add(const LiveRow& row, EstimateSink& sink) override {
+    if (const auto* imu = std::get_if<ImuSample>(&row)) {
+      if (source_.Use(imu->agent, StepSourceChoice::kImu)) ins_.Add(*imu, nullptr);
+    } else if (const auto* step = std::get_if<Step>(&row)) {
+      if (!info_.Find(step->agent) || info_.Find(step->agent)->kind != NodeKind::kAgent) {
+        throw std::invalid_argument(
+            fmt::format("'{}' has steps but is not an agent in mission.json", step->agent));
+      }
+      if (source_.Use(step->agent, StepSourceChoice::kSteps)) Buffer(*step);
+    } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
+      Buffer(*p);
+    } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
+      Buffer(*r);
+    } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
+      Buffer(*e);
+    } else {
+      ++ignored_;  // bearings: the breadcrumb localizer has no use for them
+    }
+    Release(newest_ - reorder_s_, sink);
+  }
+
+  PipelineSummary Summary() const override {
+    PipelineSummary s = notes_;
+    s.numbers["rows_ignored"] = static_cast<double>(ignored_ + source_.ignored());
+    s.numbers["rows_late"] = static_cast<double>(late_);
+    s.numbers["rows_waiting"] = static_cast<double>(buffer_.size());
+    s.numbers["reorder_s"] = reorder_s_;
+    return s;
+  }
+
+ private:
+  using Key = std::tuple<TimeS, std::size_t, std::uint64_t>;  // time, kind, arrival
+  static double ReorderOption(const std::map<std::string, std::string>& o) {
+    const auto it = o.find("reorder_s");
+    const double v = it == o.end() ? 1.0 : ParseOption(it->second);
+    if (!(v >= 0)) throw std::invalid_argument("pipeline breadcrumb: reorder_s must be >= 0");
+    return v;
+  }
+  static double ParseOption(const std::string& text) {
+    try {
+      std::size_t used = 0;
+      const double v = std::stod(text, &used);
+      if (used == text.size()) return v;
+    } catch (const std::exception&) {
+    }
+    throw std::invalid_argument("pipeline breadcrumb: reorder_s must be a number, not '" + text +
+                                "'");
+  }
+  static std::map<std::string, std::string> WithoutReorder(std::map<std::string, std::string> o) {
+    o.erase("reorder_s");
+    return o;
+  }
+  void Buffer(const MissionRow& row) {
+    const TimeS t = RowTime(row);
+    newest_ = std::max(newest_, t);
+    if (t < released_) ++late_;
+    buffer_.emplace(Key{t, row.index(), arrivals_++}, row);
+  }
+  void Release(TimeS until, EstimateSink& sink) {
+    while (!buffer_.empty() && std::get<0>(buffer_.begin()->first) <= until) {
+      const MissionRow row = std::move(buffer_.begin()->second);
+      buffer_.erase(buffer_.begin());
+      released_ = std::max(released_, RowTime(row));
+      session_.Add(row, sink);
+    }
+  }
+
+  const MissionInfo& info_;
+  double reorder_s_;
+  LiveIns ins_;
+  PipelineSummary notes_;
+  BreadcrumbSession session_;
+  StepSourceChoice source_;
+  std::map<Key, MissionRow> buffer_;
+  std::uint64_t arrivals_ = 0;
+  TimeS newest_ = -1e300, released_ = -1e300;
+  std::size_t ignored_ = 0, late_ = 0;
+};
+
 }  // namespace
 
 std::unique_ptr<LiveEstimator> MakeLiveEstimator(const std::string& name, const MissionInfo& info,
                                                  const std::map<std::string, std::string>& options) {
   if (name == "pdr") return std::make_unique<LivePdr>(info, options);
   if (name == "ins") return std::make_unique<LiveInsEstimator>(info, options);
+  if (name == "breadcrumb") return std::make_unique<LiveBreadcrumb>(info, options);
   return nullptr;
 }
 
