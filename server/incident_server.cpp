@@ -115,7 +115,9 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
     live_->journal = std::make_unique<Journal>(options_.journal_file);
     live_->work = std::filesystem::path(options_.journal_file.string() + ".work");
     std::filesystem::create_directories(live_->work);
-    live_->estimator = MakeLiveEstimator(options_.pipeline, info_, options_.pipeline_options);
+    live_->estimator =
+        MakeLiveEstimator(options_.pipeline, info_, options_.pipeline_options,
+                          options_.floor_plan ? &*options_.floor_plan : nullptr);
     if (live_->estimator) {
       // A restart: the journal's rows through the estimator again, in arrival order.
       live_->journal->ForEach(
@@ -134,6 +136,8 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
 }
 
 IncidentServer::~IncidentServer() { Stop(); }
+
+bool IncidentServer::incremental() const { return live_ && live_->estimator != nullptr; }
 
 nlohmann::json IncidentServer::StateJson() {
   std::lock_guard<std::mutex> lock(mutex_);

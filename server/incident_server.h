@@ -24,12 +24,14 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "server/incident_state.h"
 #include "server/mqtt_bridge.h"
+#include "trailmark/geometry/floor_plan.h"
 #include "trailmark/geometry/segment.h"
 
 namespace trailmark::server {
@@ -41,6 +43,8 @@ struct ServerOptions {
   std::filesystem::path live_dir, journal_file;
   std::string pipeline = "pdr";
   std::map<std::string, std::string> pipeline_options;
+  /// The incident's floor plan (live mode: the mapmatch pipeline needs it).
+  std::optional<FloorPlan> floor_plan;
   /// Pipelines without a live form (pipelines/live_estimator.h) are re-run on the whole journal
   /// at most this often; those with one (pdr, ins) estimate each row as it is committed.
   double live_period_s = 1.0;
@@ -84,6 +88,8 @@ class IncidentServer {
   void Stop();
   int port() const { return port_; }
   const char* scheme() const { return options_.tls_cert_file.empty() ? "http" : "https"; }
+  /// Live mode: whether the pipeline estimates each row as it comes (false: re-run).
+  bool incremental() const;
   bool replay_done() const { return replay_done_; }
   const ServerStats& stats() const { return stats_; }
   const MqttStats* mqtt_stats() const { return mqtt_ ? &mqtt_->stats() : nullptr; }

@@ -58,8 +58,9 @@ int ServeLive(const ServeOptions& o) {
     fmt::print("note: mission.json names the floor plan '{}', which {} does not hold: the "
                "dashboard shows no walls\n",
                *mission.info().floorplan, o.live.string());
-  } else if (const auto plan = mission.LoadFloorPlan()) {
+  } else if (auto plan = mission.LoadFloorPlan()) {
     walls = plan->solid_walls();
+    so.floor_plan = std::move(*plan);
   }
   server::IncidentServer srv(mission.info(), {}, so, {}, std::move(walls));
   srv.Start();
@@ -67,9 +68,7 @@ int ServeLive(const ServeOptions& o) {
       "trailmark serve: live incident '{}', journal {}, pipeline {} ({}), listening on "
       "{}://{}:{}/\n",
       mission.info().name, o.journal.string(), so.pipeline,
-      MakeLiveEstimator(so.pipeline, mission.info(), so.pipeline_options)
-          ? "incremental"
-          : "re-run on the journal every second",
+      srv.incremental() ? "incremental" : "re-run on the journal every second",
       srv.scheme(), o.bind, srv.port());
   fmt::print("dashboard: {}://{}:{}/?token={}\n", srv.scheme(), o.bind, srv.port(), so.token);
   if (!o.mqtt_uri.empty())

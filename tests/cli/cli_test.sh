@@ -187,6 +187,21 @@ grep -q '^data: {"alerts":' "$dir/events.txt" || { head -c 300 "$dir/events.txt"
 code=$(curl -s -o /dev/null -w "%{http_code}" --max-time 1 "http://127.0.0.1:$lport/api/events?token=wrong")
 [ "$code" = 401 ] || fail "event stream without the token gave $code"
 kill $live_pid; wait $live_pid || true
+# The map-aided pipeline live: the floor plan next to mission.json, steps posted, incremental.
+"$TM" simulate house1-search --seed 2 --out "$dir/h1" > /dev/null
+mkdir -p "$dir/hlive" && cp "$dir/h1/mission.json" "$dir/h1/floorplan.geojson" "$dir/hlive/"
+"$TM" serve --live "$dir/hlive" --journal "$dir/h.db" --pipeline mapmatch --port 0 --token H > "$dir/hlive.log" 2>&1 &
+hpid=$!
+for _ in $(seq 50); do grep -q "listening on" "$dir/hlive.log" && break; sleep 0.1; done
+hport=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/hlive.log")
+grep -q "pipeline mapmatch (incremental)" "$dir/hlive.log" || { cat "$dir/hlive.log"; fail "live mapmatch not incremental"; }
+code=$(curl -s -o "$dir/hack.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer H" \
+       --data-binary @"$dir/h1/steps.csv" "http://127.0.0.1:$hport/api/ingest/steps.csv")
+[ "$code" = 200 ] || { cat "$dir/hack.json"; fail "live mapmatch ingest"; }
+sleep 0.5
+curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | grep -q '"id":"ff1"' || fail "live mapmatch state"
+curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/floorplan" | grep -q '"walls":\[\[' || fail "live floor plan"
+kill $hpid; wait $hpid || true
 # A bounded load test (3 firefighters, 30 s each, as fast as possible): fails unless every row
 # sent is acknowledged and journaled.
 "$TM" bench load --firefighters 3 --minutes 0.5 --dir "$dir/load" > "$dir/load.log" 2>&1 \

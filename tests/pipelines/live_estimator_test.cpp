@@ -11,7 +11,9 @@
 #include "trailmark/io/mission_io.h"
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
+#include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
 
@@ -186,6 +188,21 @@ TEST(LiveEstimator, BreadcrumbBehindItsReorderBufferEqualsTheBatchPipeline) {
   }
   EXPECT_THROW(MakeLiveEstimator("breadcrumb", sim.data.info, {{"reorder_s", "-1"}}),
                std::invalid_argument);
+}
+
+TEST(LiveEstimator, MapMatchEqualsTheBatchPipeline) {
+  HouseSearchOptions o;
+  o.duration_s = 150;
+  const SimulatedMission sim = SimulateHouseSearch(o, 4);
+  const std::map<std::string, std::string> options{{"init", "uniform"}};
+  const std::vector<Estimate> batch = Batch(MapMatchPipeline(), sim, options);
+  EXPECT_THROW(MakeLiveEstimator("mapmatch", sim.data.info, options), std::invalid_argument);
+  auto live = MakeLiveEstimator("mapmatch", sim.data.info, options, &sim.plan);
+  ASSERT_NE(live, nullptr);
+  VectorSink sink;
+  for (const auto& step : sim.data.steps) live->Add(step, sink);
+  ExpectSameEstimates(batch, sink.rows);  // one agent: every estimate, bit for bit
+  EXPECT_GT(live->Summary().numbers.at("ff1.pattern_comparisons"), 0.0);
 }
 
 TEST(LiveEstimator, RefusesNonAgentsAndUnknownNames) {

@@ -8,6 +8,7 @@
 
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
+#include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/pipelines/live_ins.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline_options.h"
@@ -247,13 +248,55 @@ class LiveBreadcrumb : public LiveEstimator {
   std::size_t ignored_ = 0, late_ = 0;
 };
 
+/// `mapmatch` live: the batch pipeline's session, each agent's steps (or its IMU through the
+/// INS) as they come; agents are independent, so no reordering is needed.
+class LiveMapMatch : public LiveEstimator {
+ public:
+  LiveMapMatch(const MissionInfo& info, const std::map<std::string, std::string>& options,
+               const FloorPlan& plan)
+      : ins_(info, SplitInsOptions(options).first),
+        session_(info, plan, "the floor plan", SplitInsOptions(options).second, notes_) {
+    ins_.on_step = [this](const Step& step) { session_.AddStep(step, *sink_, notes_); };
+  }
+  void Add(const LiveRow& row, EstimateSink& sink) override {
+    sink_ = &sink;
+    if (const auto* step = std::get_if<Step>(&row)) {
+      if (source_.Use(step->agent, StepSourceChoice::kSteps)) session_.AddStep(*step, sink, notes_);
+    } else if (const auto* imu = std::get_if<ImuSample>(&row)) {
+      if (source_.Use(imu->agent, StepSourceChoice::kImu)) ins_.Add(*imu, nullptr);
+    } else {
+      ++ignored_;
+    }
+  }
+  PipelineSummary Summary() const override {
+    PipelineSummary s = notes_;
+    session_.Summarize(s);
+    s.numbers["rows_ignored"] = static_cast<double>(ignored_ + source_.ignored());
+    return s;
+  }
+
+ private:
+  PipelineSummary notes_;
+  LiveIns ins_;
+  mutable MapMatchSession session_;
+  EstimateSink* sink_ = nullptr;
+  StepSourceChoice source_;
+  std::size_t ignored_ = 0;
+};
+
 }  // namespace
 
 std::unique_ptr<LiveEstimator> MakeLiveEstimator(const std::string& name, const MissionInfo& info,
-                                                 const std::map<std::string, std::string>& options) {
+                                                 const std::map<std::string, std::string>& options,
+                                                 const FloorPlan* plan) {
   if (name == "pdr") return std::make_unique<LivePdr>(info, options);
   if (name == "ins") return std::make_unique<LiveInsEstimator>(info, options);
   if (name == "breadcrumb") return std::make_unique<LiveBreadcrumb>(info, options);
+  if (name == "mapmatch") {
+    if (plan == nullptr)
+      throw std::invalid_argument("the mapmatch pipeline needs the incident's floor plan");
+    return std::make_unique<LiveMapMatch>(info, options, *plan);
+  }
   return nullptr;
 }
 

@@ -12,6 +12,7 @@
 
 #include "trailmark/core/measurements.h"
 #include "trailmark/core/mission.h"
+#include "trailmark/geometry/floor_plan.h"
 #include "trailmark/pipelines/pipeline.h"
 
 namespace trailmark {
@@ -36,10 +37,12 @@ class LiveEstimator {
   virtual PipelineSummary Summary() const = 0;
 };
 
-/// The live form of pipeline `name` for an incident described by `info`, or null when the
-/// pipeline has none (the server then re-runs the batch pipeline on the journal). Throws
-/// std::invalid_argument on bad options.
+/// The live form of pipeline `name` for an incident described by `info` (and its floor plan,
+/// which mapmatch needs; may be null otherwise), or null when the pipeline has none (the server
+/// then re-runs the batch pipeline on the journal). `info` and `plan` must outlive it. Throws
+/// std::invalid_argument on bad options or a missing floor plan.
 std::unique_ptr<LiveEstimator> MakeLiveEstimator(const std::string& name, const MissionInfo& info,
-                                                 const std::map<std::string, std::string>& options);
+                                                 const std::map<std::string, std::string>& options,
+                                                 const FloorPlan* plan = nullptr);
 
 }  // namespace trailmark

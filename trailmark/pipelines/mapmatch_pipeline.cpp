@@ -35,16 +35,33 @@ struct AgentTrack {
 
 }  // namespace
 
-PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
-  const MissionDirectory& mission = context.mission;
-  const auto [ins_options, rest] = SplitInsOptions(context.options);
-  PipelineOptions po(rest, name());
-  const std::string init = po.String("init", "auto");
-  if (init != "auto" && init != "known" && init != "uniform") {
-    throw std::invalid_argument("pipeline mapmatch: init must be auto, known or uniform, not '" +
-                                init + "'");
-  }
+struct MapMatchSession::Impl {
+  std::string init;
   mapmatch::MapParticleFilterOptions fo;
+  mapmatch::SearchSequenceOptions so;
+  mapmatch::PatternComparisonOptions co;
+  double compare_every_m = 2.0, alarm_m2 = 3.0, alarm_min_s = 10.0;
+  FloorPlan plan;
+  std::vector<mapmatch::NodeSequence> sequences;
+  std::unique_ptr<mapmatch::SearchGrid> grid;
+  std::map<std::string, AgentTrack> agents;
+  std::size_t icp_runs = 0, icp_abandoned = 0;
+  TimeS t_last = 0;
+};
+
+MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
+                                 const std::string& plan_file,
+                                 const std::map<std::string, std::string>& options,
+                                 PipelineSummary& summary)
+    : info_(info), impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  PipelineOptions po(options, "mapmatch");
+  m.init = po.String("init", "auto");
+  if (m.init != "auto" && m.init != "known" && m.init != "uniform") {
+    throw std::invalid_argument("pipeline mapmatch: init must be auto, known or uniform, not '" +
+                                m.init + "'");
+  }
+  auto& fo = m.fo;
   fo.pseudo_observations = po.Bool("pseudo", true);
   fo.resample_from_patterns = po.Bool("resample", true);
   fo.particles = static_cast<int>(po.Double("particles", fo.particles));
@@ -57,15 +74,15 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
       po.Double("patterns_above_variance_m2", fo.use_patterns_above_variance_m2);
   fo.relocalize_above_variance_m2 =
       po.Double("relocalize_above_variance_m2", fo.relocalize_above_variance_m2);
-  mapmatch::SearchSequenceOptions so;
+  auto& so = m.so;
   so.grid.spacing_m = po.Double("grid_m", so.grid.spacing_m);
-  mapmatch::PatternComparisonOptions co;
+  auto& co = m.co;
   co.pattern_length_m = po.Double("pattern_length_m", co.pattern_length_m);
   co.point_spacing_m = po.Double("point_spacing_m", co.point_spacing_m);
   co.icp.trim_fraction = po.Double("icp_trim", co.icp.trim_fraction);
-  const double compare_every_m = po.Double("compare_every_m", 2.0);
-  const double alarm_m2 = po.Double("variance_alarm_m2", 3.0);
-  const double alarm_min_s = po.Double("variance_alarm_min_s", 10.0);
+  m.compare_every_m = po.Double("compare_every_m", 2.0);
+  m.alarm_m2 = po.Double("variance_alarm_m2", 3.0);
+  m.alarm_min_s = po.Double("variance_alarm_min_s", 10.0);
   fo.wall_alarm_k = po.Double("wall_alarm_k", fo.wall_alarm_k);
   fo.wall_alarm_h = po.Double("wall_alarm_h", fo.wall_alarm_h);
   fo.recover_on_wall_alarm = po.Bool("recover", fo.recover_on_wall_alarm);
@@ -76,152 +93,148 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
       static_cast<int>(po.Double("recover_pattern_updates", fo.recover_pattern_updates));
   po.RejectUnknown();
   std::string why;
-  if (!fo.IsValid(&why) || !so.grid.IsValid(&why) || !co.IsValid(&why) || !(compare_every_m > 0) ||
-      !(alarm_m2 > 0) || !(alarm_min_s >= 0)) {
+  if (!fo.IsValid(&why) || !so.grid.IsValid(&why) || !co.IsValid(&why) || !(m.compare_every_m > 0) ||
+      !(m.alarm_m2 > 0) || !(m.alarm_min_s >= 0)) {
     throw std::invalid_argument(
         "pipeline mapmatch: " +
         (why.empty() ? "compare_every_m and variance_alarm_m2 must be > 0" : why));
   }
 
-  PipelineSummary summary;
-  if (!mission.info().floorplan) {
-    throw InputError(mission.Path("mission.json").string(), 0,
-                     "the mapmatch pipeline needs a floor plan: mission.json has no \"floorplan\"");
-  }
-  mission.Require(*mission.info().floorplan, "the mapmatch pipeline");
-  const FloorPlan plan = *mission.LoadFloorPlan();
-  const std::string plan_file = mission.Path(*mission.info().floorplan).string();
-  for (const auto& p : mapmatch::CheckFloorPlan(plan, so.wall_snap_m)) {
+  m.plan = std::move(plan);
+  for (const auto& p : mapmatch::CheckFloorPlan(m.plan, so.wall_snap_m)) {
     if (p.fatal) throw InputError(plan_file, 0, p.message);
     summary.notes.push_back("floor plan: " + p.message);
   }
   // The entry: the first agent's start, else the single base, else a corner of the building.
   std::optional<Vec2> entry;
-  for (const NodeInfo& n : mission.info().nodes) {
+  for (const NodeInfo& n : info.nodes) {
     if (n.kind != NodeKind::kAgent) continue;
-    if (const auto s = mission.info().AgentStart(n)) {
+    if (const auto s = info.AgentStart(n)) {
       entry = s->head<2>();
       break;
     }
   }
   if (!entry) {
-    entry = plan.Bounds().min;
+    entry = m.plan.Bounds().min;
     summary.notes.push_back(
         "no agent start or base: the search sequence starts at the building's corner");
   }
-  std::vector<mapmatch::NodeSequence> sequences;
   try {
-    sequences = mapmatch::ExtractSearchSequences(plan, *entry, so);
+    m.sequences = mapmatch::ExtractSearchSequences(m.plan, *entry, so);
   } catch (const std::invalid_argument& e) {
     throw InputError(plan_file, 0, e.what());
   }
-  const mapmatch::SearchGrid grid(plan, so.grid);
+  m.grid = std::make_unique<mapmatch::SearchGrid>(m.plan, so.grid);
   std::size_t nodes = 0;
-  for (const auto& s : sequences) nodes += s.nodes.size();
-  summary.numbers["search_sequences"] = static_cast<double>(sequences.size());
+  for (const auto& s : m.sequences) nodes += s.nodes.size();
+  summary.numbers["search_sequences"] = static_cast<double>(m.sequences.size());
   summary.numbers["search_nodes"] = static_cast<double>(nodes);
-  summary.numbers["inside_area_m2"] = grid.inside_count() * so.grid.spacing_m * so.grid.spacing_m;
+  summary.numbers["inside_area_m2"] =
+      m.grid->inside_count() * so.grid.spacing_m * so.grid.spacing_m;
+}
 
-  StepSource steps(mission, ins_options, "the mapmatch pipeline", &summary);
-  std::map<std::string, AgentTrack> agents;
-  std::size_t icp_runs = 0, icp_abandoned = 0;
+MapMatchSession::~MapMatchSession() = default;
+
+void MapMatchSession::AddStep(const Step& step, EstimateSink& sink, PipelineSummary& summary) {
+  Impl& m = *impl_;
   auto emit = [&](TimeS t, const std::string& id, const AgentTrack& a) {
-    const Vec2 m = a.filter->Mean();
+    const Vec2 mean = a.filter->Mean();
     const Mat2 c = a.filter->Covariance();
-    sink.Add({t, id, Vec3(m.x(), m.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+    sink.Add({t, id, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
   };
-  Step step;
-  std::size_t rows = 0;
-  TimeS t_last = 0;
-  while (steps.Next(step)) {
-    auto it = agents.find(step.agent);
-    if (it == agents.end()) {
-      const NodeInfo* node = mission.info().Find(step.agent);
-      if (node == nullptr || node->kind != NodeKind::kAgent) {
-        steps.Fail(fmt::format("'{}' has steps but is not an agent in mission.json", step.agent));
-      }
-      AgentTrack a;
-      mapmatch::MapParticleFilterOptions o = fo;
-      o.seed = fo.seed + agents.size();
-      a.filter = std::make_unique<mapmatch::MapParticleFilter>(grid, sequences, o);
-      const auto start = mission.info().AgentStart(*node);
-      const bool known = init == "known" || (init == "auto" && start.has_value());
-      if (known && !start) {
-        steps.Fail(
-            fmt::format("init=known but agent '{}' has no start in mission.json", step.agent));
-      }
-      if (known) {
-        a.filter->InitializeKnown(start->head<2>(), 0.0,
-                                  std::max(node->start_sigma_m.value_or(0.2), 0.05),
-                                  std::max(node->start_heading_sigma_rad.value_or(0.09), 0.01));
-      } else {
-        a.filter->InitializeUniform();
-      }
-      summary.notes.push_back(
-          fmt::format("{}: initial state {}", step.agent, known ? "known" : "unknown (uniform)"));
-      it = agents.emplace(step.agent, std::move(a)).first;
-      emit(step.t0, step.agent, it->second);
+  auto it = m.agents.find(step.agent);
+  if (it == m.agents.end()) {
+    const NodeInfo* node = info_.Find(step.agent);
+    if (node == nullptr || node->kind != NodeKind::kAgent) {
+      throw std::invalid_argument(
+          fmt::format("'{}' has steps but is not an agent in mission.json", step.agent));
     }
-    AgentTrack& a = it->second;
-    const Vec2 d = step.delta_n.head<2>();
-    a.filter->Predict(d);
-    a.odometry_n += d;
-    a.walked_m += d.norm();
-    a.since_compare_m += d.norm();
-    a.history.emplace_back(a.walked_m, a.odometry_n);
-    while (a.history.size() > 2 && a.history[1].first <= a.walked_m - co.pattern_length_m)
-      a.history.pop_front();
-    if (fo.pseudo_observations && a.since_compare_m >= compare_every_m &&
-        a.walked_m >= co.pattern_length_m) {
-      a.since_compare_m = 0;
-      if (!a.filter->WantsPatterns()) {
-        ++a.skipped_comparisons;  // converged: the comparison would not be used
-      } else {
-        std::vector<Vec2> trajectory;
-        for (const auto& h : a.history) trajectory.push_back(h.second);
-        const mapmatch::PatternComparison pc = mapmatch::ComparePatterns(trajectory, sequences, co);
-        icp_runs += pc.icp_runs;
-        icp_abandoned += pc.icp_abandoned;
-        // The odometry's walking direction over its last metre.
-        Vec2 dir = Vec2::Zero();
-        for (auto h = a.history.rbegin(); h != a.history.rend(); ++h) {
-          dir = a.odometry_n - h->second;
-          if (a.walked_m - h->first >= 1.0) break;
-        }
-        a.filter->UpdatePatterns(pc, std::atan2(dir.y(), dir.x()));
-        ++a.comparisons;
-      }
+    const auto start = info_.AgentStart(*node);
+    const bool known = m.init == "known" || (m.init == "auto" && start.has_value());
+    if (known && !start) {
+      throw std::invalid_argument(
+          fmt::format("init=known but agent '{}' has no start in mission.json", step.agent));
     }
-    emit(step.t1, step.agent, a);
-    // Map-error evidence (ours): the walk keeps crossing the map's walls (the filter's CUSUM
-    // of the blocked share of the belief).
-    if (a.filter->LastStepRaisedWallAlarm()) {
-      const Vec2 where = a.filter->Mean();
-      a.wall_alarms.push_back(fmt::format("t={:.1f} s near ({:.1f}, {:.1f})", step.t1, where.x(),
-                                          where.y()));
+    AgentTrack a;
+    mapmatch::MapParticleFilterOptions o = m.fo;
+    o.seed = m.fo.seed + m.agents.size();
+    a.filter = std::make_unique<mapmatch::MapParticleFilter>(*m.grid, m.sequences, o);
+    if (known) {
+      a.filter->InitializeKnown(start->head<2>(), 0.0,
+                                std::max(node->start_sigma_m.value_or(0.2), 0.05),
+                                std::max(node->start_heading_sigma_rad.value_or(0.09), 0.01));
+    } else {
+      a.filter->InitializeUniform();
     }
-    // Map-error indicator (sec. V-E): the estimated variance above the alarm level.
-    const double variance = a.filter->Covariance().trace();
-    if (!a.alarm && variance > alarm_m2) a.alarm = true, a.alarm_since = step.t1;
-    if (a.alarm && variance <= alarm_m2) {
-      a.alarm = false;
-      if (step.t1 - a.alarm_since >= alarm_min_s) a.alarms.emplace_back(a.alarm_since, step.t1);
-    }
-    t_last = step.t1;
-    if (++rows % 1024 == 0) context.progress(steps.Progress());
+    summary.notes.push_back(
+        fmt::format("{}: initial state {}", step.agent, known ? "known" : "unknown (uniform)"));
+    it = m.agents.emplace(step.agent, std::move(a)).first;
+    emit(step.t0, step.agent, it->second);
   }
-  for (auto& [id, a] : agents) {
-    if (a.alarm && t_last - a.alarm_since >= alarm_min_s)
-      a.alarms.emplace_back(a.alarm_since, t_last);
+  AgentTrack& a = it->second;
+  const Vec2 d = step.delta_n.head<2>();
+  a.filter->Predict(d);
+  a.odometry_n += d;
+  a.walked_m += d.norm();
+  a.since_compare_m += d.norm();
+  a.history.emplace_back(a.walked_m, a.odometry_n);
+  while (a.history.size() > 2 && a.history[1].first <= a.walked_m - m.co.pattern_length_m)
+    a.history.pop_front();
+  if (m.fo.pseudo_observations && a.since_compare_m >= m.compare_every_m &&
+      a.walked_m >= m.co.pattern_length_m) {
+    a.since_compare_m = 0;
+    if (!a.filter->WantsPatterns()) {
+      ++a.skipped_comparisons;  // converged: the comparison would not be used
+    } else {
+      std::vector<Vec2> trajectory;
+      for (const auto& h : a.history) trajectory.push_back(h.second);
+      const mapmatch::PatternComparison pc =
+          mapmatch::ComparePatterns(trajectory, m.sequences, m.co);
+      m.icp_runs += pc.icp_runs;
+      m.icp_abandoned += pc.icp_abandoned;
+      // The odometry's walking direction over its last metre.
+      Vec2 dir = Vec2::Zero();
+      for (auto h = a.history.rbegin(); h != a.history.rend(); ++h) {
+        dir = a.odometry_n - h->second;
+        if (a.walked_m - h->first >= 1.0) break;
+      }
+      a.filter->UpdatePatterns(pc, std::atan2(dir.y(), dir.x()));
+      ++a.comparisons;
+    }
+  }
+  emit(step.t1, step.agent, a);
+  // Map-error evidence (ours): the walk keeps crossing the map's walls (the filter's CUSUM
+  // of the blocked share of the belief).
+  if (a.filter->LastStepRaisedWallAlarm()) {
+    const Vec2 where = a.filter->Mean();
+    a.wall_alarms.push_back(fmt::format("t={:.1f} s near ({:.1f}, {:.1f})", step.t1, where.x(),
+                                        where.y()));
+  }
+  // Map-error indicator (sec. V-E): the estimated variance above the alarm level.
+  const double variance = a.filter->Covariance().trace();
+  if (!a.alarm && variance > m.alarm_m2) a.alarm = true, a.alarm_since = step.t1;
+  if (a.alarm && variance <= m.alarm_m2) {
+    a.alarm = false;
+    if (step.t1 - a.alarm_since >= m.alarm_min_s) a.alarms.emplace_back(a.alarm_since, step.t1);
+  }
+  m.t_last = step.t1;
+}
+
+void MapMatchSession::Summarize(PipelineSummary& summary) {
+  Impl& m = *impl_;
+  for (auto& [id, a] : m.agents) {
+    auto alarms = a.alarms;
+    if (a.alarm && m.t_last - a.alarm_since >= m.alarm_min_s)
+      alarms.emplace_back(a.alarm_since, m.t_last);
     summary.notes.push_back(id + ": " + a.filter->summary().BriefReport());
     std::string periods;
-    for (const auto& [t0, t1] : a.alarms)
+    for (const auto& [t0, t1] : alarms)
       periods += fmt::format("{}{:.1f}-{:.1f} s", periods.empty() ? "" : ", ", t0, t1);
     summary.notes.push_back(
         fmt::format("{}: variance above {:.1f} m^2 for {:.0f} s or more (map error, or not yet "
                     "converged): {}",
-                    id, alarm_m2, alarm_min_s, periods.empty() ? "never" : periods));
-    summary.numbers[id + ".variance_alarms"] = static_cast<double>(a.alarms.size());
+                    id, m.alarm_m2, m.alarm_min_s, periods.empty() ? "never" : periods));
+    summary.numbers[id + ".variance_alarms"] = static_cast<double>(alarms.size());
     summary.numbers[id + ".wall_alarms"] = static_cast<double>(a.wall_alarms.size());
     std::string crossings;
     for (const auto& w : a.wall_alarms) crossings += (crossings.empty() ? "" : "; ") + w;
@@ -235,8 +248,33 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
         static_cast<double>(a.filter->summary().wall_eliminations);
     summary.numbers[id + ".restarts"] = static_cast<double>(a.filter->summary().restarts);
   }
-  summary.numbers["icp_runs"] = static_cast<double>(icp_runs);
-  summary.numbers["icp_abandoned"] = static_cast<double>(icp_abandoned);
+  summary.numbers["icp_runs"] = static_cast<double>(m.icp_runs);
+  summary.numbers["icp_abandoned"] = static_cast<double>(m.icp_abandoned);
+}
+
+PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
+  const MissionDirectory& mission = context.mission;
+  const auto [ins_options, rest] = SplitInsOptions(context.options);
+  PipelineSummary summary;
+  if (!mission.info().floorplan) {
+    throw InputError(mission.Path("mission.json").string(), 0,
+                     "the mapmatch pipeline needs a floor plan: mission.json has no \"floorplan\"");
+  }
+  mission.Require(*mission.info().floorplan, "the mapmatch pipeline");
+  const std::string plan_file = mission.Path(*mission.info().floorplan).string();
+  MapMatchSession session(mission.info(), *mission.LoadFloorPlan(), plan_file, rest, summary);
+  StepSource steps(mission, ins_options, "the mapmatch pipeline", &summary);
+  Step step;
+  std::size_t rows = 0;
+  while (steps.Next(step)) {
+    try {
+      session.AddStep(step, sink, summary);
+    } catch (const std::invalid_argument& e) {
+      steps.Fail(e.what());
+    }
+    if (++rows % 1024 == 0) context.progress(steps.Progress());
+  }
+  session.Summarize(summary);
   context.progress(1.0);
   return summary;
 }

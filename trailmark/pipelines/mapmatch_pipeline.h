@@ -12,9 +12,36 @@
 /// Diagnostics: the extracted sequences, floor-plan problems, and the periods when the
 /// estimated variance exceeded the alarm level (map errors suspected).
 
+#include <map>
+#include <memory>
+#include <string>
+
+#include "trailmark/geometry/floor_plan.h"
 #include "trailmark/pipelines/pipeline.h"
 
 namespace trailmark {
+
+/// The filter set up for an incident (floor plan, search sequences, options) and fed step by
+/// step (each agent's steps in time order; agents independent), emitting each agent's estimate
+/// at every step: the batch pipeline and its live form share it.
+class MapMatchSession {
+ public:
+  /// `options`: the pipeline's keys without the "ins." ones. Throws std::invalid_argument on
+  /// bad options, InputError naming `plan_file` for a floor plan that encloses nothing.
+  MapMatchSession(const MissionInfo& info, FloorPlan plan, const std::string& plan_file,
+                  const std::map<std::string, std::string>& options, PipelineSummary& summary);
+  ~MapMatchSession();
+  /// One step; throws std::invalid_argument for steps of a node that is not an agent, or of an
+  /// agent without a start when init=known. Notes (an agent's initial state) go to `summary`.
+  void AddStep(const Step& step, EstimateSink& sink, PipelineSummary& summary);
+  /// Per agent: the filter's counters, the variance and wall-crossing alarms.
+  void Summarize(PipelineSummary& summary);
+
+ private:
+  struct Impl;
+  const MissionInfo& info_;
+  std::unique_ptr<Impl> impl_;
+};
 
 class MapMatchPipeline : public Pipeline {
  public:
