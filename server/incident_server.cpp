@@ -281,7 +281,7 @@ void IncidentServer::Start() {
         "text/event-stream", [this, last](std::size_t, httplib::DataSink& sink) {
           {
             std::unique_lock<std::mutex> lock(event_mutex_);
-            event_cv_.wait_for(lock, std::chrono::seconds(10),
+            event_cv_.wait_for(lock, std::chrono::seconds(5),
                                [&] { return stop_.load() || version_ != *last; });
             if (stop_) return false;
             if (version_ == *last) {

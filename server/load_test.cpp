@@ -21,6 +21,7 @@
 
 // After Eigen: <resolv.h>, which httplib includes, defines a macro `_res` that Eigen uses as a name.
 #include <httplib.h>
+#include <mqtt/async_client.h>
 
 namespace trailmark::server {
 
@@ -143,6 +144,13 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   so.pipeline = o.pipeline;
   so.pipeline_options = o.pipeline_options;
   so.port = 0;
+  if (!o.mqtt_uri.empty()) {
+    so.mqtt.uri = o.mqtt_uri;
+    so.mqtt.incident = "load";
+    // A fresh session per run: a broker keeps a persistent session's queue between runs.
+    so.mqtt.client_id = fmt::format(
+        "trailmark-load-{}", std::chrono::steady_clock::now().time_since_epoch().count());
+  }
   so.token = "load-test";
   so.http_threads = static_cast<std::size_t>(o.firefighters) + 8;
   std::atomic<std::size_t> logged{0};
@@ -165,8 +173,8 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   std::atomic<std::size_t> events{0};
   std::thread dashboard([&] {
     httplib::Client client("127.0.0.1", server.port());
-    client.set_read_timeout(std::chrono::seconds(5));
     std::string buffer;
+    client.set_read_timeout(std::chrono::seconds(60));  // events may pause while devices connect
     client.Get("/api/events?token=load-test", [&](const char* data, std::size_t n) {
       buffer.append(data, n);
       for (std::size_t end; (end = buffer.find("\n\n")) != std::string::npos;) {
@@ -199,35 +207,72 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
 
   std::atomic<std::size_t> accepted{0}, refused{0};
   std::string first_refusal;
+  auto refuse = [&](const std::string& why) {
+    if (refused++ == 0) {
+      std::lock_guard<std::mutex> lock(flight_mutex);
+      first_refusal = why;
+    }
+  };
+  auto sent = [&](std::size_t k, const Request& r) {
+    if (r.stream == "imu.csv") {
+      std::lock_guard<std::mutex> lock(flight_mutex);
+      in_flight[ids[k]].push_back({r.t_last, Clock::now()});
+    }
+  };
   // Every device connects first, one after the other (cpp-httplib listens with a backlog of 5:
   // a storm of simultaneous connects waits for SYN retransmission, 1 s), then all send at once.
   std::vector<std::unique_ptr<httplib::Client>> clients;
+  std::vector<std::unique_ptr<mqtt::async_client>> publishers;
+  const auto connect0 = Clock::now();
   for (std::size_t k = 0; k < ids.size(); ++k) {
-    clients.push_back(std::make_unique<httplib::Client>("127.0.0.1", server.port()));
-    clients.back()->set_keep_alive(true);
-    clients.back()->set_tcp_nodelay(true);
-    if (!clients.back()->Get("/api/health"))
-      throw std::runtime_error("bench load: a device could not connect");
+    if (o.mqtt_uri.empty()) {
+      clients.push_back(std::make_unique<httplib::Client>("127.0.0.1", server.port()));
+      clients.back()->set_keep_alive(true);
+      clients.back()->set_tcp_nodelay(true);
+      if (!clients.back()->Get("/api/health"))
+        throw std::runtime_error("bench load: a device could not connect");
+    } else {
+      publishers.push_back(std::make_unique<mqtt::async_client>(o.mqtt_uri, "load-" + ids[k],
+                                                                mqtt::create_options()));
+      publishers.back()
+          ->connect(mqtt::connect_options_builder().clean_session(true).max_inflight(64).finalize())
+          ->wait();
+    }
   }
+  const double connect_s = std::chrono::duration<double>(Clock::now() - connect0).count();
   const double cpu0 = CpuSeconds();
   const auto wall0 = Clock::now();
   std::vector<std::thread> devices;
   for (std::size_t k = 0; k < ids.size(); ++k) {
     devices.emplace_back([&, k] {
+      if (!o.mqtt_uri.empty()) {
+        // QoS 1 through the broker; the device's PUBACK comes from the broker (the server's own
+        // PUBACK to the broker follows its journal commit). A window of 32 messages in flight.
+        std::deque<mqtt::delivery_token_ptr> window;
+        for (const Request& r : requests[k]) {
+          sent(k, r);
+          try {
+            window.push_back(publishers[k]->publish(
+                mqtt::make_message("trailmark/load/" + ids[k] + "/" + r.stream, r.body, 1, false)));
+            if (window.size() >= 32) {
+              window.front()->wait();
+              window.pop_front();
+            }
+          } catch (const mqtt::exception& e) {
+            refuse(e.what());
+          }
+        }
+        for (auto& t : window) t->wait();
+        return;
+      }
       httplib::Client& client = *clients[k];
       const httplib::Headers auth{{"Authorization", "Bearer load-test"}};
       for (const Request& r : requests[k]) {
-        if (r.stream == "imu.csv") {
-          std::lock_guard<std::mutex> lock(flight_mutex);
-          in_flight[ids[k]].push_back({r.t_last, Clock::now()});
-        }
+        sent(k, r);
         const auto res = client.Post("/api/ingest/" + r.stream, auth, r.body, "text/csv");
         if (!res || res->status != 200) {
-          if (refused++ == 0) {
-            std::lock_guard<std::mutex> lock(flight_mutex);
-            first_refusal = res ? fmt::format("HTTP {} {}", res->status, res->body)
-                                : httplib::to_string(res.error());
-          }
+          refuse(res ? fmt::format("HTTP {} {}", res->status, res->body)
+                     : httplib::to_string(res.error()));
           continue;
         }
         accepted += nlohmann::json::parse(res->body).at("accepted").get<std::size_t>();
@@ -235,6 +280,15 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
     });
   }
   for (auto& d : devices) d.join();
+  if (!o.mqtt_uri.empty()) {
+    // Devices are done when the broker has their messages; the rows are in when the server has
+    // journaled them all (at most 120 s more).
+    const auto give_up = Clock::now() + std::chrono::seconds(120);
+    while (server.stats().ingested_rows.load() < rows_total && Clock::now() < give_up)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    accepted = server.stats().ingested_rows.load();
+    for (auto& p : publishers) p->disconnect()->wait();
+  }
   const double ingest_s = std::chrono::duration<double>(Clock::now() - wall0).count();
   // Until the estimator has caught up: every batch's event, or nothing new for a second (the
   // INS holds its last samples until the detector window after them arrives: a device's final
@@ -256,6 +310,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   done = true;
   const std::size_t estimated = server.stats().estimated_rows.load();
   const std::size_t commits = server.stats().commits.load();
+  const std::size_t events_sent = server.stats().events_sent.load();
   server.Stop();
   dashboard.join();
   const std::size_t journaled = Journal(so.journal_file).size();
@@ -271,6 +326,8 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"imu_hz", o.imu_hz},
           {"batch_s", o.batch_s},
           {"pipeline", o.pipeline},
+          {"transport", o.mqtt_uri.empty() ? "http" : "mqtt"},
+          {"devices_connect_s", connect_s},
           {"requests", requests_total},
           {"rows", rows_total},
           {"imu_rows", ids.size() * imu.size()},
@@ -289,6 +346,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"latency_max_batch", {{"firefighter", worst_at.first}, {"t_last", worst_at.second}}},
           {"batches_without_event", unmatched},
           {"events", events.load()},
+          {"events_sent_by_server", events_sent},
           {"cpu_s", cpu_s},
           {"cpu_cores_busy", cpu_s / std::max(total_s, ingest_s)},
           {"peak_rss_mb", PeakRssMb()},

@@ -6,7 +6,9 @@
 /// batch -> the first event whose state has that firefighter's estimate at or past the batch's
 /// last sample), journal commits, CPU and peak memory. Not a unit test: `trailmark bench load`.
 
+#include <cstdint>
 #include <filesystem>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 
@@ -21,6 +23,9 @@ struct LoadTestOptions {
   std::map<std::string, std::string> pipeline_options;
   /// Where the journal goes (a real disk: each group commit is an fsync).
   std::filesystem::path work_dir;
+  /// Empty: devices POST over HTTP. Else the broker (e.g. tcp://127.0.0.1:1883) that devices
+  /// publish to with QoS 1 and the server subscribes to.
+  std::string mqtt_uri;
   std::uint64_t seed = 1;
 };
 

@@ -112,6 +112,8 @@ int main(int argc, char** argv) {
   bench->add_option("--pipeline", load.pipeline, "load: the live pipeline (ins, pdr, ...)");
   std::string load_dir = ".";
   bench->add_option("--dir", load_dir, "load: where the journal goes (a real disk)");
+  bench->add_option("--mqtt", load.mqtt_uri,
+                    "load: devices publish to this MQTT broker instead of POSTing (tcp://host:port)");
   IncidentOptions incident;
   double solve_period = 1.0, covariance_period = 5.0;
   bench->add_option("--agents", incident.agents, "breadcrumb: firefighters");

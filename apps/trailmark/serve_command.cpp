@@ -167,9 +167,11 @@ int Serve(const ServeOptions& o) {
 
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out) {
   fmt::print("bench load: {} firefighters x {:g} min of {:g} Hz IMU + RSSI, {:g} s per request, "
-             "pipeline {}, journal under {}\n",
+             "pipeline {}, {}, journal under {}\n",
              options.firefighters, options.minutes, options.imu_hz, options.batch_s,
-             options.pipeline, std::filesystem::absolute(options.work_dir).string());
+             options.pipeline,
+             options.mqtt_uri.empty() ? "HTTP POST" : "MQTT QoS 1 via " + options.mqtt_uri,
+             std::filesystem::absolute(options.work_dir).string());
   std::fflush(stdout);
   const nlohmann::json r = server::RunLoadTest(options);
   fmt::print("rows sent and journaled   {} ({} IMU, {} RSSI) in {} requests\n",
