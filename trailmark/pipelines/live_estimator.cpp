@@ -2,7 +2,6 @@
 
 #include <fmt/format.h>
 
-#include <queue>
 #include <stdexcept>
 #include <tuple>
 
@@ -173,10 +172,7 @@ class LiveBreadcrumb : public LiveEstimator {
     if (const auto* imu = std::get_if<ImuSample>(&row)) {
       if (source_.Use(imu->agent, StepSourceChoice::kImu)) ins_.Add(*imu, nullptr);
     } else if (const auto* step = std::get_if<Step>(&row)) {
-      if (!info_.Find(step->agent) || info_.Find(step->agent)->kind != NodeKind::kAgent) {
-        throw std::invalid_argument(
-            fmt::format("'{}' has steps but is not an agent in mission.json", step->agent));
-      }
+      RequireAgent(info_, step->agent, "steps");
       if (source_.Use(step->agent, StepSourceChoice::kSteps)) Buffer(*step);
     } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
       Buffer(*p);
@@ -202,20 +198,11 @@ class LiveBreadcrumb : public LiveEstimator {
  private:
   using Key = std::tuple<TimeS, std::size_t, std::uint64_t>;  // time, kind, arrival
   static double ReorderOption(const std::map<std::string, std::string>& o) {
-    const auto it = o.find("reorder_s");
-    const double v = it == o.end() ? 1.0 : ParseOption(it->second);
+    std::map<std::string, std::string> only;
+    if (const auto it = o.find("reorder_s"); it != o.end()) only.insert(*it);
+    const double v = PipelineOptions(only, "breadcrumb").Double("reorder_s", 1.0);
     if (!(v >= 0)) throw std::invalid_argument("pipeline breadcrumb: reorder_s must be >= 0");
     return v;
-  }
-  static double ParseOption(const std::string& text) {
-    try {
-      std::size_t used = 0;
-      const double v = std::stod(text, &used);
-      if (used == text.size()) return v;
-    } catch (const std::exception&) {
-    }
-    throw std::invalid_argument("pipeline breadcrumb: reorder_s must be a number, not '" + text +
-                                "'");
   }
   static std::map<std::string, std::string> WithoutReorder(std::map<std::string, std::string> o) {
     o.erase("reorder_s");

@@ -41,8 +41,10 @@ void PipelineOptions::RejectUnknown() const {
     if (!known_.count(k)) {
       std::string list;
       for (const auto& x : known_) list += (list.empty() ? "" : ", ") + x;
-      throw std::invalid_argument("pipeline " + pipeline_ + ": unknown option '" + k +
-                                  "' (known: " + list + ")");
+      throw std::invalid_argument(
+          "pipeline " + pipeline_ + ": unknown option '" + k + "' " +
+          (list.empty() ? std::string("(it takes none but the INS's ins.* options)")
+                        : "(known: " + list + ")"));
     }
   }
 }
