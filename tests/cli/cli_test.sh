@@ -7,39 +7,42 @@ dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 fail() { echo "FAIL: $*"; exit 1; }
 # Runs a command that must fail; leaves its exit code in $rc and its stderr in $dir/err.
+# `cmd | matches PATTERN`: like grep -q, but reads to the end — grep -q stops at the first
+# match and the writer then dies of SIGPIPE, which pipefail turns into a failure.
+matches() { grep "$@" > /dev/null; }
 run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
-"$TM" --help | grep -q simulate || fail "--help"
+"$TM" --help | matches simulate || fail "--help"
 for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy wayout serve journal; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
-"$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | grep -q "crumbs dropped" || fail simulate
+"$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | matches "crumbs dropped" || fail simulate
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m2" > /dev/null
 cmp "$dir/m/steps.csv" "$dir/m2/steps.csv" || fail "not deterministic per seed"
 cmp "$dir/m/rssi.csv" "$dir/m2/rssi.csv" || fail "not deterministic per seed"
-"$TM" pipelines | grep -q "^pdr" || fail pipelines
-"$TM" validate "$dir/m" | grep -q "runnable pipelines: pdr" || fail validate
-"$TM" run --pipeline pdr "$dir/m" --out "$dir/run" | grep -q estimates || fail run
-head -1 "$dir/run/estimates.csv" | grep -q "^t,id,x,y,z,sxx,sxy,syy$" || fail "estimates header"
-"$TM" eval "$dir/m" "$dir/run/estimates.csv" | grep -q "^ff1" || fail eval
+"$TM" pipelines | matches "^pdr" || fail pipelines
+"$TM" validate "$dir/m" | matches "runnable pipelines: pdr" || fail validate
+"$TM" run --pipeline pdr "$dir/m" --out "$dir/run" | matches estimates || fail run
+head -1 "$dir/run/estimates.csv" | matches "^t,id,x,y,z,sxx,sxy,syy$" || fail "estimates header"
+"$TM" eval "$dir/m" "$dir/run/estimates.csv" | matches "^ff1" || fail eval
 test -s "$dir/run/metrics.json" || fail "metrics.json"
 grep -q '"mean_pct_of_distance"' "$dir/run/metrics.json" || fail "metrics keys"
 "$TM" report "$dir/run" --out "$dir/r.html" > /dev/null || fail report
 grep -q "new Chart" "$dir/r.html" || fail "report content"
-"$TM" validate "$dir/m" | grep -q "breadcrumb" || fail "breadcrumb runnable"
+"$TM" validate "$dir/m" | matches "breadcrumb" || fail "breadcrumb runnable"
 "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/bc" --option state_period_s=0.5 > /dev/null \
   || fail "run breadcrumb"
 grep -q '"encounters"' "$dir/bc/diagnostics.json" || fail "breadcrumb diagnostics"
-"$TM" eval "$dir/m" "$dir/bc/estimates.csv" | grep -q "^c1 " || fail "breadcrumb crumbs estimated"
+"$TM" eval "$dir/m" "$dir/bc/estimates.csv" | matches "^c1 " || fail "breadcrumb crumbs estimated"
 run_failing "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/x" --option nope=1
 [ $rc -eq 1 ] && grep -q "unknown option 'nope'" "$dir/err" || fail "unknown pipeline option"
 run_failing "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/x" --option gate_sigma=abc
 [ $rc -eq 1 ] && grep -q "gate_sigma='abc' is not a finite number" "$dir/err" || fail "bad option value"
-"$TM" reproduce breadcrumb --seeds 1 --out "$dir/rep" | grep -q "| mean error | 5.6 m" || fail reproduce
+"$TM" reproduce breadcrumb --seeds 1 --out "$dir/rep" | matches "| mean error | 5.6 m" || fail reproduce
 test -s "$dir/rep/breadcrumb/results.md" || fail "reproduce results.md"
 "$TM" simulate training-building --seed 2 --out "$dir/tb" > /dev/null || fail "simulate training"
 "$TM" run --pipeline breadcrumb "$dir/tb" --out "$dir/tbr" > /dev/null || fail "run training"
-"$TM" eval "$dir/tb" "$dir/tbr/estimates.csv" | grep -q "^ff2 " || fail "two firefighters"
+"$TM" eval "$dir/tb" "$dir/tbr/estimates.csv" | matches "^ff2 " || fail "two firefighters"
 
 # The INS from raw IMU samples: 2 s at rest (100 Hz), then every steps-based pipeline from imu.csv.
 mkdir -p "$dir/imu"
@@ -47,7 +50,7 @@ echo '{"format": "trailmark-mission/1", "nodes": [{"id": "foot", "kind": "agent"
   > "$dir/imu/mission.json"
 awk 'BEGIN { print "t,agent,ax,ay,az,gx,gy,gz"; for (k = 0; k < 200; k++) printf "%.2f,foot,0.01,0,9.80,0,0.001,0\n", k / 100 }' \
   > "$dir/imu/imu.csv"
-"$TM" validate "$dir/imu" | grep -q "runnable pipelines: pdr breadcrumb ins" || fail "ins runnable"
+"$TM" validate "$dir/imu" | matches "runnable pipelines: pdr breadcrumb ins" || fail "ins runnable"
 "$TM" run --pipeline ins "$dir/imu" --out "$dir/insr" --option detector=shoe > /dev/null || fail "run ins"
 [ "$(($(wc -l < "$dir/insr/estimates.csv") - 1))" -eq 200 ] || fail "ins: one estimate per sample"
 "$TM" run --pipeline pdr "$dir/imu" --out "$dir/pdri" > /dev/null || fail "pdr from imu.csv"
@@ -59,42 +62,42 @@ run_failing "$TM" run --pipeline ins "$dir/imu" --out "$dir/x"
 
 # A simulated foot IMU, no steps.csv: the steps-based pipelines run the INS.
 "$TM" simulate office-loop-1lap --seed 3 --imu-rate 100 --imu-grade tactical --imu-only \
-  --out "$dir/si" | grep -q "0 steps, [0-9]* IMU samples" || fail "simulate --imu-rate"
+  --out "$dir/si" | matches "0 steps, [0-9]* IMU samples" || fail "simulate --imu-rate"
 "$TM" run --pipeline breadcrumb "$dir/si" --out "$dir/sir" > /dev/null || fail "breadcrumb from simulated IMU"
-"$TM" eval "$dir/si" "$dir/sir/estimates.csv" | grep -q "^ff1 " || fail "eval breadcrumb from IMU"
+"$TM" eval "$dir/si" "$dir/sir/estimates.csv" | matches "^ff1 " || fail "eval breadcrumb from IMU"
 run_failing "$TM" run --pipeline landmarks-stopgo "$dir/si" --out "$dir/x"  # imu.csv, no landmarks
 [ $rc -eq 2 ] && grep -q "needs steps.csv or imu.csv, rssi.csv, 3+ landmarks" "$dir/err" \
   && ! grep -q "steps.csv: missing" "$dir/err" || { cat "$dir/err"; fail "imu.csv stands for steps.csv"; }
 run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigation --out "$dir/x"
 [ $rc -eq 1 ] && grep -q "unknown IMU grade 'navigation'" "$dir/err" || fail "bad IMU grade"
 
-"$TM" energy | grep -q "sleep-only lifetime: 8.62 years" || fail "energy"
+"$TM" energy | matches "sleep-only lifetime: 8.62 years" || fail "energy"
 "$TM" simulate landmark-corridor --seed 1 --out "$dir/lc" > /dev/null || fail "simulate landmark-corridor"
 "$TM" run --pipeline landmarks-stopgo "$dir/lc" --out "$dir/lcr" > /dev/null || fail "landmarks-stopgo"
-"$TM" eval "$dir/lc" "$dir/lcr/estimates.csv" | grep -q "^lm3 " || fail "landmarks estimated"
+"$TM" eval "$dir/lc" "$dir/lcr/estimates.csv" | matches "^lm3 " || fail "landmarks estimated"
 run_failing "$TM" run --pipeline landmarks-ukf "$dir/lc" --out "$dir/x" --option loss=l1
 [ $rc -eq 1 ] && grep -q "loss must be squared, huber or cauchy" "$dir/err" || fail "bad loss option"
-"$TM" reproduce landmarks --out "$dir/rep" | grep -q "| landmark localization, median error | 0.78 m" \
+"$TM" reproduce landmarks --out "$dir/rep" | matches "| landmark localization, median error | 0.78 m" \
   || fail "reproduce landmarks"
 "$TM" reproduce beacons --seeds 1 --out "$dir/rep" > "$dir/repb.txt" || fail "reproduce beacons"
 grep -q "1,000 beacons" "$dir/repb.txt" && grep -q "| \*\*overall\*\* | 1.93 / 3.70 |" "$dir/repb.txt" \
   || fail "reproduce beacons tables"
 # The ultrasound beacon trail: MDS, the SCAAT EKF, the way back out.
-"$TM" simulate beacon-trail --seed 3 --out "$dir/bt" | grep -q "crumbs dropped" || fail "simulate beacon-trail"
-"$TM" validate "$dir/bt" | grep -q "beacons-mds beacons-ekf" || fail "beacon pipelines runnable"
+"$TM" simulate beacon-trail --seed 3 --out "$dir/bt" | matches "crumbs dropped" || fail "simulate beacon-trail"
+"$TM" validate "$dir/bt" | matches "beacons-mds beacons-ekf" || fail "beacon pipelines runnable"
 "$TM" run --pipeline beacons-mds "$dir/bt" --out "$dir/btm" > /dev/null || fail "beacons-mds"
-"$TM" eval "$dir/bt" "$dir/btm/estimates.csv" | grep -q "^b12 " || fail "beacons localized"
+"$TM" eval "$dir/bt" "$dir/btm/estimates.csv" | matches "^b12 " || fail "beacons localized"
 "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/bte" > /dev/null || fail "beacons-ekf"
 grep -q '"ff1: way out b01"' "$dir/bte/diagnostics.json" || fail "way out in diagnostics"
-"$TM" wayout "$dir/bt" --at 100 | grep -q "then out through the entry" || fail "wayout command"
+"$TM" wayout "$dir/bt" --at 100 | matches "then out through the entry" || fail "wayout command"
 run_failing "$TM" wayout "$dir/bt" --agent nobody
 [ $rc -eq 2 ] && grep -q "no agent 'nobody'" "$dir/err" || fail "wayout unknown agent"
 # Map-aided search: the house search, pattern observations, no initial position.
 "$TM" simulate house1-search --seed 2 --out "$dir/hs" > /dev/null || fail "simulate house1-search"
-"$TM" validate "$dir/hs" | grep -q "mapmatch" || fail "mapmatch runnable"
+"$TM" validate "$dir/hs" | matches "mapmatch" || fail "mapmatch runnable"
 "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/hsr" --option init=uniform > /dev/null || fail "mapmatch"
 grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatch diagnostics"
-"$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | grep -q "^ff1 " || fail "mapmatch eval"
+"$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | matches "^ff1 " || fail "mapmatch eval"
 run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
 [ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
 run_failing "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/x" --option update=polar
@@ -180,7 +183,7 @@ grep -q '"id":"ff1"' "$dir/lstate.json" || fail "live state"
 want=$(awk -F, 'NR > 1 && $2 == "ff1" { x = $3; y = $4 } END { printf "%.6f %.6f", x, y }' "$dir/m2run/estimates.csv")
 got=$(sed 's/.*"id":"ff1"[^}]*"x":\([-0-9.e]*\),"y":\([-0-9.e]*\).*/\1 \2/' "$dir/lstate.json" | awk '{ printf "%.6f %.6f", $1, $2 }')
 echo "live pdr end: $got (batch: $want)" >&2; [ "$want" = "$got" ] && [ "$want" != "0.000000 0.000000" ] || fail "live pdr ended at ($got), the batch pdr at ($want)"
-curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/history" | grep -q '"trails":{"ff1":\[\[' || fail "history"
+curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/history" | matches '"trails":{"ff1":\[\[' || fail "history"
 # Server-sent events: the state as a stream (the dashboard's live updates).
 curl -s -N --max-time 1 "http://127.0.0.1:$lport/api/events?token=T" > "$dir/events.txt" || true
 grep -q '^data: {"alerts":' "$dir/events.txt" || { head -c 300 "$dir/events.txt"; fail "event stream"; }
@@ -199,8 +202,8 @@ code=$(curl -s -o "$dir/hack.json" -w "%{http_code}" -H "Content-Type: text/csv"
        --data-binary @"$dir/h1/steps.csv" "http://127.0.0.1:$hport/api/ingest/steps.csv")
 [ "$code" = 200 ] || { cat "$dir/hack.json"; fail "live mapmatch ingest"; }
 sleep 0.5
-curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | grep -q '"id":"ff1"' || fail "live mapmatch state"
-curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/floorplan" | grep -q '"walls":\[\[' || fail "live floor plan"
+curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | matches '"id":"ff1"' || fail "live mapmatch state"
+curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/floorplan" | matches '"walls":\[\[' || fail "live floor plan"
 kill $hpid; wait $hpid || true
 # A bounded load test (3 firefighters, 30 s each, as fast as possible): fails unless every row
 # sent is acknowledged and journaled.

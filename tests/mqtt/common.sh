@@ -7,6 +7,9 @@ serve_pid=""; broker_pid=""
 cleanup() { kill $serve_pid $broker_pid 2>/dev/null || true; rm -rf "$dir"; }
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; cat "$dir"/*.log 2>/dev/null | tail -20; exit 1; }
+# `cmd | matches PATTERN`: like grep -q, but reads to the end — grep -q stops at the first
+# match and the writer then dies of SIGPIPE, which pipefail turns into a failure.
+matches() { grep "$@" > /dev/null; }
 command -v mosquitto > /dev/null || fail "mosquitto not installed (scripts/install-deps.sh)"
 start_broker() {
   for _ in $(seq 20); do  # a free port

@@ -14,7 +14,7 @@ for _ in $(seq 50); do grep -q "listening on" "$dir/serve.log" && break; sleep 0
 hport=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
 [ -n "$hport" ] || fail "serve did not start"
 header=$(head -1 "$dir/m/steps.csv")
-tail -n +2 "$dir/m/steps.csv" | head -100 | split -l 25 - "$dir/chunk."
+sed -n 2,101p "$dir/m/steps.csv" | split -l 25 - "$dir/chunk."  # (sed, not tail | head: SIGPIPE under pipefail)
 for c in "$dir"/chunk.*; do
   { echo "$header"; cat "$c"; } > "$dir/body.csv"
   mosquitto_pub -p "$port" -q 1 -t trailmark/inc7/ff1/steps.csv -f "$dir/body.csv"
@@ -27,11 +27,11 @@ timeout 5 mosquitto_sub -p "$port" -C 1 -t trailmark/inc7/ff1/estimate > "$dir/e
 grep -q '"kind":"agent"' "$dir/estimate.json" || fail "estimate payload: $(cat "$dir/estimate.json")"
 mosquitto_pub -p "$port" -q 1 -r -t trailmark/inc7/ff1/status -m lost   # a device's last will
 sleep 0.5
-curl -s -H "Authorization: Bearer mq" "http://127.0.0.1:$hport/api/state" | grep -q '"kind":"device-lost"' \
+curl -s -H "Authorization: Bearer mq" "http://127.0.0.1:$hport/api/state" | matches '"kind":"device-lost"' \
   || fail "no device-lost alert"
 kill $serve_pid; wait $serve_pid || true; serve_pid=""
 grep -q "1 rejected" "$dir/serve.log" || fail "the malformed message was not counted"
 "$TM" journal export "$dir/j.db" --mission "$dir/live" --out "$dir/exported" > /dev/null
-cmp <(tail -n +2 "$dir/m/steps.csv" | head -100) <(tail -n +2 "$dir/exported/steps.csv") \
+cmp <(sed -n 2,101p "$dir/m/steps.csv") <(tail -n +2 "$dir/exported/steps.csv") \
   || fail "journal differs from what was published"
 echo "mqtt: 1 passed, 0 failed"

@@ -28,23 +28,23 @@ for _ in $(seq 50); do grep -q "listening on" "$dir/serve.log" && break; sleep 0
 hport=$(sed -n 's|.*listening on https://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
 [ -n "$hport" ] || fail "serve over HTTPS did not start"
 # HTTPS: verified with our CA; refused without it; plain HTTP gets no answer.
-curl -s --cacert "$dir/cert.pem" "https://localhost:$hport/api/health" | grep -q '"ok": true' || fail "HTTPS health"
+curl -s --cacert "$dir/cert.pem" "https://localhost:$hport/api/health" | matches '"ok": true' || fail "HTTPS health"
 curl -s "https://localhost:$hport/api/health" > /dev/null 2>&1 && fail "an untrusted certificate was accepted"
 curl -s --max-time 2 "http://127.0.0.1:$hport/api/health" > /dev/null 2>&1 && fail "plain HTTP answered"
 # An anonymous device is refused by the broker; one with the credentials is accepted.
 mosquitto_pub -p "$port" --cafile "$dir/cert.pem" -h localhost -q 1 -t tls/x -m x > "$dir/anon.log" 2>&1 \
   && fail "the broker accepted an anonymous client"
 header=$(head -1 "$dir/m/steps.csv")
-{ echo "$header"; tail -n +2 "$dir/m/steps.csv" | head -40; } > "$dir/body.csv"
+{ echo "$header"; sed -n 2,41p "$dir/m/steps.csv"; } > "$dir/body.csv"  # (not tail | head: SIGPIPE under pipefail)
 mosquitto_pub -p "$port" --cafile "$dir/cert.pem" -h localhost -u trailmark -P s3cret -q 1 \
   -t trailmark/tls/ff1/steps.csv -f "$dir/body.csv" || fail "publish over TLS"
 for _ in $(seq 30); do
   curl -s --cacert "$dir/cert.pem" -H "Authorization: Bearer tt" "https://localhost:$hport/api/state" \
-    | grep -q '"id":"ff1"' && break
+    | matches '"id":"ff1"' && break
   sleep 0.1
 done
 curl -s --cacert "$dir/cert.pem" -H "Authorization: Bearer tt" "https://localhost:$hport/api/state" \
-  | grep -q '"id":"ff1"' || fail "no estimate after publishing over TLS"
+  | matches '"id":"ff1"' || fail "no estimate after publishing over TLS"
 kill $serve_pid; wait $serve_pid || true; serve_pid=""
 "$TM" journal export "$dir/j.db" --mission "$dir/live" --out "$dir/exported" > /dev/null
 cmp <(tail -n +2 "$dir/body.csv") <(tail -n +2 "$dir/exported/steps.csv") || fail "journal differs"
