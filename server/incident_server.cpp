@@ -111,6 +111,8 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
     options_.log = [](const std::string& line) { spdlog::warn("{}", line); };
   }
   if (!options_.journal_file.empty()) {
+    if (FindPipeline(options_.pipeline) == nullptr)
+      throw std::invalid_argument("serve: unknown pipeline '" + options_.pipeline + "'");
     live_ = std::make_unique<Live>();
     live_->journal = std::make_unique<Journal>(options_.journal_file);
     live_->work = std::filesystem::path(options_.journal_file.string() + ".work");

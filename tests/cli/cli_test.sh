@@ -205,6 +205,8 @@ sleep 0.5
 curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | matches '"id":"ff1"' || fail "live mapmatch state"
 curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/floorplan" | matches '"walls":\[\[' || fail "live floor plan"
 kill $hpid; wait $hpid || true
+run_failing "$TM" bench load --firefighters 1 --minutes 0.1 --pipeline nope --dir "$dir/load"
+[ $rc -ne 0 ] && matches "unknown pipeline 'nope'" "$dir/err" || { cat "$dir/err"; fail "bench load with an unknown pipeline"; }
 # A bounded load test (3 firefighters, 30 s each, as fast as possible): fails unless every row
 # sent is acknowledged and journaled.
 "$TM" bench load --firefighters 3 --minutes 0.5 --dir "$dir/load" > "$dir/load.log" 2>&1 \
