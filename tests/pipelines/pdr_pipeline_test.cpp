@@ -70,6 +70,19 @@ TEST(PdrPipeline, NeedsAStartAndAnAgent) {
   EXPECT_THROW(PdrPipeline().Run({mission2, {}}, sink), InputError);
 }
 
+TEST(PdrPipeline, SaysWhenImuCsvIsNotUsed) {
+  TempDir dir;
+  dir.File("mission.json", R"({"nodes":[{"id":"ff1","kind":"agent","start":[0,0,0]}]})");
+  dir.File("steps.csv", "t0,t1,agent,dx,dy\n0,1,ff1,1,0\n");
+  dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n");
+  VectorSink sink;
+  const PipelineSummary s = PdrPipeline().Run({MissionDirectory(dir.path()), {}}, sink);
+  bool said = false;
+  for (const auto& n : s.notes) said = said || n.find("imu.csv not used") != std::string::npos;
+  EXPECT_TRUE(said);
+  EXPECT_EQ(sink.rows.size(), 2u);  // the start and the one step of steps.csv
+}
+
 TEST(Pipelines, RegistryListsPdrAndRunnableChecksFiles) {
   ASSERT_NE(FindPipeline("pdr"), nullptr);
   EXPECT_EQ(FindPipeline("nope"), nullptr);

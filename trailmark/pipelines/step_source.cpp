@@ -29,6 +29,11 @@ std::optional<std::vector<Step>> InsStepsUnlessStepFile(
     if (!ins_options.empty() && summary) {
       summary->notes.push_back("ins.* options ignored: the mission has steps.csv");
     }
+    if (mission.Has("imu.csv") && summary) {
+      summary->notes.push_back(
+          "steps from steps.csv; imu.csv not used (remove steps.csv to run the INS on it, or "
+          "run the ins pipeline)");
+    }
     return std::nullopt;
   }
   if (!mission.Has("imu.csv")) mission.Require("steps.csv", who + " (or imu.csv for the INS)");
