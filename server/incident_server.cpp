@@ -85,12 +85,16 @@ void ParseStream(const std::string& stream, const std::string& name, const std::
                                 "imu.csv)");
 }
 
-/// Collects a live estimator's output.
-class StateSink : public EstimateSink {
- public:
-  void Add(const Estimate& e) override { rows.push_back(e); }
-  std::vector<Estimate> rows;
-};
+
+/// (id, node JSON) of every agent: what is published to MQTT as its retained estimate.
+std::vector<std::pair<std::string, std::string>> AgentJson(const IncidentState& state) {
+  std::vector<std::pair<std::string, std::string>> out;
+  const nlohmann::json j = state.ToJson();  // (a temporary would dangle in the loop)
+  for (const auto& n : j.at("nodes")) {
+    if (n.at("kind") == "agent") out.emplace_back(n.at("id"), n.dump());
+  }
+  return out;
+}
 
 }  // namespace
 
@@ -509,7 +513,7 @@ void IncidentServer::LiveLoop() {
     return;
   }
   auto last_publish = std::chrono::steady_clock::now() - std::chrono::hours(1);
-  StateSink sink;
+  VectorSink sink;
   std::vector<LiveRow> rows;
   std::map<std::string, std::string> refusals;  // node -> last reason logged
   while (!stop_) {
@@ -550,12 +554,7 @@ void IncidentServer::LiveLoop() {
       for (const auto& [id, t] : heard) state_.Heard(id, t);
       for (const auto& e : sink.rows) state_.Apply(e);
       state_.Advance(newest);
-      if (publish) {
-        const nlohmann::json state = state_.ToJson();  // (a temporary would dangle in the loop)
-        for (const auto& n : state.at("nodes")) {
-          if (n.at("kind") == "agent") to_publish.emplace_back(n.at("id"), n.dump());
-        }
-      }
+      if (publish) to_publish = AgentJson(state_);
     }
     Changed();
     if (publish) {
@@ -589,10 +588,7 @@ void IncidentServer::RerunOnJournal() {
       for (const auto& [node, status] : device_status_) fresh.SetDeviceStatus(node, status);
       if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
       state_ = std::move(fresh);
-      const nlohmann::json state = state_.ToJson();  // (a temporary would dangle in the loop)
-      for (const auto& n : state.at("nodes")) {
-        if (n.at("kind") == "agent") to_publish.emplace_back(n.at("id"), n.dump());
-      }
+      to_publish = AgentJson(state_);
     }
     Changed();
     if (mqtt_) {

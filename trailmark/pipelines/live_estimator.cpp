@@ -8,6 +8,7 @@
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
 #include "trailmark/pipelines/mapmatch_pipeline.h"
+#include "trailmark/pipelines/merged_stream.h"
 #include "trailmark/pipelines/live_ins.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline_options.h"
@@ -27,15 +28,7 @@ const std::string& RowNode(const LiveRow& row) {
   return std::visit(node, row);
 }
 
-TimeS RowTime(const LiveRow& row) {
-  return std::visit([](const auto& r) -> TimeS {
-    if constexpr (std::is_same_v<std::decay_t<decltype(r)>, Step>) {
-      return r.t1;
-    } else {
-      return r.t;
-    }
-  }, row);
-}
+TimeS RowTime(const LiveRow& row) { return std::visit(RowTimeOf{}, row); }
 
 namespace {
 

@@ -4,17 +4,7 @@
 
 namespace trailmark {
 
-TimeS RowTime(const MissionRow& row) {
-  return std::visit(
-      [](const auto& r) -> TimeS {
-        if constexpr (std::is_same_v<std::decay_t<decltype(r)>, Step>) {
-          return r.t1;
-        } else {
-          return r.t;
-        }
-      },
-      row);
-}
+TimeS RowTime(const MissionRow& row) { return std::visit(RowTimeOf{}, row); }
 
 namespace {
 

@@ -36,6 +36,15 @@ class MergedStream {
   std::unique_ptr<Impl> impl_;
 };
 
+/// The time a row became known: t1 for steps, t for every other row (std::visit it).
+struct RowTimeOf {
+  TimeS operator()(const Step& s) const { return s.t1; }
+  template <class Row>
+  TimeS operator()(const Row& r) const {
+    return r.t;
+  }
+};
+
 /// Time of a row (t1 for steps).
 TimeS RowTime(const MissionRow& row);
 
