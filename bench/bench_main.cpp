@@ -16,6 +16,8 @@
 #include "trailmark/beacons/scaat_ekf.h"
 #include "trailmark/sim/beacon_lab.h"
 #include "trailmark/mapmatch/pattern_comparison.h"
+#include "trailmark/mapmatch/particle_filter.h"
+#include "trailmark/sim/house_search.h"
 #include "trailmark/geometry/rigid_fit.h"
 #include <nanoflann.hpp>
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
@@ -297,6 +299,30 @@ void BM_IcpOwnBruteForce(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_IcpOwnBruteForce)->Unit(benchmark::kMicrosecond);
+
+// One time update of the map particle filter (N = 500) on a house-1 search, without (0) and
+// with (1) the wall-following model: what the model costs per step.
+void BM_MapFilterStep(benchmark::State& state) {
+  const SimulatedMission sim = SimulateHouseSearch(HouseSearchOptions(), 3);
+  const auto seqs = mapmatch::ExtractSearchSequences(sim.plan, HouseEntry(1));
+  const mapmatch::SearchGrid grid(sim.plan);
+  mapmatch::MapParticleFilterOptions o;
+  o.wall_follow = state.range(0) != 0;
+  mapmatch::MapParticleFilter pf(grid, seqs, o);
+  pf.InitializeUniform();
+  std::size_t k = 0;
+  for (auto _ : state) {
+    pf.Predict(sim.data.steps[k].delta_n.head<2>());
+    if (++k == sim.data.steps.size()) {  // the search again, from the start
+      state.PauseTiming();
+      k = 0;
+      pf.InitializeUniform();
+      state.ResumeTiming();
+    }
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_MapFilterStep)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 struct Cloud {
   std::vector<Vec2> pts;

@@ -3,12 +3,11 @@
 
 #include <cstdint>
 #include <filesystem>
-
-#include "server/load_test.h"
 #include <map>
 #include <string>
 #include <vector>
 
+#include "server/load_test.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/pipelines/pipeline.h"
 #include "trailmark/sim/synthetic_incident.h"
@@ -57,14 +56,16 @@ int WriteReproduction(const std::filesystem::path& out, const std::string& title
 /// point) and tracking on the six lab traces (Table 1, Figs. 6-9, `seeds` each).
 int ReproduceBeacons(int runs, int seeds, const std::filesystem::path& out);
 /// `trailmark reproduce mapmatch`: the map-aided search paper on the two simulated houses
-/// (Figs. 7-9); `extra` options go to every mapmatch run.
+/// (Figs. 7-9) with seeds first_seed .. first_seed + seeds - 1; `extra` options go to every
+/// mapmatch run.
 int ReproduceMapMatch(int seeds, const std::filesystem::path& out,
-                      const std::map<std::string, std::string>& extra = {});
+                      const std::map<std::string, std::string>& extra = {}, int first_seed = 1);
 /// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
-/// side with the published figures; results.md under out/NAME.
+/// side with the published figures; results.md under out/NAME. `first_seed` (mapmatch only):
+/// the first simulated run's seed, for figures on searches a setting was not chosen on.
 int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,
               const std::map<std::string, std::string>& options = {},
-              const std::filesystem::path& data_dir = "../shared/data");
+              const std::filesystem::path& data_dir = "../shared/data", int first_seed = 1);
 
 /// `trailmark serve`: replay a mission's online estimates into the incident server.
 struct ServeOptions {
@@ -74,12 +75,12 @@ struct ServeOptions {
   double speed = 10;
   int port = 8080;
   std::string bind = "127.0.0.1";
-  std::string token;     ///< empty: a random one is made and printed
+  std::string token;  ///< empty: a random one is made and printed
   bool exit_after_replay = false;
   std::filesystem::path live, journal;  ///< live mode: mission.json directory and journal file
   std::string mqtt_uri, incident = "incident", mqtt_user, mqtt_password;  ///< live mode over MQTT
-  std::string mqtt_ca;               ///< CA certificate (PEM) that signed the broker's (ssl://)
-  std::string tls_cert, tls_key;     ///< HTTPS: the server's certificate chain and key (PEM)
+  std::string mqtt_ca;            ///< CA certificate (PEM) that signed the broker's (ssl://)
+  std::string tls_cert, tls_key;  ///< HTTPS: the server's certificate chain and key (PEM)
 };
 int Serve(const ServeOptions& options);
 int ServeLive(const ServeOptions& options);

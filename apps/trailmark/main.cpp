@@ -133,6 +133,10 @@ int main(int argc, char** argv) {
   reproduce->add_option("name", reproduce_name, "breadcrumb | ins | landmarks | beacons | mapmatch")->required();
   reproduce->add_option("--seeds", reproduce_seeds, "number of simulated runs (seeds 1..N)")
       ->check(CLI::Range(1, 1000));
+  int reproduce_first_seed = 1;
+  reproduce->add_option("--first-seed", reproduce_first_seed,
+                        "mapmatch: seed of the first run (runs first..first+N-1)")
+      ->check(CLI::Range(1, 1000000));
   reproduce->add_option("--out", reproduce_out, "output directory (missions, runs, results.md)");
   std::string reproduce_data = std::getenv("TRAILMARK_SHARED_DATA") ? std::getenv("TRAILMARK_SHARED_DATA")
                                                                     : "../shared/data";
@@ -318,7 +322,8 @@ int main(int argc, char** argv) {
       return w.route.empty() || w.broken ? 3 : 0;
     } else if (*reproduce) {
       return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
-                            ParseKeyValues(reproduce_options), reproduce_data);
+                            ParseKeyValues(reproduce_options), reproduce_data,
+                            reproduce_first_seed);
     }
   } catch (const InputError& e) {
     fmt::print(stderr, "error: {}\n", e.what());

@@ -73,11 +73,13 @@ std::vector<std::pair<std::size_t, double>> ErrorVsMeasurements(const fs::path& 
 
 int ReproduceBreadcrumb(int seeds, const fs::path& out,
                         const std::map<std::string, std::string>& options) {
-  fmt::print("Breadcrumb paper, sec. V-A: office floor, 100 m loop walked 4 times (400 m), "
-             "dispenser-dropped crumbs, {} seeds\n\n", seeds);
+  fmt::print(
+      "Breadcrumb paper, sec. V-A: office floor, 100 m loop walked 4 times (400 m), "
+      "dispenser-dropped crumbs, {} seeds\n\n",
+      seeds);
   fmt::print("{:>5} {:>7} {:>7} | {:>9} {:>9} {:>9} | {:>9} {:>9} {:>9} | {:>8} {:>7}\n", "seed",
-             "crumbs", "dist m", "pdr mean", "pdr max", "pdr end", "gen mean", "gen max",
-             "gen end", "crumb m", "time s");
+             "crumbs", "dist m", "pdr mean", "pdr max", "pdr end", "gen mean", "gen max", "gen end",
+             "crumb m", "time s");
   std::vector<SeedResult> results;
   for (int k = 1; k <= seeds; ++k) {
     SeedResult r;
@@ -87,8 +89,8 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
     WriteMissionDirectory(dir / "mission", sim.data, &sim.plan);
     for (const auto& e : sim.data.events) r.crumbs += e.event == "drop";
     const Metrics pdr = RunAndEvaluate("pdr", dir / "mission", dir / "pdr", nullptr);
-    const Metrics gen = RunAndEvaluate("breadcrumb", dir / "mission", dir / "breadcrumb", &r.wall_s,
-                                       options);
+    const Metrics gen =
+        RunAndEvaluate("breadcrumb", dir / "mission", dir / "breadcrumb", &r.wall_s, options);
     r.distance_m = gen.agents.distance_m;
     r.pdr_mean = pdr.agents.stats.mean_m;
     r.pdr_max = pdr.agents.stats.max_m;
@@ -97,10 +99,11 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
     r.gen_max = gen.agents.stats.max_m;
     r.gen_end = gen.agents.stats.final_m;
     r.crumb_mean = gen.static_nodes.stats.mean_m;
-    fmt::print("{:>5} {:>7} {:>7.1f} | {:>9.2f} {:>9.2f} {:>9.2f} | {:>9.2f} {:>9.2f} {:>9.2f} | "
-               "{:>8.2f} {:>7.3f}\n",
-               r.seed, r.crumbs, r.distance_m, r.pdr_mean, r.pdr_max, r.pdr_end, r.gen_mean,
-               r.gen_max, r.gen_end, r.crumb_mean, r.wall_s);
+    fmt::print(
+        "{:>5} {:>7} {:>7.1f} | {:>9.2f} {:>9.2f} {:>9.2f} | {:>9.2f} {:>9.2f} {:>9.2f} | "
+        "{:>8.2f} {:>7.3f}\n",
+        r.seed, r.crumbs, r.distance_m, r.pdr_mean, r.pdr_max, r.pdr_end, r.gen_mean, r.gen_max,
+        r.gen_end, r.crumb_mean, r.wall_s);
     results.push_back(r);
   }
   auto avg = [&](double SeedResult::*f) {
@@ -112,24 +115,26 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
   const double mean = avg(&SeedResult::gen_mean), max = avg(&SeedResult::gen_max);
   const double end = avg(&SeedResult::gen_end), pdr_end = avg(&SeedResult::pdr_end);
   std::string table;
-  table += fmt::format("| figure (average over {} seeds) | paper | trailmark `breadcrumb` | target |\n",
-                       seeds);
+  table += fmt::format(
+      "| figure (average over {} seeds) | paper | trailmark `breadcrumb` | target |\n", seeds);
   table += "|---|---|---|---|\n";
   table += fmt::format("| mean error | 5.6 m (1.4 %) | {:.2f} m ({:.2f} %) | <= 1.0 % |\n", mean,
                        100 * mean / dist);
   table += fmt::format("| max error | 10.9 m (2.7 %) | {:.2f} m ({:.2f} %) | <= 2.0 % |\n", max,
                        100 * max / dist);
   table += fmt::format("| end error, PDR only | > 35 m | {:.2f} m | |\n", pdr_end);
-  table += fmt::format("| end error, breadcrumb | - | {:.2f} m ({:.1f}x lower than PDR) | >= 5x |\n",
-                       end, pdr_end / std::max(end, 1e-9));
+  table +=
+      fmt::format("| end error, breadcrumb | - | {:.2f} m ({:.1f}x lower than PDR) | >= 5x |\n",
+                  end, pdr_end / std::max(end, 1e-9));
   table += fmt::format("| mean error, PDR only | - | {:.2f} m | |\n", avg(&SeedResult::pdr_mean));
   table += fmt::format("| breadcrumb (crumb) mean error | - | {:.2f} m | |\n",
                        avg(&SeedResult::crumb_mean));
   fmt::print("\n{}", table);
 
   const auto fig11 = ErrorVsMeasurements(out / "seed-1" / "mission", out / "seed-1" / "breadcrumb");
-  std::string fig = "\nBreadcrumb error vs number of measurements (paper Fig. 11; seed 1, mean over "
-                    "crumbs):\n| measurements | crumb error m |\n|---|---|\n";
+  std::string fig =
+      "\nBreadcrumb error vs number of measurements (paper Fig. 11; seed 1, mean over "
+      "crumbs):\n| measurements | crumb error m |\n|---|---|\n";
   for (const auto& [n, e] : fig11) fig += fmt::format("| {} | {:.2f} |\n", n, e);
   fmt::print("{}", fig);
   std::ofstream(out / "results.md") << "# trailmark reproduce breadcrumb\n\n" << table << fig;
@@ -148,11 +153,15 @@ int WriteReproduction(const fs::path& out, const std::string& title, const std::
 }
 
 int Reproduce(const std::string& name, int seeds, const fs::path& out,
-              const std::map<std::string, std::string>& options, const fs::path& data_dir) {
+              const std::map<std::string, std::string>& options, const fs::path& data_dir,
+              int first_seed) {
+  if (first_seed != 1 && name != "mapmatch")
+    throw std::invalid_argument("--first-seed applies to the mapmatch reproduction only");
   if (name == "breadcrumb") return ReproduceBreadcrumb(seeds, out / "breadcrumb", options);
   if (name == "ins") return ReproduceIns(data_dir, out / "ins", options);
-  if (name == "landmarks") return ReproduceLandmarks(std::max(seeds, 20), out / "landmarks", data_dir);
-  if (name == "mapmatch") return ReproduceMapMatch(seeds, out / "mapmatch", options);
+  if (name == "landmarks")
+    return ReproduceLandmarks(std::max(seeds, 20), out / "landmarks", data_dir);
+  if (name == "mapmatch") return ReproduceMapMatch(seeds, out / "mapmatch", options, first_seed);
   if (name == "beacons") return ReproduceBeacons(std::max(seeds, 100), seeds, out / "beacons");
   throw std::invalid_argument("unknown reproduction '" + name +
                               "' (known: breadcrumb, ins, landmarks, beacons, mapmatch)");

@@ -150,12 +150,25 @@ TEST(PatternComparison, AnExactPatternMatchesAtItsNodeAndEnd) {
   EXPECT_NEAR(pc.sequences[0].heading_rad[5][1], std::atan2(d.y(), d.x()), 1e-12);
 }
 
+// A house-1 search of `duration_s` with its map's search sequences and grid.
+struct HouseOneSearch {
+  SimulatedMission sim;
+  std::vector<NodeSequence> seqs;
+  SearchGrid grid;
+  HouseOneSearch(double duration_s, std::uint64_t seed)
+      : sim(Simulate(duration_s, seed)),
+        seqs(ExtractSearchSequences(sim.plan, HouseEntry(1))),
+        grid(sim.plan) {}
+  static SimulatedMission Simulate(double duration_s, std::uint64_t seed) {
+    HouseSearchOptions o;
+    o.duration_s = duration_s;
+    return SimulateHouseSearch(o, seed);
+  }
+};
+
 TEST(MapParticleFilter, NoParticleEverEndsAStepThroughAWall) {
-  HouseSearchOptions o;
-  o.duration_s = 120;
-  const SimulatedMission sim = SimulateHouseSearch(o, 3);
-  const auto seqs = ExtractSearchSequences(sim.plan, HouseEntry(1));
-  const SearchGrid grid(sim.plan);
+  const HouseOneSearch house(120, 3);
+  const auto& [sim, seqs, grid] = house;
   for (bool uniform : {false, true}) {
     MapParticleFilter pf(grid, seqs);
     if (uniform)
@@ -222,6 +235,122 @@ TEST(MapParticleFilter, AWalkIntoAWallRaisesTheWallAlarmAndRecovers) {
     EXPECT_EQ(pf.summary().recoveries, pseudo ? 1u : 0u);
     EXPECT_EQ(pf.WantsPatterns(), pseudo);
     for (const auto& q : pf.particles()) ASSERT_TRUE(q.position_n.allFinite());
+  }
+}
+
+TEST(MapParticleFilter, AfterARecoveryASettledFilterOnlyDrawsNewParticlesFromPatterns) {
+  // A 6 x 4 room; the belief spread 1 m round its middle (trace ~2 m^2, under the pattern level
+  // of 5 m^2 set here: settled); a step east blocks part of it and (k 0, h 0.01) raises a wall
+  // alarm; the recovery (no spread) forces the next comparisons. With the default, a forced
+  // comparison of a settled filter leaves the weights of the particles it does not redraw as
+  // they were; recover_reweight_converged weights them by eq. (2) as well (and replaces those
+  // under the weight floor).
+  const FloorPlan plan = Room(6, 4);
+  const SearchGrid grid(plan);
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  std::vector<Vec2> walk;  // the room's search sequence walked twice: an exact search pattern
+  for (int lap = 0; lap < 2; ++lap)
+    walk.insert(walk.end(), seqs[0].nodes.begin(), seqs[0].nodes.end());
+  const PatternComparison pc = ComparePatterns(walk, seqs);
+  for (bool reweight : {false, true}) {
+    MapParticleFilterOptions o;
+    o.wall_follow = false;
+    o.use_patterns_above_variance_m2 = 5;
+    o.wall_alarm_k = 0;
+    o.wall_alarm_h = 0.01;
+    o.recover_position_sigma_m = 0;
+    o.recover_heading_sigma_rad = 0;
+    o.recover_reweight_converged = reweight;
+    MapParticleFilter pf(grid, seqs, o);
+    pf.InitializeKnown(Vec2(3.5, 2), 0.0, 1.0, 0.0);
+    pf.Predict(Vec2(1.0, 0));
+    ASSERT_EQ(pf.summary().recoveries, 1u);
+    ASSERT_LT(pf.Covariance().trace(), 5.0);
+    ASSERT_TRUE(pf.WantsPatterns());  // forced although settled
+    const auto before = pf.particles();
+    const std::size_t resamples = pf.summary().systematic_resamples;
+    const Vec2 d = walk.back() - walk[walk.size() - 2];
+    pf.UpdatePatterns(pc, std::atan2(d.y(), d.x()));
+    EXPECT_GT(pf.summary().pattern_resamples, 0u);  // new particles drawn either way
+    // The weights of the particles not redrawn, relative to one another.
+    double lo = 1e300, hi = 0;
+    for (std::size_t i = 0; i < before.size(); ++i) {
+      if (pf.particles()[i].position_n != before[i].position_n) continue;  // redrawn
+      const double r = pf.particles()[i].weight / before[i].weight;
+      lo = std::min(lo, r), hi = std::max(hi, r);
+    }
+    if (!reweight) {
+      EXPECT_NEAR(hi / lo, 1.0, 1e-9);
+      EXPECT_EQ(pf.summary().systematic_resamples, resamples);
+      EXPECT_EQ(pf.summary().floor_replacements, 0u);
+    } else {
+      // Eq. (2): the weights change, and particles pushed under the floor are replaced.
+      EXPECT_GT(hi / lo, 1.01);
+      EXPECT_GT(pf.summary().floor_replacements, 0u);
+    }
+  }
+}
+
+TEST(WallFollowing, StepLikelihoodIsTheForwardRecursionOfTheOnOffChain) {
+  // Walls along y = 0.05 and y = 3.05: the field's cell centres lie at (k + 1/2) 0.1 m, so
+  // it is exact at the side points used below.
+  DistanceField::Options fo;
+  fo.cell_m = 0.1;
+  const DistanceField walls({{{0, 0.05}, {10, 0.05}}, {{0, 3.05}, {10, 3.05}}}, fo);
+  MapParticleFilterOptions o;  // leave 0.05, return 0.15, off-wall likelihood 0.6, s 0.25 m
+  const double c = o.wall_follow_off_likelihood;
+  const Vec2 on_left(5.05, -0.5);  // heading east: the side point (5.05, 0.05) is on the wall
+  const Vec2 in_room(5.05, 0.8);   // side point (5.05, 1.35): 1.3 m from the nearest wall
+  const double l_room = std::exp(-1.3 * 1.3 / (2 * 0.25 * 0.25));
+  float p_off = 0;
+  // Following the wall (p_off 0): prior_off = leave; l = (1 - leave) * 1 + leave * c.
+  double l = WallFollowingLikelihood(walls, on_left, 0.0, true, o, p_off);
+  EXPECT_NEAR(l, 0.95 + 0.05 * c, 1e-12);
+  EXPECT_NEAR(p_off, 0.05 * c / (0.95 + 0.05 * c), 1e-7);
+  // Leaving it: the first step off costs about the leave probability ...
+  const double prior2 = p_off * (1 - 0.15) + (1 - p_off) * 0.05;
+  l = WallFollowingLikelihood(walls, in_room, 0.0, true, o, p_off);
+  EXPECT_NEAR(l, (1 - prior2) * l_room + prior2 * c, 1e-7);
+  EXPECT_LT(l, 0.05);
+  EXPECT_GT(p_off, 0.999);
+  // ... staying off costs little (the walker is following furniture): about (1 - return) * c.
+  l = WallFollowingLikelihood(walls, in_room, 0.0, true, o, p_off);
+  EXPECT_NEAR(l, 0.85 * c, 1e-3);
+  // The wrong hand: at (5.05, 0.6) heading east the wall is on the right; a left-hand
+  // hypothesis looks for it 1.1 m from any wall; a right-hand one finds it.
+  float p_left = 0, p_right = 0;
+  const Vec2 by_wall(5.05, 0.6);
+  const double l_left = WallFollowingLikelihood(walls, by_wall, 0.0, true, o, p_left);
+  const double l_right = WallFollowingLikelihood(walls, by_wall, 0.0, false, o, p_right);
+  EXPECT_NEAR(l_right, 0.95 + 0.05 * c, 1e-12);
+  EXPECT_LT(l_left, 0.05);
+  // Heading west flips the sides: the left-hand hypothesis there finds the wall.
+  float p_west = 0;
+  EXPECT_NEAR(WallFollowingLikelihood(walls, by_wall, std::numbers::pi, true, o, p_west),
+              0.95 + 0.05 * c, 1e-12);
+}
+
+TEST(MapParticleFilter, ParticlesStayInsideTheBuildingThroughAnOpenEntry) {
+  // The house-1 map shows the entry door open (the search is inside with it shut behind).
+  const HouseOneSearch house(90, 5);
+  const auto& [sim, seqs, grid] = house;
+  for (bool stay : {true, false}) {
+    MapParticleFilterOptions o;
+    o.stay_inside = stay;
+    o.wall_follow = false;  // the odometry alone moves the particles
+    MapParticleFilter pf(grid, seqs, o);
+    pf.InitializeUniform();
+    std::size_t outside = 0;
+    for (const auto& st : sim.data.steps) {
+      pf.Predict(st.delta_n.head<2>());
+      for (const auto& q : pf.particles()) outside += !grid.Inside(grid.CellOf(q.position_n));
+    }
+    if (stay) {
+      EXPECT_EQ(outside, 0u);
+      EXPECT_GT(pf.summary().outside_eliminations, 0u);
+    } else {
+      EXPECT_GT(outside, 0u);  // without the rule, some walk out through the entry
+    }
   }
 }
 

@@ -60,6 +60,15 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
       recover_pattern_updates < 0)
     return fail("recovery spreads and updates must be >= 0");
   if (!(max_match_rmse_m > 0)) return fail("max_match_rmse_m must be > 0");
+  if (!(wall_follow_offset_m >= 0 && wall_follow_offset_m <= 2) || !(wall_follow_sigma_m > 0))
+    return fail("wall_follow_offset_m must be within [0, 2] and wall_follow_sigma_m > 0");
+  if (!(wall_follow_leave > 0 && wall_follow_leave < 1) ||
+      !(wall_follow_return > 0 && wall_follow_return <= 1) ||
+      !(wall_follow_off_likelihood > 0 && wall_follow_off_likelihood <= 1) ||
+      !(wall_follow_converged_power >= 0 && wall_follow_converged_power <= 1))
+    return fail(
+        "wall_follow_leave must be within (0, 1), wall_follow_return and "
+        "wall_follow_off_likelihood within (0, 1], wall_follow_converged_power within [0, 1]");
   return true;
 }
 
@@ -69,18 +78,21 @@ std::string MapParticleFilterSummary::BriefReport() const {
       "{} floor "
       "replacements, {} particles from patterns, {} systematic resamples, {} backtracks, {} "
       "restarts; {} "
-      "comparisons skipped while converged",
+      "comparisons skipped while converged; {} left the building",
       time_updates, pattern_updates, uninformative_updates, wall_eliminations, floor_replacements,
-      pattern_resamples, systematic_resamples, backtracks, restarts, skipped_converged);
+      pattern_resamples, systematic_resamples, backtracks, restarts, skipped_converged,
+      outside_eliminations);
 }
 
 MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
-                                     const std::vector<NodeSequence>& sequences, Options options)
+                                     const std::vector<NodeSequence>& sequences, Options options,
+                                     std::shared_ptr<const DistanceField> wall_distance)
     : grid_(grid),
       sequences_(sequences),
       options_(options),
       rng_(options.seed),
-      nodes_(new NodeIndex) {
+      nodes_(new NodeIndex),
+      wall_distance_(std::move(wall_distance)) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("MapParticleFilter options: " + why);
   inside_centers_ = grid.InsideCenters();
@@ -103,6 +115,7 @@ MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
   nodes_->tree =
       std::make_unique<NodeIndex::Tree>(2, *nodes_, nanoflann::KDTreeSingleIndexAdaptorParams(8));
   particles_.resize(options_.particles);
+  if (options_.wall_follow && !wall_distance_) wall_distance_ = MakeWallDistanceField(grid.plan());
 }
 
 MapParticleFilter::~MapParticleFilter() = default;
@@ -126,6 +139,8 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
   for (auto& q : particles_) {
     q.position_n = p + Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
     q.heading_offset_rad = offset + rng_.Normal(0, hs);
+    q.hand = RandomHand();
+    q.p_off_wall = 0;
     q.step_from_n = q.position_n;
     q.weight = 1.0 / particles_.size();
   }
@@ -139,8 +154,16 @@ void MapParticleFilter::InitializeUniform() {
   for (auto& q : particles_) {
     q.position_n = q.step_from_n = RandomInsidePoint();
     q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
+    q.hand = RandomHand();
+    q.p_off_wall = 0;
     q.weight = 1.0 / particles_.size();
   }
+}
+
+std::uint8_t MapParticleFilter::RandomHand() {
+  // Only the wall-following model reads the hand: without it, no draw (the random stream, and
+  // so the results, stay those of the paper's filter).
+  return options_.wall_follow && Uniform() >= 0.5 ? 1 : 0;
 }
 
 void MapParticleFilter::Normalize() {
@@ -171,7 +194,11 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
       q.position_n = uniform_start_ ? RandomInsidePoint()
                                     : mean + Vec2(rng_.Normal(0, 1.0), rng_.Normal(0, 1.0));
       q.step_from_n = q.position_n;  // a new particle, not a step
-      if (uniform_start_) q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
+      if (uniform_start_) {
+        q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
+        q.hand = RandomHand();
+        q.p_off_wall = 0;
+      }
       q.weight = 1.0 / particles_.size();
     }
     return;
@@ -237,6 +264,20 @@ void MapParticleFilter::Predict(const Vec2& d) {
       q.position_n = next;
     }
     summary_.wall_eliminations += n_dead;
+    // A search stays in the building: a particle that left it (through a door that the map
+    // shows open, e.g. the entry) is eliminated too, unless the whole belief left (then the
+    // walker did).
+    if (options_.stay_inside) {
+      std::vector<std::size_t> outside;
+      for (std::size_t i = 0; i < particles_.size(); ++i) {
+        if (!dead[i] && !InsideBuilding(particles_[i].position_n)) outside.push_back(i);
+      }
+      if (!outside.empty() && n_dead + outside.size() < particles_.size()) {
+        for (const std::size_t i : outside) dead[i] = 1;
+        n_dead += outside.size();
+        summary_.outside_eliminations += outside.size();
+      }
+    }
     // The first attempt's share says how much of the belief the walk drove into walls.
     if (attempt == 0) {
       last_blocked_mass_ = mass > 0 ? mass_dead / mass : 0.0;
@@ -249,6 +290,13 @@ void MapParticleFilter::Predict(const Vec2& d) {
     }
     if (n_dead < particles_.size() || attempt == 3) {
       if (n_dead > 0) ReplaceFromSurvivors(dead);
+      if (options_.wall_follow && len > 0.1) {
+        // Full weight while uncertain; once converged, tempered (see the option).
+        const bool uncertain =
+            forced_pattern_updates_ > 0 || Covariance().trace() > PatternThreshold();
+        const double power = uncertain ? 1.0 : options_.wall_follow_converged_power;
+        if (power > 0) WeighWallFollowing(std::atan2(d.y(), d.x()), power);
+      }
       if (last_step_alarm_ && options_.recover_on_wall_alarm && options_.pseudo_observations)
         Recover();
       return;
@@ -291,19 +339,24 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   for (const auto& sc : pc.sequences) {
     for (const auto& r : sc.rmse_m) best_anywhere = std::min({best_anywhere, r[0], r[1]});
   }
+  const bool converged_now = Covariance().trace() <= PatternThreshold();
   if (forced_pattern_updates_ > 0) {
     --forced_pattern_updates_;
-  } else if (Covariance().trace() <= PatternThreshold()) {
+  } else if (converged_now) {
     ++summary_.skipped_converged;
     return;
   }
+  // After a recovery, once the particles have settled again, a comparison only offers new
+  // particles: weighting the settled ones by one comparison (sigma 0.1) can wipe out the right
+  // hypothesis when furniture makes a wrong match slightly better.
+  const bool reweight = !(converged_now && !options_.recover_reweight_converged);
   if (!(best_anywhere <= options_.max_match_rmse_m)) {
     ++summary_.uninformative_updates;  // not a search pattern: no weights, no new particles
     return;
   }
   if (!std::isfinite(e_min)) {
     ++summary_.uninformative_updates;
-  } else {
+  } else if (reweight) {
     // Eq. (2)-(3), scaled by exp(E_min / sigma^2) against underflow (cancels in eq. 3).
     for (std::size_t i = 0; i < particles_.size(); ++i) {
       const double l = std::isfinite(E[i]) ? std::exp(-(E[i] - e_min) / s2) : 0.0;
@@ -325,6 +378,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
       Vec2 p;
       double heading;
       double cumulative;
+      int end;  ///< 0: a left-hand observation, 1: a right-hand one
     };
     std::vector<Obs> obs;
     double acc = 0, best = std::numeric_limits<double>::infinity();
@@ -339,7 +393,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
             const double w = std::exp(-(sc.rmse_m[n][end] - best) / s2);
             if (w < 1e-12) continue;
             acc += w;
-            obs.push_back({sc.position_n[n][end], sc.heading_rad[n][end], acc});
+            obs.push_back({sc.position_n[n][end], sc.heading_rad[n][end], acc, end});
           }
         }
       }
@@ -372,6 +426,8 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
         q.heading_offset_rad = WrapAngle(o.heading - odometry_heading_rad +
                                          rng_.Normal(0, options_.resample_heading_sigma_rad));
         q.weight = new_weight;
+        q.hand = static_cast<std::uint8_t>(o.end);
+        q.p_off_wall = 0;
         ++summary_.pattern_resamples;
       }
       Normalize();
@@ -387,12 +443,51 @@ bool MapParticleFilter::WantsPatterns() const {
          (forced_pattern_updates_ > 0 || Covariance().trace() > PatternThreshold());
 }
 
+double WallFollowingLikelihood(const DistanceField& walls, const Vec2& position_n,
+                               double heading_n_rad, bool left_hand,
+                               const MapParticleFilterOptions& o, float& p_off_wall) {
+  // Where the wall should be: the offset to the search side of the walking direction.
+  const double side = left_hand ? 1.0 : -1.0;
+  const Vec2 at = position_n + side * o.wall_follow_offset_m *
+                                   Vec2(-std::sin(heading_n_rad), std::cos(heading_n_rad));
+  const double dd = walls.At(at);
+  // One step of the forward recursion of the on/off-wall chain.
+  const double prior_off =
+      p_off_wall * (1 - o.wall_follow_return) + (1 - p_off_wall) * o.wall_follow_leave;
+  const double l_on = std::exp(-dd * dd / (2 * o.wall_follow_sigma_m * o.wall_follow_sigma_m));
+  const double l = (1 - prior_off) * l_on + prior_off * o.wall_follow_off_likelihood;
+  p_off_wall = static_cast<float>(prior_off * o.wall_follow_off_likelihood / l);
+  return l;
+}
+
+std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan) {
+  DistanceField::Options o;
+  o.cell_m = 0.1;
+  o.max_distance_m = 2.0;
+  return std::make_shared<const DistanceField>(plan.solid_walls(), o);
+}
+
+void MapParticleFilter::WeighWallFollowing(double step_heading_odometry_rad, double power) {
+  for (auto& q : particles_) {
+    const double l = WallFollowingLikelihood(*wall_distance_, q.position_n,
+                                             q.heading_offset_rad + step_heading_odometry_rad,
+                                             q.hand == 0, options_, q.p_off_wall);
+    q.weight *= power == 1.0 ? l : std::pow(l, power);
+  }
+  Normalize();
+  double sum2 = 0;
+  for (const auto& q : particles_) sum2 += q.weight * q.weight;
+  if (1.0 / sum2 < options_.ess_resample_fraction * particles_.size()) SystematicResample();
+}
+
 void MapParticleFilter::Recover() {
   ++summary_.recoveries;
+
   for (auto& q : particles_) {
     const Vec2 p = q.position_n + Vec2(rng_.Normal(0, options_.recover_position_sigma_m),
                                        rng_.Normal(0, options_.recover_position_sigma_m));
     if (InsideBuilding(p)) q.position_n = p;
+    q.step_from_n = q.position_n;  // moved by the recovery, not by a step
     q.heading_offset_rad =
         WrapAngle(q.heading_offset_rad + rng_.Normal(0, options_.recover_heading_sigma_rad));
   }

@@ -8,9 +8,13 @@
 /// when the agent has a start in mission.json), `pseudo=true|false`, `resample=true|false`;
 /// and `particles`, `seed`, `grid_m`, `pattern_length_m`, `compare_every_m`,
 /// `point_spacing_m`, `sigma`, `outlier_weight`, `new_particle_weight`, `variance_alarm_m2`
-/// (map-error indicator, sec. V-E: 3 m^2) and `variance_alarm_min_s` (how long it must last).
-/// Diagnostics: the extracted sequences, floor-plan problems, and the periods when the
-/// estimated variance exceeded the alarm level (map errors suspected).
+/// (map-error indicator, sec. V-E: 3 m^2) and `variance_alarm_min_s` (how long it must last);
+/// ours: the wall-following model (`wall_follow`, `wall_follow_*`), `stay_inside`, the wall
+/// alarm and recovery (`wall_alarm_k`, `wall_alarm_h`, `recover*`), `map_error_wall_alarms`
+/// (docs/mapmatch.md lists them all with their defaults and where they were chosen).
+/// Diagnostics: the extracted sequences, floor-plan problems, the periods when the estimated
+/// variance exceeded the alarm level, the wall alarms, and the map-error verdict
+/// (`<agent>.map_error_suspected`).
 
 #include <map>
 #include <memory>
