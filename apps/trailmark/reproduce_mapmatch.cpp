@@ -71,8 +71,8 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
        "inside**",
        {{"init", "uniform"}}},
       {"known, ours (default)", {{"init", "known"}}},
-      {"unknown, the previous default (ours without the wall-following model, stay-inside and "
-       "the settled-recovery rule; N = 500)",
+      {"unknown, ours without the wall-following model, stay-inside and the settled-recovery "
+       "rule; N = 500",
        {{"init", "uniform"},
         {"wall_follow", "false"},
         {"stay_inside", "false"},

@@ -148,6 +148,7 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
 
 void MapParticleFilter::InitializeUniform() {
   uniform_start_ = true;
+  pattern_updates_applied_ = 0;
   converged_ = false;
   wall_cusum_ = 0;
   forced_pattern_updates_ = 0;
@@ -342,7 +343,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   const bool converged_now = Covariance().trace() <= PatternThreshold();
   if (forced_pattern_updates_ > 0) {
     --forced_pattern_updates_;
-  } else if (converged_now) {
+  } else if (converged_now && !Unconfirmed()) {
     ++summary_.skipped_converged;
     return;
   }
@@ -354,6 +355,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
     ++summary_.uninformative_updates;  // not a search pattern: no weights, no new particles
     return;
   }
+  ++pattern_updates_applied_;
   if (!std::isfinite(e_min)) {
     ++summary_.uninformative_updates;
   } else if (reweight) {
@@ -439,8 +441,13 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
 }
 
 bool MapParticleFilter::WantsPatterns() const {
-  return options_.pseudo_observations &&
-         (forced_pattern_updates_ > 0 || Covariance().trace() > PatternThreshold());
+  return options_.pseudo_observations && (forced_pattern_updates_ > 0 || Unconfirmed() ||
+                                          Covariance().trace() > PatternThreshold());
+}
+
+bool MapParticleFilter::Unconfirmed() const {
+  return uniform_start_ && options_.pseudo_observations &&
+         pattern_updates_applied_ < options_.confirm_pattern_updates;
 }
 
 double WallFollowingLikelihood(const DistanceField& walls, const Vec2& position_n,
@@ -502,7 +509,7 @@ double MapParticleFilter::PatternThreshold() const {
 }
 
 void MapParticleFilter::NoteConvergence() {
-  if (!converged_ && options_.use_patterns_above_variance_m2 > 0 &&
+  if (!converged_ && options_.use_patterns_above_variance_m2 > 0 && !Unconfirmed() &&
       Covariance().trace() <= options_.use_patterns_above_variance_m2) {
     converged_ = true;
   }

@@ -62,6 +62,10 @@ struct MapParticleFilterOptions {
   /// converged filter that drifts a little is better served by the walls than by a comparison
   /// that furniture can fool). 0 = no hysteresis.
   double relocalize_above_variance_m2 = 0.0;
+  /// Ours: from an unknown start, the filter counts as converged (and skips comparisons) only
+  /// after this many pattern comparisons have been used: walls and the wall-following model
+  /// alone can settle a confident belief in the wrong corridor of a large building.
+  int confirm_pattern_updates = 5;
   /// Ours: map-error and lost-track evidence — the share of the belief that a step drives into
   /// walls (LastBlockedMass) accumulated as a one-sided CUSUM with reference k; above h, a
   /// wall alarm: the walk keeps crossing the map's walls (a map error, or a converged filter
@@ -206,6 +210,8 @@ class MapParticleFilter {
   double wall_cusum_ = 0;
   bool last_step_alarm_ = false;
   int forced_pattern_updates_ = 0;
+  int pattern_updates_applied_ = 0;
+  bool Unconfirmed() const;
   void Recover();
   void WeighWallFollowing(double step_heading_odometry_rad, double power);
   std::shared_ptr<const DistanceField> wall_distance_;

@@ -77,6 +77,8 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
   fo.seed = static_cast<std::uint64_t>(po.Double("seed", 1));
   fo.recover_pattern_updates =
       static_cast<int>(po.Double("recover_pattern_updates", fo.recover_pattern_updates));
+  fo.confirm_pattern_updates = static_cast<int>(
+      std::clamp(po.Double("confirm_pattern_updates", fo.confirm_pattern_updates), 0.0, 1e6));
   const double map_error_wall_alarms = po.Double("map_error_wall_alarms", 3);
   // Option key -> the setting it overrides (the default is the setting's value).
   for (const auto& [key, field] : std::initializer_list<std::pair<const char*, double*>>{
