@@ -57,8 +57,9 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
   if (!(wall_alarm_k >= 0 && wall_alarm_k < 1) || !(wall_alarm_h > 0))
     return fail("wall_alarm_k must be within [0, 1) and wall_alarm_h > 0");
   if (!(recover_position_sigma_m >= 0) || !(recover_heading_sigma_rad >= 0) ||
-      recover_pattern_updates < 0)
-    return fail("recovery spreads and updates must be >= 0");
+      recover_pattern_updates < 0 || confirm_pattern_updates < 0)
+    return fail(
+        "recovery spreads, recover_pattern_updates and confirm_pattern_updates must be >= 0");
   if (!(max_match_rmse_m > 0)) return fail("max_match_rmse_m must be > 0");
   if (!(wall_follow_offset_m >= 0 && wall_follow_offset_m <= 2) || !(wall_follow_sigma_m > 0))
     return fail("wall_follow_offset_m must be within [0, 2] and wall_follow_sigma_m > 0");
@@ -213,6 +214,12 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
     particles_[i] = particles_[alive[k]];
   }
   Normalize();
+}
+
+void MapParticleFilter::ResampleIfDegenerate() {
+  double sum2 = 0;
+  for (const auto& q : particles_) sum2 += q.weight * q.weight;
+  if (1.0 / sum2 < options_.ess_resample_fraction * particles_.size()) SystematicResample();
 }
 
 void MapParticleFilter::SystematicResample() {
@@ -435,9 +442,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
       Normalize();
     }
   }
-  double sum2 = 0;
-  for (const auto& q : particles_) sum2 += q.weight * q.weight;
-  if (1.0 / sum2 < options_.ess_resample_fraction * particles_.size()) SystematicResample();
+  ResampleIfDegenerate();
 }
 
 bool MapParticleFilter::WantsPatterns() const {
@@ -482,14 +487,11 @@ void MapParticleFilter::WeighWallFollowing(double step_heading_odometry_rad, dou
     q.weight *= power == 1.0 ? l : std::pow(l, power);
   }
   Normalize();
-  double sum2 = 0;
-  for (const auto& q : particles_) sum2 += q.weight * q.weight;
-  if (1.0 / sum2 < options_.ess_resample_fraction * particles_.size()) SystematicResample();
+  ResampleIfDegenerate();
 }
 
 void MapParticleFilter::Recover() {
   ++summary_.recoveries;
-
   for (auto& q : particles_) {
     const Vec2 p = q.position_n + Vec2(rng_.Normal(0, options_.recover_position_sigma_m),
                                        rng_.Normal(0, options_.recover_position_sigma_m));

@@ -187,6 +187,8 @@ class MapParticleFilter {
   void Normalize();
   void ReplaceFromSurvivors(const std::vector<char>& dead);
   void SystematicResample();
+  /// Systematic resampling when the effective sample size is below ess_resample_fraction N.
+  void ResampleIfDegenerate();
   Vec2 RandomInsidePoint();
   bool InsideBuilding(const Vec2& p) const;
   double PatternThreshold() const;

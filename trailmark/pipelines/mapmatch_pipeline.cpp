@@ -22,7 +22,7 @@ bool MapMatchPipeline::CanRun(const MissionDirectory& mission) const {
 
 namespace {
 
-constexpr double kDefaultMapMatchParticles = 2000;
+constexpr int kDefaultMapMatchParticles = 2000;
 
 struct AgentTrack {
   std::unique_ptr<mapmatch::MapParticleFilter> filter;
@@ -72,13 +72,15 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
   // Ours: 2,000 particles by default (the paper: N = 500, `particles=500`); with the
   // wall-following model the belief stays sharp, and more particles keep the second
   // hypotheses alive through furniture (docs/mapmatch.md: measured on held-out searches).
-  fo.particles = static_cast<int>(
-      std::clamp(po.Double("particles", kDefaultMapMatchParticles), 0.0, 1e7));  // IsValid: range
-  fo.seed = static_cast<std::uint64_t>(po.Double("seed", 1));
-  fo.recover_pattern_updates =
-      static_cast<int>(po.Double("recover_pattern_updates", fo.recover_pattern_updates));
-  fo.confirm_pattern_updates = static_cast<int>(
-      std::clamp(po.Double("confirm_pattern_updates", fo.confirm_pattern_updates), 0.0, 1e6));
+  fo.particles = kDefaultMapMatchParticles;
+  // Whole-number options, clamped before the cast (IsValid then names the allowed range).
+  for (const auto& [key, field] : std::initializer_list<std::pair<const char*, int*>>{
+           {"particles", &fo.particles},
+           {"recover_pattern_updates", &fo.recover_pattern_updates},
+           {"confirm_pattern_updates", &fo.confirm_pattern_updates}}) {
+    *field = static_cast<int>(std::clamp(po.Double(key, *field), -1.0, 1e7));
+  }
+  fo.seed = static_cast<std::uint64_t>(std::clamp(po.Double("seed", 1), 0.0, 1e18));
   const double map_error_wall_alarms = po.Double("map_error_wall_alarms", 3);
   // Option key -> the setting it overrides (the default is the setting's value).
   for (const auto& [key, field] : std::initializer_list<std::pair<const char*, double*>>{
