@@ -105,7 +105,11 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
                                                           {"wall_follow_sigma_m", "0"},
                                                           {"wall_follow_leave", "1"},
                                                           {"wall_follow_off_likelihood", "1.5"},
-                                                          {"wall_follow", "maybe"}}) {
+                                                          {"wall_follow", "maybe"},
+                                                          {"seed", "-1"},
+                                                          {"seed", "2.5"},
+                                                          {"seed", "1e30"},
+                                                          {"particles", "2500.5"}}) {
       EXPECT_THROW(MapMatchPipeline().Run({mission, {{key, value}}}, sink), std::invalid_argument)
           << key;
     }
