@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -186,8 +187,12 @@ int ReproduceIns(const fs::path& data_dir, const fs::path& out,
                   cy = g.RequireColumn("y_m");
         std::vector<Vec2> est, gt;
         while (g.Next()) {
-          const auto k = static_cast<std::size_t>(g.Double(ci));
-          if (k >= states.size()) g.Fail("imu_index0 beyond the IMU samples");
+          const double index = g.Double(ci);
+          if (!(index >= 0) || index != std::floor(index) ||
+              index >= static_cast<double>(states.size())) {
+            g.Fail("imu_index0 is not a sample index of the IMU file");
+          }
+          const auto k = static_cast<std::size_t>(index);
           est.push_back(states[k].position_n.head<2>());
           gt.emplace_back(g.Double(cx), g.Double(cy));
         }

@@ -17,7 +17,7 @@ ins::InsOptions InsOptionsFrom(const std::map<std::string, std::string>& values,
   ins::InsOptions x;
   x.detector.kind = ins::ParseDetectorKind(o.String("detector", ins::ToString(x.detector.kind)));
   if (values.count("window")) x.detector.window_s = 0;  // an explicit sample count wins
-  x.detector.window = static_cast<int>(o.Double("window", x.detector.window));
+  x.detector.window = static_cast<int>(o.Whole("window", x.detector.window, 1, 100000));
   x.detector.window_s = o.Double("window_s", x.detector.window_s);
   if (values.count("gamma")) x.detector.gamma = o.Double("gamma", 0);
   else o.Double("gamma", 0);

@@ -73,27 +73,13 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
   // wall-following model the belief stays sharp, and more particles keep the second
   // hypotheses alive through furniture (docs/mapmatch.md: measured on held-out searches).
   fo.particles = kDefaultMapMatchParticles;
-  // Whole-number options: a fraction is refused, not truncated; the value is clamped before the
-  // cast (IsValid then names the allowed range).
-  auto whole = [&](const char* key, double value) {
-    if (value != std::floor(value)) {
-      throw std::invalid_argument(fmt::format(
-          "pipeline mapmatch: option {} must be a whole number, not {}", key, value));
-    }
-    return value;
-  };
-  for (const auto& [key, field] : std::initializer_list<std::pair<const char*, int*>>{
-           {"particles", &fo.particles},
-           {"recover_pattern_updates", &fo.recover_pattern_updates},
-           {"confirm_pattern_updates", &fo.confirm_pattern_updates}}) {
-    *field = static_cast<int>(std::clamp(whole(key, po.Double(key, *field)), -1.0, 1e7));
-  }
-  const double seed = whole("seed", po.Double("seed", 1));
-  if (!(seed >= 0 && seed <= 9007199254740992.0)) {  // 2^53: every whole number up to it is exact
-    throw std::invalid_argument(fmt::format(
-        "pipeline mapmatch: option seed must be within 0 .. 2^53, not {}", seed));
-  }
-  fo.seed = static_cast<std::uint64_t>(seed);
+  fo.particles = static_cast<int>(po.Whole("particles", fo.particles, 10, 1000000));
+  fo.recover_pattern_updates =
+      static_cast<int>(po.Whole("recover_pattern_updates", fo.recover_pattern_updates, 0, 1000000));
+  fo.confirm_pattern_updates =
+      static_cast<int>(po.Whole("confirm_pattern_updates", fo.confirm_pattern_updates, 0, 1000000));
+  // 2^53: every whole number up to it is exact in the option's double.
+  fo.seed = static_cast<std::uint64_t>(po.Whole("seed", 1, 0, std::int64_t{1} << 53));
   const double map_error_wall_alarms = po.Double("map_error_wall_alarms", 3);
   // Option key -> the setting it overrides (the default is the setting's value).
   for (const auto& [key, field] : std::initializer_list<std::pair<const char*, double*>>{

@@ -19,6 +19,18 @@ double PipelineOptions::Double(const std::string& key, double fallback) {
   return *v;
 }
 
+std::int64_t PipelineOptions::Whole(const std::string& key, std::int64_t fallback,
+                                    std::int64_t min_value, std::int64_t max_value) {
+  const double v = Double(key, static_cast<double>(fallback));
+  if (v != std::floor(v) || v < static_cast<double>(min_value) ||
+      v > static_cast<double>(max_value)) {
+    throw std::invalid_argument("pipeline " + pipeline_ + ": option " + key + "='" +
+                                values_.at(key) + "' must be a whole number within " +
+                                std::to_string(min_value) + " .. " + std::to_string(max_value));
+  }
+  return static_cast<std::int64_t>(v);
+}
+
 bool PipelineOptions::Bool(const std::string& key, bool fallback) {
   known_.insert(key);
   auto it = values_.find(key);
