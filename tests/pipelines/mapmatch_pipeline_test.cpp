@@ -109,7 +109,8 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
                                                           {"seed", "-1"},
                                                           {"seed", "2.5"},
                                                           {"seed", "1e30"},
-                                                          {"particles", "2500.5"}}) {
+                                                          {"particles", "2500.5"},
+                                                          {"map_error_wall_alarms", "2.5"}}) {
       EXPECT_THROW(MapMatchPipeline().Run({mission, {{key, value}}}, sink), std::invalid_argument)
           << key;
     }

@@ -80,7 +80,8 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
       static_cast<int>(po.Whole("confirm_pattern_updates", fo.confirm_pattern_updates, 0, 1000000));
   // 2^53: every whole number up to it is exact in the option's double.
   fo.seed = static_cast<std::uint64_t>(po.Whole("seed", 1, 0, std::int64_t{1} << 53));
-  const double map_error_wall_alarms = po.Double("map_error_wall_alarms", 3);
+  m.map_error_wall_alarms =
+      static_cast<int>(po.Whole("map_error_wall_alarms", m.map_error_wall_alarms, 1, 1000000));
   // Option key -> the setting it overrides (the default is the setting's value).
   for (const auto& [key, field] : std::initializer_list<std::pair<const char*, double*>>{
            {"sigma", &fo.likelihood_sigma},
@@ -123,14 +124,12 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
   po.RejectUnknown();
   std::string why;
   if (!fo.IsValid(&why) || !so.grid.IsValid(&why) || !co.IsValid(&why) ||
-      !(m.compare_every_m > 0) || !(m.alarm_m2 > 0) || !(m.alarm_min_s >= 0) ||
-      !(map_error_wall_alarms >= 1 && map_error_wall_alarms <= 1e6)) {
-    throw std::invalid_argument("pipeline mapmatch: " +
-                                (why.empty() ? "compare_every_m and variance_alarm_m2 must be > 0, "
-                                               "map_error_wall_alarms within 1 .. 1,000,000"
-                                             : why));
+      !(m.compare_every_m > 0) || !(m.alarm_m2 > 0) || !(m.alarm_min_s >= 0)) {
+    throw std::invalid_argument(
+        "pipeline mapmatch: " +
+        (why.empty() ? "compare_every_m and variance_alarm_m2 must be > 0, variance_alarm_min_s >= 0"
+                     : why));
   }
-  m.map_error_wall_alarms = static_cast<int>(map_error_wall_alarms);
 
   m.plan = std::move(plan);
   for (const auto& p : mapmatch::CheckFloorPlan(m.plan, so.wall_snap_m)) {

@@ -21,6 +21,10 @@ double PipelineOptions::Double(const std::string& key, double fallback) {
 
 std::int64_t PipelineOptions::Whole(const std::string& key, std::int64_t fallback,
                                     std::int64_t min_value, std::int64_t max_value) {
+  if (!values_.count(key)) {
+    known_.insert(key);
+    return fallback;
+  }
   const double v = Double(key, static_cast<double>(fallback));
   if (v != std::floor(v) || v < static_cast<double>(min_value) ||
       v > static_cast<double>(max_value)) {
