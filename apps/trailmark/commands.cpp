@@ -205,9 +205,20 @@ void Validate(const fs::path& mission_dir) {
   ValidateStream<BearingMeasurement>(mission, [](const BearingMeasurement& r) { return r.t; });
   ValidateStream<MissionEvent>(mission, [](const MissionEvent& r) { return r.t; });
   ValidateStream<TruthSample>(mission, [](const TruthSample& r) { return r.t; });
-  if (const auto plan = mission.LoadFloorPlan()) {
-    fmt::print("{:<14} {} walls, {} doors, {} rooms\n", *mission.info().floorplan,
-               plan->walls().size(), plan->doors().size(), plan->rooms().size());
+  std::vector<int> levels;
+  if (const auto plan = mission.LoadFloorPlan(std::nullopt, &levels)) {
+    if (levels.size() > 1) {
+      // One line per floor: a single-floor pipeline uses one of them (mapmatch: level=N).
+      for (const int level : levels) {
+        const auto floor = mission.LoadFloorPlan(level);
+        fmt::print("{:<14} level {}: {} walls, {} doors, {} rooms{}\n", *mission.info().floorplan,
+                   level, floor->walls().size(), floor->doors().size(), floor->rooms().size(),
+                   level == DefaultFloorPlanLevel(levels) ? " (the default floor)" : "");
+      }
+    } else {
+      fmt::print("{:<14} {} walls, {} doors, {} rooms\n", *mission.info().floorplan,
+                 plan->walls().size(), plan->doors().size(), plan->rooms().size());
+    }
   }
   fmt::print("valid; runnable pipelines:");
   for (const auto& name : RunnablePipelines(mission)) fmt::print(" {}", name);

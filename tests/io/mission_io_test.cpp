@@ -155,6 +155,47 @@ TEST(FloorPlanGeoJson, ReadsWallsDoorsRoomsAndLevels) {
   EXPECT_EQ(back.solid_walls().size(), all.solid_walls().size());
 }
 
+TEST(FloorPlanGeoJson, AMultiFloorPlanIsReadOneFloorAtATime) {
+  // Floor 0 a 10 x 5 m room; floor 1 a wall straight across it (the room above is split).
+  TempDir dir;
+  dir.File("mission.json", R"({"nodes":[],"floorplan":"plan.geojson"})");
+  dir.File("plan.geojson", R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"wall"},
+     "geometry":{"type":"LineString","coordinates":[[0,0],[10,0],[10,5],[0,5],[0,0]]}},
+    {"type":"Feature","properties":{"kind":"wall","level":1},
+     "geometry":{"type":"LineString","coordinates":[[5,0],[5,5]]}},
+    {"type":"Feature","properties":{"kind":"room","level":-1,"name":"cellar"},
+     "geometry":{"type":"Polygon","coordinates":[[[0,0],[4,0],[4,4],[0,0]]]}}]})");
+  const MissionDirectory mission(dir.path());
+  std::vector<int> levels;
+  const auto ground = mission.LoadFloorPlan(std::nullopt, &levels);
+  EXPECT_EQ(levels, (std::vector<int>{-1, 0, 1}));
+  // Not told which: level 0 (the entry floor), never the floors merged.
+  ASSERT_TRUE(ground.has_value());
+  EXPECT_EQ(ground->walls().size(), 4u);
+  EXPECT_FALSE(ground->Crosses({2, 2}, {8, 2}));
+  const auto upstairs = mission.LoadFloorPlan(1);
+  EXPECT_EQ(upstairs->walls().size(), 1u);
+  EXPECT_TRUE(upstairs->Crosses({2, 2}, {8, 2}));
+  EXPECT_EQ(mission.LoadFloorPlan(-1)->rooms().size(), 1u);
+  try {
+    mission.LoadFloorPlan(2);
+    FAIL() << "expected an error for level 2";
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("plan.geojson"), HasSubstr("no level 2"),
+                                HasSubstr("-1, 0, 1")));
+  }
+  EXPECT_EQ(DefaultFloorPlanLevel({-1, 0, 1}), 0);
+  EXPECT_EQ(DefaultFloorPlanLevel({2, 3}), 2);  // no level 0: the lowest
+  EXPECT_EQ(DefaultFloorPlanLevel({}), 0);
+  // A plan without levels is one floor, level 0.
+  std::vector<int> one;
+  ParseFloorPlanGeoJson(R"({"type":"FeatureCollection","features":[{"type":"Feature",
+      "properties":{"kind":"wall"},"geometry":{"type":"LineString","coordinates":[[0,0],[1,0]]}}]})",
+                        "x", -1, &one);
+  EXPECT_EQ(one, std::vector<int>{0});
+}
+
 TEST(FloorPlanGeoJson, BadGeometryIsNamed) {
   auto error = [](const std::string& t) {
     try {

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "test_util.h"
 #include "trailmark/core/error.h"
@@ -152,6 +153,49 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("needs a floor plan"), std::string::npos) << e.what();
   }
+}
+
+TEST(MapMatchPipeline, AMultiFloorPlanIsMatchedOnOneFloor) {
+  // House 1 on level 0 and, on level 1, walls every metre across it (the floor above, cut into
+  // offices): merged into one plan every step would cross a wall. Not told which floor, the
+  // filter uses level 0 and gives exactly the single-floor result.
+  HouseSearchOptions o;
+  o.duration_s = 60;
+  const SimulatedMission sim = SimulateHouseSearch(o, 3);
+  testing::TempDir single, multi;
+  WriteMissionDirectory(single.path(), sim.data, &sim.plan);
+  WriteMissionDirectory(multi.path(), sim.data, &sim.plan);
+  {
+    auto plan = nlohmann::json::parse(std::ifstream(multi.path() / "floorplan.geojson"));
+    for (int x = 1; x < 12; ++x) {
+      plan["features"].push_back(
+          {{"type", "Feature"},
+           {"properties", {{"kind", "wall"}, {"level", 1}}},
+           {"geometry", {{"type", "LineString"}, {"coordinates", {{x + 0.5, 0.0}, {x + 0.5, 10.0}}}}}});
+    }
+    std::ofstream(multi.path() / "floorplan.geojson") << plan.dump();
+  }
+  const std::map<std::string, std::string> options{{"pseudo", "false"}};
+  VectorSink a, b;
+  MapMatchPipeline().Run({MissionDirectory(single.path()), options}, a);
+  const PipelineSummary s = MapMatchPipeline().Run({MissionDirectory(multi.path()), options}, b);
+  ASSERT_EQ(a.rows.size(), b.rows.size());
+  for (std::size_t k = 0; k < a.rows.size(); ++k) {
+    ASSERT_EQ(a.rows[k].position_n, b.rows[k].position_n) << k;
+  }
+  bool noted = false;
+  for (const auto& n : s.notes) noted |= n.find("2 levels (0, 1)") != std::string::npos;
+  EXPECT_TRUE(noted);
+  // Asked for a floor the plan does not have, or not a whole number: named.
+  const MissionDirectory mission(multi.path());
+  try {
+    MapMatchPipeline().Run({mission, {{"level", "2"}}}, b);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("no level 2 (its levels: 0, 1)"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_THROW(MapMatchPipeline().Run({mission, {{"level", "0.5"}}}, b), std::invalid_argument);
 }
 
 TEST(MapMatchPipeline, TheWallFollowingModelHoldsHouseTwoFromAnUnknownStart) {

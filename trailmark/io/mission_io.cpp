@@ -1,6 +1,9 @@
 #include "trailmark/io/mission_io.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <algorithm>
 
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -220,7 +223,9 @@ void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info
   if (!out) throw std::runtime_error(path.string() + ": write failed");
 }
 
-FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source, int level) {
+FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source, int level,
+                                std::vector<int>* levels_present) {
+  std::set<int> levels;
   const json root = ParseJson(text, source);
   if (!root.is_object() || root.value("type", "") != "FeatureCollection") {
     Bad(source, "/", "expected a GeoJSON FeatureCollection");
@@ -247,8 +252,9 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
                                                   "expected an integer");
       feature_level = props["level"].get<int>();
     }
-    if (level >= 0 && feature_level != level) continue;
     if (kind != "wall" && kind != "door" && kind != "room") continue;  // others are ignored
+    levels.insert(feature_level);
+    if (level >= 0 && feature_level != level) continue;
     if (!f.contains("geometry") || !f["geometry"].is_object()) {
       Bad(source, where + "/geometry", "missing geometry");
     }
@@ -299,11 +305,18 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
           fmt::format("a {} must be a LineString or MultiLineString, not '{}'", kind, type));
     }
   }
+  if (levels_present) levels_present->assign(levels.begin(), levels.end());
   return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
 }
 
-FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level) {
-  return ParseFloorPlanGeoJson(ReadText(path), path.string(), level);
+FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level,
+                               std::vector<int>* levels_present) {
+  return ParseFloorPlanGeoJson(ReadText(path), path.string(), level, levels_present);
+}
+
+int DefaultFloorPlanLevel(const std::vector<int>& levels) {
+  if (levels.empty() || std::find(levels.begin(), levels.end(), 0) != levels.end()) return 0;
+  return *std::min_element(levels.begin(), levels.end());
 }
 
 std::string FloorPlanToGeoJson(const FloorPlan& plan) {
@@ -407,9 +420,21 @@ void MissionDirectory::Require(const std::string& file, const std::string& neede
   }
 }
 
-std::optional<FloorPlan> MissionDirectory::LoadFloorPlan() const {
+std::optional<FloorPlan> MissionDirectory::LoadFloorPlan(std::optional<int> level,
+                                                         std::vector<int>* levels_present) const {
   if (!info_.floorplan) return std::nullopt;
-  return ReadFloorPlanGeoJson(dir_ / *info_.floorplan);
+  const std::filesystem::path path = dir_ / *info_.floorplan;
+  const std::string text = ReadText(path);
+  std::vector<int> levels;
+  FloorPlan all = ParseFloorPlanGeoJson(text, path.string(), -1, &levels);
+  if (levels_present) *levels_present = levels;
+  if (level && !levels.empty() && std::find(levels.begin(), levels.end(), *level) == levels.end()) {
+    throw InputError(path.string(), 0,
+                     fmt::format("the floor plan has no level {} (its levels: {})", *level,
+                                 fmt::join(levels, ", ")));
+  }
+  if (levels.size() <= 1 && !level) return all;
+  return ParseFloorPlanGeoJson(text, path.string(), level.value_or(DefaultFloorPlanLevel(levels)));
 }
 
 }  // namespace trailmark

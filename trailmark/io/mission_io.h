@@ -19,10 +19,16 @@ MissionInfo ReadMissionInfo(const std::filesystem::path& path);
 std::string MissionInfoToJson(const MissionInfo& info);
 void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info);
 
-/// Floor plan GeoJSON (spec: "Floor plans"). `level` selects one floor (-1 = all levels).
+/// Floor plan GeoJSON (spec: "Floor plans"). `level` selects one floor (-1 = all levels);
+/// `levels_present` (optional) receives the levels its walls, doors and rooms use, sorted
+/// (a feature without "level" is on level 0).
 FloorPlan ParseFloorPlanGeoJson(const std::string& json_text, const std::string& source,
-                                int level = -1);
-FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level = -1);
+                                int level = -1, std::vector<int>* levels_present = nullptr);
+FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level = -1,
+                               std::vector<int>* levels_present = nullptr);
+/// The floor a single-floor consumer uses when not told: level 0 when the plan has it (the
+/// floor the responders enter on), else the lowest.
+int DefaultFloorPlanLevel(const std::vector<int>& levels_present);
 std::string FloorPlanToGeoJson(const FloorPlan& plan);
 
 /// Writes mission.json, every non-empty stream and (when given) the floor plan into `dir`,
@@ -59,8 +65,12 @@ class MissionDirectory {
   RowReader<Row> OpenStream() const {
     return RowReader<Row>(Path(StreamFileName<Row>()).string(), &registry_);
   }
-  /// The floor plan named in mission.json, if any.
-  std::optional<FloorPlan> LoadFloorPlan() const;
+  /// The floor plan named in mission.json, if any: one floor of it — `level`, or when not
+  /// given DefaultFloorPlanLevel (floors are never merged into one plan). A `level` the plan
+  /// does not have is an InputError naming the file and the levels it has. `levels_present`
+  /// (optional) receives the plan's levels.
+  std::optional<FloorPlan> LoadFloorPlan(std::optional<int> level = std::nullopt,
+                                         std::vector<int>* levels_present = nullptr) const;
 
  private:
   std::filesystem::path dir_;

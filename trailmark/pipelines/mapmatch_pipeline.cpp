@@ -1,6 +1,7 @@
 #include "trailmark/pipelines/mapmatch_pipeline.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
@@ -304,7 +305,7 @@ void MapMatchSession::Summarize(PipelineSummary& summary) {
 
 PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
   const MissionDirectory& mission = context.mission;
-  const auto [ins_options, rest] = SplitInsOptions(context.options);
+  auto [ins_options, rest] = SplitInsOptions(context.options);
   PipelineSummary summary;
   if (!mission.info().floorplan) {
     throw InputError(mission.Path("mission.json").string(), 0,
@@ -312,7 +313,23 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
   }
   mission.Require(*mission.info().floorplan, "the mapmatch pipeline");
   const std::string plan_file = mission.Path(*mission.info().floorplan).string();
-  MapMatchSession session(mission.info(), *mission.LoadFloorPlan(), plan_file, rest, summary);
+  // One floor of a multi-floor plan (the paper's filter is 2-D): `level`, else level 0 (the
+  // entry floor) or the lowest.
+  std::optional<int> level;
+  if (const auto it = rest.find("level"); it != rest.end()) {
+    PipelineOptions lo({{"level", it->second}}, "mapmatch");
+    level = static_cast<int>(lo.Whole("level", 0, -1000000, 1000000));
+    rest.erase(it);
+  }
+  std::vector<int> levels;
+  FloorPlan plan = *mission.LoadFloorPlan(level, &levels);
+  if (levels.size() > 1) {
+    summary.notes.push_back(fmt::format(
+        "floor plan: {} levels ({}); the filter uses level {}{}", levels.size(),
+        fmt::join(levels, ", "), level.value_or(DefaultFloorPlanLevel(levels)),
+        level ? "" : " (option level=N for another)"));
+  }
+  MapMatchSession session(mission.info(), std::move(plan), plan_file, rest, summary);
   StepSource steps(mission, ins_options, "the mapmatch pipeline", &summary);
   Step step;
   std::size_t rows = 0;
