@@ -21,6 +21,7 @@
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
+#include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/landmarks/energy.h"
 #include "trailmark/pipelines/beacons_pipeline.h"
@@ -150,10 +151,11 @@ int main(int argc, char** argv) {
   std::string convert_format, convert_src, convert_out;
   auto* convert = app.add_subcommand(
       "convert", "convert recorded data into a mission directory (formats: pyshoe-vicon, "
-                 "openshoe-figure8, llio-gcp-walk, zupt-dualfoot)");
+                 "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor)");
   convert->add_option("format", convert_format,
                       "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
-                      "(WALK_imu.csv) | zupt-dualfoot (the folder)")
+                      "(WALK_imu.csv) | zupt-dualfoot (the folder) | wrld-indoor (the folder "
+                      "holding main.json: a WRLD indoor map as a multi-floor floor plan)")
       ->required();
   convert->add_option("source", convert_src, "source file or folder")->required()->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
@@ -259,6 +261,17 @@ int main(int argc, char** argv) {
       return cli::Bench(bench_rows, bench_json);
     } else if (*convert) {
       std::size_t samples = 0;
+      if (convert_format == "wrld-indoor") {
+        const WrldBuilding building = ReadWrldBuilding(convert_src);
+        WriteWrldMission(building, convert_out);
+        for (const auto& l : building.levels) {
+          fmt::print("level {:>3} ({}): {} walls, {} rooms\n", l.z_order,
+                     l.name.empty() ? l.id : l.name, l.walls.size(), l.rooms.size());
+        }
+        fmt::print("converted {} ({} levels) into {} (floorplan.geojson, mission.json)\n",
+                   convert_src, building.levels.size(), convert_out);
+        return 0;
+      }
       if (convert_format == "pyshoe-vicon") {
         const PyShoeTrial trial = ReadPyShoeTrial(convert_src);
         WritePyShoeMission(trial, convert_out);

@@ -21,6 +21,21 @@ done
 cmp "$dir/m/steps.csv" "$dir/m2/steps.csv" || fail "not deterministic per seed"
 cmp "$dir/m/rssi.csv" "$dir/m2/rssi.csv" || fail "not deterministic per seed"
 "$TM" pipelines | matches "^pdr" || fail pipelines
+# A WRLD indoor map (two levels, lon/lat) -> a multi-floor floor plan in metres.
+mkdir -p "$dir/wrld"
+cat > "$dir/wrld/main.json" <<'JSON'
+{"id":"tiny","location":{"type":"Point","coordinates":[-2.978,56.46]},
+ "levels":[{"id":"g","name":"G","z_order":0,"filename":"g.geojson"},
+           {"id":"one","name":"1","z_order":1,"filename":"one.geojson"}]}
+JSON
+square='[[[-2.978,56.46],[-2.9779,56.46],[-2.9779,56.4601],[-2.978,56.4601],[-2.978,56.46]]]'
+echo "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\",\"properties\":{\"type\":\"wall\"},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":$square}}]}" > "$dir/wrld/g.geojson"
+cp "$dir/wrld/g.geojson" "$dir/wrld/one.geojson"
+"$TM" convert wrld-indoor "$dir/wrld" --out "$dir/wm" | matches "2 levels" || fail "convert wrld-indoor"
+"$TM" validate "$dir/wm" | matches "level 1: 4 walls" || fail "validate a multi-floor plan"
+rm "$dir/wrld/one.geojson"
+run_failing "$TM" convert wrld-indoor "$dir/wrld" --out "$dir/wm2"
+[ $rc -ne 0 ] && grep -q "one.geojson: file does not exist" "$dir/err" || fail "wrld missing level file"
 "$TM" validate "$dir/m" | matches "runnable pipelines: pdr" || fail validate
 "$TM" run --pipeline pdr "$dir/m" --out "$dir/run" | matches estimates || fail run
 head -1 "$dir/run/estimates.csv" | matches "^t,id,x,y,z,sxx,sxy,syy$" || fail "estimates header"

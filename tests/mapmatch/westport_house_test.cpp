@@ -7,12 +7,11 @@
 
 #include <Eigen/LU>
 #include <cmath>
-#include <fstream>
-#include <nlohmann/json.hpp>
 #include <numbers>
 
 #include "test_util.h"
 #include "trailmark/core/random.h"
+#include "trailmark/io/convert_wrld.h"
 #include "trailmark/mapmatch/particle_filter.h"
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/walker.h"
@@ -20,38 +19,14 @@
 namespace trailmark::mapmatch {
 namespace {
 
-// The level's walls, windows, outline, stairs and lifts as wall segments (polygon edges), in
-// metres east/north of the building's location (main.json); doors are the gaps between walls.
-FloorPlan LoadWrldLevel(const std::filesystem::path& dir, const std::string& level) {
-  const auto main = nlohmann::json::parse(std::ifstream(dir / "main.json"));
-  const double lon0 = main["location"]["coordinates"][0];
-  const double lat0 = main["location"]["coordinates"][1];
-  constexpr double kEarthRadiusM = 6371008.8;
-  const double deg = std::numbers::pi / 180;
-  auto to_m = [&](const nlohmann::json& c) {
-    return Vec2(kEarthRadiusM * std::cos(lat0 * deg) * (c[0].get<double>() - lon0) * deg,
-                kEarthRadiusM * (c[1].get<double>() - lat0) * deg);
-  };
-  const auto geo = nlohmann::json::parse(std::ifstream(dir / (level + ".geojson")));
-  std::vector<Segment2> walls;
-  for (const auto& f : geo["features"]) {
-    const std::string type = f["properties"].value("type", "");
-    if (type != "wall" && type != "window" && type != "building_outline" && type != "stairs" &&
-        type != "elevator")
-      continue;
-    if (f["geometry"].is_null() || f["geometry"]["type"] != "Polygon") continue;
-    for (const auto& ring : f["geometry"]["coordinates"]) {
-      for (std::size_t k = 1; k < ring.size(); ++k)
-        walls.push_back({to_m(ring[k - 1]), to_m(ring[k])});
-    }
-  }
-  return FloorPlan(std::move(walls), {}, {});
-}
-
 TEST(WestportHouse, SearchSequencesAndTheFilterOnARealFloorPlan) {
   const auto dir = testing::SharedData("floorplan-westport-house");
   if (dir.empty()) GTEST_SKIP() << "../shared/data/floorplan-westport-house not found";
-  const FloorPlan plan = LoadWrldLevel(dir, "westport-house-floor-1");
+  // The level's walls, windows, outline, stairs and lifts as wall segments (polygon edges), in
+  // metres east/north of the building's location; doors are the gaps between walls.
+  const WrldBuilding building = ReadWrldBuilding(dir);
+  ASSERT_NE(building.Level("westport-house-floor-1"), nullptr);
+  const FloorPlan plan(building.Level("westport-house-floor-1")->walls, {}, {});
   // 826 wall pieces; the outline drawn over the outer walls gives overlaps (reported, not fatal).
   for (const auto& p : CheckFloorPlan(plan)) EXPECT_FALSE(p.fatal) << p.message;
   const SearchGrid grid(plan);

@@ -1,0 +1,236 @@
+#include "trailmark/io/convert_wrld.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <set>
+
+#include "trailmark/core/error.h"
+#include "trailmark/io/json_input.h"
+
+namespace trailmark {
+namespace {
+
+using nlohmann::json;
+using io_detail::Bad;
+using io_detail::Number;
+
+constexpr double kEarthRadiusM = 6371008.8;  // mean radius (IUGG)
+
+const std::set<std::string>& BlockingTypes() {
+  static const std::set<std::string> types{"wall",   "window",   "building_outline",
+                                           "stairs", "elevator", "inaccessible_space",
+                                           "floor_opening"};
+  return types;
+}
+
+struct Projection {
+  double lon0_deg, lat0_deg;
+  Vec2 ToMetres(const json& c, const std::string& source, const std::string& where) const {
+    if (!c.is_array() || c.size() < 2) Bad(source, where, "expected a position [lon, lat]");
+    const double lon = Number(c[0], source, where + "/0");
+    const double lat = Number(c[1], source, where + "/1");
+    if (std::abs(lon) > 180 || std::abs(lat) > 90) {
+      Bad(source, where, fmt::format("[{}, {}] is not a WGS84 longitude, latitude", lon, lat));
+    }
+    const double deg = std::numbers::pi / 180;
+    const Vec2 p(kEarthRadiusM * std::cos(lat0_deg * deg) * (lon - lon0_deg) * deg,
+                 kEarthRadiusM * (lat - lat0_deg) * deg);
+    // A building is not tens of kilometres across: a wrong location or swapped coordinates.
+    if (p.norm() > 50e3) {
+      Bad(source, where,
+          fmt::format("[{}, {}] is {:.0f} km from the building's location in main.json", lon, lat,
+                      p.norm() / 1e3));
+    }
+    return p;
+  }
+};
+
+// The rings of a Polygon or MultiPolygon geometry (JSON pointer of each ring).
+std::vector<std::pair<const json*, std::string>> Rings(const json& g, const std::string& source,
+                                                       const std::string& where) {
+  std::vector<std::pair<const json*, std::string>> rings;
+  const std::string type = g.value("type", "");
+  if (!g.contains("coordinates") || !g["coordinates"].is_array()) {
+    Bad(source, where + "/coordinates", "expected an array");
+  }
+  const json& c = g["coordinates"];
+  auto polygon = [&](const json& p, const std::string& w) {
+    if (!p.is_array()) Bad(source, w, "expected an array of rings");
+    for (std::size_t r = 0; r < p.size(); ++r) {
+      if (!p[r].is_array()) Bad(source, fmt::format("{}/{}", w, r), "expected a ring");
+      rings.emplace_back(&p[r], fmt::format("{}/{}", w, r));
+    }
+  };
+  if (type == "Polygon") {
+    polygon(c, where + "/coordinates");
+  } else if (type == "MultiPolygon") {
+    for (std::size_t k = 0; k < c.size(); ++k) polygon(c[k], fmt::format("{}/coordinates/{}", where, k));
+  } else if (type == "LineString") {
+    rings.emplace_back(&c, where + "/coordinates");
+  }
+  return rings;
+}
+
+WrldLevel ReadLevel(const std::filesystem::path& path, const Projection& proj) {
+  const std::string source = path.string();
+  const json root = io_detail::ParseJson(io_detail::ReadText(path), source);
+  if (!root.is_object() || !root.contains("features") || !root["features"].is_array()) {
+    Bad(source, "/features", "expected a GeoJSON FeatureCollection with a features array");
+  }
+  WrldLevel level;
+  const json& features = root["features"];
+  for (std::size_t i = 0; i < features.size(); ++i) {
+    const std::string where = fmt::format("/features/{}", i);
+    const json& f = features[i];
+    if (!f.is_object()) Bad(source, where, "expected a Feature object");
+    if (!f.contains("properties") || !f["properties"].is_object()) continue;
+    const json& props = f["properties"];
+    const std::string type =
+        props.contains("type") && props["type"].is_string() ? props["type"].get<std::string>() : "";
+    const bool blocking = BlockingTypes().count(type) > 0;
+    const bool room = type == "room" || type == "bathroom";
+    if (!blocking && !room) continue;
+    if (!f.contains("geometry") || f["geometry"].is_null()) continue;  // "no_geometry" items
+    if (!f["geometry"].is_object()) Bad(source, where + "/geometry", "expected an object");
+    for (const auto& [ring, w] : Rings(f["geometry"], source, where + "/geometry")) {
+      std::vector<Vec2> pts;
+      for (std::size_t k = 0; k < ring->size(); ++k) {
+        pts.push_back(proj.ToMetres((*ring)[k], source, fmt::format("{}/{}", w, k)));
+      }
+      if (blocking) {
+        for (std::size_t k = 1; k < pts.size(); ++k) {
+          if ((pts[k] - pts[k - 1]).norm() > 1e-9) level.walls.push_back({pts[k - 1], pts[k]});
+        }
+      } else if (w.ends_with("/0") && pts.size() >= 3) {  // a room's outer ring
+        Room r;
+        if (props.contains("name") && props["name"].is_string()) r.name = props["name"];
+        r.ring = pts;
+        if ((r.ring.front() - r.ring.back()).norm() < 1e-9) r.ring.pop_back();
+        if (r.ring.size() >= 3) level.rooms.push_back(std::move(r));
+      }
+    }
+  }
+  return level;
+}
+
+}  // namespace
+
+const WrldLevel* WrldBuilding::Level(const std::string& id) const {
+  for (const auto& l : levels) {
+    if (l.id == id) return &l;
+  }
+  return nullptr;
+}
+
+WrldBuilding ReadWrldBuilding(const std::filesystem::path& dir) {
+  const std::filesystem::path main_path = dir / "main.json";
+  const std::string source = main_path.string();
+  const json main = io_detail::ParseJson(io_detail::ReadText(main_path), source);
+  if (!main.is_object()) Bad(source, "/", "expected an object");
+  WrldBuilding b;
+  if (main.contains("id") && main["id"].is_string()) b.id = main["id"];
+  if (main.contains("name") && main["name"].is_string()) b.name = main["name"];
+  if (!main.contains("location") || !main["location"].is_object() ||
+      !main["location"].contains("coordinates")) {
+    Bad(source, "/location", "expected a GeoJSON Point with coordinates [lon, lat]");
+  }
+  const json& loc = main["location"]["coordinates"];
+  if (!loc.is_array() || loc.size() < 2) {
+    Bad(source, "/location/coordinates", "expected [lon, lat]");
+  }
+  b.lon0_deg = Number(loc[0], source, "/location/coordinates/0");
+  b.lat0_deg = Number(loc[1], source, "/location/coordinates/1");
+  if (std::abs(b.lon0_deg) > 180 || std::abs(b.lat0_deg) >= 89) {
+    Bad(source, "/location/coordinates", "not a WGS84 longitude, latitude (|lat| < 89)");
+  }
+  if (!main.contains("levels") || !main["levels"].is_array() || main["levels"].empty()) {
+    Bad(source, "/levels", "expected a non-empty array of levels");
+  }
+  const Projection proj{b.lon0_deg, b.lat0_deg};
+  std::set<int> z_seen;
+  const json& levels = main["levels"];
+  for (std::size_t i = 0; i < levels.size(); ++i) {
+    const std::string where = fmt::format("/levels/{}", i);
+    const json& l = levels[i];
+    if (!l.is_object() || !l.contains("filename") || !l["filename"].is_string()) {
+      Bad(source, where, "expected an object with a \"filename\"");
+    }
+    const std::string file = l["filename"];
+    if (file.empty() || file.find("..") != std::string::npos || file.front() == '/') {
+      Bad(source, where + "/filename", "'" + file + "' is not a file name inside the folder");
+    }
+    const double z = l.contains("z_order") ? Number(l["z_order"], source, where + "/z_order")
+                                           : static_cast<double>(i);
+    if (z != std::floor(z) || std::abs(z) > 1000) {
+      Bad(source, where + "/z_order", "expected a whole number");
+    }
+    if (!z_seen.insert(static_cast<int>(z)).second) {
+      Bad(source, where + "/z_order", fmt::format("z_order {} used by two levels", z));
+    }
+    WrldLevel level = ReadLevel(dir / file, proj);
+    level.z_order = static_cast<int>(z);
+    for (auto& r : level.rooms) r.level = level.z_order;
+    if (l.contains("id") && l["id"].is_string()) level.id = l["id"];
+    if (l.contains("name") && l["name"].is_string()) level.name = l["name"];
+    b.levels.push_back(std::move(level));
+  }
+  std::sort(b.levels.begin(), b.levels.end(),
+            [](const WrldLevel& a, const WrldLevel& c) { return a.z_order < c.z_order; });
+  return b;
+}
+
+std::string WrldFloorPlanGeoJson(const WrldBuilding& b) {
+  json features = json::array();
+  auto xy = [](const Vec2& p) { return json::array({p.x(), p.y()}); };
+  for (const auto& l : b.levels) {
+    for (const auto& w : l.walls) {
+      features.push_back({{"type", "Feature"},
+                          {"properties", {{"kind", "wall"}, {"level", l.z_order}}},
+                          {"geometry",
+                           {{"type", "LineString"}, {"coordinates", json::array({xy(w.a), xy(w.b)})}}}});
+    }
+    for (const auto& r : l.rooms) {
+      json ring = json::array();
+      for (const auto& p : r.ring) ring.push_back(xy(p));
+      ring.push_back(xy(r.ring.front()));
+      features.push_back(
+          {{"type", "Feature"},
+           {"properties", {{"kind", "room"}, {"name", r.name}, {"level", l.z_order}}},
+           {"geometry", {{"type", "Polygon"}, {"coordinates", json::array({ring})}}}});
+    }
+  }
+  return json{{"type", "FeatureCollection"}, {"features", features}}.dump() + "\n";
+}
+
+void WriteWrldMission(const WrldBuilding& b, const std::filesystem::path& out) {
+  std::filesystem::create_directories(out);
+  json levels = json::array();
+  for (const auto& l : b.levels) {
+    levels.push_back({{"level", l.z_order}, {"wrld_id", l.id}, {"name", l.name}});
+  }
+  const json mission{
+      {"format", "trailmark-mission/1"},
+      {"name", b.id.empty() ? std::string("wrld-building") : b.id},
+      {"description", fmt::format("floor plan of {} (WRLD Indoor Map Format v1), metres east/"
+                                  "north of its location",
+                                  b.name.empty() ? b.id : b.name)},
+      {"nodes", json::array()},
+      {"floorplan", "floorplan.geojson"},
+      {"provenance",
+       {{"converted_from", "wrld-indoor"},
+        {"origin_lon_lat_deg", json::array({b.lon0_deg, b.lat0_deg})},
+        {"levels", levels}}}};
+  auto write = [&](const std::filesystem::path& p, const std::string& text) {
+    std::ofstream f(p, std::ios::binary);
+    f << text;
+    if (!f) throw std::runtime_error(p.string() + ": write failed");
+  };
+  write(out / "mission.json", mission.dump(2) + "\n");
+  write(out / "floorplan.geojson", WrldFloorPlanGeoJson(b));
+}
+
+}  // namespace trailmark
