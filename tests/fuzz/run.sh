@@ -8,7 +8,7 @@ gen="$OUT/generated"
 mkdir -p "$gen/trailmark_generated"
 printf '#pragma once\n#include <string_view>\nnamespace trailmark::generated {\ninline constexpr std::string_view kChartJsParts[] = {""};\n}\n' \
   > "$gen/trailmark_generated/chartjs_bundle.h"
-sources=(core/types.cpp core/mission.cpp io/csv.cpp io/streams.cpp io/mission_io.cpp
+sources=(core/types.cpp core/mission.cpp io/csv.cpp io/streams.cpp io/mission_io.cpp io/json_input.cpp
          geometry/segment.cpp geometry/segment_index.cpp geometry/floor_plan.cpp)
 srcs=()
 for s in "${sources[@]}"; do srcs+=("$SRC/trailmark/$s"); done
