@@ -6,13 +6,15 @@
 #include <map>
 #include <set>
 #include <string>
+#include <utility>
 
 namespace trailmark {
 
 class PipelineOptions {
  public:
-  PipelineOptions(const std::map<std::string, std::string>& values, std::string pipeline)
-      : values_(values), pipeline_(std::move(pipeline)) {}
+  /// Keeps a copy of `values` (a handful of strings; a temporary map is fine).
+  PipelineOptions(std::map<std::string, std::string> values, std::string pipeline)
+      : values_(std::move(values)), pipeline_(std::move(pipeline)) {}
   double Double(const std::string& key, double fallback);
   /// A whole number within [min_value, max_value]: a fraction or a value out of the range is
   /// refused with the option's name (never truncated or clamped).
@@ -24,7 +26,7 @@ class PipelineOptions {
   void RejectUnknown() const;
 
  private:
-  const std::map<std::string, std::string>& values_;
+  std::map<std::string, std::string> values_;
   std::string pipeline_;
   std::set<std::string> known_;
 };
