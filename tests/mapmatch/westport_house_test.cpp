@@ -26,7 +26,7 @@ TEST(WestportHouse, SearchSequencesAndTheFilterOnARealFloorPlan) {
   // metres east/north of the building's location; doors are the gaps between walls.
   const WrldBuilding building = ReadWrldBuilding(dir);
   ASSERT_NE(building.Level("westport-house-floor-1"), nullptr);
-  const FloorPlan plan(building.Level("westport-house-floor-1")->walls, {}, {});
+  const FloorPlan plan = building.Level("westport-house-floor-1")->Plan();
   // 826 wall pieces; the outline drawn over the outer walls gives overlaps (reported, not fatal).
   for (const auto& p : CheckFloorPlan(plan)) EXPECT_FALSE(p.fatal) << p.message;
   const SearchGrid grid(plan);

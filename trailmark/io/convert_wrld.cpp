@@ -10,6 +10,7 @@
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/json_input.h"
+#include "trailmark/io/mission_io.h"
 
 namespace trailmark {
 namespace {
@@ -184,26 +185,9 @@ WrldBuilding ReadWrldBuilding(const std::filesystem::path& dir) {
 }
 
 std::string WrldFloorPlanGeoJson(const WrldBuilding& b) {
-  json features = json::array();
-  auto xy = [](const Vec2& p) { return json::array({p.x(), p.y()}); };
-  for (const auto& l : b.levels) {
-    for (const auto& w : l.walls) {
-      features.push_back({{"type", "Feature"},
-                          {"properties", {{"kind", "wall"}, {"level", l.z_order}}},
-                          {"geometry",
-                           {{"type", "LineString"}, {"coordinates", json::array({xy(w.a), xy(w.b)})}}}});
-    }
-    for (const auto& r : l.rooms) {
-      json ring = json::array();
-      for (const auto& p : r.ring) ring.push_back(xy(p));
-      ring.push_back(xy(r.ring.front()));
-      features.push_back(
-          {{"type", "Feature"},
-           {"properties", {{"kind", "room"}, {"name", r.name}, {"level", l.z_order}}},
-           {"geometry", {{"type", "Polygon"}, {"coordinates", json::array({ring})}}}});
-    }
-  }
-  return json{{"type", "FeatureCollection"}, {"features", features}}.dump() + "\n";
+  std::vector<std::pair<int, FloorPlan>> floors;
+  for (const auto& l : b.levels) floors.emplace_back(l.z_order, l.Plan());
+  return FloorPlanToGeoJson(floors);
 }
 
 void WriteWrldMission(const WrldBuilding& b, const std::filesystem::path& out) {

@@ -271,11 +271,17 @@ int DefaultFloorPlanLevel(const std::vector<int>& levels) {
   return *std::min_element(levels.begin(), levels.end());
 }
 
-std::string FloorPlanToGeoJson(const FloorPlan& plan) {
-  json features = json::array();
+namespace {
+
+// The plan's walls, doors and rooms as GeoJSON features; with `level`, every feature carries it.
+void AppendFloorFeatures(json& features, const FloorPlan& plan, std::optional<int> level) {
+  auto properties = [&](json p) {
+    if (level) p["level"] = *level;
+    return p;
+  };
   auto add_line = [&](const Segment2& s, const char* kind) {
     features.push_back({{"type", "Feature"},
-                        {"properties", {{"kind", kind}}},
+                        {"properties", properties({{"kind", kind}})},
                         {"geometry",
                          {{"type", "LineString"},
                           {"coordinates", json::array({json::array({s.a.x(), s.a.y()}),
@@ -287,11 +293,29 @@ std::string FloorPlanToGeoJson(const FloorPlan& plan) {
     json ring = json::array();
     for (const auto& p : r.ring) ring.push_back(json::array({p.x(), p.y()}));
     ring.push_back(json::array({r.ring.front().x(), r.ring.front().y()}));
-    features.push_back({{"type", "Feature"},
-                        {"properties", {{"kind", "room"}, {"name", r.name}, {"level", r.level}}},
-                        {"geometry", {{"type", "Polygon"}, {"coordinates", json::array({ring})}}}});
+    features.push_back(
+        {{"type", "Feature"},
+         {"properties", properties({{"kind", "room"}, {"name", r.name}, {"level", r.level}})},
+         {"geometry", {{"type", "Polygon"}, {"coordinates", json::array({ring})}}}});
   }
-  return json{{"type", "FeatureCollection"}, {"features", features}}.dump() + "\n";
+}
+
+std::string FeatureCollection(json features) {
+  return json{{"type", "FeatureCollection"}, {"features", std::move(features)}}.dump() + "\n";
+}
+
+}  // namespace
+
+std::string FloorPlanToGeoJson(const FloorPlan& plan) {
+  json features = json::array();
+  AppendFloorFeatures(features, plan, std::nullopt);
+  return FeatureCollection(std::move(features));
+}
+
+std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors) {
+  json features = json::array();
+  for (const auto& [level, plan] : floors) AppendFloorFeatures(features, plan, level);
+  return FeatureCollection(std::move(features));
 }
 
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,

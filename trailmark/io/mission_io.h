@@ -4,6 +4,7 @@
 #include <filesystem>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "trailmark/core/measurements.h"
@@ -30,6 +31,8 @@ FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level = -1
 /// floor the responders enter on), else the lowest.
 int DefaultFloorPlanLevel(const std::vector<int>& levels_present);
 std::string FloorPlanToGeoJson(const FloorPlan& plan);
+/// Several floors in one file: every feature of a floor carries its `level`.
+std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors);
 
 /// Writes mission.json, every non-empty stream and (when given) the floor plan into `dir`,
 /// creating it. Streams are written in the order held; the caller keeps them time-sorted.
