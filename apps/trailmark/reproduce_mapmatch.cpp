@@ -53,7 +53,8 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
   const std::map<std::string, std::string> paper{
       {"particles", "500"},        {"patterns_above_variance_m2", "0"},
       {"max_match_rmse_m", "1e9"}, {"recover", "false"},
-      {"wall_follow", "false"},    {"stay_inside", "false"}};
+      {"wall_follow", "false"},    {"stay_inside", "false"},
+      {"tracking_sigma", "0"}};
   auto with = [](std::map<std::string, std::string> a,
                  const std::map<std::string, std::string>& b) {
     a.insert(b.begin(), b.end());
@@ -81,6 +82,8 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
       {"unknown, ours, wall-following model only while uncertain",
        {{"init", "uniform"}, {"wall_follow_converged_power", "0"}}},
       {"unknown, ours with N = 500", {{"init", "uniform"}, {"particles", "500"}}},
+      {"unknown, ours with the paper's sigma (0.1) also once the track is found",
+       {{"init", "uniform"}, {"tracking_sigma", "0"}}},
       {"unknown, ours without pattern observations (walls + wall-following model)",
        {{"init", "uniform"}, {"pseudo", "false"}}},
   };

@@ -291,6 +291,73 @@ TEST(MapParticleFilter, AfterARecoveryASettledFilterOnlyDrawsNewParticlesFromPat
   }
 }
 
+TEST(MapParticleFilter, OnceTheTrackIsFoundComparisonsWeighWithTheTrackingSigma) {
+  // Eq. (2) weights a particle by exp(-(E - E_min) / sigma^2). Before the track is found
+  // (unknown start, unconfirmed) sigma is likelihood_sigma (0.1); once found (a known start
+  // that converged, here re-weighted by a forced comparison after a wall alarm), the tracking
+  // sigma (0.3). Same seeds, so the same particles and E: the log-weight differences between
+  // particles must scale by exactly (0.3 / 0.1)^2 = 9 once tracking, and not at all before.
+  const FloorPlan plan = Room(6, 4);
+  const SearchGrid grid(plan);
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  std::vector<Vec2> walk;
+  for (int lap = 0; lap < 2; ++lap)
+    walk.insert(walk.end(), seqs[0].nodes.begin(), seqs[0].nodes.end());
+  const PatternComparison pc = ComparePatterns(walk, seqs);
+  const Vec2 d = walk.back() - walk[walk.size() - 2];
+  // log(w_after / w_before) of every particle, relative to particle 0's.
+  auto log_weight_changes = [&](double tracking_sigma, bool known) {
+    MapParticleFilterOptions o;
+    o.wall_follow = false;
+    o.use_patterns_above_variance_m2 = 5;
+    o.wall_alarm_k = 0;
+    o.wall_alarm_h = 0.01;
+    o.recover_position_sigma_m = 0;
+    o.recover_heading_sigma_rad = 0;
+    o.recover_reweight_converged = true;
+    o.weight_floor = 0;                // nothing replaced,
+    o.resample_from_patterns = false;  // nothing drawn,
+    o.ess_resample_fraction = 0;       // nothing resampled: only eq. (2) changes the weights
+    o.tracking_likelihood_sigma = tracking_sigma;
+    MapParticleFilter pf(grid, seqs, o);
+    if (known) {
+      pf.InitializeKnown(Vec2(3.5, 2), 0.0, 1.0, 0.0);
+      pf.Predict(Vec2(1.0, 0));  // converged: the track is found; the wall alarm forces patterns
+      EXPECT_EQ(pf.summary().recoveries, 1u);
+    } else {
+      pf.InitializeUniform();
+    }
+    EXPECT_TRUE(pf.WantsPatterns());
+    const auto before = pf.particles();
+    pf.UpdatePatterns(pc, std::atan2(d.y(), d.x()));
+    std::vector<double> change;
+    for (std::size_t i = 0; i < before.size(); ++i)
+      change.push_back(std::log(pf.particles()[i].weight / before[i].weight));
+    const double reference = change[0];
+    for (auto& c : change) c -= reference;
+    return change;
+  };
+  for (bool known : {true, false}) {
+    const auto sharp = log_weight_changes(0.0, known);  // likelihood_sigma (0.1) throughout
+    const auto tracking = log_weight_changes(0.3, known);
+    ASSERT_EQ(sharp.size(), tracking.size());
+    ASSERT_TRUE(std::isfinite(sharp[0]));
+    const double scale = known ? 9.0 : 1.0;
+    int compared = 0, informative = 0;
+    for (std::size_t i = 0; i < sharp.size(); ++i) {
+      if (!std::isfinite(sharp[i]) || std::abs(sharp[i]) > 500) continue;  // underflowed
+      ++compared;
+      informative += std::abs(sharp[i]) > 1.0;
+      EXPECT_NEAR(tracking[i] * scale, sharp[i], 1e-6 * (1 + std::abs(sharp[i]))) << i;
+    }
+    EXPECT_GT(compared, 100) << known;
+    EXPECT_GT(informative, 10) << known;  // the comparison does tell the particles apart
+  }
+  MapParticleFilterOptions bad;
+  bad.tracking_likelihood_sigma = -0.1;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+}
+
 TEST(WallFollowing, StepLikelihoodIsTheForwardRecursionOfTheOnOffChain) {
   // Walls along y = 0.05 and y = 3.05: the field's cell centres lie at (k + 1/2) 0.1 m, so
   // it is exact at the side points used below.

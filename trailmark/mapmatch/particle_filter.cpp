@@ -45,6 +45,8 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
   if (!(position_noise_m >= 0) || !(heading_noise_rad_per_m >= 0))
     return fail("noises must be >= 0");
   if (!(likelihood_sigma > 0)) return fail("likelihood_sigma must be > 0");
+  if (!(tracking_likelihood_sigma >= 0))
+    return fail("tracking_likelihood_sigma must be >= 0 (0: likelihood_sigma throughout)");
   if (!(weight_floor >= 0 && weight_floor < 1)) return fail("weight_floor must be within [0, 1)");
   if (!(outlier_weight >= 0 && outlier_weight < 1))
     return fail("outlier_weight must be within [0, 1)");
@@ -135,6 +137,7 @@ Vec2 MapParticleFilter::RandomInsidePoint() {
 void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
   uniform_start_ = false;
   converged_ = false;
+  tracking_ = false;
   wall_cusum_ = 0;
   forced_pattern_updates_ = 0;
   for (auto& q : particles_) {
@@ -151,6 +154,7 @@ void MapParticleFilter::InitializeUniform() {
   uniform_start_ = true;
   pattern_updates_applied_ = 0;
   converged_ = false;
+  tracking_ = false;
   wall_cusum_ = 0;
   forced_pattern_updates_ = 0;
   for (auto& q : particles_) {
@@ -191,6 +195,7 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
   if (alive.empty() || !(acc > 0)) {
     // Every particle hit a wall: start again (uniform, or around the last mean).
     ++summary_.restarts;
+    if (uniform_start_) tracking_ = false;  // the track is to be found again
     const Vec2 mean = Mean();
     for (auto& q : particles_) {
       q.position_n = uniform_start_ ? RandomInsidePoint()
@@ -366,9 +371,14 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   if (!std::isfinite(e_min)) {
     ++summary_.uninformative_updates;
   } else if (reweight) {
-    // Eq. (2)-(3), scaled by exp(E_min / sigma^2) against underflow (cancels in eq. 3).
+    // Eq. (2)-(3), scaled by exp(E_min / sigma^2) against underflow (cancels in eq. 3); once
+    // the track has been found, with the tracking sigma (see the option).
+    const double sigma = tracking_ && options_.tracking_likelihood_sigma > 0
+                             ? options_.tracking_likelihood_sigma
+                             : options_.likelihood_sigma;
+    const double s2_weight = sigma * sigma;
     for (std::size_t i = 0; i < particles_.size(); ++i) {
-      const double l = std::isfinite(E[i]) ? std::exp(-(E[i] - e_min) / s2) : 0.0;
+      const double l = std::isfinite(E[i]) ? std::exp(-(E[i] - e_min) / s2_weight) : 0.0;
       particles_[i].weight *= options_.outlier_weight + (1 - options_.outlier_weight) * l;
     }
     Normalize();
@@ -514,6 +524,7 @@ void MapParticleFilter::NoteConvergence() {
   if (!converged_ && options_.use_patterns_above_variance_m2 > 0 && !Unconfirmed() &&
       Covariance().trace() <= options_.use_patterns_above_variance_m2) {
     converged_ = true;
+    tracking_ = true;
   }
 }
 

@@ -86,6 +86,7 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
   // Option key -> the setting it overrides (the default is the setting's value).
   for (const auto& [key, field] : std::initializer_list<std::pair<const char*, double*>>{
            {"sigma", &fo.likelihood_sigma},
+           {"tracking_sigma", &fo.tracking_likelihood_sigma},
            {"outlier_weight", &fo.outlier_weight},
            {"new_particle_weight", &fo.new_particle_weight},
            {"max_match_rmse_m", &fo.max_match_rmse_m},
@@ -128,8 +129,9 @@ MapMatchSession::MapMatchSession(const MissionInfo& info, FloorPlan plan,
       !(m.compare_every_m > 0) || !(m.alarm_m2 > 0) || !(m.alarm_min_s >= 0)) {
     throw std::invalid_argument(
         "pipeline mapmatch: " +
-        (why.empty() ? "compare_every_m and variance_alarm_m2 must be > 0, variance_alarm_min_s >= 0"
-                     : why));
+        (why.empty()
+             ? "compare_every_m and variance_alarm_m2 must be > 0, variance_alarm_min_s >= 0"
+             : why));
   }
 
   m.plan = std::move(plan);
@@ -324,10 +326,10 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
   std::vector<int> levels;
   FloorPlan plan = *mission.LoadFloorPlan(level, &levels);
   if (levels.size() > 1) {
-    summary.notes.push_back(fmt::format(
-        "floor plan: {} levels ({}); the filter uses level {}{}", levels.size(),
-        fmt::join(levels, ", "), level.value_or(DefaultFloorPlanLevel(levels)),
-        level ? "" : " (option level=N for another)"));
+    summary.notes.push_back(fmt::format("floor plan: {} levels ({}); the filter uses level {}{}",
+                                        levels.size(), fmt::join(levels, ", "),
+                                        level.value_or(DefaultFloorPlanLevel(levels)),
+                                        level ? "" : " (option level=N for another)"));
   }
   MapMatchSession session(mission.info(), std::move(plan), plan_file, rest, summary);
   StepSource steps(mission, ins_options, "the mapmatch pipeline", &summary);

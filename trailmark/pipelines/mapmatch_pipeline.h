@@ -7,7 +7,8 @@
 /// Options (the four configurations of Figs. 7-8): `init=auto|known|uniform` (auto: known
 /// when the agent has a start in mission.json), `pseudo=true|false`, `resample=true|false`;
 /// and `particles`, `seed`, `grid_m`, `pattern_length_m`, `compare_every_m`,
-/// `point_spacing_m`, `sigma`, `outlier_weight`, `new_particle_weight`, `variance_alarm_m2`
+/// `point_spacing_m`, `sigma`, `tracking_sigma` (ours: sigma once the track is found),
+/// `outlier_weight`, `new_particle_weight`, `variance_alarm_m2`
 /// (map-error indicator, sec. V-E: 3 m^2) and `variance_alarm_min_s` (how long it must last);
 /// ours: the wall-following model (`wall_follow`, `wall_follow_*`), `stay_inside`, the wall
 /// alarm and recovery (`wall_alarm_k`, `wall_alarm_h`, `recover*`), `map_error_wall_alarms`
