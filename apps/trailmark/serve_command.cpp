@@ -14,6 +14,7 @@
 #include "server/journal.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/pipelines/live_estimator.h"
+#include "trailmark/pipelines/mapmatch_pipeline.h"
 
 namespace trailmark::cli {
 
@@ -29,6 +30,19 @@ std::string RandomToken() {
 }
 
 std::atomic<bool>& StopFlag() { return g_stop; }
+
+// The floor the incident is tracked and drawn on: mapmatch's `level` option when given (a
+// level the plan lacks is an error naming its levels), else the plan's default floor.
+std::optional<FloorPlan> ServedFloorPlan(const MissionDirectory& mission,
+                                         const std::string& pipeline,
+                                         const std::map<std::string, std::string>& options) {
+  std::optional<int> level;
+  if (pipeline == "mapmatch") {
+    auto rest = options;
+    level = TakeMapMatchLevel(rest);
+  }
+  return mission.LoadFloorPlan(level);
+}
 
 }  // namespace
 
@@ -55,10 +69,11 @@ int ServeLive(const ServeOptions& o) {
   so.alerts.map_error = so.pipeline == "mapmatch";
   std::vector<Segment2> walls;
   if (mission.info().floorplan && !mission.Has(*mission.info().floorplan)) {
-    fmt::print("note: mission.json names the floor plan '{}', which {} does not hold: the "
-               "dashboard shows no walls\n",
-               *mission.info().floorplan, o.live.string());
-  } else if (auto plan = mission.LoadFloorPlan()) {
+    fmt::print(
+        "note: mission.json names the floor plan '{}', which {} does not hold: the "
+        "dashboard shows no walls\n",
+        *mission.info().floorplan, o.live.string());
+  } else if (auto plan = ServedFloorPlan(mission, so.pipeline, so.pipeline_options)) {
     walls = plan->solid_walls();
     so.floor_plan = std::move(*plan);
   }
@@ -68,8 +83,8 @@ int ServeLive(const ServeOptions& o) {
       "trailmark serve: live incident '{}', journal {}, pipeline {} ({}), listening on "
       "{}://{}:{}/\n",
       mission.info().name, o.journal.string(), so.pipeline,
-      srv.incremental() ? "incremental" : "re-run on the journal every second",
-      srv.scheme(), o.bind, srv.port());
+      srv.incremental() ? "incremental" : "re-run on the journal every second", srv.scheme(),
+      o.bind, srv.port());
   fmt::print("dashboard: {}://{}:{}/?token={}\n", srv.scheme(), o.bind, srv.port(), so.token);
   if (!o.mqtt_uri.empty())
     fmt::print("mqtt: {}, topics trailmark/{}/<node>/<stream>\n", o.mqtt_uri, o.incident);
@@ -142,7 +157,7 @@ int Serve(const ServeOptions& o) {
   std::stable_sort(heard.begin(), heard.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Segment2> walls;
-  if (const auto plan = mission.LoadFloorPlan()) walls = plan->solid_walls();
+  if (const auto plan = ServedFloorPlan(mission, pipeline, o.options)) walls = plan->solid_walls();
   server::IncidentServer srv(mission.info(), std::move(sink.rows), so, std::move(heard),
                              std::move(walls));
   srv.Start();
@@ -166,29 +181,31 @@ int Serve(const ServeOptions& o) {
 }
 
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out) {
-  fmt::print("bench load: {} firefighters x {:g} min of {:g} Hz IMU + RSSI, {:g} s per request, "
-             "pipeline {}, {}, journal under {}\n",
-             options.firefighters, options.minutes, options.imu_hz, options.batch_s,
-             options.pipeline,
-             options.mqtt_uri.empty() ? "HTTP POST" : "MQTT QoS 1 via " + options.mqtt_uri,
-             std::filesystem::absolute(options.work_dir).string());
+  fmt::print(
+      "bench load: {} firefighters x {:g} min of {:g} Hz IMU + RSSI, {:g} s per request, "
+      "pipeline {}, {}, journal under {}\n",
+      options.firefighters, options.minutes, options.imu_hz, options.batch_s, options.pipeline,
+      options.mqtt_uri.empty() ? "HTTP POST" : "MQTT QoS 1 via " + options.mqtt_uri,
+      std::filesystem::absolute(options.work_dir).string());
   std::fflush(stdout);
   const nlohmann::json r = server::RunLoadTest(options);
   fmt::print("rows sent and journaled   {} ({} IMU, {} RSSI) in {} requests\n",
              r["rows"].get<std::size_t>(), r["imu_rows"].get<std::size_t>(),
              r["rssi_rows"].get<std::size_t>(), r["requests"].get<std::size_t>());
-  fmt::print("sustained                 {:.0f} rows/s, {:.0f} requests/s ({:.0f}x real time per "
-             "firefighter)\n",
-             r["rows_per_s"].get<double>(), r["requests_per_s"].get<double>(),
-             r["real_time_factor"].get<double>());
+  fmt::print(
+      "sustained                 {:.0f} rows/s, {:.0f} requests/s ({:.0f}x real time per "
+      "firefighter)\n",
+      r["rows_per_s"].get<double>(), r["requests_per_s"].get<double>(),
+      r["real_time_factor"].get<double>());
   fmt::print("group commits             {} ({:.0f} rows per fsync)\n",
              r["journal_commits"].get<std::size_t>(), r["rows_per_commit"].get<double>());
   fmt::print("latency POST -> event     p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms ({} batches)\n",
              r["latency_ms_p50"].get<double>(), r["latency_ms_p99"].get<double>(),
              r["latency_ms_max"].get<double>(), r["latency_samples"].get<std::size_t>());
-  fmt::print("CPU                       {:.1f} s, {:.2f} cores busy (server and clients, one "
-             "process)\n",
-             r["cpu_s"].get<double>(), r["cpu_cores_busy"].get<double>());
+  fmt::print(
+      "CPU                       {:.1f} s, {:.2f} cores busy (server and clients, one "
+      "process)\n",
+      r["cpu_s"].get<double>(), r["cpu_cores_busy"].get<double>());
   fmt::print("peak memory               {:.0f} MB resident\n", r["peak_rss_mb"].get<double>());
   if (!json_out.empty()) std::ofstream(json_out) << r.dump(2) << "\n";
   return 0;

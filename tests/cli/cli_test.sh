@@ -115,6 +115,9 @@ grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatc
 "$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | matches "^ff1 " || fail "mapmatch eval"
 run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
 [ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
+# The live server reads mapmatch's floor (level) as the pipeline does: a missing one is named.
+run_failing "$TM" serve --live "$dir/hs" --journal "$dir/hsj.db" --pipeline mapmatch --option level=7 --port 0 --token x
+[ $rc -ne 0 ] && grep -q "no level 7 (its levels: 0)" "$dir/err" || { cat "$dir/err"; fail "serve mapmatch level"; }
 run_failing "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/x" --option update=polar
 [ $rc -eq 1 ] && grep -q "update must be range-bearing or position" "$dir/err" || fail "bad update option"
 # The incident server: replay, token, state contract (curl on loopback).

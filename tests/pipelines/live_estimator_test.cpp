@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <fstream>
 
 #include "test_util.h"
 #include "trailmark/io/mission_io.h"
@@ -203,6 +204,38 @@ TEST(LiveEstimator, MapMatchEqualsTheBatchPipeline) {
   for (const auto& step : sim.data.steps) live->Add(step, sink);
   ExpectSameEstimates(batch, sink.rows);  // one agent: every estimate, bit for bit
   EXPECT_GT(live->Summary().numbers.at("ff1.pattern_comparisons"), 0.0);
+}
+
+TEST(LiveEstimator, MapMatchOnTheFloorItIsGiven) {
+  // The house on level 1 of a two-floor plan whose level 0 is cut into 1 m strips: the batch
+  // pipeline with level=1 and the live one given that floor (and the same option, which
+  // `trailmark serve` also uses to choose the floor) give the same estimates.
+  HouseSearchOptions o;
+  o.duration_s = 60;
+  const SimulatedMission sim = SimulateHouseSearch(o, 4);
+  std::vector<Segment2> strips;
+  for (int x = 1; x < 12; ++x) strips.push_back({{x + 0.5, 0.0}, {x + 0.5, 10.0}});
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  std::ofstream(dir.path() / "floorplan.geojson")
+      << FloorPlanToGeoJson({{0, FloorPlan(strips, {}, {})}, {1, sim.plan}});
+  const MissionDirectory mission(dir.path());
+  const std::map<std::string, std::string> options{{"init", "uniform"}, {"level", "1"}};
+  VectorSink batch;
+  MapMatchPipeline().Run({mission, options}, batch);
+  const auto floor = mission.LoadFloorPlan(1);
+  ASSERT_TRUE(floor.has_value());
+  auto live = MakeLiveEstimator("mapmatch", sim.data.info, options, &*floor);
+  VectorSink sink;
+  for (const auto& step : sim.data.steps) live->Add(step, sink);
+  ExpectSameEstimates(batch.rows, sink.rows);
+  // The option is checked live too.
+  EXPECT_THROW(MakeLiveEstimator("mapmatch", sim.data.info, {{"level", "1.5"}}, &*floor),
+               std::invalid_argument);
+  std::map<std::string, std::string> taken{{"level", "-2"}, {"init", "uniform"}};
+  EXPECT_EQ(TakeMapMatchLevel(taken), -2);
+  EXPECT_EQ(taken.count("level"), 0u);
+  EXPECT_EQ(TakeMapMatchLevel(taken), std::nullopt);
 }
 
 TEST(LiveEstimator, RefusesNonAgentsAndUnknownNames) {

@@ -7,9 +7,9 @@
 
 #include "trailmark/pipelines/breadcrumb_pipeline.h"
 #include "trailmark/pipelines/ins_pipeline.h"
+#include "trailmark/pipelines/live_ins.h"
 #include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/pipelines/merged_stream.h"
-#include "trailmark/pipelines/live_ins.h"
 #include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/pipelines/pipeline_options.h"
 #include "trailmark/pipelines/step_source.h"
@@ -230,12 +230,20 @@ class LiveBreadcrumb : public LiveEstimator {
 
 /// `mapmatch` live: the batch pipeline's session, each agent's steps (or its IMU through the
 /// INS) as they come; agents are independent, so no reordering is needed.
+/// The session's options: `level` chose the floor `plan` already is (TakeMapMatchLevel checks
+/// it is a whole number).
+std::map<std::string, std::string> WithoutLevel(std::map<std::string, std::string> options) {
+  TakeMapMatchLevel(options);
+  return options;
+}
+
 class LiveMapMatch : public LiveEstimator {
  public:
   LiveMapMatch(const MissionInfo& info, const std::map<std::string, std::string>& options,
                const FloorPlan& plan)
       : ins_(info, SplitInsOptions(options).first),
-        session_(info, plan, "the floor plan", SplitInsOptions(options).second, notes_) {
+        session_(info, plan, "the floor plan", WithoutLevel(SplitInsOptions(options).second),
+                 notes_) {
     ins_.on_step = [this](const Step& step) { session_.AddStep(step, *sink_, notes_); };
   }
   void Add(const LiveRow& row, EstimateSink& sink) override {

@@ -305,6 +305,15 @@ void MapMatchSession::Summarize(PipelineSummary& summary) {
   summary.numbers["icp_abandoned"] = static_cast<double>(m.icp_abandoned);
 }
 
+std::optional<int> TakeMapMatchLevel(std::map<std::string, std::string>& options) {
+  const auto it = options.find("level");
+  if (it == options.end()) return std::nullopt;
+  PipelineOptions lo({{"level", it->second}}, "mapmatch");
+  const int level = static_cast<int>(lo.Whole("level", 0, -1000000, 1000000));
+  options.erase(it);
+  return level;
+}
+
 PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSink& sink) const {
   const MissionDirectory& mission = context.mission;
   auto [ins_options, rest] = SplitInsOptions(context.options);
@@ -317,12 +326,7 @@ PipelineSummary MapMatchPipeline::Run(const PipelineContext& context, EstimateSi
   const std::string plan_file = mission.Path(*mission.info().floorplan).string();
   // One floor of a multi-floor plan (the paper's filter is 2-D): `level`, else level 0 (the
   // entry floor) or the lowest.
-  std::optional<int> level;
-  if (const auto it = rest.find("level"); it != rest.end()) {
-    PipelineOptions lo({{"level", it->second}}, "mapmatch");
-    level = static_cast<int>(lo.Whole("level", 0, -1000000, 1000000));
-    rest.erase(it);
-  }
+  const std::optional<int> level = TakeMapMatchLevel(rest);
   std::vector<int> levels;
   FloorPlan plan = *mission.LoadFloorPlan(level, &levels);
   if (levels.size() > 1) {

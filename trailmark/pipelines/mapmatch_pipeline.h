@@ -19,6 +19,7 @@
 
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "trailmark/geometry/floor_plan.h"
@@ -47,6 +48,12 @@ class MapMatchSession {
   const MissionInfo& info_;
   std::unique_ptr<Impl> impl_;
 };
+
+/// The mapmatch option `level` (which floor of a multi-floor plan; a whole number), taken out
+/// of `options`; nullopt when absent (the plan's default floor: level 0, else the lowest).
+/// Throws std::invalid_argument when it is not a whole number. The batch pipeline, its live
+/// form and `trailmark serve` (which draws that floor) read it the same way.
+std::optional<int> TakeMapMatchLevel(std::map<std::string, std::string>& options);
 
 class MapMatchPipeline : public Pipeline {
  public:
