@@ -238,21 +238,22 @@ TEST(MapParticleFilter, AWalkIntoAWallRaisesTheWallAlarmAndRecovers) {
   }
 }
 
-TEST(MapParticleFilter, AfterARecoveryASettledFilterOnlyDrawsNewParticlesFromPatterns) {
-  // A 6 x 4 room; the belief spread 1 m round its middle (trace ~2 m^2, under the pattern level
-  // of 5 m^2 set here: settled); a step east blocks part of it and (k 0, h 0.01) raises a wall
-  // alarm; the recovery (no spread) forces the next comparisons. With the default, a forced
-  // comparison of a settled filter leaves the weights of the particles it does not redraw as
-  // they were; recover_reweight_converged weights them by eq. (2) as well (and replaces those
-  // under the weight floor).
-  const FloorPlan plan = Room(6, 4);
-  const SearchGrid grid(plan);
-  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
-  std::vector<Vec2> walk;  // the room's search sequence walked twice: an exact search pattern
-  for (int lap = 0; lap < 2; ++lap)
-    walk.insert(walk.end(), seqs[0].nodes.begin(), seqs[0].nodes.end());
-  const PatternComparison pc = ComparePatterns(walk, seqs);
-  for (bool reweight : {false, true}) {
+// A 6 x 4 room with its search sequence walked twice (an exact search pattern) and that
+// walk's comparison; and filter options under which one step east (from a 1 m spread round
+// the room's middle) raises a wall alarm whose recovery (no spread) forces the next
+// comparisons while the filter stays settled (pattern level 5 m^2).
+struct RoomWithExactPattern {
+  FloorPlan plan = Room(6, 4);
+  SearchGrid grid{plan};
+  std::vector<NodeSequence> seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  std::vector<Vec2> walk = Twice(seqs[0].nodes);
+  PatternComparison pc = ComparePatterns(walk, seqs);
+  static std::vector<Vec2> Twice(const std::vector<Vec2>& nodes) {
+    std::vector<Vec2> w = nodes;
+    w.insert(w.end(), nodes.begin(), nodes.end());
+    return w;
+  }
+  static MapParticleFilterOptions ForcedComparisons() {
     MapParticleFilterOptions o;
     o.wall_follow = false;
     o.use_patterns_above_variance_m2 = 5;
@@ -260,6 +261,21 @@ TEST(MapParticleFilter, AfterARecoveryASettledFilterOnlyDrawsNewParticlesFromPat
     o.wall_alarm_h = 0.01;
     o.recover_position_sigma_m = 0;
     o.recover_heading_sigma_rad = 0;
+    return o;
+  }
+};
+
+TEST(MapParticleFilter, AfterARecoveryASettledFilterOnlyDrawsNewParticlesFromPatterns) {
+  // A 6 x 4 room; the belief spread 1 m round its middle (trace ~2 m^2, under the pattern level
+  // of 5 m^2 set here: settled); a step east blocks part of it and (k 0, h 0.01) raises a wall
+  // alarm; the recovery (no spread) forces the next comparisons. With the default, a forced
+  // comparison of a settled filter leaves the weights of the particles it does not redraw as
+  // they were; recover_reweight_converged weights them by eq. (2) as well (and replaces those
+  // under the weight floor).
+  const RoomWithExactPattern room;
+  const auto& [plan, grid, seqs, walk, pc] = room;
+  for (bool reweight : {false, true}) {
+    MapParticleFilterOptions o = RoomWithExactPattern::ForcedComparisons();
     o.recover_reweight_converged = reweight;
     MapParticleFilter pf(grid, seqs, o);
     pf.InitializeKnown(Vec2(3.5, 2), 0.0, 1.0, 0.0);
@@ -297,23 +313,12 @@ TEST(MapParticleFilter, OnceTheTrackIsFoundComparisonsWeighWithTheTrackingSigma)
   // that converged, here re-weighted by a forced comparison after a wall alarm), the tracking
   // sigma (0.3). Same seeds, so the same particles and E: the log-weight differences between
   // particles must scale by exactly (0.3 / 0.1)^2 = 9 once tracking, and not at all before.
-  const FloorPlan plan = Room(6, 4);
-  const SearchGrid grid(plan);
-  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
-  std::vector<Vec2> walk;
-  for (int lap = 0; lap < 2; ++lap)
-    walk.insert(walk.end(), seqs[0].nodes.begin(), seqs[0].nodes.end());
-  const PatternComparison pc = ComparePatterns(walk, seqs);
+  const RoomWithExactPattern room;
+  const auto& [plan, grid, seqs, walk, pc] = room;
   const Vec2 d = walk.back() - walk[walk.size() - 2];
   // log(w_after / w_before) of every particle, relative to particle 0's.
   auto log_weight_changes = [&](double tracking_sigma, bool known) {
-    MapParticleFilterOptions o;
-    o.wall_follow = false;
-    o.use_patterns_above_variance_m2 = 5;
-    o.wall_alarm_k = 0;
-    o.wall_alarm_h = 0.01;
-    o.recover_position_sigma_m = 0;
-    o.recover_heading_sigma_rad = 0;
+    MapParticleFilterOptions o = RoomWithExactPattern::ForcedComparisons();
     o.recover_reweight_converged = true;
     o.weight_floor = 0;                // nothing replaced,
     o.resample_from_patterns = false;  // nothing drawn,
