@@ -1,9 +1,13 @@
 #include "commands.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
+#include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <numbers>
+#include <sstream>
 
 #include "progress.h"
 #include "trailmark/core/error.h"
@@ -11,6 +15,7 @@
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/report/html_report.h"
+#include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
 
@@ -18,17 +23,69 @@ namespace trailmark::cli {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// The `search` scenario: one floor of the user's plan, a directional search from the entry.
+SimulatedMission SimulateSearchOnFile(const SimulateSearchArgs& a, std::uint64_t seed) {
+  if (a.floorplan.empty() || a.entry.empty())
+    throw std::invalid_argument("simulate search needs --floorplan FILE and --entry X,Y");
+  std::vector<int> levels;
+  ReadFloorPlanGeoJson(a.floorplan, std::nullopt, &levels);
+  const int level = a.level.value_or(DefaultFloorPlanLevel(levels));
+  if (!levels.empty() && std::find(levels.begin(), levels.end(), level) == levels.end())
+    throw InputError(a.floorplan, 0,
+                     fmt::format("the floor plan has no level {} (its levels: {})", level,
+                                 fmt::join(levels, ", ")));
+  // The mission's plan is that one floor (its rooms on level 0 with the walls, so that the
+  // mission's floor plan has one level).
+  const FloorPlan floor = ReadFloorPlanGeoJson(a.floorplan, level);
+  std::vector<Room> rooms = floor.rooms();
+  for (auto& r : rooms) r.level = 0;
+  const FloorPlan plan(floor.walls(), floor.doors(), std::move(rooms));
+  Vec2 entry;
+  char comma = 0;
+  std::istringstream in(a.entry);
+  if (!(in >> entry.x() >> comma >> entry.y()) || comma != ',' || !(in >> std::ws).eof())
+    throw std::invalid_argument("--entry must be X,Y in metres, not '" + a.entry + "'");
+  HouseSearchOptions o;
+  if (a.hand == "left")
+    o.hand = Hand::kLeft;
+  else if (a.hand == "right")
+    o.hand = Hand::kRight;
+  else
+    throw std::invalid_argument("--hand must be left or right, not '" + a.hand + "'");
+  o.duration_s = a.minutes * 60;
+  std::optional<double> heading;
+  if (a.heading_deg) heading = *a.heading_deg * std::numbers::pi / 180;
+  SimulatedMission sim = SimulateSearchOnPlan(plan, entry, heading, o, seed);
+  if (levels.size() > 1)
+    sim.data.info.description += fmt::format("; level {} of {}", level, a.floorplan);
+  return sim;
+}
+
+}  // namespace
+
 void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& out,
-              const SimulateImu& imu) {
-  SimulatedMission sim = SimulateScenario(scenario, seed);
+              const SimulateImu& imu, const SimulateSearchArgs& search) {
+  if (scenario != "search" && search.Given())
+    throw std::invalid_argument(
+        "--floorplan, --level, --entry, --heading, --hand and --minutes are for the 'search' "
+        "scenario");
+  SimulatedMission sim =
+      scenario == "search" ? SimulateSearchOnFile(search, seed) : SimulateScenario(scenario, seed);
   if (imu.rate_hz > 0) {
     ImuSimOptions o;
     o.rate_hz = imu.rate_hz;
     o.grade = ImuGrade::ByName(imu.grade);
-    if (imu.motion == "walk") o.motion = FootMotion::kWalk;
-    else if (imu.motion == "crawl") o.motion = FootMotion::kCrawl;
-    else if (imu.motion == "stairs") o.motion = FootMotion::kStairs;
-    else throw std::invalid_argument("unknown --imu-motion '" + imu.motion + "' (walk, crawl, stairs)");
+    if (imu.motion == "walk")
+      o.motion = FootMotion::kWalk;
+    else if (imu.motion == "crawl")
+      o.motion = FootMotion::kCrawl;
+    else if (imu.motion == "stairs")
+      o.motion = FootMotion::kStairs;
+    else
+      throw std::invalid_argument("unknown --imu-motion '" + imu.motion +
+                                  "' (walk, crawl, stairs)");
     AddFootImu(sim, o, seed ^ 0x1e1e1e1eULL);
     sim.data.info.description += ". Foot IMU at " + fmt::format("{:g}", imu.rate_hz) + " Hz, " +
                                  o.grade.name + " grade, " + imu.motion + ".";
@@ -38,11 +95,11 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
   const auto& d = sim.data;
   std::size_t crumbs = 0;
   for (const auto& e : d.events) crumbs += e.event == "drop";
-  fmt::print("simulated '{}' (seed {}) into {}: {} steps, {} IMU samples, {} RSSI packets, {} "
-             "crumbs dropped, {} truth rows, {:.0f} s\n",
-             scenario, seed, out.string(), d.steps.size(), d.imu.size(), d.rssi.size(), crumbs,
-             d.truth.size(),
-             d.truth.empty() ? 0.0 : d.truth.back().t - d.truth.front().t);
+  fmt::print(
+      "simulated '{}' (seed {}) into {}: {} steps, {} IMU samples, {} RSSI packets, {} "
+      "crumbs dropped, {} truth rows, {:.0f} s\n",
+      scenario, seed, out.string(), d.steps.size(), d.imu.size(), d.rssi.size(), crumbs,
+      d.truth.size(), d.truth.empty() ? 0.0 : d.truth.back().t - d.truth.front().t);
 }
 
 RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::path& out,
@@ -66,7 +123,8 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
       const bool is_file = file.find(' ') == std::string::npos &&
                            (file.ends_with(".csv") || file.ends_with(".json"));
       if (!is_file || (!other.empty() && mission.Has(other))) continue;
-      mission.Require(file, "pipeline '" + name + "'" + (other.empty() ? "" : " (or " + other + ")"));
+      mission.Require(file,
+                      "pipeline '" + name + "'" + (other.empty() ? "" : " (or " + other + ")"));
     }
     throw InputError(mission_dir.string(), 0, "pipeline '" + name + "' needs " + need);
   }
@@ -106,8 +164,9 @@ namespace {
 
 fs::path MissionOfRun(const fs::path& run_dir) {
   std::ifstream in(run_dir / "diagnostics.json");
-  if (!in) throw InputError((run_dir / "diagnostics.json").string(), 0,
-                            "missing: pass --mission or a directory written by 'trailmark run'");
+  if (!in)
+    throw InputError((run_dir / "diagnostics.json").string(), 0,
+                     "missing: pass --mission or a directory written by 'trailmark run'");
   nlohmann::json j;
   try {
     in >> j;
@@ -158,21 +217,22 @@ void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
                        const std::vector<std::string>& missions) {
-  fmt::print("\n{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "mission", "pipeline",
-             "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist", "static m", "run time s");
+  fmt::print("\n{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "mission",
+             "pipeline", "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist",
+             "static m", "run time s");
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const auto& [run, m] = rows[k];
     const auto& a = m.agents;
     const bool agents = a.stats.samples > 0;
     auto num = [&](double v) { return agents ? fmt::format("{:.2f}", v) : std::string("-"); };
-    fmt::print("{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10.3f}\n",
-               k < missions.size() ? missions[k] : "", run.pipeline, num(a.stats.mean_m), num(a.stats.p95_m),
-               num(a.stats.max_m), num(a.stats.final_m),
-               a.mean_pct_of_distance ? fmt::format("{:.2f}", *a.mean_pct_of_distance) : "-",
-               a.max_pct_of_distance ? fmt::format("{:.2f}", *a.max_pct_of_distance) : "-",
-               m.static_nodes.stats.samples > 0 ? fmt::format("{:.2f}", m.static_nodes.stats.mean_m)
-                                                : "-",
-               run.wall_time_s);
+    fmt::print(
+        "{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10.3f}\n",
+        k < missions.size() ? missions[k] : "", run.pipeline, num(a.stats.mean_m),
+        num(a.stats.p95_m), num(a.stats.max_m), num(a.stats.final_m),
+        a.mean_pct_of_distance ? fmt::format("{:.2f}", *a.mean_pct_of_distance) : "-",
+        a.max_pct_of_distance ? fmt::format("{:.2f}", *a.max_pct_of_distance) : "-",
+        m.static_nodes.stats.samples > 0 ? fmt::format("{:.2f}", m.static_nodes.stats.mean_m) : "-",
+        run.wall_time_s);
   }
 }
 
@@ -236,7 +296,8 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
   std::vector<std::pair<RunResult, Metrics>> rows;
   std::vector<std::string> missions;
   std::set<std::string> done;
-  auto run_all = [&](const std::string& label, const fs::path& mdir, const fs::path& runs, const fs::path& report) {
+  auto run_all = [&](const std::string& label, const fs::path& mdir, const fs::path& runs,
+                     const fs::path& report) {
     const MissionDirectory mission(mdir);
     std::vector<fs::path> run_dirs;
     for (const auto& name : RunnablePipelines(mission)) {
@@ -266,10 +327,12 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
   }
   PrintSummaryTable(rows, missions);
   for (const auto& p : AllPipelines()) {
-    if (!done.count(p->name()) && p->name() != "pdr") fmt::print("not run (no mission with its inputs): {}\n", p->name());
+    if (!done.count(p->name()) && p->name() != "pdr")
+      fmt::print("not run (no mission with its inputs): {}\n", p->name());
   }
   fmt::print("\nreports: {}, {}, {}, {}\n", (out / "report.html").string(),
-             (out / "report-landmark-corridor.html").string(), (out / "report-beacon-trail.html").string(),
+             (out / "report-landmark-corridor.html").string(),
+             (out / "report-beacon-trail.html").string(),
              (out / "report-house1-search.html").string());
   return 0;
 }

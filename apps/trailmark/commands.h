@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -21,8 +22,22 @@ struct SimulateImu {
   std::string motion = "walk";
   bool drop_steps = false;  ///< write imu.csv only (no steps.csv): pipelines then run the INS
 };
+/// The `search` scenario of `trailmark simulate`: a directional search on the user's floor plan
+/// (one floor of it), entering at `entry` ("X,Y" in the plan's metres).
+struct SimulateSearchArgs {
+  std::string floorplan;              ///< floor-plan GeoJSON file (spec: "Floor plans")
+  std::optional<int> level;           ///< default: level 0, else the lowest
+  std::string entry;                  ///< "X,Y"
+  std::optional<double> heading_deg;  ///< walking in; default: away from the nearest door
+  std::string hand = "left";
+  double minutes = 10;
+  bool Given() const {
+    return !floorplan.empty() || level || !entry.empty() || heading_deg || hand != "left" ||
+           minutes != 10;
+  }
+};
 void Simulate(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out,
-              const SimulateImu& imu = {});
+              const SimulateImu& imu = {}, const SimulateSearchArgs& search = {});
 RunResult Run(const std::string& pipeline, const std::filesystem::path& mission,
               const std::filesystem::path& out, const std::map<std::string, std::string>& options);
 /// Evaluates, prints the per-node table, writes metrics.json next to the estimates (or `out`).

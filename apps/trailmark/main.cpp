@@ -56,11 +56,26 @@ int main(int argc, char** argv) {
   simulate->add_option("--seed", seed, "random seed; the same seed gives the same mission");
   simulate->add_option("--out", out, "mission directory to write")->required();
   cli::SimulateImu sim_imu;
-  simulate->add_option("--imu-rate", sim_imu.rate_hz, "also write imu.csv: foot IMU at this rate (Hz)")
+  simulate
+      ->add_option("--imu-rate", sim_imu.rate_hz, "also write imu.csv: foot IMU at this rate (Hz)")
       ->check(CLI::Range(0.0, 2000.0));
-  simulate->add_option("--imu-grade", sim_imu.grade, "perfect, tactical, industrial (default), consumer");
+  simulate->add_option("--imu-grade", sim_imu.grade,
+                       "perfect, tactical, industrial (default), consumer");
   simulate->add_option("--imu-motion", sim_imu.motion, "walk (default), crawl, stairs");
-  simulate->add_flag("--imu-only", sim_imu.drop_steps, "no steps.csv: pipelines run the INS on imu.csv");
+  simulate->add_flag("--imu-only", sim_imu.drop_steps,
+                     "no steps.csv: pipelines run the INS on imu.csv");
+  cli::SimulateSearchArgs sim_search;
+  simulate->add_option("--floorplan", sim_search.floorplan,
+                       "search: the floor plan (GeoJSON) to search, e.g. from 'trailmark convert'");
+  simulate->add_option("--level", sim_search.level,
+                       "search: which floor (default level 0, else the lowest)");
+  simulate->add_option("--entry", sim_search.entry, "search: where the team enters, X,Y in metres");
+  simulate->add_option("--heading", sim_search.heading_deg,
+                       "search: walking-in direction in degrees (0 = +x, 90 = +y; default: "
+                       "away from the door nearest the entry)");
+  simulate->add_option("--hand", sim_search.hand, "search: left (default) or right");
+  simulate->add_option("--minutes", sim_search.minutes, "search: duration (default 10)")
+      ->check(CLI::Range(0.1, 1440.0));
 
   app.add_subcommand("scenarios", "list the simulator's scenarios");
 
@@ -68,13 +83,16 @@ int main(int argc, char** argv) {
   std::vector<std::string> run_options;
   auto* run = app.add_subcommand("run", "run a pipeline on a mission: DIR/estimates.csv");
   run->add_option("--pipeline", pipeline, "pipeline name (see 'trailmark pipelines')")->required();
-  run->add_option("mission", mission, "mission directory")->required()->check(CLI::ExistingDirectory);
+  run->add_option("mission", mission, "mission directory")
+      ->required()
+      ->check(CLI::ExistingDirectory);
   run->add_option("--out", out, "output directory")->required();
   run->add_option("--option", run_options, "pipeline option key=value (repeatable)");
 
   app.add_subcommand("pipelines", "list pipelines and the files each needs");
 
-  auto* validate = app.add_subcommand("validate", "check every file of a mission (all reader checks)");
+  auto* validate =
+      app.add_subcommand("validate", "check every file of a mission (all reader checks)");
   validate->add_option("mission", mission, "mission directory")->required();
 
   std::string estimates, metrics_out;
@@ -86,13 +104,15 @@ int main(int argc, char** argv) {
   std::vector<std::string> run_dirs;
   auto* report = app.add_subcommand("report", "write one self-contained HTML report");
   report->add_option("runs", run_dirs, "run directories (written by 'trailmark run')")
-      ->required()->check(CLI::ExistingDirectory);
+      ->required()
+      ->check(CLI::ExistingDirectory);
   report->add_option("--mission", mission, "mission directory (default: from the runs)");
   report->add_option("--out", out, "HTML file")->required();
 
   std::string demo_out = "out/demo";
-  auto* demo = app.add_subcommand("demo", "the main job: simulate the default mission, run every "
-                                          "pipeline, print the summary and write the report");
+  auto* demo = app.add_subcommand("demo",
+                                  "the main job: simulate the default mission, run every "
+                                  "pipeline, print the summary and write the report");
   demo->add_option("--scenario", scenario, "scenario");
   demo->add_option("--seed", seed, "random seed");
   demo->add_option("--out", demo_out, "output directory");
@@ -113,8 +133,9 @@ int main(int argc, char** argv) {
   bench->add_option("--pipeline", load.pipeline, "load: the live pipeline (ins, pdr, ...)");
   std::string load_dir = ".";
   bench->add_option("--dir", load_dir, "load: where the journal goes (a real disk)");
-  bench->add_option("--mqtt", load.mqtt_uri,
-                    "load: devices publish to this MQTT broker instead of POSTing (tcp://host:port)");
+  bench->add_option(
+      "--mqtt", load.mqtt_uri,
+      "load: devices publish to this MQTT broker instead of POSTing (tcp://host:port)");
   IncidentOptions incident;
   double solve_period = 1.0, covariance_period = 5.0;
   bench->add_option("--agents", incident.agents, "breadcrumb: firefighters");
@@ -131,16 +152,19 @@ int main(int argc, char** argv) {
   std::string reproduce_out = "out/reproduce";
   auto* reproduce = app.add_subcommand(
       "reproduce", "a paper's experiment on simulated equivalents, side by side with the paper");
-  reproduce->add_option("name", reproduce_name, "breadcrumb | ins | landmarks | beacons | mapmatch")->required();
+  reproduce->add_option("name", reproduce_name, "breadcrumb | ins | landmarks | beacons | mapmatch")
+      ->required();
   reproduce->add_option("--seeds", reproduce_seeds, "number of simulated runs (seeds 1..N)")
       ->check(CLI::Range(1, 1000));
   int reproduce_first_seed = 1;
-  reproduce->add_option("--first-seed", reproduce_first_seed,
-                        "mapmatch: seed of the first run (runs first..first+N-1)")
+  reproduce
+      ->add_option("--first-seed", reproduce_first_seed,
+                   "mapmatch: seed of the first run (runs first..first+N-1)")
       ->check(CLI::Range(1, 1000000));
   reproduce->add_option("--out", reproduce_out, "output directory (missions, runs, results.md)");
-  std::string reproduce_data = std::getenv("TRAILMARK_SHARED_DATA") ? std::getenv("TRAILMARK_SHARED_DATA")
-                                                                    : "../shared/data";
+  std::string reproduce_data = std::getenv("TRAILMARK_SHARED_DATA")
+                                   ? std::getenv("TRAILMARK_SHARED_DATA")
+                                   : "../shared/data";
   reproduce->add_option("--data", reproduce_data,
                         "recorded data folder (ins: holds pyshoe-vicon/; default ../shared/data "
                         "or $TRAILMARK_SHARED_DATA)");
@@ -149,15 +173,19 @@ int main(int argc, char** argv) {
                         "key=value passed to the reproduced pipeline (ablations)");
 
   std::string convert_format, convert_src, convert_out;
-  auto* convert = app.add_subcommand(
-      "convert", "convert recorded data into a mission directory (formats: pyshoe-vicon, "
-                 "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor)");
-  convert->add_option("format", convert_format,
-                      "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
-                      "(WALK_imu.csv) | zupt-dualfoot (the folder) | wrld-indoor (the folder "
-                      "holding main.json: a WRLD indoor map as a multi-floor floor plan)")
+  auto* convert =
+      app.add_subcommand("convert",
+                         "convert recorded data into a mission directory (formats: pyshoe-vicon, "
+                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor)");
+  convert
+      ->add_option("format", convert_format,
+                   "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
+                   "(WALK_imu.csv) | zupt-dualfoot (the folder) | wrld-indoor (the folder "
+                   "holding main.json: a WRLD indoor map as a multi-floor floor plan)")
       ->required();
-  convert->add_option("source", convert_src, "source file or folder")->required()->check(CLI::ExistingPath);
+  convert->add_option("source", convert_src, "source file or folder")
+      ->required()
+      ->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
 
   landmarks::EnergyModel energy_model;
@@ -175,13 +203,15 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber);
   energy->add_option("--after-years", energy_after_years, "years asleep before the emergency")
       ->check(CLI::NonNegativeNumber);
-  energy->add_option("--periods", energy_periods, "wake-up periods (s)")->check(CLI::PositiveNumber);
+  energy->add_option("--periods", energy_periods, "wake-up periods (s)")
+      ->check(CLI::PositiveNumber);
 
   std::string wayout_mission, wayout_agent = "ff1";
   double wayout_at = std::numeric_limits<double>::quiet_NaN();
   auto* wayout = app.add_subcommand(
-      "wayout", "the way back out along an ultrasound beacon trail: walk to the smallest beacon id "
-                "you hear (ultrasound-beacons paper, sec. 4)");
+      "wayout",
+      "the way back out along an ultrasound beacon trail: walk to the smallest beacon id "
+      "you hear (ultrasound-beacons paper, sec. 4)");
   wayout->add_option("mission", wayout_mission, "mission directory with ranges.csv")->required();
   wayout->add_option("--agent", wayout_agent, "the firefighter (default ff1)");
   wayout->add_option("--at", wayout_at, "mission time (s); default: the end of the mission");
@@ -189,43 +219,64 @@ int main(int argc, char** argv) {
   cli::ServeOptions serve_options;
   std::string serve_replay;
   std::vector<std::string> serve_kv;
-  auto* serve = app.add_subcommand("serve", "the incident server: replays a mission's online estimates at a speed "
-                                            "and serves the state and the dashboard over HTTP (docs/server.md)");
+  auto* serve =
+      app.add_subcommand("serve",
+                         "the incident server: replays a mission's online estimates at a speed "
+                         "and serves the state and the dashboard over HTTP (docs/server.md)");
   std::string serve_live, serve_journal;
   auto* replay_opt = serve->add_option("--replay", serve_replay, "mission directory to replay");
-  auto* live_opt = serve->add_option("--live", serve_live, "live incident: directory with its mission.json; "
-                                                          "measurements are POSTed to /api/ingest/<stream>");
-  serve->add_option("--journal", serve_journal, "live mode: the SQLite journal file (created or resumed)");
-  serve->add_option("--mqtt", serve_options.mqtt_uri, "live mode: also ingest from this MQTT broker (tcp://host:port)");
-  serve->add_option("--incident", serve_options.incident, "MQTT topic tree trailmark/<incident>/... (default incident)");
+  auto* live_opt = serve->add_option("--live", serve_live,
+                                     "live incident: directory with its mission.json; "
+                                     "measurements are POSTed to /api/ingest/<stream>");
+  serve->add_option("--journal", serve_journal,
+                    "live mode: the SQLite journal file (created or resumed)");
+  serve->add_option("--mqtt", serve_options.mqtt_uri,
+                    "live mode: also ingest from this MQTT broker (tcp://host:port)");
+  serve->add_option("--incident", serve_options.incident,
+                    "MQTT topic tree trailmark/<incident>/... (default incident)");
   serve->add_option("--mqtt-user", serve_options.mqtt_user, "MQTT user name");
-  serve->add_option("--mqtt-password", serve_options.mqtt_password, "MQTT password (also $TRAILMARK_MQTT_PASSWORD)");
-  serve->add_option("--mqtt-ca", serve_options.mqtt_ca, "ssl:// brokers: the CA certificate (PEM) to trust");
-  serve->add_option("--tls-cert", serve_options.tls_cert, "serve HTTPS with this certificate chain (PEM)");
+  serve->add_option("--mqtt-password", serve_options.mqtt_password,
+                    "MQTT password (also $TRAILMARK_MQTT_PASSWORD)");
+  serve->add_option("--mqtt-ca", serve_options.mqtt_ca,
+                    "ssl:// brokers: the CA certificate (PEM) to trust");
+  serve->add_option("--tls-cert", serve_options.tls_cert,
+                    "serve HTTPS with this certificate chain (PEM)");
   serve->add_option("--tls-key", serve_options.tls_key, "the private key (PEM) of --tls-cert");
   replay_opt->excludes(live_opt);
-  serve->add_option("--pipeline", serve_options.pipeline, "pipeline (default: the most capable runnable one)");
+  serve->add_option("--pipeline", serve_options.pipeline,
+                    "pipeline (default: the most capable runnable one)");
   serve->add_option("--option", serve_kv, "pipeline option key=value (repeatable)");
-  serve->add_option("--speed", serve_options.speed, "mission seconds per wall second")->check(CLI::PositiveNumber);
-  serve->add_option("--port", serve_options.port, "TCP port (0: any free port)")->check(CLI::Range(0, 65535));
-  serve->add_option("--bind", serve_options.bind, "address to listen on (default 127.0.0.1, loopback only)");
-  serve->add_option("--token", serve_options.token, "access token (default: $TRAILMARK_TOKEN, else a random one)");
-  serve->add_flag("--exit-after-replay", serve_options.exit_after_replay, "stop when the replay has ended");
+  serve->add_option("--speed", serve_options.speed, "mission seconds per wall second")
+      ->check(CLI::PositiveNumber);
+  serve->add_option("--port", serve_options.port, "TCP port (0: any free port)")
+      ->check(CLI::Range(0, 65535));
+  serve->add_option("--bind", serve_options.bind,
+                    "address to listen on (default 127.0.0.1, loopback only)");
+  serve->add_option("--token", serve_options.token,
+                    "access token (default: $TRAILMARK_TOKEN, else a random one)");
+  serve->add_flag("--exit-after-replay", serve_options.exit_after_replay,
+                  "stop when the replay has ended");
 
   std::string journal_file, journal_mission, journal_out;
   auto* journal = app.add_subcommand("journal", "the incident journal of `trailmark serve --live`");
-  auto* journal_export = journal->add_subcommand("export", "write the journal as a mission directory");
+  auto* journal_export =
+      journal->add_subcommand("export", "write the journal as a mission directory");
   journal_export->add_option("journal", journal_file, "journal file")->required();
-  journal_export->add_option("--mission", journal_mission, "directory with the incident's mission.json")->required();
+  journal_export
+      ->add_option("--mission", journal_mission, "directory with the incident's mission.json")
+      ->required();
   journal_export->add_option("--out", journal_out, "mission directory to write")->required();
   journal->require_subcommand(1);
 
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
-      cli::Simulate(scenario, seed, out, sim_imu);
+      cli::Simulate(scenario, seed, out, sim_imu, sim_search);
     } else if (app.got_subcommand("scenarios")) {
       for (const auto& s : Scenarios()) fmt::print("{:<18} {}\n", s.name, s.description);
+      fmt::print("{:<18} {}\n", "search",
+                 "a left- or right-hand directional search on your own floor plan: --floorplan "
+                 "F [--level N] --entry X,Y [--heading DEG] [--hand left|right] [--minutes M]");
     } else if (*run) {
       const RunResult r = cli::Run(pipeline, mission, out, ParseKeyValues(run_options));
       fmt::print("{}: {} estimates in {:.3f} s -> {}\n", r.pipeline, r.estimates, r.wall_time_s,
@@ -235,8 +286,8 @@ int main(int argc, char** argv) {
         std::string req, opt;
         for (const auto& f : p->required_files()) req += (req.empty() ? "" : ", ") + f;
         for (const auto& f : p->optional_files()) opt += (opt.empty() ? "" : ", ") + f;
-        fmt::print("{:<14} {}\n{:<14} needs: mission.json, {}{}\n", p->name(), p->description(),
-                   "", req, opt.empty() ? "" : "; uses if present: " + opt);
+        fmt::print("{:<14} {}\n{:<14} needs: mission.json, {}{}\n", p->name(), p->description(), "",
+                   req, opt.empty() ? "" : "; uses if present: " + opt);
       }
     } else if (*validate) {
       cli::Validate(mission);
@@ -257,7 +308,8 @@ int main(int argc, char** argv) {
         load.work_dir = load_dir;
         return cli::BenchLoad(load, bench_json);
       }
-      if (!bench_what.empty()) throw std::invalid_argument("unknown benchmark '" + bench_what + "'");
+      if (!bench_what.empty())
+        throw std::invalid_argument("unknown benchmark '" + bench_what + "'");
       return cli::Bench(bench_rows, bench_json);
     } else if (*convert) {
       std::size_t samples = 0;
@@ -278,10 +330,14 @@ int main(int argc, char** argv) {
         samples = trial.imu.size();
       } else {
         MissionData m;
-        if (convert_format == "openshoe-figure8") m = ReadOpenShoeFigure8(convert_src);
-        else if (convert_format == "llio-gcp-walk") m = ReadLlioWalk(convert_src);
-        else if (convert_format == "zupt-dualfoot") m = ReadDualFoot(convert_src);
-        else throw std::invalid_argument("unknown format '" + convert_format + "'");
+        if (convert_format == "openshoe-figure8")
+          m = ReadOpenShoeFigure8(convert_src);
+        else if (convert_format == "llio-gcp-walk")
+          m = ReadLlioWalk(convert_src);
+        else if (convert_format == "zupt-dualfoot")
+          m = ReadDualFoot(convert_src);
+        else
+          throw std::invalid_argument("unknown format '" + convert_format + "'");
         WriteMissionDirectory(convert_out, m, nullptr);
         samples = m.imu.size();
       }
@@ -301,12 +357,13 @@ int main(int argc, char** argv) {
         for (double y : energy_after_years) {
           const double t = e.MaxOperatingTimeS(y * landmarks::kSecondsPerYear, p);
           fmt::print(" {:>14}", t >= 86400 * 2 ? fmt::format("{:.1f} d", t / 86400)
-                                              : fmt::format("{:.1f} h", t / 3600));
+                                               : fmt::format("{:.1f} h", t / 3600));
         }
         fmt::print("\n");
       }
     } else if (*serve) {
-      if (serve_replay.empty() && serve_live.empty()) throw std::invalid_argument("serve needs --replay MISSION or --live DIR");
+      if (serve_replay.empty() && serve_live.empty())
+        throw std::invalid_argument("serve needs --replay MISSION or --live DIR");
       serve_options.live = serve_live;
       if (serve_options.mqtt_password.empty() && std::getenv("TRAILMARK_MQTT_PASSWORD")) {
         serve_options.mqtt_password = std::getenv("TRAILMARK_MQTT_PASSWORD");
@@ -314,7 +371,8 @@ int main(int argc, char** argv) {
       serve_options.journal = serve_journal;
       serve_options.replay = serve_replay;
       serve_options.options = ParseKeyValues(serve_kv);
-      if (serve_options.token.empty() && std::getenv("TRAILMARK_TOKEN")) serve_options.token = std::getenv("TRAILMARK_TOKEN");
+      if (serve_options.token.empty() && std::getenv("TRAILMARK_TOKEN"))
+        serve_options.token = std::getenv("TRAILMARK_TOKEN");
       return cli::Serve(serve_options);
     } else if (*journal_export) {
       return cli::JournalExport(journal_file, journal_mission, journal_out);

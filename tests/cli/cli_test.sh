@@ -115,6 +115,14 @@ grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatc
 "$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | matches "^ff1 " || fail "mapmatch eval"
 run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
 [ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
+# A directional search simulated on a given floor plan (here house 1's map), then matched.
+"$TM" simulate search --floorplan "$dir/hs/floorplan.geojson" --entry 1.5,0.5 --minutes 2 --seed 4 --out "$dir/ss" | matches "simulated 'search'" || fail "simulate search"
+grep -q '"start_heading": 1.57' "$dir/ss/mission.json" || { cat "$dir/ss/mission.json"; fail "search: heading from the entry door"; }
+"$TM" run --pipeline mapmatch "$dir/ss" --out "$dir/ssr" > /dev/null || fail "mapmatch on the simulated search"
+run_failing "$TM" simulate search --floorplan "$dir/hs/floorplan.geojson" --out "$dir/x"
+[ $rc -ne 0 ] && grep -q "needs --floorplan FILE and --entry X,Y" "$dir/err" || { cat "$dir/err"; fail "search without an entry"; }
+run_failing "$TM" simulate office-loop --entry 1,1 --out "$dir/x"
+[ $rc -ne 0 ] && grep -q "are for the 'search' scenario" "$dir/err" || { cat "$dir/err"; fail "search options elsewhere"; }
 # The live server reads mapmatch's floor (level) as the pipeline does: a missing one is named.
 run_failing "$TM" serve --live "$dir/hs" --journal "$dir/hsj.db" --pipeline mapmatch --option level=7 --port 0 --token x
 [ $rc -ne 0 ] && grep -q "no level 7 (its levels: 0)" "$dir/err" || { cat "$dir/err"; fail "serve mapmatch level"; }

@@ -177,7 +177,10 @@ TEST(FloorPlanGeoJson, AMultiFloorPlanIsReadOneFloorAtATime) {
   const auto upstairs = mission.LoadFloorPlan(1);
   EXPECT_EQ(upstairs->walls().size(), 1u);
   EXPECT_TRUE(upstairs->Crosses({2, 2}, {8, 2}));
-  EXPECT_EQ(mission.LoadFloorPlan(-1)->rooms().size(), 1u);
+  // A basement (a negative level) is one floor too: its room, none of the other floors' walls.
+  const auto cellar = mission.LoadFloorPlan(-1);
+  EXPECT_EQ(cellar->rooms().size(), 1u);
+  EXPECT_TRUE(cellar->walls().empty());
   try {
     mission.LoadFloorPlan(2);
     FAIL() << "expected an error for level 2";
@@ -192,7 +195,7 @@ TEST(FloorPlanGeoJson, AMultiFloorPlanIsReadOneFloorAtATime) {
   std::vector<int> one;
   ParseFloorPlanGeoJson(R"({"type":"FeatureCollection","features":[{"type":"Feature",
       "properties":{"kind":"wall"},"geometry":{"type":"LineString","coordinates":[[0,0],[1,0]]}}]})",
-                        "x", -1, &one);
+                        "x", std::nullopt, &one);
   EXPECT_EQ(one, std::vector<int>{0});
 }
 

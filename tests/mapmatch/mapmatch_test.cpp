@@ -363,6 +363,34 @@ TEST(MapParticleFilter, OnceTheTrackIsFoundComparisonsWeighWithTheTrackingSigma)
   EXPECT_FALSE(bad.IsValid(nullptr));
 }
 
+TEST(MapParticleFilter, AKnownStartComparesAgainOnlyWhenClearlyLost) {
+  // A 30 x 30 m hall; a known start (converged at once); wide odometry noise spreads the belief
+  // to a variance between the pattern level (2 m^2) and the known start's (8 m^2): a known
+  // start does not ask for comparisons there (option 0: it does, as a uniform start would);
+  // spread further, above 8 m^2, it does.
+  const FloorPlan plan = Room(30, 30);
+  const SearchGrid grid(plan);
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  for (double known_level : {8.0, 0.0}) {
+    MapParticleFilterOptions o;
+    o.wall_follow = false;
+    o.position_noise_m = 1.0;
+    o.heading_noise_rad_per_m = 0;
+    o.known_start_relocalize_above_variance_m2 = known_level;
+    MapParticleFilter pf(grid, seqs, o);
+    pf.InitializeKnown(Vec2(15, 15), 0.0, 0.05, 0.0);
+    pf.Predict(Vec2(0.1, 0));  // converged
+    pf.Predict(Vec2(0.1, 0));
+    pf.Predict(Vec2(0.1, 0));
+    const double variance = pf.Covariance().trace();
+    ASSERT_GT(variance, 2.0);
+    ASSERT_LT(variance, 8.0);
+    EXPECT_EQ(pf.WantsPatterns(), known_level == 0.0) << variance;
+    while (pf.Covariance().trace() <= 8.0) pf.Predict(Vec2(0.1, 0));
+    EXPECT_TRUE(pf.WantsPatterns());
+  }
+}
+
 TEST(WallFollowing, StepLikelihoodIsTheForwardRecursionOfTheOnOffChain) {
   // Walls along y = 0.05 and y = 3.05: the field's cell centres lie at (k + 1/2) 0.1 m, so
   // it is exact at the side points used below.

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "trailmark/sim/house_search.h"
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/rssi_channel.h"
 #include "trailmark/sim/scenarios.h"
@@ -50,8 +51,11 @@ TEST(Walker, WallFollowingGoesRoundARoomAndBack) {
 }
 
 TEST(PdrErrorModel, ErrorFreeIsExactAndDriftRotates) {
-  PdrErrorOptions none{.heading_random_walk_rad = 0, .heading_drift_sigma_rad_per_s = 0,
-                       .turn_scale_error_sigma = 0, .scale_error_sigma = 0, .step_noise_m = 0};
+  PdrErrorOptions none{.heading_random_walk_rad = 0,
+                       .heading_drift_sigma_rad_per_s = 0,
+                       .turn_scale_error_sigma = 0,
+                       .scale_error_sigma = 0,
+                       .step_noise_m = 0};
   PdrErrorModel exact(none, Random(1));
   EXPECT_TRUE(exact.Apply({0.7, 0.1}, 0.5).isApprox(Vec2(0.7, 0.1), 1e-15));
   PdrErrorOptions drift = none;
@@ -76,8 +80,7 @@ TEST(RssiChannel, MeanFollowsLogDistanceWallsAndBody) {
   EXPECT_NEAR(free.MeanRssi({0, 0}, {10, 0}, 0.0, std::nullopt),
               o.alpha_dbm - 10 * o.path_loss_exponent, 1e-9);
   // A fire zone across the link adds its loss per metre inside.
-  RssiChannel fire(o, nullptr, {{"fire", {{4, -1}, {6, -1}, {6, 1}, {4, 1}}, 3.0, 0.0}},
-                   Random(1));
+  RssiChannel fire(o, nullptr, {{"fire", {{4, -1}, {6, -1}, {6, 1}, {4, 1}}, 3.0, 0.0}}, Random(1));
   EXPECT_NEAR(fire.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt),
               o.alpha_dbm - 10 * o.path_loss_exponent - 2.0 * 3.0, 1e-9);
 }
@@ -162,4 +165,40 @@ TEST(Scenario, UnknownNameListsKnownOnes) {
 }
 
 }  // namespace
+TEST(Scenario, ADirectionalSearchOnAnyFloorPlan) {
+  // House 2 as its map shows it (the entry door open): entering at the house's entry with no
+  // heading given, the search walks in away from that door, which is shut behind the team —
+  // the truth never crosses a wall of the map nor leaves the building's bounds.
+  const FloorPlan map = BuildHouse(2, false);
+  HouseSearchOptions o;
+  o.duration_s = 300;
+  const SimulatedMission sim = SimulateSearchOnPlan(map, HouseEntry(2), std::nullopt, o, 5);
+  ASSERT_EQ(sim.data.info.nodes.size(), 1u);
+  EXPECT_NEAR(sim.data.info.nodes[0].start_heading_rad.value_or(99), HouseEntryHeading(2), 1e-12);
+  ASSERT_GT(sim.data.truth.size(), 2000u);  // 10 Hz for 300 s
+  EXPECT_NEAR(sim.data.truth.back().t, 300, 0.2);
+  double walked = 0;
+  const Box2 box = map.Bounds();
+  for (std::size_t k = 1; k < sim.data.truth.size(); ++k) {
+    const Vec2 a = sim.data.truth[k - 1].position_n.head<2>();
+    const Vec2 b = sim.data.truth[k].position_n.head<2>();
+    ASSERT_FALSE(map.Crosses(a, b)) << sim.data.truth[k].t;
+    ASSERT_TRUE((b.array() >= box.min.array()).all() && (b.array() <= box.max.array()).all());
+    walked += (b - a).norm();
+  }
+  EXPECT_GT(walked, 100.0);  // about 0.45 m/s less the pauses
+  EXPECT_FALSE(sim.data.steps.empty());
+  EXPECT_EQ(sim.plan.walls().size(), map.walls().size());  // the map as given
+  // Deterministic per seed.
+  const SimulatedMission again = SimulateSearchOnPlan(map, HouseEntry(2), std::nullopt, o, 5);
+  EXPECT_EQ(again.data.truth.back().position_n, sim.data.truth.back().position_n);
+  // Named errors: outside the plan, no door to walk in from and no heading, no walls.
+  EXPECT_THROW(SimulateSearchOnPlan(map, Vec2(40, 5), 0.0, o, 1), std::invalid_argument);
+  EXPECT_THROW(SimulateSearchOnPlan(map, Vec2(11, 2), std::nullopt, o, 1), std::invalid_argument);
+  EXPECT_NO_THROW(SimulateSearchOnPlan(map, Vec2(11, 2), 0.5, o, 1));
+  EXPECT_THROW(SimulateSearchOnPlan(FloorPlan(), Vec2(0, 0), 0.0, o, 1), std::invalid_argument);
+  o.duration_s = 0;
+  EXPECT_THROW(SimulateSearchOnPlan(map, HouseEntry(2), 0.0, o, 1), std::invalid_argument);
+}
+
 }  // namespace trailmark

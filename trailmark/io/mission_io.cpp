@@ -175,8 +175,8 @@ void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info
   if (!out) throw std::runtime_error(path.string() + ": write failed");
 }
 
-FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source, int level,
-                                std::vector<int>* levels_present) {
+FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source,
+                                std::optional<int> level, std::vector<int>* levels_present) {
   std::set<int> levels;
   const json root = ParseJson(text, source);
   if (!root.is_object() || root.value("type", "") != "FeatureCollection") {
@@ -206,7 +206,7 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
     }
     if (kind != "wall" && kind != "door" && kind != "room") continue;  // others are ignored
     levels.insert(feature_level);
-    if (level >= 0 && feature_level != level) continue;
+    if (level && feature_level != *level) continue;
     if (!f.contains("geometry") || !f["geometry"].is_object()) {
       Bad(source, where + "/geometry", "missing geometry");
     }
@@ -261,7 +261,7 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
   return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
 }
 
-FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level,
+FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, std::optional<int> level,
                                std::vector<int>* levels_present) {
   return ParseFloorPlanGeoJson(ReadText(path), path.string(), level, levels_present);
 }
@@ -402,7 +402,7 @@ std::optional<FloorPlan> MissionDirectory::LoadFloorPlan(std::optional<int> leve
   const std::filesystem::path path = dir_ / *info_.floorplan;
   const std::string text = ReadText(path);
   std::vector<int> levels;
-  FloorPlan all = ParseFloorPlanGeoJson(text, path.string(), -1, &levels);
+  FloorPlan all = ParseFloorPlanGeoJson(text, path.string(), std::nullopt, &levels);
   if (levels_present) *levels_present = levels;
   if (level && !levels.empty() && std::find(levels.begin(), levels.end(), *level) == levels.end()) {
     throw InputError(path.string(), 0,

@@ -20,12 +20,15 @@ MissionInfo ReadMissionInfo(const std::filesystem::path& path);
 std::string MissionInfoToJson(const MissionInfo& info);
 void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info);
 
-/// Floor plan GeoJSON (spec: "Floor plans"). `level` selects one floor (-1 = all levels);
+/// Floor plan GeoJSON (spec: "Floor plans"). `level` selects one floor (any integer, a
+/// basement's -1 too; nullopt = every level's features in one plan);
 /// `levels_present` (optional) receives the levels its walls, doors and rooms use, sorted
 /// (a feature without "level" is on level 0).
 FloorPlan ParseFloorPlanGeoJson(const std::string& json_text, const std::string& source,
-                                int level = -1, std::vector<int>* levels_present = nullptr);
-FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path, int level = -1,
+                                std::optional<int> level = std::nullopt,
+                                std::vector<int>* levels_present = nullptr);
+FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path,
+                               std::optional<int> level = std::nullopt,
                                std::vector<int>* levels_present = nullptr);
 /// The floor a single-floor consumer uses when not told: level 0 when the plan has it (the
 /// floor the responders enter on), else the lowest.

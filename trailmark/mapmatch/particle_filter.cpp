@@ -54,8 +54,9 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
     return fail("resample_fraction must be within [0, 1]");
   if (!(resample_position_sigma_m >= 0) || !(resample_heading_sigma_rad >= 0))
     return fail("resample noises >= 0");
-  if (!(relocalize_above_variance_m2 >= 0))
-    return fail("relocalize_above_variance_m2 must be >= 0");
+  if (!(relocalize_above_variance_m2 >= 0) || !(known_start_relocalize_above_variance_m2 >= 0))
+    return fail(
+        "relocalize_above_variance_m2 and known_start_relocalize_above_variance_m2 must be >= 0");
   if (!(wall_alarm_k >= 0 && wall_alarm_k < 1) || !(wall_alarm_h > 0))
     return fail("wall_alarm_k must be within [0, 1) and wall_alarm_h > 0");
   if (!(recover_position_sigma_m >= 0) || !(recover_heading_sigma_rad >= 0) ||
@@ -515,9 +516,12 @@ void MapParticleFilter::Recover() {
 }
 
 double MapParticleFilter::PatternThreshold() const {
-  return converged_ ? std::max(options_.use_patterns_above_variance_m2,
-                               options_.relocalize_above_variance_m2)
-                    : options_.use_patterns_above_variance_m2;
+  if (!converged_) return options_.use_patterns_above_variance_m2;
+  const double relocalize = uniform_start_
+                                ? options_.relocalize_above_variance_m2
+                                : std::max(options_.relocalize_above_variance_m2,
+                                           options_.known_start_relocalize_above_variance_m2);
+  return std::max(options_.use_patterns_above_variance_m2, relocalize);
 }
 
 void MapParticleFilter::NoteConvergence() {

@@ -63,6 +63,13 @@ struct MapParticleFilterOptions {
   /// converged filter that drifts a little is better served by the walls than by a comparison
   /// that furniture can fool). 0 = no hysteresis.
   double relocalize_above_variance_m2 = 0.0;
+  /// Ours: the same for a known start, whose filter is on track from the first step: it
+  /// compares again only when its variance exceeds this (or after a wall alarm). Walking a
+  /// corridor spreads the belief along it; on a large floor with repeating corridors (a real
+  /// office floor: 2,500 m^2) a comparison then draws particles into the wrong corridors and
+  /// a known start was lost by 6-25 m, against 0.3-1.0 m without (docs/mapmatch.md). 0 = as a
+  /// uniform start.
+  double known_start_relocalize_above_variance_m2 = 8.0;
   /// Ours: from an unknown start, the filter counts as converged (and skips comparisons) only
   /// after this many pattern comparisons have been used: walls and the wall-following model
   /// alone can settle a confident belief in the wrong corridor of a large building.

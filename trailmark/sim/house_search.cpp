@@ -98,15 +98,26 @@ FloorPlan BuildHouse(int house, bool with_furniture, bool map_error, bool furnit
   return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
 }
 
-SimulatedMission SimulateHouseSearch(const HouseSearchOptions& o, std::uint64_t seed) {
-  if (o.house != 1 && o.house != 2) throw std::invalid_argument("house must be 1 or 2");
-  Random rng(seed * 2654435761ULL + static_cast<std::uint64_t>(o.house));
-  Random walk_rng = rng.Fork(), pdr_rng = rng.Fork(), sweep_rng = rng.Fork();
-  const FloorPlan world = BuildHouse(o.house, true, false, o.furniture);
+namespace {
+
+// The door nearest to `x`, within `max_distance_m`; null when none.
+const Segment2* NearestDoor(const FloorPlan& plan, const Vec2& x, double max_distance_m) {
+  const Segment2* best = nullptr;
+  double best_d = max_distance_m;
+  for (const auto& door : plan.doors()) {
+    const double d = DistanceToSegment(x, door);
+    if (d <= best_d) best_d = d, best = &door;
+  }
+  return best;
+}
+
+// The search itself, shared by the houses and any plan: the walker follows `world`'s walls
+// from `entry`; `map` becomes the mission's floor plan. Name and description are the caller's.
+SimulatedMission SimulateSearch(const FloorPlan& world, FloorPlan map, const Vec2& entry,
+                                double heading, const HouseSearchOptions& o, Random& walk_rng,
+                                Random& pdr_rng, Random& sweep_rng) {
   SimulatedMission sim;
-  sim.plan = BuildHouse(o.house, false, o.map_error);
-  const Vec2 entry = HouseEntry(o.house);
-  const double heading = HouseEntryHeading(o.house);
+  sim.plan = std::move(map);
   WallFollowOptions wf;
   wf.wall_offset_m = o.wall_offset_m;
   wf.max_length_m = o.duration_s * o.speed_mps * 1.05;
@@ -137,14 +148,6 @@ SimulatedMission SimulateHouseSearch(const HouseSearchOptions& o, std::uint64_t 
   sim.walks.emplace_back("ff1", walk);
 
   MissionData& m = sim.data;
-  m.info.name = fmt::format("house{}-search", o.house);
-  m.info.description = fmt::format(
-      "Map-aided search paper, data set {}: {} {}-hand directional search of {:.0f} s at {:.2f} "
-      "m/s from the "
-      "entry{}; furniture not on the map; simulated, seed {}",
-      o.house, o.house == 1 ? "12.5 x 10 m house (west 70 m^2 searched)," : "23 x 11 m house,",
-      o.hand == Hand::kLeft ? "left" : "right", o.duration_s, o.speed_mps,
-      o.map_error ? "; the map shows the hall door 2 m from where it is" : "", seed);
   m.info.floorplan = "floorplan.geojson";
   m.info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(entry.x(), entry.y(), 0), 0.2, heading, 0.05));
   PdrErrorModel pdr(o.pdr, pdr_rng);
@@ -161,6 +164,82 @@ SimulatedMission SimulateHouseSearch(const HouseSearchOptions& o, std::uint64_t 
     m.events.push_back({st.t_stop, "ff1", "stop", ""});
     m.events.push_back({std::min(st.t_go, o.duration_s), "ff1", "go", ""});
   }
+  return sim;
+}
+
+}  // namespace
+
+SimulatedMission SimulateHouseSearch(const HouseSearchOptions& o, std::uint64_t seed) {
+  if (o.house != 1 && o.house != 2) throw std::invalid_argument("house must be 1 or 2");
+  Random rng(seed * 2654435761ULL + static_cast<std::uint64_t>(o.house));
+  Random walk_rng = rng.Fork(), pdr_rng = rng.Fork(), sweep_rng = rng.Fork();
+  const FloorPlan world = BuildHouse(o.house, true, false, o.furniture);
+  SimulatedMission sim =
+      SimulateSearch(world, BuildHouse(o.house, false, o.map_error), HouseEntry(o.house),
+                     HouseEntryHeading(o.house), o, walk_rng, pdr_rng, sweep_rng);
+  MissionData& m = sim.data;
+  m.info.name = fmt::format("house{}-search", o.house);
+  m.info.description = fmt::format(
+      "Map-aided search paper, data set {}: {} {}-hand directional search of {:.0f} s at {:.2f} "
+      "m/s from the "
+      "entry{}; furniture not on the map; simulated, seed {}",
+      o.house, o.house == 1 ? "12.5 x 10 m house (west 70 m^2 searched)," : "23 x 11 m house,",
+      o.hand == Hand::kLeft ? "left" : "right", o.duration_s, o.speed_mps,
+      o.map_error ? "; the map shows the hall door 2 m from where it is" : "", seed);
+  return sim;
+}
+
+std::optional<double> EntryHeadingFromDoor(const FloorPlan& plan, const Vec2& entry,
+                                           double max_distance_m) {
+  const Segment2* best = NearestDoor(plan, entry, max_distance_m);
+  if (best == nullptr) return std::nullopt;
+  const Vec2 away = entry - 0.5 * (best->a + best->b);
+  if (away.norm() < 1e-6) return std::nullopt;
+  return std::atan2(away.y(), away.x());
+}
+
+SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
+                                      std::optional<double> entry_heading_rad,
+                                      const HouseSearchOptions& o, std::uint64_t seed) {
+  if (plan.solid_walls().empty()) throw std::invalid_argument("the floor plan has no walls");
+  const Box2 box = plan.Bounds();
+  if (!entry.allFinite() || (entry.array() < box.min.array()).any() ||
+      (entry.array() > box.max.array()).any())
+    throw std::invalid_argument(fmt::format(
+        "the entry ({:.2f}, {:.2f}) is not within the floor plan's bounds ({:.1f}, {:.1f}) .. "
+        "({:.1f}, {:.1f})",
+        entry.x(), entry.y(), box.min.x(), box.min.y(), box.max.x(), box.max.y()));
+  if (!(o.duration_s > 0 && o.duration_s <= 24 * 3600))
+    throw std::invalid_argument("the search must last more than 0 s and at most 24 h");
+  // The door they came in by is shut behind them (else the left hand would lead back out).
+  std::vector<Segment2> walls = plan.walls(), doors;
+  const Segment2* entry_door = NearestDoor(plan, entry, 1.5);
+  for (const auto& door : plan.doors()) {
+    if (&door == entry_door)
+      walls.push_back(door);
+    else
+      doors.push_back(door);
+  }
+  const FloorPlan world(std::move(walls), std::move(doors), plan.rooms());
+  double heading = 0;
+  if (entry_heading_rad) {
+    heading = *entry_heading_rad;
+  } else if (const auto from_door = EntryHeadingFromDoor(plan, entry, 1.5)) {
+    heading = *from_door;
+  } else {
+    throw std::invalid_argument(
+        "no door within 1.5 m of the entry to walk in from: give the entry heading");
+  }
+  Random rng(seed * 2654435761ULL + 7);
+  Random walk_rng = rng.Fork(), pdr_rng = rng.Fork(), sweep_rng = rng.Fork();
+  SimulatedMission sim =
+      SimulateSearch(world, plan, entry, heading, o, walk_rng, pdr_rng, sweep_rng);
+  sim.data.info.name = "search";
+  sim.data.info.description = fmt::format(
+      "a {}-hand directional search of {:.0f} s at {:.2f} m/s on a given floor plan, entering at "
+      "({:.2f}, {:.2f}) heading {:.0f} deg{}; no furniture; simulated, seed {}",
+      o.hand == Hand::kLeft ? "left" : "right", o.duration_s, o.speed_mps, entry.x(), entry.y(),
+      heading * 180 / kPi, entry_door ? ", the entry door shut behind" : "", seed);
   return sim;
 }
 

@@ -11,6 +11,7 @@
 /// of ~10 minutes through the whole house.
 
 #include <cstdint>
+#include <optional>
 
 #include "trailmark/sim/mission_sim.h"
 #include "trailmark/sim/pdr_error_model.h"
@@ -45,5 +46,20 @@ double HouseEntryHeading(int house);
 /// One search: the mission's floor plan is the map (no furniture; with the moved door when
 /// map_error); steps from the odometry; truth at 10 Hz.
 SimulatedMission SimulateHouseSearch(const HouseSearchOptions& options, std::uint64_t seed);
+
+/// The same directional search on any floor plan (e.g. one floor of a converted building):
+/// the firefighter enters at `entry`, facing `entry_heading_rad` or, when not given, away from
+/// the plan's nearest door within 1.5 m (that door is shut behind the team, as in the houses);
+/// the plan is both the world and the map (no furniture). Throws std::invalid_argument for a
+/// plan without walls, an entry outside its bounds, no heading and no door near the entry, or
+/// a duration outside (0 s, 24 h]. `options.house`, `map_error` and `furniture` are not used.
+SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
+                                      std::optional<double> entry_heading_rad,
+                                      const HouseSearchOptions& options, std::uint64_t seed);
+
+/// The direction from the midpoint of the door nearest to `entry` (within `max_distance_m`)
+/// to `entry`: walking in through it. nullopt when there is none.
+std::optional<double> EntryHeadingFromDoor(const FloorPlan& plan, const Vec2& entry,
+                                           double max_distance_m);
 
 }  // namespace trailmark
