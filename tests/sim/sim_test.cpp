@@ -197,6 +197,13 @@ TEST(Scenario, ADirectionalSearchOnAnyFloorPlan) {
   EXPECT_THROW(SimulateSearchOnPlan(map, Vec2(11, 2), std::nullopt, o, 1), std::invalid_argument);
   EXPECT_NO_THROW(SimulateSearchOnPlan(map, Vec2(11, 2), 0.5, o, 1));
   EXPECT_THROW(SimulateSearchOnPlan(FloorPlan(), Vec2(0, 0), 0.0, o, 1), std::invalid_argument);
+  EXPECT_THROW(SimulateSearchOnPlan(map, Vec2(5.0, 2.0), 0.0, o, 1),  // on a wall
+               std::invalid_argument);
+  // Boxed in: a 0.5 m cell round the entry.
+  std::vector<Segment2> walls = map.walls();
+  AddRectangle(walls, Vec2(2.75, 2.75), Vec2(3.25, 3.25));
+  EXPECT_THROW(SimulateSearchOnPlan(FloorPlan(walls, {}, {}), Vec2(3, 3), 0.0, o, 1),
+               std::invalid_argument);
   o.duration_s = 0;
   EXPECT_THROW(SimulateSearchOnPlan(map, HouseEntry(2), 0.0, o, 1), std::invalid_argument);
 }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "trailmark/core/random.h"
@@ -230,10 +231,22 @@ SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
     throw std::invalid_argument(
         "no door within 1.5 m of the entry to walk in from: give the entry heading");
   }
+  double clearance = std::numeric_limits<double>::infinity();
+  for (const auto& w : world.solid_walls())
+    clearance = std::min(clearance, DistanceToSegment(entry, w));
+  if (clearance < 0.2)
+    throw std::invalid_argument(fmt::format(
+        "the entry ({:.2f}, {:.2f}) is {:.2f} m from a wall: stand the team at least 0.2 m off it",
+        entry.x(), entry.y(), clearance));
   Random rng(seed * 2654435761ULL + 7);
   Random walk_rng = rng.Fork(), pdr_rng = rng.Fork(), sweep_rng = rng.Fork();
   SimulatedMission sim =
       SimulateSearch(world, plan, entry, heading, o, walk_rng, pdr_rng, sweep_rng);
+  if (sim.data.steps.size() < 2)
+    throw std::invalid_argument(fmt::format(
+        "no search could be walked from the entry ({:.2f}, {:.2f}) heading {:.0f} deg: walls "
+        "all round it?",
+        entry.x(), entry.y(), heading * 180 / kPi));
   sim.data.info.name = "search";
   sim.data.info.description = fmt::format(
       "a {}-hand directional search of {:.0f} s at {:.2f} m/s on a given floor plan, entering at "

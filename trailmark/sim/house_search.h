@@ -51,8 +51,9 @@ SimulatedMission SimulateHouseSearch(const HouseSearchOptions& options, std::uin
 /// the firefighter enters at `entry`, facing `entry_heading_rad` or, when not given, away from
 /// the plan's nearest door within 1.5 m (that door is shut behind the team, as in the houses);
 /// the plan is both the world and the map (no furniture). Throws std::invalid_argument for a
-/// plan without walls, an entry outside its bounds, no heading and no door near the entry, or
-/// a duration outside (0 s, 24 h]. `options.house`, `map_error` and `furniture` are not used.
+/// plan without walls, an entry outside its bounds or within 0.2 m of a wall, no heading and no
+/// door near the entry, a duration outside (0 s, 24 h], or an entry no search can leave.
+/// `options.house`, `map_error` and `furniture` are not used.
 SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
                                       std::optional<double> entry_heading_rad,
                                       const HouseSearchOptions& options, std::uint64_t seed);
