@@ -14,6 +14,7 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/report/html_report.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
@@ -190,6 +191,21 @@ double WallTimeOfRun(const fs::path& run_dir) {
   return 0.0;
 }
 
+// The floor a run of mapmatch was matched on (its `level` option), for the report to draw;
+// nullopt for other pipelines or the default floor.
+std::optional<int> LevelOfRun(const fs::path& run_dir) {
+  std::ifstream in(run_dir / "diagnostics.json");
+  nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+  if (!j.is_object() || j.value("pipeline", std::string()) != "mapmatch" ||
+      !j.contains("options") || !j["options"].is_object())
+    return std::nullopt;
+  std::map<std::string, std::string> options;
+  for (const auto& [k, v] : j["options"].items()) {
+    if (v.is_string()) options[k] = v.get<std::string>();
+  }
+  return TakeMapMatchLevel(options);
+}
+
 }  // namespace
 
 void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
@@ -199,7 +215,12 @@ void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
   const MissionDirectory mission(mission_dir);
   ReportInput input;
   input.info = mission.info();
-  input.plan = mission.LoadFloorPlan();
+  // The floor the first mapmatch run with a `level` was matched on, else the default floor.
+  std::optional<int> level;
+  for (const auto& run : run_dirs) {
+    if ((level = LevelOfRun(run))) break;
+  }
+  input.plan = mission.LoadFloorPlan(level);
   if (mission.Has("truth.csv")) {
     input.truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
   }

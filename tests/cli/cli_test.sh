@@ -115,6 +115,12 @@ grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatc
 "$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | matches "^ff1 " || fail "mapmatch eval"
 run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
 [ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
+# The report draws the floor a mapmatch run was matched on (its level option).
+"$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/hsl" --option level=0 > /dev/null || fail "mapmatch level=0"
+"$TM" report "$dir/hsl" --out "$dir/hsl.html" > /dev/null || fail "report of a mapmatch run with a level"
+sed -i 's/"level": *"0"/"level":"5"/' "$dir/hsl/diagnostics.json"
+run_failing "$TM" report "$dir/hsl" --out "$dir/x.html"
+[ $rc -ne 0 ] && grep -q "no level 5" "$dir/err" || { cat "$dir/err"; fail "report reads the run's level"; }
 # A directional search simulated on a given floor plan (here house 1's map), then matched.
 "$TM" simulate search --floorplan "$dir/hs/floorplan.geojson" --entry 1.5,0.5 --minutes 2 --seed 4 --out "$dir/ss" | matches "simulated 'search'" || fail "simulate search"
 grep -q '"start_heading": 1.57' "$dir/ss/mission.json" || { cat "$dir/ss/mission.json"; fail "search: heading from the entry door"; }
