@@ -1,9 +1,7 @@
 #include "commands.h"
 
 #include <fmt/format.h>
-#include <fmt/ranges.h>
 
-#include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -31,15 +29,10 @@ SimulatedMission SimulateSearchOnFile(const SimulateSearchArgs& a, std::uint64_t
   if (a.floorplan.empty() || a.entry.empty())
     throw std::invalid_argument("simulate search needs --floorplan FILE and --entry X,Y");
   std::vector<int> levels;
-  ReadFloorPlanGeoJson(a.floorplan, std::nullopt, &levels);
+  const FloorPlan floor = ReadFloorPlanFloor(a.floorplan, a.level, &levels);
   const int level = a.level.value_or(DefaultFloorPlanLevel(levels));
-  if (!levels.empty() && std::find(levels.begin(), levels.end(), level) == levels.end())
-    throw InputError(a.floorplan, 0,
-                     fmt::format("the floor plan has no level {} (its levels: {})", level,
-                                 fmt::join(levels, ", ")));
   // The mission's plan is that one floor (its rooms on level 0 with the walls, so that the
   // mission's floor plan has one level).
-  const FloorPlan floor = ReadFloorPlanGeoJson(a.floorplan, level);
   std::vector<Room> rooms = floor.rooms();
   for (auto& r : rooms) r.level = 0;
   const FloorPlan plan(floor.walls(), floor.doors(), std::move(rooms));

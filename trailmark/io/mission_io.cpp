@@ -15,11 +15,11 @@
 namespace trailmark {
 namespace {
 
-using nlohmann::json;
 using io_detail::Bad;
 using io_detail::Number;
 using io_detail::ParseJson;
 using io_detail::ReadText;
+using nlohmann::json;
 
 std::optional<double> OptNumber(const json& obj, const char* key, const std::string& source,
                                 const std::string& where) {
@@ -100,10 +100,10 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
       node.start_sigma_m = OptNumber(n, "start_sigma", source, where);
       node.start_heading_rad = OptNumber(n, "start_heading", source, where);
       node.start_heading_sigma_rad = OptNumber(n, "start_heading_sigma", source, where);
-      for (const auto& [key, sigma] : {std::pair{"position_sigma", node.position_sigma_m},
-                                       std::pair{"start_sigma", node.start_sigma_m},
-                                       std::pair{"start_heading_sigma",
-                                                 node.start_heading_sigma_rad}}) {
+      for (const auto& [key, sigma] :
+           {std::pair{"position_sigma", node.position_sigma_m},
+            std::pair{"start_sigma", node.start_sigma_m},
+            std::pair{"start_heading_sigma", node.start_heading_sigma_rad}}) {
         if (sigma && *sigma < 0) Bad(source, where + "/" + key, "must not be negative");
       }
       if (node.kind == NodeKind::kBase && !node.position) {
@@ -192,16 +192,15 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
     const std::string where = fmt::format("/features/{}", i);
     const json& f = features[i];
     if (!f.is_object()) Bad(source, where, "expected a Feature object");
-    const json props = f.contains("properties") && f["properties"].is_object()
-                           ? f["properties"]
-                           : json::object();
+    const json props =
+        f.contains("properties") && f["properties"].is_object() ? f["properties"] : json::object();
     const std::string kind = props.contains("kind") && props["kind"].is_string()
                                  ? props["kind"].get<std::string>()
                                  : std::string();
     int feature_level = 0;
     if (props.contains("level") && !props["level"].is_null()) {
-      if (!props["level"].is_number_integer()) Bad(source, where + "/properties/level",
-                                                  "expected an integer");
+      if (!props["level"].is_number_integer())
+        Bad(source, where + "/properties/level", "expected an integer");
       feature_level = props["level"].get<int>();
     }
     if (kind != "wall" && kind != "door" && kind != "room") continue;  // others are ignored
@@ -396,10 +395,8 @@ void MissionDirectory::Require(const std::string& file, const std::string& neede
   }
 }
 
-std::optional<FloorPlan> MissionDirectory::LoadFloorPlan(std::optional<int> level,
-                                                         std::vector<int>* levels_present) const {
-  if (!info_.floorplan) return std::nullopt;
-  const std::filesystem::path path = dir_ / *info_.floorplan;
+FloorPlan ReadFloorPlanFloor(const std::filesystem::path& path, std::optional<int> level,
+                             std::vector<int>* levels_present) {
   const std::string text = ReadText(path);
   std::vector<int> levels;
   FloorPlan all = ParseFloorPlanGeoJson(text, path.string(), std::nullopt, &levels);
@@ -411,6 +408,12 @@ std::optional<FloorPlan> MissionDirectory::LoadFloorPlan(std::optional<int> leve
   }
   if (levels.size() <= 1 && !level) return all;
   return ParseFloorPlanGeoJson(text, path.string(), level.value_or(DefaultFloorPlanLevel(levels)));
+}
+
+std::optional<FloorPlan> MissionDirectory::LoadFloorPlan(std::optional<int> level,
+                                                         std::vector<int>* levels_present) const {
+  if (!info_.floorplan) return std::nullopt;
+  return ReadFloorPlanFloor(dir_ / *info_.floorplan, level, levels_present);
 }
 
 }  // namespace trailmark

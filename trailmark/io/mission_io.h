@@ -33,6 +33,12 @@ FloorPlan ReadFloorPlanGeoJson(const std::filesystem::path& path,
 /// The floor a single-floor consumer uses when not told: level 0 when the plan has it (the
 /// floor the responders enter on), else the lowest.
 int DefaultFloorPlanLevel(const std::vector<int>& levels_present);
+/// One floor of a floor-plan file: `level`, or when not given DefaultFloorPlanLevel (floors are
+/// never merged into one plan). A `level` the plan does not have is an InputError naming the
+/// file and the levels it has. `levels_present` (optional) receives the plan's levels.
+FloorPlan ReadFloorPlanFloor(const std::filesystem::path& path,
+                             std::optional<int> level = std::nullopt,
+                             std::vector<int>* levels_present = nullptr);
 std::string FloorPlanToGeoJson(const FloorPlan& plan);
 /// Several floors in one file: every feature of a floor carries its `level`.
 std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors);
@@ -71,10 +77,7 @@ class MissionDirectory {
   RowReader<Row> OpenStream() const {
     return RowReader<Row>(Path(StreamFileName<Row>()).string(), &registry_);
   }
-  /// The floor plan named in mission.json, if any: one floor of it — `level`, or when not
-  /// given DefaultFloorPlanLevel (floors are never merged into one plan). A `level` the plan
-  /// does not have is an InputError naming the file and the levels it has. `levels_present`
-  /// (optional) receives the plan's levels.
+  /// The floor plan named in mission.json, if any: one floor of it (ReadFloorPlanFloor).
   std::optional<FloorPlan> LoadFloorPlan(std::optional<int> level = std::nullopt,
                                          std::vector<int>* levels_present = nullptr) const;
 
