@@ -112,6 +112,13 @@ const Segment2* NearestDoor(const FloorPlan& plan, const Vec2& x, double max_dis
   return best;
 }
 
+// Walking in through `door` to `entry`: the direction from the door's middle to the entry.
+std::optional<double> HeadingThroughDoor(const Segment2& door, const Vec2& entry) {
+  const Vec2 away = entry - 0.5 * (door.a + door.b);
+  if (away.norm() < 1e-6) return std::nullopt;
+  return std::atan2(away.y(), away.x());
+}
+
 // The search itself, shared by the houses and any plan: the walker follows `world`'s walls
 // from `entry`; `map` becomes the mission's floor plan. Name and description are the caller's.
 SimulatedMission SimulateSearch(const FloorPlan& world, FloorPlan map, const Vec2& entry,
@@ -190,15 +197,6 @@ SimulatedMission SimulateHouseSearch(const HouseSearchOptions& o, std::uint64_t 
   return sim;
 }
 
-std::optional<double> EntryHeadingFromDoor(const FloorPlan& plan, const Vec2& entry,
-                                           double max_distance_m) {
-  const Segment2* best = NearestDoor(plan, entry, max_distance_m);
-  if (best == nullptr) return std::nullopt;
-  const Vec2 away = entry - 0.5 * (best->a + best->b);
-  if (away.norm() < 1e-6) return std::nullopt;
-  return std::atan2(away.y(), away.x());
-}
-
 SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
                                       std::optional<double> entry_heading_rad,
                                       const HouseSearchOptions& o, std::uint64_t seed) {
@@ -225,7 +223,8 @@ SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
   double heading = 0;
   if (entry_heading_rad) {
     heading = *entry_heading_rad;
-  } else if (const auto from_door = EntryHeadingFromDoor(plan, entry, 1.5)) {
+  } else if (const auto from_door =
+                 entry_door ? HeadingThroughDoor(*entry_door, entry) : std::nullopt) {
     heading = *from_door;
   } else {
     throw std::invalid_argument(

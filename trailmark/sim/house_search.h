@@ -58,9 +58,4 @@ SimulatedMission SimulateSearchOnPlan(const FloorPlan& plan, const Vec2& entry,
                                       std::optional<double> entry_heading_rad,
                                       const HouseSearchOptions& options, std::uint64_t seed);
 
-/// The direction from the midpoint of the door nearest to `entry` (within `max_distance_m`)
-/// to `entry`: walking in through it. nullopt when there is none.
-std::optional<double> EntryHeadingFromDoor(const FloorPlan& plan, const Vec2& entry,
-                                           double max_distance_m);
-
 }  // namespace trailmark
