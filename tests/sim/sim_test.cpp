@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <numbers>
+#include <utility>
+#include <vector>
 
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/pdr_error_model.h"
@@ -63,6 +65,44 @@ TEST(PdrErrorModel, ErrorFreeIsExactAndDriftRotates) {
   PdrErrorModel m(drift, Random(1));
   const Vec2 d = m.Apply({1, 0}, 1.0);  // 0.1 rad of heading error after 1 s
   EXPECT_NEAR(std::atan2(d.y(), d.x()), 0.1, 1e-12);
+}
+
+// The gyro scale error accrues on real turns only: a few short steps in scattered directions
+// (edging round furniture) between two steps in the same direction add nothing with
+// turn_min_step_m, and a wrapped "rotation" of hundreds of degrees without it.
+TEST(PdrErrorModel, ShortShufflingStepsDoNotTurnTheGyro) {
+  PdrErrorOptions o{.heading_random_walk_rad = 0,
+                    .heading_drift_sigma_rad_per_s = 0,
+                    .turn_scale_error_sigma = 0.05,
+                    .scale_error_sigma = 0,
+                    .step_noise_m = 0};
+  const std::vector<double> shuffle_deg = {-1, -133, 80, -44, -168, 65, -150};
+  auto heading_error_after_shuffle = [&](double turn_min_step_m) {
+    PdrErrorOptions oo = o;
+    oo.turn_min_step_m = turn_min_step_m;
+    PdrErrorModel m(oo, Random(7));
+    m.Apply({0.5, 0}, 1.0);
+    for (double deg : shuffle_deg) {
+      const double a = deg * std::numbers::pi / 180;
+      m.Apply(0.15 * Vec2(std::cos(a), std::sin(a)), 1.0);
+    }
+    m.Apply({0.5, 0}, 1.0);
+    return std::pair{m.heading_error_rad(), m.turn_scale()};
+  };
+  const auto [with_rule, scale] = heading_error_after_shuffle(0.3);
+  ASSERT_GT(std::abs(scale), 1e-4);
+  EXPECT_NEAR(with_rule, 0.0, 1e-12);
+  // Without the rule: the wrapped direction changes of the shuffle sum to a whole number of
+  // turns that the foot never made (here -360 deg), times the scale error.
+  const auto [without_rule, same_scale] = heading_error_after_shuffle(0.0);
+  double wrapped_sum = 0, last = 0;
+  for (double deg : shuffle_deg) {
+    wrapped_sum += std::remainder(deg - last, 360.0);
+    last = deg;
+  }
+  wrapped_sum += std::remainder(0 - last, 360.0);
+  EXPECT_NEAR(wrapped_sum, -360.0, 1e-9);
+  EXPECT_NEAR(without_rule, same_scale * wrapped_sum * std::numbers::pi / 180, 1e-9);
 }
 
 TEST(RssiChannel, MeanFollowsLogDistanceWallsAndBody) {

@@ -1,6 +1,7 @@
 #include "trailmark/sim/pdr_error_model.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 namespace trailmark {
@@ -15,8 +16,9 @@ PdrErrorModel::PdrErrorModel(const PdrErrorOptions& options, Random rng)
 }
 
 Vec2 PdrErrorModel::Apply(const Vec2& delta_true_n, double dt_s) {
-  heading_error_rad_ += drift_rad_per_s_ * dt_s + rng_.Normal(0.0, options_.heading_random_walk_rad);
-  if (delta_true_n.norm() > 1e-6) {
+  heading_error_rad_ +=
+      drift_rad_per_s_ * dt_s + rng_.Normal(0.0, options_.heading_random_walk_rad);
+  if (delta_true_n.norm() > std::max(1e-6, options_.turn_min_step_m)) {
     const double heading = std::atan2(delta_true_n.y(), delta_true_n.x());
     if (last_true_heading_rad_) {
       heading_error_rad_ += turn_scale_ * WrapAngle(heading - *last_true_heading_rad_);

@@ -16,8 +16,8 @@
 namespace trailmark {
 
 struct PdrErrorOptions {
-  double heading_random_walk_rad = 0.006;  ///< per step, 1 sigma (~0.23 deg)
-  double heading_drift_sigma_rad_per_s = 0.002;  ///< per-walk drift rate, 1 sigma (~2 deg/min)
+  double heading_random_walk_rad = 0.006;         ///< per step, 1 sigma (~0.23 deg)
+  double heading_drift_sigma_rad_per_s = 0.002;   ///< per-walk drift rate, 1 sigma (~2 deg/min)
   std::optional<double> heading_drift_rad_per_s;  ///< fixed drift rate instead of a draw
   /// Per-walk gyro scale-factor error: every true turn adds this fraction of its angle to the
   /// heading error (MEMS gyro scale factor 1-3 %: e.g. ADIS16448 / MPU-9250 datasheets).
@@ -28,6 +28,15 @@ struct PdrErrorOptions {
   /// Variance reported with each step: the per-step noise plus a heading term; the filter
   /// cannot know the drift, so it is not in the reported variance.
   double reported_heading_sigma_rad = 0.02;
+  /// The gyro scale-factor error accrues on the walker's body rotation, which the model takes
+  /// from the direction of each step. A step shorter than this moves the foot without saying
+  /// where the body faces (edging round furniture, shuffling in a tight spot): its direction
+  /// is not a turn, and the next longer step's turn is counted from the last longer step.
+  /// Without it, a few 0.15 m steps in scattered directions at a cramped spot add up to
+  /// hundreds of degrees of "rotation" the foot never made (wrapped direction changes do not
+  /// cancel), and a 3 % scale error turns them into a heading jump of tens of degrees in
+  /// seconds (docs/mapmatch.md). 0: every step turns (the other simulations).
+  double turn_min_step_m = 0.0;
 };
 
 class PdrErrorModel {
