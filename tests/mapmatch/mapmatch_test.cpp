@@ -277,6 +277,9 @@ TEST(MapParticleFilter, AfterARecoveryASettledFilterOnlyDrawsNewParticlesFromPat
   for (bool reweight : {false, true}) {
     MapParticleFilterOptions o = RoomWithExactPattern::ForcedComparisons();
     o.recover_reweight_converged = reweight;
+    // The paper's sigma throughout: this tests the rule, not the tracking sigma (whose exact
+    // scaling of the same weights is the next test).
+    o.tracking_likelihood_sigma = 0;
     MapParticleFilter pf(grid, seqs, o);
     pf.InitializeKnown(Vec2(3.5, 2), 0.0, 1.0, 0.0);
     pf.Predict(Vec2(1.0, 0));
@@ -311,8 +314,9 @@ TEST(MapParticleFilter, OnceTheTrackIsFoundComparisonsWeighWithTheTrackingSigma)
   // Eq. (2) weights a particle by exp(-(E - E_min) / sigma^2). Before the track is found
   // (unknown start, unconfirmed) sigma is likelihood_sigma (0.1); once found (a known start
   // that converged, here re-weighted by a forced comparison after a wall alarm), the tracking
-  // sigma (0.3). Same seeds, so the same particles and E: the log-weight differences between
-  // particles must scale by exactly (0.3 / 0.1)^2 = 9 once tracking, and not at all before.
+  // sigma (default 0.5). Same seeds, so the same particles and E: the log-weight differences
+  // between particles must scale by exactly (0.5 / 0.1)^2 = 25 once tracking, and not at all
+  // before.
   const RoomWithExactPattern room;
   const auto& [plan, grid, seqs, walk, pc] = room;
   const Vec2 d = walk.back() - walk[walk.size() - 2];
@@ -344,10 +348,12 @@ TEST(MapParticleFilter, OnceTheTrackIsFoundComparisonsWeighWithTheTrackingSigma)
   };
   for (bool known : {true, false}) {
     const auto sharp = log_weight_changes(0.0, known);  // likelihood_sigma (0.1) throughout
-    const auto tracking = log_weight_changes(0.3, known);
+    const double tracking_sigma = MapParticleFilterOptions{}.tracking_likelihood_sigma;
+    ASSERT_GT(tracking_sigma, 0.1);  // the default is the softer one
+    const auto tracking = log_weight_changes(tracking_sigma, known);
     ASSERT_EQ(sharp.size(), tracking.size());
     ASSERT_TRUE(std::isfinite(sharp[0]));
-    const double scale = known ? 9.0 : 1.0;
+    const double scale = known ? std::pow(tracking_sigma / 0.1, 2) : 1.0;
     int compared = 0, informative = 0;
     for (std::size_t i = 0; i < sharp.size(); ++i) {
       if (!std::isfinite(sharp[i]) || std::abs(sharp[i]) > 500) continue;  // underflowed

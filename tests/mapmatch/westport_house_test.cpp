@@ -115,7 +115,8 @@ TEST(WestportHouse, SearchSequencesAndTheFilterOnARealFloorPlan) {
     // comparisons on: walking a corridor spreads the belief past the 2 m^2 pattern level; a
     // known start compares again only above 8 m^2 (or after a wall alarm), else the draws from
     // the repeating corridors lose it. Measured: mean 0.96 m (PDR alone 0.97 m); with the known
-    // start's level at 0 (as a uniform start), 13.4 m.
+    // start's level at 0 (as a uniform start), 5.7 m (2026-11-23; 13.4 m before the simulated
+    // gyro ignored shuffling steps and the tracking sigma became 0.5).
     HouseSearchOptions so;
     so.duration_s = 300;
     const SimulatedMission sim = SimulateSearchOnPlan(plan, start, 0.0, so, 1);
