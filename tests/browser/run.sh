@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Browser test of the dashboard: a replayed two-firefighter mission, Debian's Chromium headless.
+# Browser test of the dashboard: a replayed two-firefighter mission (371 s at 10x, so the replay
+# outlasts a slow Chromium start on a loaded machine), Debian's Chromium headless.
 set -euo pipefail
 TM="$1"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -7,7 +8,7 @@ dir=$(mktemp -d)
 trap 'kill $pid 2>/dev/null || true; rm -rf "$dir"' EXIT
 [ -d "$here/node_modules/playwright-core" ] || { echo "FAIL: run scripts/install-deps.sh (npm ci in tests/browser)"; exit 1; }
 "$TM" simulate training-building --seed 2 --out "$dir/m" > /dev/null
-"$TM" serve --replay "$dir/m" --pipeline pdr --speed 20 --port 0 --token br0wser > "$dir/serve.log" 2>&1 &
+"$TM" serve --replay "$dir/m" --pipeline pdr --speed 10 --port 0 --token br0wser > "$dir/serve.log" 2>&1 &
 pid=$!
 for _ in $(seq 100); do grep -q "listening on" "$dir/serve.log" && break; sleep 0.1; done
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
