@@ -21,11 +21,16 @@ double ToPrincipal(double a) {
   return std::min(r, q - r);
 }
 
+// The closest point of segment ab to p. The division is done only when the projection falls
+// inside the segment: clamp(u / l2, 0, 1) is 0 for u <= 0 and 1 for u >= l2 in IEEE arithmetic,
+// so the result is bit-identical to a + clamp(u / l2, 0, 1) * d (the ICP's inner loop).
 Vec2 ClosestOnSegment(const Vec2& p, const Vec2& a, const Vec2& b) {
   const Vec2 d = b - a;
   const double l2 = d.squaredNorm();
   if (l2 <= 0) return a;
-  return a + std::clamp((p - a).dot(d) / l2, 0.0, 1.0) * d;
+  const double u = (p - a).dot(d);
+  const double t = u <= 0 ? 0.0 : (u >= l2 ? 1.0 : u / l2);
+  return a + t * d;
 }
 
 Vec2 ClosestOnPolyline(const Vec2& p, const std::vector<Vec2>& line) {
