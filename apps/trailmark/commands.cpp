@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <numbers>
@@ -231,8 +232,10 @@ void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
                        const std::vector<std::string>& missions) {
-  fmt::print("\n{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "mission",
-             "pipeline", "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist",
+  std::size_t width = 14;  // the pipeline column fits the longest name (landmarks-stopgo)
+  for (const auto& [run, m] : rows) width = std::max(width, run.pipeline.size());
+  fmt::print("\n{:<18} {:<{}} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "mission",
+             "pipeline", width, "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist",
              "static m", "run time s");
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const auto& [run, m] = rows[k];
@@ -240,8 +243,8 @@ void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
     const bool agents = a.stats.samples > 0;
     auto num = [&](double v) { return agents ? fmt::format("{:.2f}", v) : std::string("-"); };
     fmt::print(
-        "{:<18} {:<14} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10.3f}\n",
-        k < missions.size() ? missions[k] : "", run.pipeline, num(a.stats.mean_m),
+        "{:<18} {:<{}} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10.3f}\n",
+        k < missions.size() ? missions[k] : "", run.pipeline, width, num(a.stats.mean_m),
         num(a.stats.p95_m), num(a.stats.max_m), num(a.stats.final_m),
         a.mean_pct_of_distance ? fmt::format("{:.2f}", *a.mean_pct_of_distance) : "-",
         a.max_pct_of_distance ? fmt::format("{:.2f}", *a.max_pct_of_distance) : "-",
