@@ -52,12 +52,17 @@ TEST(Walker, WallFollowingGoesRoundARoomAndBack) {
   }
 }
 
+// An odometry model with every random error off.
+PdrErrorOptions ErrorFree() {
+  return {.heading_random_walk_rad = 0,
+          .heading_drift_sigma_rad_per_s = 0,
+          .turn_scale_error_sigma = 0,
+          .scale_error_sigma = 0,
+          .step_noise_m = 0};
+}
+
 TEST(PdrErrorModel, ErrorFreeIsExactAndDriftRotates) {
-  PdrErrorOptions none{.heading_random_walk_rad = 0,
-                       .heading_drift_sigma_rad_per_s = 0,
-                       .turn_scale_error_sigma = 0,
-                       .scale_error_sigma = 0,
-                       .step_noise_m = 0};
+  const PdrErrorOptions none = ErrorFree();
   PdrErrorModel exact(none, Random(1));
   EXPECT_TRUE(exact.Apply({0.7, 0.1}, 0.5).isApprox(Vec2(0.7, 0.1), 1e-15));
   PdrErrorOptions drift = none;
@@ -71,11 +76,8 @@ TEST(PdrErrorModel, ErrorFreeIsExactAndDriftRotates) {
 // (edging round furniture) between two steps in the same direction add nothing with
 // turn_min_step_m, and a wrapped "rotation" of hundreds of degrees without it.
 TEST(PdrErrorModel, ShortShufflingStepsDoNotTurnTheGyro) {
-  PdrErrorOptions o{.heading_random_walk_rad = 0,
-                    .heading_drift_sigma_rad_per_s = 0,
-                    .turn_scale_error_sigma = 0.05,
-                    .scale_error_sigma = 0,
-                    .step_noise_m = 0};
+  PdrErrorOptions o = ErrorFree();
+  o.turn_scale_error_sigma = 0.05;
   const std::vector<double> shuffle_deg = {-1, -133, 80, -44, -168, 65, -150};
   auto heading_error_after_shuffle = [&](double turn_min_step_m) {
     PdrErrorOptions oo = o;
