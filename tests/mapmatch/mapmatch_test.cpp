@@ -4,10 +4,12 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
 #include "trailmark/core/random.h"
+#include "trailmark/geometry/rigid_fit.h"
 #include "trailmark/mapmatch/particle_filter.h"
 #include "trailmark/sim/house_search.h"
 
@@ -119,6 +121,63 @@ TEST(PatternComparison, IcpRecoversAKnownTransform) {
   EXPECT_LT(r.rmse_m, 1e-6);
   EXPECT_LT((r.rotation - R).norm(), 1e-6);
   EXPECT_LT((r.translation - t).norm(), 1e-6);
+}
+
+// The reference: plain point-to-point ICP, every segment of the target scanned for every point.
+IcpResult PlainScanIcp(const std::vector<Vec2>& source, const std::vector<Vec2>& target,
+                       const Mat2& R0, const Vec2& t0, int iterations) {
+  IcpResult r;
+  r.rotation = R0;
+  r.translation = t0;
+  for (int it = 0; it < iterations; ++it) {
+    std::vector<Vec2> closest;
+    double sq = 0;
+    for (const Vec2& s : source) {
+      const Vec2 p = r.Apply(s);
+      Vec2 best = target[0];
+      double best_d = 1e300;
+      for (std::size_t k = 1; k < target.size(); ++k) {
+        const Vec2 d = target[k] - target[k - 1];
+        const Vec2 c =
+            target[k - 1] + std::clamp((p - target[k - 1]).dot(d) / d.squaredNorm(), 0.0, 1.0) * d;
+        if ((c - p).squaredNorm() < best_d) best_d = (c - p).squaredNorm(), best = c;
+      }
+      closest.push_back(best);
+      sq += best_d;
+    }
+    r.rmse_m = std::sqrt(sq / source.size());
+    const RigidFit2 fit = FitRigid(source, closest, false);
+    r.rotation = fit.rotation;
+    r.translation = fit.translation;
+  }
+  return r;
+}
+
+// The closest-point search skips runs of segments by their bounding boxes; on a long winding
+// pattern (40 segments) and a noisy, offset walk every iterate equals the plain scan's exactly.
+TEST(PatternComparison, IcpEqualsThePlainScanExactly) {
+  Random rng(11);
+  std::vector<Vec2> target = {{0, 0}};
+  for (int k = 0; k < 40; ++k) {
+    const Vec2 step = k % 3 == 2 ? Vec2(0, k % 2 ? 1.0 : -1.0) : Vec2(1.0, 0.0);
+    target.push_back(target.back() + step);
+  }
+  std::vector<Vec2> source;
+  for (const Vec2& p : ResampleByDistance(target, 0.5))
+    source.push_back(Rot(0.4) * p + Vec2(2.0 + rng.Normal(0, 0.2), -1.0 + rng.Normal(0, 0.2)));
+  IcpOptions o;
+  o.abandon_rmse_m = 1e9;  // never stop early: compare whole runs
+  o.tolerance_m = -1;      // and run every iteration
+  for (int iterations : {1, 2, 5, 12}) {
+    o.max_iterations = iterations;
+    const IcpResult ours = Icp(source, target, Rot(-0.3), Vec2(0.5, 0.5), o);
+    // Both report the RMSE of the last correspondences and the fit made from them.
+    const IcpResult ref = PlainScanIcp(source, target, Rot(-0.3), Vec2(0.5, 0.5), iterations);
+    EXPECT_EQ(ours.rmse_m, ref.rmse_m) << iterations;
+    EXPECT_EQ(ours.rotation, ref.rotation) << iterations;
+    EXPECT_EQ(ours.translation, ref.translation) << iterations;
+    EXPECT_EQ(ours.iterations, iterations);
+  }
 }
 
 TEST(PatternComparison, AnExactPatternMatchesAtItsNodeAndEnd) {

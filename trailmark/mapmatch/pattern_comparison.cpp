@@ -33,17 +33,52 @@ Vec2 ClosestOnSegment(const Vec2& p, const Vec2& a, const Vec2& b) {
   return a + t * d;
 }
 
-Vec2 ClosestOnPolyline(const Vec2& p, const std::vector<Vec2>& line) {
-  if (line.size() == 1) return line[0];
-  Vec2 best = line[0];
-  double best_d = 1e300;
-  for (std::size_t k = 1; k < line.size(); ++k) {
-    const Vec2 c = ClosestOnSegment(p, line[k - 1], line[k]);
-    const double d = (c - p).squaredNorm();
-    if (d < best_d) best_d = d, best = c;
+// The polyline's segments in runs of kRun, each with its bounding box: a run whose box is
+// farther from the query than the closest point found so far cannot hold a closer point, so the
+// ICP's closest-point search skips it (segments are still visited in order, so the result is
+// the plain scan's).
+class ChunkedPolyline {
+ public:
+  static constexpr std::size_t kRun = 4;
+  explicit ChunkedPolyline(const std::vector<Vec2>& line) : line_(line) {
+    for (std::size_t k = 1; k < line.size(); k += kRun) {
+      const std::size_t end = std::min(k + kRun, line.size());
+      Box b{line[k - 1], line[k - 1]};
+      for (std::size_t j = k; j < end; ++j) {
+        b.lo = b.lo.cwiseMin(line[j]);
+        b.hi = b.hi.cwiseMax(line[j]);
+      }
+      boxes_.push_back(b);
+    }
   }
-  return best;
-}
+
+  Vec2 Closest(const Vec2& p) const {
+    if (line_.size() == 1) return line_[0];
+    Vec2 best = line_[0];
+    double best_d = 1e300;
+    for (std::size_t r = 0; r < boxes_.size(); ++r) {
+      const Box& b = boxes_[r];
+      const double dx = std::max({b.lo.x() - p.x(), 0.0, p.x() - b.hi.x()});
+      const double dy = std::max({b.lo.y() - p.y(), 0.0, p.y() - b.hi.y()});
+      // A margin far above rounding: every segment of a skipped run is strictly farther.
+      if (dx * dx + dy * dy > best_d * (1 + 1e-9) + 1e-18) continue;
+      const std::size_t k0 = 1 + r * kRun, end = std::min(k0 + kRun, line_.size());
+      for (std::size_t k = k0; k < end; ++k) {
+        const Vec2 c = ClosestOnSegment(p, line_[k - 1], line_[k]);
+        const double d = (c - p).squaredNorm();
+        if (d < best_d) best_d = d, best = c;
+      }
+    }
+    return best;
+  }
+
+ private:
+  struct Box {
+    Vec2 lo, hi;
+  };
+  const std::vector<Vec2>& line_;
+  std::vector<Box> boxes_;
+};
 
 Vec2 Centroid(const std::vector<Vec2>& v) {
   Vec2 s = Vec2::Zero();
@@ -86,11 +121,12 @@ IcpResult Icp(const std::vector<Vec2>& source, const std::vector<Vec2>& target, 
   std::vector<Vec2> closest(n);
   std::vector<std::pair<double, std::size_t>> residual(n);
   std::vector<Vec2> from, to;
+  const ChunkedPolyline polyline(target);
   double previous = 1e300;
   for (int it = 0; it < o.max_iterations; ++it) {
     for (std::size_t k = 0; k < n; ++k) {
       const Vec2 p = r.Apply(source[k]);
-      closest[k] = ClosestOnPolyline(p, target);
+      closest[k] = polyline.Closest(p);
       residual[k] = {(closest[k] - p).squaredNorm(), k};
     }
     if (keep < n) std::nth_element(residual.begin(), residual.begin() + keep, residual.end());

@@ -7,8 +7,9 @@
 /// heading observations Pos_m, Hea_m. No I/O.
 ///
 /// ICP is our own point-to-point ICP on these tiny sets (tens of points): the closed-form 2-D
-/// rigid fit (geometry/rigid_fit.h, Eigen SVD) and brute-force closest points on the pattern
-/// polyline, measured faster than building a nanoflann tree per pattern (docs/mapmatch.md).
+/// rigid fit (geometry/rigid_fit.h, Eigen SVD) and an exact scan for the closest points on the
+/// pattern polyline (runs of four segments skipped by their bounding boxes), measured faster than
+/// building a nanoflann tree per pattern (docs/mapmatch.md).
 /// Beyond the paper: an ICP whose RMSE is above twice `abandon_rmse_m` after one iteration, or
 /// above it after two, is stopped (its likelihood exp(-E/sigma^2) = e^-100 is negligible next to
 /// any real match).
