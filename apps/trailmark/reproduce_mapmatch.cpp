@@ -125,8 +125,9 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
                                   "part, left and right hand"
                                 : "data set 2: 253 m^2, left-hand searches of 10 min");
     for (double c : checkpoints) t += fmt::format(" {:.1f} min |", c / 60);
-    t += " settles <= 1 m at | mean from 2 min | errors > 2 m from 2 min |\n|---|";
-    for (std::size_t k = 0; k <= checkpoints.size() + 2; ++k) t += "---|";
+    t += " settles <= 1 m at | mean from 2 min | errors > 2 m from 2 min | ten-run sets <= 1 m "
+         "from 2 min |\n|---|";
+    for (std::size_t k = 0; k <= checkpoints.size() + 3; ++k) t += "---|";
     t += "\n";
     for (std::size_t c = 0; c < configs.size(); ++c) {
       t += "| " + configs[c].label + " |";
@@ -159,8 +160,22 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
         mean += rmse[k], ++n_mean;
         for (const auto& run : err[c]) ++counted, gross += !(run[k] <= 2.0);
       }
-      t += fmt::format(" {} | {:.2f} | {} of {} |\n", settle, mean / std::max(n_mean, 1), gross,
-                       counted);
+      // The target on every consecutive ten of the runs (seed order), each ten taken
+      // as one ten-run reproduction: RMSE <= 1 m at every checkpoint from 2 min.
+      int sets = 0, sets_met = 0;
+      for (std::size_t r0 = 0; r0 + 10 <= err[c].size(); r0 += 10, ++sets) {
+        bool met = true;
+        for (std::size_t k = 0; k < checkpoints.size(); ++k) {
+          if (checkpoints[k] < 120) continue;
+          double sq = 0;
+          for (std::size_t r = r0; r < r0 + 10; ++r) sq += err[c][r][k] * err[c][r][k];
+          met = met && std::sqrt(sq / 10) <= 1.0;  // a NaN error fails the set
+        }
+        sets_met += met;
+      }
+      t +=
+          fmt::format(" {} | {:.2f} | {} of {} | {} |\n", settle, mean / std::max(n_mean, 1), gross,
+                      counted, sets ? fmt::format("{} of {}", sets_met, sets) : std::string("-"));
     }
   }
   // The map error (sec. V-E): the hall door drawn 2 m from where it is; the same searches with
