@@ -223,7 +223,7 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
         "| {} of {} | {} of {} | {} |\n",
         label, flagged_walls[0], seeds, flagged_walls[1], seeds, errors);
     t += fmt::format(
-        "| {} | **map error suspected** (pipeline verdict: the variance indicator, or 3 or more "
+        "| {} | **map error suspected** (pipeline verdict: the variance indicator, or 5 or more "
         "wall alarms) | {} of {} | {} of {} | {} |\n",
         label, flagged_verdict[0], seeds, flagged_verdict[1], seeds, errors);
   }

@@ -45,7 +45,7 @@ struct MapMatchSession::Impl {
   mapmatch::SearchSequenceOptions so;
   mapmatch::PatternComparisonOptions co;
   double compare_every_m = 2.0, alarm_m2 = 3.0, alarm_min_s = 10.0;
-  int map_error_wall_alarms = 3;
+  int map_error_wall_alarms = 5;
   FloorPlan plan;
   std::vector<mapmatch::NodeSequence> sequences;
   std::unique_ptr<mapmatch::SearchGrid> grid;
