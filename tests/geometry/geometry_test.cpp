@@ -8,14 +8,25 @@ namespace trailmark {
 namespace {
 
 TEST(Segments, IntersectionCases) {
-  EXPECT_TRUE(SegmentsIntersect({{0, 0}, {2, 2}}, {{0, 2}, {2, 0}}));    // proper crossing
-  EXPECT_TRUE(SegmentsIntersect({{0, 0}, {1, 0}}, {{1, 0}, {1, 1}}));    // touching end
-  EXPECT_TRUE(SegmentsIntersect({{0, 0}, {2, 0}}, {{1, 0}, {3, 0}}));    // collinear overlap
-  EXPECT_FALSE(SegmentsIntersect({{0, 0}, {1, 0}}, {{2, 0}, {3, 0}}));   // collinear apart
+  EXPECT_TRUE(SegmentsIntersect({{0, 0}, {2, 2}}, {{0, 2}, {2, 0}}));   // proper crossing
+  EXPECT_TRUE(SegmentsIntersect({{0, 0}, {1, 0}}, {{1, 0}, {1, 1}}));   // touching end
+  EXPECT_TRUE(SegmentsIntersect({{0, 0}, {2, 0}}, {{1, 0}, {3, 0}}));   // collinear overlap
+  EXPECT_FALSE(SegmentsIntersect({{0, 0}, {1, 0}}, {{2, 0}, {3, 0}}));  // collinear apart
   EXPECT_FALSE(SegmentsIntersect({{0, 0}, {1, 1}}, {{0, 1}, {0.4, 0.6001}}));
   EXPECT_NEAR(*FirstIntersection({{0, 0}, {4, 0}}, {{1, -1}, {1, 1}}), 0.25, 1e-12);
   EXPECT_NEAR(DistanceToSegment({1, 1}, {{0, 0}, {2, 0}}), 1.0, 1e-12);
   EXPECT_NEAR(DistanceToSegment({3, 0}, {{0, 0}, {2, 0}}), 1.0, 1e-12);
+}
+
+TEST(Box2, SquaredDistanceIsZeroInsideAndExactOutside) {
+  Box2 b;
+  b.Extend({0, 0});
+  b.Extend({2, 1});
+  EXPECT_EQ(b.SquaredDistanceTo({1, 0.5}), 0.0);
+  EXPECT_EQ(b.SquaredDistanceTo({2, 0}), 0.0);      // on the boundary
+  EXPECT_EQ(b.SquaredDistanceTo({-3, 0.5}), 9.0);   // left of it
+  EXPECT_EQ(b.SquaredDistanceTo({5, 5}), 25.0);     // off a corner: 3^2 + 4^2
+  EXPECT_EQ(b.SquaredDistanceTo({1, -0.5}), 0.25);  // below it
 }
 
 TEST(Polygons, AreaAndContainment) {

@@ -1,7 +1,9 @@
 #pragma once
 /// 2-D segments and the predicates the floor plan needs. No I/O.
 
+#include <limits>
 #include <optional>
+#include <vector>
 
 #include "trailmark/core/types.h"
 
@@ -32,6 +34,11 @@ struct Box2 {
     max = max.cwiseMax(p);
   }
   bool Empty() const { return min.x() > max.x(); }
+  /// Squared distance from p to the box (0 inside).
+  double SquaredDistanceTo(const Vec2& p) const {
+    const Vec2 out = (min - p).cwiseMax(p - max).cwiseMax(0.0);
+    return out.squaredNorm();
+  }
 };
 
 /// Signed area of a simple polygon (positive when counter-clockwise).

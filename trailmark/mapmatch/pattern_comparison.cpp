@@ -6,6 +6,7 @@
 #include <numbers>
 
 #include "trailmark/geometry/rigid_fit.h"
+#include "trailmark/geometry/segment.h"
 
 namespace trailmark::mapmatch {
 namespace {
@@ -43,11 +44,8 @@ class ChunkedPolyline {
   explicit ChunkedPolyline(const std::vector<Vec2>& line) : line_(line) {
     for (std::size_t k = 1; k < line.size(); k += kRun) {
       const std::size_t end = std::min(k + kRun, line.size());
-      Box b{line[k - 1], line[k - 1]};
-      for (std::size_t j = k; j < end; ++j) {
-        b.lo = b.lo.cwiseMin(line[j]);
-        b.hi = b.hi.cwiseMax(line[j]);
-      }
+      Box2 b;
+      for (std::size_t j = k - 1; j < end; ++j) b.Extend(line[j]);
       boxes_.push_back(b);
     }
   }
@@ -57,11 +55,8 @@ class ChunkedPolyline {
     Vec2 best = line_[0];
     double best_d = 1e300;
     for (std::size_t r = 0; r < boxes_.size(); ++r) {
-      const Box& b = boxes_[r];
-      const double dx = std::max({b.lo.x() - p.x(), 0.0, p.x() - b.hi.x()});
-      const double dy = std::max({b.lo.y() - p.y(), 0.0, p.y() - b.hi.y()});
       // A margin far above rounding: every segment of a skipped run is strictly farther.
-      if (dx * dx + dy * dy > best_d * (1 + 1e-9) + 1e-18) continue;
+      if (boxes_[r].SquaredDistanceTo(p) > best_d * (1 + 1e-9) + 1e-18) continue;
       const std::size_t k0 = 1 + r * kRun, end = std::min(k0 + kRun, line_.size());
       for (std::size_t k = k0; k < end; ++k) {
         const Vec2 c = ClosestOnSegment(p, line_[k - 1], line_[k]);
@@ -73,11 +68,8 @@ class ChunkedPolyline {
   }
 
  private:
-  struct Box {
-    Vec2 lo, hi;
-  };
   const std::vector<Vec2>& line_;
-  std::vector<Box> boxes_;
+  std::vector<Box2> boxes_;
 };
 
 Vec2 Centroid(const std::vector<Vec2>& v) {
