@@ -18,10 +18,10 @@
 #include "trailmark/mapmatch/pattern_comparison.h"
 #include "trailmark/mapmatch/particle_filter.h"
 #include "trailmark/sim/house_search.h"
+#include "trailmark/sim/imu_sim.h"
 #include "trailmark/geometry/rigid_fit.h"
 #include <nanoflann.hpp>
-#include "trailmark/pipelines/breadcrumb_pipeline.h"
-#include "trailmark/pipelines/pdr_pipeline.h"
+#include "trailmark/pipelines/batch_run.h"
 #include "trailmark/sim/synthetic_incident.h"
 #include "trailmark/sim/scenarios.h"
 #include "trailmark/sim/synthetic_streams.h"
@@ -98,7 +98,7 @@ void BM_PdrPipelineOfficeLoop(benchmark::State& state) {
   const MissionDirectory mission(dir);
   const double duration = sim.data.truth.back().t - sim.data.truth.front().t;
   for (auto _ : state) {
-    RunPipeline(PdrPipeline(), {mission, {}}, BenchDir() / "run");
+    RunPipeline(RequirePipeline("pdr"), {mission, {}}, BenchDir() / "run");
   }
   state.counters["x_real_time"] = benchmark::Counter(duration * state.iterations(),
                                                      benchmark::Counter::kIsRate);
@@ -117,7 +117,7 @@ void BM_BreadcrumbPipelineOfficeLoop(benchmark::State& state) {
   const MissionDirectory mission(dir);
   const double duration = sim.data.truth.back().t - sim.data.truth.front().t;
   for (auto _ : state) {
-    RunPipeline(BreadcrumbPipeline(), {mission, {}}, BenchDir() / "run-bc");
+    RunPipeline(RequirePipeline("breadcrumb"), {mission, {}}, BenchDir() / "run-bc");
   }
   state.counters["x_real_time"] = benchmark::Counter(duration * state.iterations(),
                                                      benchmark::Counter::kIsRate);
@@ -359,6 +359,49 @@ void BM_IcpNanoflannTree(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_IcpNanoflannTree)->Unit(benchmark::kMicrosecond);
+
+
+// Every online estimator of the registry fed its paper's simulated experiment (the office loop
+// for the others) row by row from memory, as the live server feeds it: foot IMU at 100 Hz
+// instead of steps, the other streams as simulated, in time order. Rows/s of the estimator alone
+// (no parsing, no journal): the capacity of one server core for that pipeline.
+void BM_OnlineEstimator(benchmark::State& state, const char* name) {
+  const PipelineSpec& spec = RequirePipeline(name);
+  SimulatedMission sim = spec.paper_scenarios.empty()
+                             ? SimulateScenario("office-loop", 1)
+                             : SimulateScenario(spec.paper_scenarios.front(), 1);
+  ImuSimOptions imu;
+  imu.rate_hz = 100;
+  AddFootImu(sim, imu, 1);
+  std::vector<MissionRow> rows;
+  for (const auto& r : sim.data.events) rows.emplace_back(r);
+  for (const auto& r : sim.data.ranges) rows.emplace_back(r);
+  for (const auto& r : sim.data.bearings) rows.emplace_back(r);
+  for (const auto& r : sim.data.rssi) rows.emplace_back(r);
+  for (const auto& r : sim.data.imu) rows.emplace_back(r);
+  std::stable_sort(rows.begin(), rows.end(), [](const MissionRow& a, const MissionRow& b) {
+    return RowTime(a) < RowTime(b);
+  });
+  const double mission_s = RowTime(rows.back()) - RowTime(rows.front());
+  for (auto _ : state) {
+    auto estimator = spec.make({sim.data.info, &sim.plan}, {}, Feed::kLive);
+    NullSink sink;
+    for (const MissionRow& r : rows) estimator->Add(r, sink);
+    benchmark::DoNotOptimize(estimator->Summary());
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(rows.size()));
+  state.counters["x_real_time"] = benchmark::Counter(
+      mission_s * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK_CAPTURE(BM_OnlineEstimator, pdr, "pdr")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, ins, "ins")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, breadcrumb, "breadcrumb")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, landmarks_stopgo, "landmarks-stopgo")
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, landmarks_ukf, "landmarks-ukf")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, beacons_mds, "beacons-mds")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, beacons_ekf, "beacons-ekf")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(BM_OnlineEstimator, mapmatch, "mapmatch")->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -14,8 +14,7 @@
 #include "trailmark/core/error.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
-#include "trailmark/pipelines/live_estimator.h"
-#include "trailmark/pipelines/pipeline.h"
+#include "trailmark/pipelines/registry.h"
 
 namespace trailmark::server {
 
@@ -25,13 +24,14 @@ struct IncidentServer::Http {
 
 struct IncidentServer::Live {
   std::unique_ptr<Journal> journal;
-  std::filesystem::path work;  ///< scratch: the exported journal for batch re-runs
-  /// Null when the pipeline has no live form (then RerunOnJournal).
-  std::unique_ptr<LiveEstimator> estimator;
+  std::filesystem::path work;  ///< the MQTT client's persistence
+  /// The pipeline's online estimator (the registry's, as in a batch run), fed committed rows.
+  std::unique_ptr<OnlineEstimator> estimator;
+  std::mutex estimator_mutex;  ///< the live loop feeds it; /api/stats reads its summary
   /// Group commit: requests wait here until the committer has journaled them.
   struct Pending {
     Journal::Batch batch;
-    std::vector<LiveRow> rows;
+    std::vector<MissionRow> rows;
     std::promise<Journal::AppendResult> done;
   };
   std::mutex queue_mutex;
@@ -41,7 +41,7 @@ struct IncidentServer::Live {
   /// Committed rows, in commit order, for the estimator.
   std::mutex feed_mutex;
   std::condition_variable feed_cv;
-  std::vector<LiveRow> feed;
+  std::vector<MissionRow> feed;
 };
 
 namespace {
@@ -50,7 +50,7 @@ namespace {
 /// times, nodes, lines). Throws InputError naming `name` and the line.
 template <class Row>
 void Parse(const std::string& name, const std::string& body, Journal::Batch& batch,
-           std::vector<LiveRow>& typed) {
+           std::vector<MissionRow>& typed) {
   const std::vector<Row> rows = ParseAll<Row>(name, body, nullptr, &batch.lines);
   std::vector<std::string> lines = FormatAll(rows);
   batch.header = lines.front();
@@ -65,7 +65,7 @@ void Parse(const std::string& name, const std::string& body, Journal::Batch& bat
 }
 
 void ParseStream(const std::string& stream, const std::string& name, const std::string& body,
-                 Journal::Batch& batch, std::vector<LiveRow>& typed) {
+                 Journal::Batch& batch, std::vector<MissionRow>& typed) {
   batch.stream = stream;
   if (stream == "steps.csv")
     Parse<Step>(name, body, batch, typed);
@@ -79,10 +79,12 @@ void ParseStream(const std::string& stream, const std::string& name, const std::
     Parse<MissionEvent>(name, body, batch, typed);
   else if (stream == "imu.csv")
     Parse<ImuSample>(name, body, batch, typed);
+  else if (stream == "baro.csv")
+    Parse<BaroSample>(name, body, batch, typed);
   else
     throw std::invalid_argument("unknown stream '" + stream +
                                 "' (steps.csv, rssi.csv, ranges.csv, bearings.csv, events.csv, "
-                                "imu.csv)");
+                                "imu.csv, baro.csv)");
 }
 
 
@@ -115,35 +117,28 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
     options_.log = [](const std::string& line) { spdlog::warn("{}", line); };
   }
   if (!options_.journal_file.empty()) {
-    if (FindPipeline(options_.pipeline) == nullptr)
-      throw std::invalid_argument("serve: unknown pipeline '" + options_.pipeline + "'");
+    const PipelineSpec& pipeline = RequirePipeline(options_.pipeline);
     live_ = std::make_unique<Live>();
+    // The estimator first: bad options fail before the journal is touched.
+    live_->estimator = pipeline.make(
+        {info_, options_.floor_plan ? &*options_.floor_plan : nullptr, "the floor plan"},
+        options_.pipeline_options, Feed::kLive);
     live_->journal = std::make_unique<Journal>(options_.journal_file);
     live_->work = std::filesystem::path(options_.journal_file.string() + ".work");
-    std::filesystem::create_directories(live_->work);
-    live_->estimator =
-        MakeLiveEstimator(options_.pipeline, info_, options_.pipeline_options,
-                          options_.floor_plan ? &*options_.floor_plan : nullptr);
-    if (live_->estimator) {
-      // A restart: the journal's rows through the estimator again, in arrival order.
-      live_->journal->ForEach(
-          [this](const std::string& stream, const std::string& header, const std::string& row) {
-            Journal::Batch batch;
-            try {
-              ParseStream(stream, "journal", header + "\n" + row + "\n", batch, live_->feed);
-            } catch (const std::exception& e) {
-              Reject(std::string("journal row not re-read: ") + e.what());
-            }
-          });
-    } else {
-      dirty_ = live_->journal->size() > 0;  // a restart: rebuild the state from the journal
-    }
+    // A restart: the journal's rows through the estimator again, in arrival order.
+    live_->journal->ForEach(
+        [this](const std::string& stream, const std::string& header, const std::string& row) {
+          Journal::Batch batch;
+          try {
+            ParseStream(stream, "journal", header + "\n" + row + "\n", batch, live_->feed);
+          } catch (const std::exception& e) {
+            Reject(std::string("journal row not re-read: ") + e.what());
+          }
+        });
   }
 }
 
 IncidentServer::~IncidentServer() { Stop(); }
-
-bool IncidentServer::incremental() const { return live_ && live_->estimator != nullptr; }
 
 nlohmann::json IncidentServer::StateJson() {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -181,7 +176,6 @@ nlohmann::json IncidentServer::StatsJson() {
                       {"journal_commits", stats_.commits.load()},
                       {"estimated_rows", stats_.estimated_rows.load()},
                       {"estimator_refusals", stats_.estimator_refusals.load()},
-                      {"pipeline_runs", stats_.pipeline_runs.load()},
                       {"events_sent", stats_.events_sent.load()}};
   if (const MqttStats* m = mqtt_stats()) {
     j["mqtt"] = {{"received", m->received.load()},
@@ -195,6 +189,11 @@ nlohmann::json IncidentServer::StatsJson() {
     for (const auto& [t, why] : recent_rejections_) recent.push_back({{"unix_time", t}, {"reason", why}});
   }
   j["recent_rejections"] = recent;
+  if (live_) {
+    // The estimator's own counters (rows used, ignored, late, waiting in its reorder buffer).
+    std::lock_guard<std::mutex> lock(live_->estimator_mutex);
+    j["estimator"] = live_->estimator->Summary().numbers;
+  }
   return j;
 }
 
@@ -490,31 +489,15 @@ void IncidentServer::CommitLoop() {
         }
       }
     }
-    if (any) {
-      dirty_ = true;
-      live_->feed_cv.notify_one();
-    }
+    if (any) live_->feed_cv.notify_one();
     for (std::size_t g = 0; g < group.size(); ++g) group[g]->done.set_value(std::move(results[g]));
   }
 }
 
 void IncidentServer::LiveLoop() {
-  if (!live_->estimator) {
-    auto last = std::chrono::steady_clock::now() - std::chrono::hours(1);
-    while (!stop_) {
-      const auto now = std::chrono::steady_clock::now();
-      if (dirty_ && std::chrono::duration<double>(now - last).count() >= options_.live_period_s) {
-        dirty_ = false;
-        last = now;
-        RerunOnJournal();
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    return;
-  }
   auto last_publish = std::chrono::steady_clock::now() - std::chrono::hours(1);
   VectorSink sink;
-  std::vector<LiveRow> rows;
+  std::vector<MissionRow> rows;
   std::map<std::string, std::string> refusals;  // node -> last reason logged
   while (!stop_) {
     {
@@ -529,7 +512,8 @@ void IncidentServer::LiveLoop() {
     sink.rows.clear();
     std::vector<std::pair<std::string, TimeS>> heard;
     heard.reserve(rows.size());
-    for (const LiveRow& row : rows) {
+    std::unique_lock<std::mutex> estimator_lock(live_->estimator_mutex);
+    for (const MissionRow& row : rows) {
       heard.emplace_back(RowNode(row), RowTime(row));
       newest = std::max(newest, RowTime(row));
       try {
@@ -545,6 +529,7 @@ void IncidentServer::LiveLoop() {
         }
       }
     }
+    estimator_lock.unlock();
     stats_.estimated_rows += rows.size();
     std::vector<std::pair<std::string, std::string>> to_publish;
     const bool publish = mqtt_ && std::chrono::steady_clock::now() - last_publish >
@@ -557,46 +542,13 @@ void IncidentServer::LiveLoop() {
       if (publish) to_publish = AgentJson(state_);
     }
     Changed();
+    if (options_.on_estimate) {
+      for (const auto& e : sink.rows) options_.on_estimate(e);
+    }
     if (publish) {
       last_publish = std::chrono::steady_clock::now();
       for (const auto& [node, j] : to_publish) mqtt_->PublishEstimate(node, j);
     }
-  }
-}
-
-void IncidentServer::RerunOnJournal() {
-  const std::filesystem::path mission_json = options_.live_dir / "mission.json";
-  try {
-    const std::filesystem::path dir = live_->work / "mission";
-    std::filesystem::remove_all(dir);
-    live_->journal->Export(dir, mission_json);
-    if (info_.floorplan && std::filesystem::exists(options_.live_dir / *info_.floorplan)) {
-      std::filesystem::copy_file(options_.live_dir / *info_.floorplan, dir / *info_.floorplan,
-                                 std::filesystem::copy_options::overwrite_existing);
-    }
-    const MissionDirectory mission(dir);
-    const Pipeline* p = FindPipeline(options_.pipeline);
-    VectorSink sink;
-    if (p && p->CanRun(mission)) p->Run({mission, options_.pipeline_options}, sink);
-    ++stats_.pipeline_runs;
-    sink.rows = sink.TakeSortedByTime();
-    IncidentState fresh(info_, options_.alerts);
-    for (const auto& e : sink.rows) fresh.Apply(e);
-    std::vector<std::pair<std::string, std::string>> to_publish;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      for (const auto& [node, status] : device_status_) fresh.SetDeviceStatus(node, status);
-      if (!sink.rows.empty()) fresh.Advance(sink.rows.back().t);
-      state_ = std::move(fresh);
-      to_publish = AgentJson(state_);
-    }
-    Changed();
-    if (mqtt_) {
-      for (const auto& [node, json] : to_publish) mqtt_->PublishEstimate(node, json);
-    }
-  } catch (const std::exception& e) {
-    // The journal holds rows the pipeline refuses; keep serving, say why.
-    Reject(options_.pipeline + " on the journal: " + e.what());
   }
 }
 

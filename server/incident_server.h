@@ -38,16 +38,15 @@ namespace trailmark::server {
 
 struct ServerOptions {
   /// Live mode (instead of a replay): a directory with the incident's mission.json, and the
-  /// journal file; measurements are POSTed to /api/ingest/<stream>, journaled, and the pipeline
-  /// re-run on the journal at most every `live_period_s`.
+  /// journal file; measurements are POSTed to /api/ingest/<stream> (or received over MQTT),
+  /// journaled, then fed to the pipeline's online estimator as each commit lands — the same
+  /// estimator a batch run uses (pipelines/registry.h), with rows that need global time order
+  /// put in it by its reorder buffer (option reorder_s).
   std::filesystem::path live_dir, journal_file;
-  std::string pipeline = "pdr";
+  std::string pipeline = "pdr";  ///< a name of the registry
   std::map<std::string, std::string> pipeline_options;
-  /// The incident's floor plan (live mode: the mapmatch pipeline needs it).
+  /// The floor the pipeline works on (those that need a floor plan).
   std::optional<FloorPlan> floor_plan;
-  /// Pipelines without a live form (pipelines/live_estimator.h) are re-run on the whole journal
-  /// at most this often; those with one (pdr, ins) estimate each row as it is committed.
-  double live_period_s = 1.0;
   MqttOptions mqtt;  ///< live mode: also ingest from an MQTT broker when `mqtt.uri` is set
   /// HTTPS when both are set: the certificate chain and private key files (PEM).
   std::string tls_cert_file, tls_key_file;
@@ -63,12 +62,15 @@ struct ServerOptions {
   /// Receives every rejection reason (also counted; the latest are in /api/stats); default:
   /// a line on stderr.
   std::function<void(const std::string&)> log;
+  /// Live mode: receives every estimate the estimator produces, in order (from the live loop's
+  /// thread), e.g. to forward them or to compare them with a batch run; may be empty.
+  std::function<void(const Estimate&)> on_estimate;
 };
 
 struct ServerStats {
   std::atomic<std::size_t> requests{0}, unauthorized{0}, released_estimates{0};
   std::atomic<std::size_t> ingested_rows{0}, duplicate_rows{0}, rejected_requests{0},
-      pipeline_runs{0}, estimated_rows{0}, estimator_refusals{0}, commits{0}, events_sent{0};
+      estimated_rows{0}, estimator_refusals{0}, commits{0}, events_sent{0};
 };
 
 class IncidentServer {
@@ -88,8 +90,6 @@ class IncidentServer {
   void Stop();
   int port() const { return port_; }
   const char* scheme() const { return options_.tls_cert_file.empty() ? "http" : "https"; }
-  /// Live mode: whether the pipeline estimates each row as it comes (false: re-run).
-  bool incremental() const;
   bool replay_done() const { return replay_done_; }
   const ServerStats& stats() const { return stats_; }
   const MqttStats* mqtt_stats() const { return mqtt_ ? &mqtt_->stats() : nullptr; }
@@ -100,18 +100,17 @@ class IncidentServer {
   /// std::invalid_argument for bad input (nothing journaled; the message names the line),
   /// std::runtime_error when the journal cannot commit.
   nlohmann::json Ingest(const std::string& stream, const std::string& body);
+  /// GET /api/stats: counters, the latest rejections, the live estimator's summary numbers.
+  nlohmann::json StatsJson();
 
  private:
   void ReplayLoop();
   void LiveLoop();
   void CommitLoop();
-  /// Live pipelines without a live form: the batch pipeline on the exported journal.
-  void RerunOnJournal();
   /// Counts and logs a rejection.
   void Reject(const std::string& reason);
   /// The state changed: wake the event streams.
   void Changed();
-  nlohmann::json StatsJson();
 
   MissionInfo info_;
   std::vector<Estimate> estimates_;
@@ -123,7 +122,7 @@ class IncidentServer {
   struct Http;
   std::unique_ptr<Http> http_;
   std::thread http_thread_, replay_thread_;
-  std::atomic<bool> stop_{false}, replay_done_{false}, dirty_{false};
+  std::atomic<bool> stop_{false}, replay_done_{false};
   struct Live;
   std::unique_ptr<Live> live_;
   std::unique_ptr<MqttBridge> mqtt_;

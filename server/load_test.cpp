@@ -6,9 +6,11 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <deque>
 #include <fstream>
 #include <mutex>
+#include <set>
 #include <thread>
 
 #include "server/incident_server.h"
@@ -16,6 +18,7 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
+#include "trailmark/pipelines/registry.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
 
@@ -31,35 +34,48 @@ using Clock = std::chrono::steady_clock;
 
 struct Request {
   std::string stream, body;
-  double t_last = 0;  ///< IMU: the batch's last sample time (latency matching)
+  double t_last = 0;   ///< IMU: the batch's last sample time (latency matching)
+  double t_first = 0;  ///< IMU: its first sample time
 };
 
-/// One firefighter's requests in send order: IMU batches, each followed by the RSSI packets of
-/// its time window.
-std::vector<Request> Requests(const std::string& id, const std::vector<ImuSample>& imu,
-                              const std::vector<RssiPacket>& rssi, double batch_s) {
+/// One firefighter's rows (its own ids), each stream in time order.
+struct DeviceRows {
+  std::vector<ImuSample> imu;
+  std::vector<RssiPacket> rssi;
+  std::vector<RangeMeasurement> ranges;
+  std::vector<BearingMeasurement> bearings;
+  std::vector<MissionEvent> events;
+};
+
+template <class Row>
+void AddBody(const std::vector<Row>& rows, std::size_t& next, double until, const char* stream,
+             std::vector<Request>& out) {
+  std::vector<Row> window;
+  for (; next < rows.size() && RowTime(MissionRow(rows[next])) <= until; ++next)
+    window.push_back(rows[next]);
+  if (window.empty()) return;
+  std::string body;
+  for (const auto& line : FormatAll(window)) body += line + "\n";
+  out.push_back({stream, std::move(body), 0});
+}
+
+/// One firefighter's requests in send order: IMU batches, each followed by the rows of the
+/// other streams of its time window (one request per stream).
+std::vector<Request> Requests(const DeviceRows& d, double batch_s) {
   std::vector<Request> out;
-  std::size_t r = 0;
-  for (std::size_t i = 0; i < imu.size();) {
-    const double end = imu[i].t + batch_s - 1e-9;
+  std::size_t r = 0, g = 0, b = 0, e = 0;
+  for (std::size_t i = 0; i < d.imu.size();) {
+    const double end = d.imu[i].t + batch_s - 1e-9;
     std::vector<ImuSample> batch;
-    for (; i < imu.size() && imu[i].t <= end; ++i) {
-      batch.push_back(imu[i]);
-      batch.back().agent = id;
-    }
+    for (; i < d.imu.size() && d.imu[i].t <= end; ++i) batch.push_back(d.imu[i]);
     std::string body;
     for (const auto& line : FormatAll(batch)) body += line + "\n";
-    out.push_back({"imu.csv", std::move(body), batch.back().t});
-    std::vector<RssiPacket> packets;
-    for (; r < rssi.size() && rssi[r].t <= batch.back().t; ++r) {
-      packets.push_back(rssi[r]);
-      packets.back().rx = id;
-    }
-    if (!packets.empty()) {
-      std::string rb;
-      for (const auto& line : FormatAll(packets)) rb += line + "\n";
-      out.push_back({"rssi.csv", std::move(rb), 0});
-    }
+    out.push_back({"imu.csv", std::move(body), batch.back().t, batch.front().t});
+    const double until = batch.back().t;
+    AddBody(d.events, e, until, "events.csv", out);
+    AddBody(d.ranges, g, until, "ranges.csv", out);
+    AddBody(d.bearings, b, until, "bearings.csv", out);
+    AddBody(d.rssi, r, until, "rssi.csv", out);
   }
   return out;
 }
@@ -82,67 +98,117 @@ double PeakRssMb() {
 nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   if (o.firefighters < 1 || !(o.minutes > 0) || !(o.batch_s > 0) || !(o.imu_hz > 0))
     throw std::invalid_argument("bench load: firefighters >= 1; minutes, batch, rate > 0");
-  // One walk with a foot IMU (the office loop: it ends where it began), repeated until the
-  // incident time is covered; every firefighter sends it under its own id.
-  OfficeLoopOptions loop;
-  SimulatedMission sim = SimulateOfficeLoop(loop, o.seed);
+  // The scenario: the simulated experiment of the pipeline's paper, else the office loop (it
+  // ends where it began), with a foot IMU; one walk repeated until the incident time is covered;
+  // every firefighter sends it under its own id.
+  //  - the office loop (as measured since issue 7): the firefighters share the base and the
+  //    crumbs, and each sends its IMU and the packets it receives;
+  //  - a paper's experiment: the building's landmarks and base are shared, while each
+  //    firefighter drops its own crumbs (its own beacon trail: "ff3-b01"); each device sends
+  //    the rows it is the device of (RowNode: its IMU, its events, what it receives) and those
+  //    of its crumbs (ranges between its beacons, bearings from them); rows of the shared nodes'
+  //    own devices go once, with the first firefighter's.
+  const PipelineSpec& spec = RequirePipeline(o.pipeline);
+  const bool paper = !spec.paper_scenarios.empty();
+  SimulatedMission sim = paper ? SimulateScenario(spec.paper_scenarios.front(), o.seed)
+                               : SimulateOfficeLoop(OfficeLoopOptions{}, o.seed);
   ImuSimOptions imu_options;
   imu_options.rate_hz = o.imu_hz;
   AddFootImu(sim, imu_options, o.seed);
   const std::string agent = sim.walks.begin()->first;
-  std::vector<ImuSample> one;
-  for (const auto& s : sim.data.imu)
-    if (s.agent == agent) one.push_back(s);
-  std::vector<RssiPacket> one_rssi;
-  for (const auto& p : sim.data.rssi)
-    if (p.rx == agent) one_rssi.push_back(p);
-  const double span = one.back().t - one.front().t + 1.0 / o.imu_hz;
-  const double t0 = one.front().t, duration_s = o.minutes * 60.0;
-  std::vector<ImuSample> imu;
-  std::vector<RssiPacket> rssi;
-  for (int rep = 0; rep * span < duration_s; ++rep) {
-    for (auto s : one) {
-      s.t += rep * span;
-      if (s.t - t0 < duration_s) imu.push_back(s);
+  const NodeInfo* original = sim.data.info.Find(agent);
+  const double duration_s = o.minutes * 60.0;
+  double t0 = 1e300, t_end = -1e300;
+  for (const auto& s : sim.data.imu) {
+    if (s.agent == agent) t0 = std::min(t0, s.t), t_end = std::max(t_end, s.t);
+  }
+  const double span = t_end - t0 + 1.0 / o.imu_hz;
+  std::set<std::string> crumbs;  // the nodes each firefighter has its own copy of
+  if (paper) {
+    for (const NodeInfo& n : sim.data.info.nodes) {
+      if (n.kind == NodeKind::kCrumb) crumbs.insert(n.id);
     }
-    for (auto p : one_rssi) {
-      p.t += rep * span;
-      if (p.t - t0 < duration_s) rssi.push_back(p);
+    for (const auto& e : sim.data.events) {
+      if (e.event == "drop" && !e.node.empty()) crumbs.insert(e.node);
     }
   }
-  // The incident: N firefighters starting where the walk starts.
-  const NodeInfo* original = sim.data.info.Find(agent);
   MissionInfo info;
   info.name = "load test";
-  for (const NodeInfo& n : sim.data.info.nodes)
-    if (n.kind != NodeKind::kAgent) info.nodes.push_back(n);
+  info.radio = sim.data.info.radio;
   std::vector<std::string> ids;
+  std::vector<std::vector<Request>> requests;
+  std::size_t imu_rows = 0, other_rows = 0;
   for (int k = 1; k <= o.firefighters; ++k) {
-    ids.push_back(fmt::format("ff{}", k));
+    const std::string ff = fmt::format("ff{}", k);
+    ids.push_back(ff);
+    auto id = [&](const std::string& node) {
+      if (node == agent) return ff;
+      return crumbs.count(node) ? ff + "-" + node : node;
+    };
+    // Whether this firefighter's device sends a row whose device is `node` (and, on the
+    // office loop, which it receives).
+    auto sends = [&](const std::string& node) {
+      return node == agent || crumbs.count(node) || (paper && k == 1);
+    };
     NodeInfo n = *original;
-    n.id = ids.back();
+    n.id = ff;
     info.nodes.push_back(n);
+    for (const NodeInfo& s : sim.data.info.nodes) {
+      if (s.kind == NodeKind::kAgent || (!crumbs.count(s.id) && k > 1)) continue;
+      NodeInfo copy = s;
+      copy.id = id(s.id);
+      info.nodes.push_back(copy);
+    }
+    DeviceRows d;
+    for (int rep = 0; rep * span < duration_s; ++rep) {
+      const double shift = rep * span;
+      auto keep = [&](double t) { return t + shift - t0 < duration_s; };
+      for (auto s : sim.data.imu) {
+        if (s.agent != agent || !keep(s.t)) continue;
+        s.t += shift, s.agent = ff;
+        d.imu.push_back(s);
+      }
+      // The rows this device sends, shifted and renamed (`a`, `b`: the row's two nodes, the
+      // first its device).
+      auto copy = [&](const auto& rows, auto& out, auto a, auto b) {
+        for (auto r : rows) {
+          if (!keep(RowTime(MissionRow(r))) || !sends(r.*a)) continue;
+          r.t += shift;
+          r.*a = id(r.*a), r.*b = id(r.*b);
+          out.push_back(r);
+        }
+      };
+      copy(sim.data.rssi, d.rssi, &RssiPacket::rx, &RssiPacket::tx);
+      copy(sim.data.ranges, d.ranges, &RangeMeasurement::a, &RangeMeasurement::b);
+      copy(sim.data.bearings, d.bearings, &BearingMeasurement::a, &BearingMeasurement::b);
+      for (auto e : sim.data.events) {
+        if (!paper || !keep(e.t) || e.agent != agent) continue;
+        e.t += shift, e.agent = ff, e.node = id(e.node);
+        d.events.push_back(e);
+      }
+    }
+    // The requests now: the rows themselves are not kept (peak memory).
+    requests.push_back(Requests(d, o.batch_s));
+    imu_rows += d.imu.size();
+    other_rows += d.rssi.size() + d.ranges.size() + d.bearings.size() + d.events.size();
   }
   const std::filesystem::path dir = o.work_dir / "load-test";
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir / "incident");
   WriteMissionInfo(dir / "incident" / "mission.json", info);
 
-  std::vector<std::vector<Request>> requests;
-  std::size_t rows_total = 0, requests_total = 0;
-  std::size_t imu_batches = 0;
-  for (const auto& id : ids) {
-    requests.push_back(Requests(id, imu, rssi, o.batch_s));
-    requests_total += requests.back().size();
-    for (const auto& r : requests.back()) imu_batches += r.stream == "imu.csv";
+  std::size_t rows_total = imu_rows + other_rows, requests_total = 0, imu_batches = 0;
+  for (const auto& device : requests) {
+    requests_total += device.size();
+    for (const auto& r : device) imu_batches += r.stream == "imu.csv";
   }
-  rows_total = ids.size() * (imu.size() + rssi.size());
 
   ServerOptions so;
   so.live_dir = dir / "incident";
   so.journal_file = dir / "journal.db";
   so.pipeline = o.pipeline;
   so.pipeline_options = o.pipeline_options;
+  if (spec.needs_floor_plan) so.floor_plan = sim.plan;
   so.port = 0;
   if (!o.mqtt_uri.empty()) {
     so.mqtt.uri = o.mqtt_uri;
@@ -160,11 +226,17 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
 
   // The dashboard client: every event's agent times, matched against the batches in flight.
   struct InFlight {
-    double t_last;
+    double t_first, t_last;
     Clock::time_point sent;
   };
   std::mutex flight_mutex;
   std::map<std::string, std::deque<InFlight>> in_flight;
+  // Data -> estimate: for each new estimate, from the POST of the batch holding its time (a
+  // step-based estimate of a firefighter standing still has nothing new to show; the batches
+  // of a stance are not waiting for one).
+  std::map<std::string, std::deque<InFlight>> holding;
+  std::map<std::string, double> shown;
+  std::vector<double> data_latencies_ms;
   std::vector<double> latencies_ms;
   double worst_ms = 0;
   std::pair<std::string, double> worst_at;  ///< firefighter and batch time of the worst latency
@@ -189,6 +261,14 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           auto it = in_flight.find(node.at("id").get<std::string>());
           if (it == in_flight.end()) continue;
           const double t = node.at("t").get<double>();
+          auto& hold = holding[it->first];
+          if (auto [s, fresh] = shown.emplace(it->first, t); fresh || t > s->second) {
+            s->second = t;
+            while (!hold.empty() && hold.front().t_last < t - 1e-9) hold.pop_front();
+            if (!hold.empty() && hold.front().t_first <= t + 1e-9)
+              data_latencies_ms.push_back(
+                  std::chrono::duration<double, std::milli>(now - hold.front().sent).count());
+          }
           while (!it->second.empty() && it->second.front().t_last <= t + 1e-9) {
             latencies_ms.push_back(
                 std::chrono::duration<double, std::milli>(now - it->second.front().sent).count());
@@ -216,7 +296,8 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   auto sent = [&](std::size_t k, const Request& r) {
     if (r.stream == "imu.csv") {
       std::lock_guard<std::mutex> lock(flight_mutex);
-      in_flight[ids[k]].push_back({r.t_last, Clock::now()});
+      in_flight[ids[k]].push_back({r.t_first, r.t_last, Clock::now()});
+      holding[ids[k]].push_back({r.t_first, r.t_last, Clock::now()});
     }
   };
   // Every device connects first, one after the other (cpp-httplib listens with a backlog of 5:
@@ -242,6 +323,27 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   const double connect_s = std::chrono::duration<double>(Clock::now() - connect0).count();
   const double cpu0 = CpuSeconds();
   const auto wall0 = Clock::now();
+  // Devices keep within max_skew_s of mission time of each other, as in real time (a device
+  // that ran ahead by more than an estimator's reorder window would make the others' rows late).
+  std::mutex pace_mutex;
+  std::condition_variable pace_cv;
+  std::vector<double> progress(ids.size(), -1e300);  // the last IMU batch time sent
+  auto pace = [&](std::size_t k, const Request& r) {
+    if (!(o.max_skew_s > 0) || r.stream != "imu.csv") return;
+    std::unique_lock<std::mutex> lock(pace_mutex);
+    pace_cv.wait(lock, [&] {
+      return *std::min_element(progress.begin(), progress.end()) >= r.t_last - o.max_skew_s ||
+             progress[k] <= *std::min_element(progress.begin(), progress.end());
+    });
+  };
+  auto paced = [&](std::size_t k, const Request& r) {
+    if (!(o.max_skew_s > 0) || r.stream != "imu.csv") return;
+    {
+      std::lock_guard<std::mutex> lock(pace_mutex);
+      progress[k] = r.t_last;
+    }
+    pace_cv.notify_all();
+  };
   std::vector<std::thread> devices;
   for (std::size_t k = 0; k < ids.size(); ++k) {
     devices.emplace_back([&, k] {
@@ -250,7 +352,9 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
         // PUBACK to the broker follows its journal commit). A window of 32 messages in flight.
         std::deque<mqtt::delivery_token_ptr> window;
         for (const Request& r : requests[k]) {
+          pace(k, r);
           sent(k, r);
+          paced(k, r);
           try {
             window.push_back(publishers[k]->publish(
                 mqtt::make_message("trailmark/load/" + ids[k] + "/" + r.stream, r.body, 1, false)));
@@ -268,8 +372,10 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       httplib::Client& client = *clients[k];
       const httplib::Headers auth{{"Authorization", "Bearer load-test"}};
       for (const Request& r : requests[k]) {
+        pace(k, r);
         sent(k, r);
         const auto res = client.Post("/api/ingest/" + r.stream, auth, r.body, "text/csv");
+        paced(k, r);
         if (!res || res->status != 200) {
           refuse(res ? fmt::format("HTTP {} {}", res->status, res->body)
                      : httplib::to_string(res.error()));
@@ -311,6 +417,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   const std::size_t estimated = server.stats().estimated_rows.load();
   const std::size_t commits = server.stats().commits.load();
   const std::size_t events_sent = server.stats().events_sent.load();
+  const nlohmann::json estimator = server.StatsJson().value("estimator", nlohmann::json::object());
   server.Stop();
   dashboard.join();
   const std::size_t journaled = Journal(so.journal_file).size();
@@ -326,12 +433,14 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"imu_hz", o.imu_hz},
           {"batch_s", o.batch_s},
           {"pipeline", o.pipeline},
+          {"max_skew_s", o.max_skew_s},
           {"transport", o.mqtt_uri.empty() ? "http" : "mqtt"},
           {"devices_connect_s", connect_s},
           {"requests", requests_total},
           {"rows", rows_total},
-          {"imu_rows", ids.size() * imu.size()},
-          {"rssi_rows", ids.size() * rssi.size()},
+          {"scenario", paper ? spec.paper_scenarios.front() : std::string("office-loop")},
+          {"imu_rows", imu_rows},
+          {"other_rows", other_rows},
           {"ingest_wall_s", ingest_s},
           {"rows_per_s", rows_total / ingest_s},
           {"requests_per_s", requests_total / ingest_s},
@@ -344,13 +453,18 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"latency_ms_max", Percentile(latencies_ms, 100)},
           {"latency_samples", latencies_ms.size()},
           {"latency_max_batch", {{"firefighter", worst_at.first}, {"t_last", worst_at.second}}},
+          {"data_to_estimate_ms_p50", Percentile(data_latencies_ms, 50)},
+          {"data_to_estimate_ms_p99", Percentile(data_latencies_ms, 99)},
+          {"data_to_estimate_ms_max", Percentile(data_latencies_ms, 100)},
+          {"data_to_estimate_samples", data_latencies_ms.size()},
           {"batches_without_event", unmatched},
           {"events", events.load()},
           {"events_sent_by_server", events_sent},
           {"cpu_s", cpu_s},
           {"cpu_cores_busy", cpu_s / std::max(total_s, ingest_s)},
           {"peak_rss_mb", PeakRssMb()},
-          {"rejections_logged", logged.load()}};
+          {"rejections_logged", logged.load()},
+          {"estimator", estimator}};
 }
 
 }  // namespace trailmark::server

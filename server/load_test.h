@@ -19,7 +19,10 @@ struct LoadTestOptions {
   double minutes = 10.0;    ///< incident time each firefighter sends
   double batch_s = 0.1;     ///< IMU per request (10 samples at 100 Hz)
   double imu_hz = 100.0;
-  std::string pipeline = "ins";
+  /// Devices keep within this much mission time of each other (s), as they do in real time;
+  /// 0: each sends as fast as it can.
+  double max_skew_s = 0.5;
+  std::string pipeline = "ins";  ///< a name of the registry
   std::map<std::string, std::string> pipeline_options;
   /// Where the journal goes (a real disk: each group commit is an fsync).
   std::filesystem::path work_dir;

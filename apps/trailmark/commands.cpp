@@ -1,6 +1,7 @@
 #include "commands.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <fstream>
@@ -13,7 +14,6 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/report/html_report.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
@@ -99,33 +99,12 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
 
 RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::path& out,
               const std::map<std::string, std::string>& options) {
-  const Pipeline* pipeline = FindPipeline(name);
-  if (pipeline == nullptr) {
-    std::string known;
-    for (const auto& p : AllPipelines()) known += (known.empty() ? "" : ", ") + p->name();
-    throw std::invalid_argument(fmt::format("unknown pipeline '{}' (known: {})", name, known));
-  }
+  const PipelineSpec& pipeline = RequirePipeline(name);
   const MissionDirectory mission(mission_dir);
-  if (!pipeline->CanRun(mission)) {
-    std::string need;
-    for (const auto& f : pipeline->required_files()) need += (need.empty() ? "" : ", ") + f;
-    // A missing file is named with its path; "a.csv or b.csv" needs either one; requirements
-    // that are not file names ("3+ landmarks in mission.json") are in the message below.
-    for (const auto& f : pipeline->required_files()) {
-      const auto alt = f.find(" or ");
-      const std::string file = f.substr(0, alt);
-      const std::string other = alt == std::string::npos ? "" : f.substr(alt + 4);
-      const bool is_file = file.find(' ') == std::string::npos &&
-                           (file.ends_with(".csv") || file.ends_with(".json"));
-      if (!is_file || (!other.empty() && mission.Has(other))) continue;
-      mission.Require(file,
-                      "pipeline '" + name + "'" + (other.empty() ? "" : " (or " + other + ")"));
-    }
-    throw InputError(mission_dir.string(), 0, "pipeline '" + name + "' needs " + need);
-  }
+  RequireCanRun(pipeline, mission);
   ProgressBar bar("run " + name);
   PipelineContext context{mission, options, [&](double f) { bar.Update(f); }};
-  RunResult result = RunPipeline(*pipeline, context, out);
+  RunResult result = RunPipeline(pipeline, context, out);
   bar.Finish();
   return result;
 }
@@ -185,19 +164,19 @@ double WallTimeOfRun(const fs::path& run_dir) {
   return 0.0;
 }
 
-// The floor a run of mapmatch was matched on (its `level` option), for the report to draw;
-// nullopt for other pipelines or the default floor.
+// The floor a run of a floor-plan pipeline was matched on (its `level` option), for the report
+// to draw; nullopt for other pipelines or the default floor.
 std::optional<int> LevelOfRun(const fs::path& run_dir) {
   std::ifstream in(run_dir / "diagnostics.json");
   nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
-  if (!j.is_object() || j.value("pipeline", std::string()) != "mapmatch" ||
-      !j.contains("options") || !j["options"].is_object())
-    return std::nullopt;
+  if (!j.is_object() || !j.contains("options") || !j["options"].is_object()) return std::nullopt;
+  const PipelineSpec* pipeline = FindPipeline(j.value("pipeline", std::string()));
+  if (pipeline == nullptr || !pipeline->needs_floor_plan) return std::nullopt;
   std::map<std::string, std::string> options;
   for (const auto& [k, v] : j["options"].items()) {
     if (v.is_string()) options[k] = v.get<std::string>();
   }
-  return TakeMapMatchLevel(options);
+  return pipeline->floor_level(options);
 }
 
 }  // namespace
@@ -281,6 +260,7 @@ void Validate(const fs::path& mission_dir) {
   ValidateStream<RangeMeasurement>(mission, [](const RangeMeasurement& r) { return r.t; });
   ValidateStream<BearingMeasurement>(mission, [](const BearingMeasurement& r) { return r.t; });
   ValidateStream<MissionEvent>(mission, [](const MissionEvent& r) { return r.t; });
+  ValidateStream<BaroSample>(mission, [](const BaroSample& r) { return r.t; });
   ValidateStream<TruthSample>(mission, [](const TruthSample& r) { return r.t; });
   std::vector<int> levels;
   if (const auto plan = mission.LoadFloorPlan(std::nullopt, &levels)) {
@@ -320,10 +300,7 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
     for (const auto& name : RunnablePipelines(mission)) {
       if (done.count(name)) continue;
       const fs::path run_dir = runs / name;
-      // The INS estimate is reported at 10 Hz (the truth's rate) to keep the report small.
-      std::map<std::string, std::string> options;
-      if (name == "ins") options["output_hz"] = "10";
-      RunResult r = Run(name, mdir, run_dir, options);
+      RunResult r = Run(name, mdir, run_dir, RequirePipeline(name).report_options);
       Metrics m = Eval(mdir, run_dir / "estimates.csv", run_dir / "metrics.json", false);
       rows.emplace_back(std::move(r), std::move(m));
       missions.push_back(label);
@@ -333,24 +310,32 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
     if (!run_dirs.empty()) Report(run_dirs, mdir, report);
   };
   run_all(scenario, mission_dir, out / "runs", out / "report.html");
-  // Pipelines that need other sensors run on the simulated experiment of their paper, with
-  // dead reckoning (pdr) on the same mission for comparison.
-  for (const std::string extra : {"landmark-corridor", "beacon-trail", "house1-search"}) {
+  // Pipelines that need other sensors run on the simulated experiment of their paper (also
+  // when they ran on the default mission), with the baseline (dead reckoning) on the same
+  // mission for comparison.
+  std::vector<std::string> extras;
+  for (const auto& p : Pipelines()) {
+    for (const auto& s : p.paper_scenarios) {
+      if (std::find(extras.begin(), extras.end(), s) == extras.end()) extras.push_back(s);
+    }
+  }
+  std::vector<std::string> reports{(out / "report.html").string()};
+  for (const std::string& extra : extras) {
     const fs::path mdir = out / "missions" / extra;
     Simulate(extra, seed, mdir);
-    done.erase("pdr");
-    if (extra == "house1-search") done.erase("mapmatch");  // also on the search it was made for
+    for (const auto& p : Pipelines()) {
+      const auto& s = p.paper_scenarios;
+      if (p.baseline || std::find(s.begin(), s.end(), extra) != s.end()) done.erase(p.name);
+    }
     run_all(extra, mdir, out / "runs" / extra, out / ("report-" + extra + ".html"));
+    reports.push_back((out / ("report-" + extra + ".html")).string());
   }
   PrintSummaryTable(rows, missions);
-  for (const auto& p : AllPipelines()) {
-    if (!done.count(p->name()) && p->name() != "pdr")
-      fmt::print("not run (no mission with its inputs): {}\n", p->name());
+  for (const auto& p : Pipelines()) {
+    if (!done.count(p.name) && !p.baseline)
+      fmt::print("not run (no mission with its inputs): {}\n", p.name);
   }
-  fmt::print("\nreports: {}, {}, {}, {}\n", (out / "report.html").string(),
-             (out / "report-landmark-corridor.html").string(),
-             (out / "report-beacon-trail.html").string(),
-             (out / "report-house1-search.html").string());
+  fmt::print("\nreports: {}\n", fmt::join(reports, ", "));
   return 0;
 }
 

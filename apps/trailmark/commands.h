@@ -10,7 +10,7 @@
 
 #include "server/load_test.h"
 #include "trailmark/eval/metrics.h"
-#include "trailmark/pipelines/pipeline.h"
+#include "trailmark/pipelines/batch_run.h"
 #include "trailmark/sim/synthetic_incident.h"
 
 namespace trailmark::cli {
@@ -58,30 +58,6 @@ int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
                     double covariance_period_s, const std::filesystem::path& json_out);
 /// `trailmark bench load`: the live server under load on loopback (server/load_test.h).
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out);
-/// `trailmark reproduce ins`: the INS on the recorded foot-IMU sets under data_dir.
-int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::path& out,
-                 const std::map<std::string, std::string>& options = {});
-/// `trailmark reproduce landmarks`: the radio-landmarks paper's stop-and-go experiment.
-int ReproduceLandmarks(int seeds, const std::filesystem::path& out,
-                       const std::filesystem::path& data_dir);
-/// Prints `text` and writes it to out/results.md under a "# title" heading; returns 0.
-int WriteReproduction(const std::filesystem::path& out, const std::string& title,
-                      const std::string& text);
-/// `trailmark reproduce beacons`: MDS beacon localization (Figs. 4-5, `runs` simulations per
-/// point) and tracking on the six lab traces (Table 1, Figs. 6-9, `seeds` each).
-int ReproduceBeacons(int runs, int seeds, const std::filesystem::path& out);
-/// `trailmark reproduce mapmatch`: the map-aided search paper on the two simulated houses
-/// (Figs. 7-9) with seeds first_seed .. first_seed + seeds - 1; `extra` options go to every
-/// mapmatch run.
-int ReproduceMapMatch(int seeds, const std::filesystem::path& out,
-                      const std::map<std::string, std::string>& extra = {}, int first_seed = 1);
-/// `trailmark reproduce NAME`: a paper's experiment on simulated equivalents, printed side by
-/// side with the published figures; results.md under out/NAME. `first_seed` (mapmatch only):
-/// the first simulated run's seed, for figures on searches a setting was not chosen on.
-int Reproduce(const std::string& name, int seeds, const std::filesystem::path& out,
-              const std::map<std::string, std::string>& options = {},
-              const std::filesystem::path& data_dir = "../shared/data", int first_seed = 1);
-
 /// `trailmark serve`: replay a mission's online estimates into the incident server.
 struct ServeOptions {
   std::filesystem::path replay;

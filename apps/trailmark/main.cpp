@@ -24,7 +24,9 @@
 #include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/landmarks/energy.h"
-#include "trailmark/pipelines/beacons_pipeline.h"
+#include "experiments/experiments.h"
+#include "trailmark/pipelines/batch_run.h"
+#include "trailmark/pipelines/registry.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace fs = std::filesystem;
@@ -89,7 +91,12 @@ int main(int argc, char** argv) {
   run->add_option("--out", out, "output directory")->required();
   run->add_option("--option", run_options, "pipeline option key=value (repeatable)");
 
-  app.add_subcommand("pipelines", "list pipelines and the files each needs");
+  auto* pipelines = app.add_subcommand("pipelines", "list pipelines, the files each needs and its options");
+  bool pipelines_json = false, pipelines_markdown = false;
+  pipelines->add_flag("--json", pipelines_json,
+                      "the registry as JSON: name, needs, uses, live, capabilities, options");
+  pipelines->add_flag("--markdown", pipelines_markdown,
+                      "the option tables in Markdown (docs/pipeline-options.md)");
 
   auto* validate =
       app.add_subcommand("validate", "check every file of a mission (all reader checks)");
@@ -131,6 +138,8 @@ int main(int argc, char** argv) {
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
   bench->add_option("--batch", load.batch_s, "load: seconds of IMU per request");
   bench->add_option("--pipeline", load.pipeline, "load: the live pipeline (ins, pdr, ...)");
+  bench->add_option("--max-skew", load.max_skew_s,
+                    "load: devices keep within this many mission seconds of each other (0: free)");
   std::string load_dir = ".";
   bench->add_option("--dir", load_dir, "load: where the journal goes (a real disk)");
   bench->add_option(
@@ -281,13 +290,20 @@ int main(int argc, char** argv) {
       const RunResult r = cli::Run(pipeline, mission, out, ParseKeyValues(run_options));
       fmt::print("{}: {} estimates in {:.3f} s -> {}\n", r.pipeline, r.estimates, r.wall_time_s,
                  (fs::path(out) / "estimates.csv").string());
-    } else if (app.got_subcommand("pipelines")) {
-      for (const auto& p : AllPipelines()) {
-        std::string req, opt;
-        for (const auto& f : p->required_files()) req += (req.empty() ? "" : ", ") + f;
-        for (const auto& f : p->optional_files()) opt += (opt.empty() ? "" : ", ") + f;
-        fmt::print("{:<14} {}\n{:<14} needs: mission.json, {}{}\n", p->name(), p->description(), "",
-                   req, opt.empty() ? "" : "; uses if present: " + opt);
+    } else if (*pipelines) {
+      if (pipelines_json) {
+        fmt::print("{}\n", RegistryJson());
+      } else if (pipelines_markdown) {
+        fmt::print("{}", RegistryMarkdown());
+      } else {
+        for (const auto& p : Pipelines()) {
+          std::string needs, uses;
+          for (const auto& f : p.NeedsText()) needs += (needs.empty() ? "" : ", ") + f;
+          for (Stream s : p.uses.List()) uses += (uses.empty() ? "" : ", ") + std::string(StreamFileName(s));
+          fmt::print("{:<16} {}\n{:<16} needs: mission.json, {}; uses if present: {}; {} options "
+                     "(--json lists them)\n",
+                     p.name, p.description, "", needs, uses, p.options.size());
+        }
       }
     } else if (*validate) {
       cli::Validate(mission);
@@ -378,7 +394,7 @@ int main(int argc, char** argv) {
       return cli::JournalExport(journal_file, journal_mission, journal_out);
     } else if (*wayout) {
       const MissionDirectory m(wayout_mission);
-      const WayOutReport w = ComputeWayOut(
+      const beacons::WayOutReport w = ComputeWayOut(
           m, wayout_agent, std::isnan(wayout_at) ? std::nullopt : std::optional<double>(wayout_at));
       std::string heard;
       for (const auto& h : w.heard) heard += (heard.empty() ? "" : ", ") + h;
@@ -392,9 +408,13 @@ int main(int argc, char** argv) {
       if (!w.route.empty() && !w.broken) fmt::print("then out through the entry\n");
       return w.route.empty() || w.broken ? 3 : 0;
     } else if (*reproduce) {
-      return cli::Reproduce(reproduce_name, reproduce_seeds, reproduce_out,
-                            ParseKeyValues(reproduce_options), reproduce_data,
-                            reproduce_first_seed);
+      experiments::ReproductionArgs args;
+      args.seeds = reproduce_seeds;
+      args.out = reproduce_out;
+      args.options = ParseKeyValues(reproduce_options);
+      args.data_dir = reproduce_data;
+      args.first_seed = reproduce_first_seed;
+      return experiments::Reproduce(reproduce_name, args);
     }
   } catch (const InputError& e) {
     fmt::print(stderr, "error: {}\n", e.what());

@@ -13,8 +13,8 @@
 #include "server/incident_server.h"
 #include "server/journal.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/live_estimator.h"
-#include "trailmark/pipelines/mapmatch_pipeline.h"
+#include "trailmark/pipelines/batch_run.h"
+#include "trailmark/pipelines/registry.h"
 
 namespace trailmark::cli {
 
@@ -31,17 +31,12 @@ std::string RandomToken() {
 
 std::atomic<bool>& StopFlag() { return g_stop; }
 
-// The floor the incident is tracked and drawn on: mapmatch's `level` option when given (a
-// level the plan lacks is an error naming its levels), else the plan's default floor.
+// The floor the incident is tracked and drawn on: a floor-plan pipeline's `level` option when
+// given (a level the plan lacks is an error naming its levels), else the plan's default floor.
 std::optional<FloorPlan> ServedFloorPlan(const MissionDirectory& mission,
-                                         const std::string& pipeline,
+                                         const PipelineSpec& pipeline,
                                          const std::map<std::string, std::string>& options) {
-  std::optional<int> level;
-  if (pipeline == "mapmatch") {
-    auto rest = options;
-    level = TakeMapMatchLevel(rest);
-  }
-  return mission.LoadFloorPlan(level);
+  return LoadPipelineFloor(pipeline, mission, options);
 }
 
 }  // namespace
@@ -52,9 +47,13 @@ int ServeLive(const ServeOptions& o) {
   server::ServerOptions so;
   so.live_dir = o.live;
   so.journal_file = o.journal;
-  so.pipeline = o.pipeline.empty() ? "pdr" : o.pipeline;
-  if (!FindPipeline(so.pipeline))
-    throw std::invalid_argument("unknown pipeline '" + so.pipeline + "'");
+  // Without --pipeline: the baseline (dead reckoning), which every incident can feed.
+  const PipelineSpec* chosen = nullptr;
+  for (const auto& p : Pipelines()) {
+    if (o.pipeline.empty() ? p.baseline && !chosen : p.name == o.pipeline) chosen = &p;
+  }
+  const PipelineSpec& spec = chosen ? *chosen : RequirePipeline(o.pipeline);
+  so.pipeline = spec.name;
   so.pipeline_options = o.options;
   so.mqtt.uri = o.mqtt_uri;
   so.mqtt.incident = o.incident;
@@ -66,25 +65,23 @@ int ServeLive(const ServeOptions& o) {
   so.bind = o.bind;
   so.port = o.port;
   so.token = o.token.empty() ? RandomToken() : o.token;
-  so.alerts.map_error = so.pipeline == "mapmatch";
+  so.alerts.map_error = spec.raises_map_alerts;
   std::vector<Segment2> walls;
   if (mission.info().floorplan && !mission.Has(*mission.info().floorplan)) {
     fmt::print(
         "note: mission.json names the floor plan '{}', which {} does not hold: the "
         "dashboard shows no walls\n",
         *mission.info().floorplan, o.live.string());
-  } else if (auto plan = ServedFloorPlan(mission, so.pipeline, so.pipeline_options)) {
+  } else if (auto plan = ServedFloorPlan(mission, spec, so.pipeline_options)) {
     walls = plan->solid_walls();
     so.floor_plan = std::move(*plan);
   }
   server::IncidentServer srv(mission.info(), {}, so, {}, std::move(walls));
   srv.Start();
   fmt::print(
-      "trailmark serve: live incident '{}', journal {}, pipeline {} ({}), listening on "
+      "trailmark serve: live incident '{}', journal {}, pipeline {} (incremental), listening on "
       "{}://{}:{}/\n",
-      mission.info().name, o.journal.string(), so.pipeline,
-      srv.incremental() ? "incremental" : "re-run on the journal every second", srv.scheme(),
-      o.bind, srv.port());
+      mission.info().name, o.journal.string(), so.pipeline, srv.scheme(), o.bind, srv.port());
   fmt::print("dashboard: {}://{}:{}/?token={}\n", srv.scheme(), o.bind, srv.port(), so.token);
   if (!o.mqtt_uri.empty())
     fmt::print("mqtt: {}, topics trailmark/{}/<node>/<stream>\n", o.mqtt_uri, o.incident);
@@ -120,23 +117,21 @@ int JournalExport(const std::filesystem::path& journal, const std::filesystem::p
 int Serve(const ServeOptions& o) {
   if (!o.live.empty()) return ServeLive(o);
   const MissionDirectory mission(o.replay);
-  std::string pipeline = o.pipeline;
-  if (pipeline.empty()) {
-    // The most capable pipeline the mission can feed.
-    const auto runnable = RunnablePipelines(mission);
-    for (const char* p : {"breadcrumb", "beacons-ekf", "landmarks-ukf", "mapmatch", "ins", "pdr"}) {
-      if (std::find(runnable.begin(), runnable.end(), p) != runnable.end()) {
-        pipeline = p;
-        break;
-      }
+  const PipelineSpec* p = nullptr;
+  if (o.pipeline.empty()) {
+    // The most capable pipeline the mission can feed (the registry's serve ranks).
+    for (const auto& spec : Pipelines()) {
+      if (spec.serve_rank && CanRun(spec, mission) && (!p || *spec.serve_rank < *p->serve_rank))
+        p = &spec;
     }
-    if (pipeline.empty())
+    if (p == nullptr)
       throw std::invalid_argument("serve: no pipeline can run on " + o.replay.string());
+  } else {
+    p = &RequirePipeline(o.pipeline);
   }
-  const Pipeline* p = FindPipeline(pipeline);
-  if (!p) throw std::invalid_argument("unknown pipeline '" + pipeline + "'");
+  const std::string pipeline = p->name;
   VectorSink sink;
-  p->Run({mission, o.options}, sink);
+  RunBatch(*p, {mission, o.options}, sink);
   sink.rows = sink.TakeSortedByTime();
   server::ServerOptions so;
   so.bind = o.bind;
@@ -145,7 +140,7 @@ int Serve(const ServeOptions& o) {
   so.tls_key_file = o.tls_key;
   so.speed = o.speed;
   so.token = o.token.empty() ? RandomToken() : o.token;
-  so.alerts.map_error = pipeline == "mapmatch";
+  so.alerts.map_error = p->raises_map_alerts;
   // When each node was heard (for the link-lost alert): every row of the measurement streams.
   const MissionData data = ReadMissionData(mission);
   std::vector<std::pair<TimeS, std::string>> heard;
@@ -157,7 +152,7 @@ int Serve(const ServeOptions& o) {
   std::stable_sort(heard.begin(), heard.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Segment2> walls;
-  if (const auto plan = ServedFloorPlan(mission, pipeline, o.options)) walls = plan->solid_walls();
+  if (const auto plan = ServedFloorPlan(mission, *p, o.options)) walls = plan->solid_walls();
   server::IncidentServer srv(mission.info(), std::move(sink.rows), so, std::move(heard),
                              std::move(walls));
   srv.Start();
@@ -182,16 +177,17 @@ int Serve(const ServeOptions& o) {
 
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out) {
   fmt::print(
-      "bench load: {} firefighters x {:g} min of {:g} Hz IMU + RSSI, {:g} s per request, "
+      "bench load: {} firefighters x {:g} min of {:g} Hz IMU + radio, {:g} s per request, "
       "pipeline {}, {}, journal under {}\n",
       options.firefighters, options.minutes, options.imu_hz, options.batch_s, options.pipeline,
       options.mqtt_uri.empty() ? "HTTP POST" : "MQTT QoS 1 via " + options.mqtt_uri,
       std::filesystem::absolute(options.work_dir).string());
   std::fflush(stdout);
   const nlohmann::json r = server::RunLoadTest(options);
-  fmt::print("rows sent and journaled   {} ({} IMU, {} RSSI) in {} requests\n",
+  fmt::print("rows sent and journaled   {} ({} IMU, {} of the other streams) in {} requests ({})\n",
              r["rows"].get<std::size_t>(), r["imu_rows"].get<std::size_t>(),
-             r["rssi_rows"].get<std::size_t>(), r["requests"].get<std::size_t>());
+             r["other_rows"].get<std::size_t>(), r["requests"].get<std::size_t>(),
+             r["scenario"].get<std::string>());
   fmt::print(
       "sustained                 {:.0f} rows/s, {:.0f} requests/s ({:.0f}x real time per "
       "firefighter)\n",
@@ -202,6 +198,10 @@ int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::pat
   fmt::print("latency POST -> event     p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms ({} batches)\n",
              r["latency_ms_p50"].get<double>(), r["latency_ms_p99"].get<double>(),
              r["latency_ms_max"].get<double>(), r["latency_samples"].get<std::size_t>());
+  fmt::print("latency data -> estimate  p50 {:.1f} ms, p99 {:.1f} ms, max {:.1f} ms ({} estimates)\n",
+             r["data_to_estimate_ms_p50"].get<double>(), r["data_to_estimate_ms_p99"].get<double>(),
+             r["data_to_estimate_ms_max"].get<double>(),
+             r["data_to_estimate_samples"].get<std::size_t>());
   fmt::print(
       "CPU                       {:.1f} s, {:.2f} cores busy (server and clients, one "
       "process)\n",

@@ -2,6 +2,7 @@
 // layout (up to a rigid motion and flip), shortest-path completion, Procrustes anchoring, and
 // SMACOF on the measured links removing the shortest-path bias.
 #include "trailmark/beacons/mds.h"
+#include "trailmark/geometry/rigid_fit.h"
 
 #include <gtest/gtest.h>
 
@@ -20,7 +21,7 @@ std::vector<Vec2> RandomBeacons(int n, std::uint64_t seed) {
 }
 
 double AlignedError(const std::vector<Vec2>& est, const std::vector<Vec2>& truth) {
-  const RigidTransform T = Procrustes(est, truth);
+  const RigidFit2 T = FitRigid(est, truth, true);
   double sum = 0;
   for (std::size_t i = 0; i < est.size(); ++i) sum += (T.Apply(est[i]) - truth[i]).norm();
   return sum / est.size();
@@ -42,10 +43,10 @@ TEST(Mds, ProcrustesRecoversRotationTranslationAndFlip) {
   flip(1, 1) = -1;
   std::vector<Vec2> to;
   for (const auto& p : from) to.push_back(R * flip * p + Vec2(3, -4));
-  const RigidTransform T = Procrustes(from, to);
+  const RigidFit2 T = FitRigid(from, to, true);
   for (std::size_t i = 0; i < from.size(); ++i) EXPECT_LT((T.Apply(from[i]) - to[i]).norm(), 1e-9);
   EXPECT_NEAR(T.rotation.determinant(), -1.0, 1e-9);
-  const RigidTransform proper = Procrustes(from, to, false);
+  const RigidFit2 proper = FitRigid(from, to, false);
   EXPECT_NEAR(proper.rotation.determinant(), 1.0, 1e-9);
 }
 

@@ -6,10 +6,10 @@
 
 #include <cmath>
 
+#include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/breadcrumb_pipeline.h"
 
 namespace trailmark {
 namespace {
@@ -22,8 +22,9 @@ TEST(BreadcrumbPlaza, RecordedRangeSlamLocalizesTheBeacons) {
     void Add(const Estimate& e) override { rows.push_back(e); }
     std::vector<Estimate> rows;
   } sink;
-  const PipelineSummary s = BreadcrumbPipeline().Run(
-      {mission, {{"heading_scale", "0"}, {"range_sigma_m", "1.0"}}}, sink);
+  const EstimatorSummary s = RunBatch(
+      RequirePipeline("breadcrumb"), {mission, {{"heading_scale", "0"}, {"range_sigma_m", "1.0"}}},
+      sink);
   EXPECT_EQ(s.numbers.at("delayed_initializations"), 4.0);
   EXPECT_EQ(s.numbers.at("static_nodes_never_localized"), 0.0);
   for (const auto& e : sink.rows) {

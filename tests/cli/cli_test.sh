@@ -91,7 +91,7 @@ run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigatio
 "$TM" run --pipeline landmarks-stopgo "$dir/lc" --out "$dir/lcr" > /dev/null || fail "landmarks-stopgo"
 "$TM" eval "$dir/lc" "$dir/lcr/estimates.csv" | matches "^lm3 " || fail "landmarks estimated"
 run_failing "$TM" run --pipeline landmarks-ukf "$dir/lc" --out "$dir/x" --option loss=l1
-[ $rc -eq 1 ] && grep -q "loss must be squared, huber or cauchy" "$dir/err" || fail "bad loss option"
+[ $rc -eq 1 ] && grep -q "option loss=.l1. must be one of squared, huber, cauchy" "$dir/err" || fail "bad loss option"
 "$TM" reproduce landmarks --out "$dir/rep" | matches "| landmark localization, median error | 0.78 m" \
   || fail "reproduce landmarks"
 "$TM" reproduce beacons --seeds 1 --out "$dir/rep" > "$dir/repb.txt" || fail "reproduce beacons"
@@ -114,7 +114,7 @@ run_failing "$TM" wayout "$dir/bt" --agent nobody
 grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatch diagnostics"
 "$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | matches "^ff1 " || fail "mapmatch eval"
 run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
-[ $rc -eq 1 ] && grep -q "init must be auto, known or uniform" "$dir/err" || fail "bad mapmatch option"
+[ $rc -eq 1 ] && grep -q "option init=.somewhere. must be one of auto, known, uniform" "$dir/err" || fail "bad mapmatch option"
 # The report draws the floor a mapmatch run was matched on (its level option).
 "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/hsl" --option level=0 > /dev/null || fail "mapmatch level=0"
 "$TM" report "$dir/hsl" --out "$dir/hsl.html" > /dev/null || fail "report of a mapmatch run with a level"
@@ -133,7 +133,7 @@ run_failing "$TM" simulate office-loop --entry 1,1 --out "$dir/x"
 run_failing "$TM" serve --live "$dir/hs" --journal "$dir/hsj.db" --pipeline mapmatch --option level=7 --port 0 --token x
 [ $rc -ne 0 ] && grep -q "no level 7 (its levels: 0)" "$dir/err" || { cat "$dir/err"; fail "serve mapmatch level"; }
 run_failing "$TM" run --pipeline beacons-ekf "$dir/bt" --out "$dir/x" --option update=polar
-[ $rc -eq 1 ] && grep -q "update must be range-bearing or position" "$dir/err" || fail "bad update option"
+[ $rc -eq 1 ] && grep -q "must be one of range-bearing, position" "$dir/err" || fail "bad update option"
 # The incident server: replay, token, state contract (curl on loopback).
 "$TM" serve --replay "$dir/bt" --speed 100 --port 0 --token t0k3n > "$dir/serve.log" 2>&1 &
 serve_pid=$!

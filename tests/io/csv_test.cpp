@@ -229,6 +229,25 @@ TEST(Streams, EveryKindRoundTripsExactly) {
                   [](const MissionEvent& a, const MissionEvent& b) {
                     return a.t == b.t && a.event == b.event && a.node == b.node;
                   });
+  ExpectRoundTrip(std::vector<BaroSample>{{0.25, "ff1", 1013.25}, {0.5, "ff1", 1012.987654321}},
+                  [](const BaroSample& a, const BaroSample& b) {
+                    return a.t == b.t && a.agent == b.agent && a.pressure_hpa == b.pressure_hpa;
+                  });
+}
+
+TEST(CsvReader, BarometerRowsAreCheckedLikeEveryStream) {
+  TempDir dir;
+  const std::string header = "t,agent,pressure_hpa\n";
+  EXPECT_EQ(ErrorOf<BaroSample>(dir.File("baro.csv", header + "0,ff1,1013.2\n1,ff1,1013.1\n")), "");
+  for (const char* bad : {"101325", "101.3", "-5"}) {  // Pa, kPa, nonsense
+    EXPECT_THAT(ErrorOf<BaroSample>(dir.File("b1.csv", header + "0,ff1," + std::string(bad) + "\n")),
+                AllOf(HasSubstr("b1.csv:2:"), HasSubstr("not an air pressure in hPa")))
+        << bad;
+  }
+  EXPECT_THAT(ErrorOf<BaroSample>(dir.File("b2.csv", header + "1,ff1,1013\n0,ff1,1013\n")),
+              HasSubstr("out of time order"));
+  EXPECT_THAT(ErrorOf<BaroSample>(dir.File("b3.csv", "t,agent\n0,ff1\n")),
+              HasSubstr("pressure_hpa"));
 }
 
 TEST(CsvWriter, RefusesNonFiniteNumbers) {

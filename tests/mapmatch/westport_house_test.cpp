@@ -9,19 +9,22 @@
 #include <cmath>
 #include <numbers>
 
+#include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/core/random.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/mapmatch/particle_filter.h"
-#include "trailmark/pipelines/mapmatch_pipeline.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/walker.h"
 
 namespace trailmark::mapmatch {
 namespace {
+
+using testing::CanRunNamed;
+using testing::RunNamed;
 
 TEST(WestportHouse, SearchSequencesAndTheFilterOnARealFloorPlan) {
   const auto dir = testing::SharedData("floorplan-westport-house");
@@ -125,7 +128,7 @@ TEST(WestportHouse, SearchSequencesAndTheFilterOnARealFloorPlan) {
     const MissionDirectory mission(mission_dir.path());
     auto mean_error = [&](const std::map<std::string, std::string>& options) {
       VectorSink sink;
-      MapMatchPipeline().Run({mission, options}, sink);
+      RunNamed("mapmatch", mission, options, sink);
       return Evaluate(sim.data.info, sim.data.truth, sink.rows).agents.stats.mean_m;
     };
     EXPECT_LT(mean_error({}), 1.5);

@@ -1,33 +1,35 @@
 // The ultrasound-beacon pipelines end to end on simulated lab missions.
-#include "trailmark/pipelines/beacons_pipeline.h"
 
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
 #include <fstream>
 
+#include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/core/error.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark {
 namespace {
 
+using testing::CanRunNamed;
+using testing::RunNamed;
+
 struct Outcome {
-  PipelineSummary summary;
+  EstimatorSummary summary;
   Metrics metrics;
   std::vector<double> agent_errors;
 };
 
-Outcome RunOn(const Pipeline& pipeline, const MissionDirectory& mission, const MissionData& data,
+Outcome RunOn(const PipelineSpec& pipeline, const MissionDirectory& mission, const MissionData& data,
               std::map<std::string, std::string> options = {}) {
   VectorSink sink;
   Outcome o;
-  o.summary = pipeline.Run({mission, options}, sink);
+  o.summary = RunBatch(pipeline, {mission, options}, sink);
   for (const auto& e : sink.rows) {
     EXPECT_TRUE(e.position_n.allFinite()) << e.id;
     EXPECT_GT(e.sxx, 0) << e.id;
@@ -46,12 +48,12 @@ TEST(BeaconsPipeline, TracksTheLabTraceWithinTheIssueTargets) {
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  const BeaconsPipeline ekf(true);
-  ASSERT_TRUE(ekf.CanRun(mission));
+  const PipelineSpec& ekf = RequirePipeline("beacons-ekf");
+  ASSERT_TRUE(CanRun(ekf, mission));
   const Outcome ours = RunOn(ekf, mission, sim.data);
   const Outcome paper = RunOn(ekf, mission, sim.data, {{"update", "position"}});
   const Outcome us_only = RunOn(ekf, mission, sim.data, {{"filter", "us-only"}});
-  const Outcome pdr = RunOn(PdrPipeline(), mission, sim.data);
+  const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
   // Issue targets (paper Table 1 overall 1.93 / 3.70 m): 50 % <= 1.0 m, 75 % <= 1.8 m.
   EXPECT_LE(Percentile(ours.agent_errors, 50), 1.0);
   EXPECT_LE(Percentile(ours.agent_errors, 75), 1.8);
@@ -68,7 +70,7 @@ TEST(BeaconsPipeline, StartsWithoutASurveyedStartFromTheFirstUltrasound) {
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  const Outcome o = RunOn(BeaconsPipeline(true), mission, sim.data, {{"init", "ultrasound"}});
+  const Outcome o = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data, {{"init", "ultrasound"}});
   ASSERT_TRUE(o.summary.numbers.count("ff1.initialized_at_s"));
   EXPECT_LT(o.summary.numbers.at("ff1.initialized_at_s"), 20.0);
   EXPECT_LE(Percentile(o.agent_errors, 50), 1.0);
@@ -81,7 +83,7 @@ TEST(BeaconsPipeline, DroppedTrailIsLocalizedByMdsAndLeadsBackOut) {
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  const Outcome mds = RunOn(BeaconsPipeline(false), mission, sim.data);
+  const Outcome mds = RunOn(RequirePipeline("beacons-mds"), mission, sim.data);
   EXPECT_TRUE(mds.agent_errors.empty());  // beacons only
   EXPECT_EQ(mds.summary.numbers.at("beacons_from_mds"), mds.summary.numbers.at("beacons"));
   double final_sum = 0;
@@ -93,8 +95,8 @@ TEST(BeaconsPipeline, DroppedTrailIsLocalizedByMdsAndLeadsBackOut) {
   }
   ASSERT_GE(n, 18);
   EXPECT_LT(final_sum / n, 1.5);  // seeds 1-4: 0.55-1.04 m
-  const Outcome ekf = RunOn(BeaconsPipeline(true), mission, sim.data);
-  const Outcome pdr = RunOn(PdrPipeline(), mission, sim.data);
+  const Outcome ekf = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
+  const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
   EXPECT_LT(Percentile(ekf.agent_errors, 50), 1.5);
   EXPECT_LT(ekf.metrics.agents.stats.mean_m, pdr.metrics.agents.stats.mean_m);
   // At the end the firefighter is back at the door: the way out is the entry beacon.
@@ -102,7 +104,7 @@ TEST(BeaconsPipeline, DroppedTrailIsLocalizedByMdsAndLeadsBackOut) {
   for (const auto& note : ekf.summary.notes) noted |= note == "ff1: way out b01";
   EXPECT_TRUE(noted);
   // Mid-mission (deep in the trace), the way out descends through the ids to b01.
-  const WayOutReport w = ComputeWayOut(mission, "ff1", 120.0);
+  const beacons::WayOutReport w = ComputeWayOut(mission, "ff1", 120.0);
   ASSERT_FALSE(w.route.empty());
   EXPECT_FALSE(w.broken.has_value());
   EXPECT_EQ(w.route.back(), "b01");
@@ -118,8 +120,8 @@ TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClose
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  const Outcome ekf = RunOn(BeaconsPipeline(true), mission, sim.data);
-  const Outcome pdr = RunOn(PdrPipeline(), mission, sim.data);
+  const Outcome ekf = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
+  const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
   EXPECT_EQ(ekf.summary.numbers.at("beacons_from_mds"), ekf.summary.numbers.at("beacons"));
   EXPECT_EQ(ekf.summary.numbers.at("beacons_anchored_by_close_pass"),
             ekf.summary.numbers.at("beacons"));
@@ -135,11 +137,11 @@ TEST(BeaconsPipeline, BadInputIsReportedClearly) {
   WriteMissionDirectory(dir.path(), data, &sim.plan);
   const MissionDirectory mission(dir.path());
   VectorSink sink;
-  EXPECT_THROW(BeaconsPipeline(true).Run({mission, {{"filter", "kalman"}}}, sink),
+  EXPECT_THROW(RunNamed("beacons-ekf", mission, {{"filter", "kalman"}}, sink),
                std::invalid_argument);
-  EXPECT_THROW(BeaconsPipeline(true).Run({mission, {{"update", "polar"}}}, sink),
+  EXPECT_THROW(RunNamed("beacons-ekf", mission, {{"update", "polar"}}, sink),
                std::invalid_argument);
-  EXPECT_THROW(BeaconsPipeline(true).Run({mission, {{"no_such_option", "1"}}}, sink),
+  EXPECT_THROW(RunNamed("beacons-ekf", mission, {{"no_such_option", "1"}}, sink),
                std::invalid_argument);
   // A NaN bearing is named with its file and line.
   {
@@ -147,7 +149,7 @@ TEST(BeaconsPipeline, BadInputIsReportedClearly) {
     f << "1000,b01,ff1,nan,0.5\n";
   }
   try {
-    BeaconsPipeline(true).Run({mission, {}}, sink);
+    RunNamed("beacons-ekf", mission, {}, sink);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("bearings.csv:52"), std::string::npos) << e.what();
@@ -155,9 +157,9 @@ TEST(BeaconsPipeline, BadInputIsReportedClearly) {
   // Without ranges.csv the pipeline cannot run, and says why.
   std::filesystem::remove(dir.path() / "ranges.csv");
   const MissionDirectory no_ranges(dir.path());
-  EXPECT_FALSE(BeaconsPipeline(true).CanRun(no_ranges));
+  EXPECT_FALSE(CanRunNamed("beacons-ekf", no_ranges));
   try {
-    BeaconsPipeline(false).Run({no_ranges, {}}, sink);
+    RunNamed("beacons-mds", no_ranges, {}, sink);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("ranges.csv"), std::string::npos) << e.what();

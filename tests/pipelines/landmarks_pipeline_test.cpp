@@ -1,11 +1,10 @@
 // The landmark pipelines end to end on the simulated stop-and-go corridor mission.
 #include <gtest/gtest.h>
 
+#include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/landmarks_pipeline.h"
-#include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark {
@@ -13,10 +12,10 @@ namespace {
 
 
 /// Runs `pipeline` on the mission; returns its summary and fills `rows`.
-PipelineSummary RunOn(const Pipeline& pipeline, const MissionDirectory& mission,
+EstimatorSummary RunOn(const PipelineSpec& pipeline, const MissionDirectory& mission,
                       std::vector<Estimate>* rows) {
   VectorSink sink;
-  const PipelineSummary s = pipeline.Run({mission, {}}, sink);
+  const EstimatorSummary s = RunBatch(pipeline, {mission, {}}, sink);
   *rows = std::move(sink.rows);
   return s;
 }
@@ -27,15 +26,15 @@ TEST(LandmarksPipeline, CorridorMissionLocalizesTheLandmarks) {
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
   std::vector<Estimate> pdr_rows;
-  RunOn(PdrPipeline(), mission, &pdr_rows);
+  RunOn(RequirePipeline("pdr"), mission, &pdr_rows);
   const double pdr_mean = Evaluate(sim.data.info, sim.data.truth, pdr_rows).agents.stats.mean_m;
   for (bool ukf : {false, true}) {
-    const LandmarksPipeline pipeline(ukf);
-    ASSERT_TRUE(pipeline.CanRun(mission));
+    const PipelineSpec& pipeline = RequirePipeline(ukf ? "landmarks-ukf" : "landmarks-stopgo");
+    ASSERT_TRUE(CanRun(pipeline, mission));
     struct {
       std::vector<Estimate> rows;
     } sink;
-    const PipelineSummary s = RunOn(pipeline, mission, &sink.rows);
+    const EstimatorSummary s = RunOn(pipeline, mission, &sink.rows);
     EXPECT_EQ(s.numbers.at("stops"), 7.0);
     EXPECT_EQ(s.numbers.at("landmarks_localized"), 4.0);
     for (const auto& e : sink.rows) {
@@ -69,7 +68,7 @@ TEST(LandmarksPipeline, FitsTheRadioOnlineWithoutCalibration) {
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
   std::vector<Estimate> rows;
-  const PipelineSummary s = RunOn(LandmarksPipeline(false), mission, &rows);
+  const EstimatorSummary s = RunOn(RequirePipeline("landmarks-stopgo"), mission, &rows);
   EXPECT_GE(s.numbers.at("radio_refits"), 1.0);
   EXPECT_NEAR(s.numbers.at("radio_path_loss_exponent"), 7.1, 1.0);  // the simulated channel
   const Metrics m = Evaluate(sim.data.info, sim.data.truth, rows);

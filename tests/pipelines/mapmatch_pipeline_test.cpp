@@ -1,20 +1,22 @@
 // The mapmatch pipeline end to end on the simulated house search, and its input checks.
-#include "trailmark/pipelines/mapmatch_pipeline.h"
 
 #include <gtest/gtest.h>
 
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/core/error.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/house_search.h"
 
 namespace trailmark {
 namespace {
+
+using testing::CanRunNamed;
+using testing::RunNamed;
 
 TEST(MapMatchPipeline, KnownStartStaysOnTheMapAndEveryEstimateIsValid) {
   HouseSearchOptions o;
@@ -22,15 +24,15 @@ TEST(MapMatchPipeline, KnownStartStaysOnTheMapAndEveryEstimateIsValid) {
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
-  const MapMatchPipeline pipeline;
-  ASSERT_TRUE(pipeline.CanRun(mission));
+  const PipelineSpec& pipeline = RequirePipeline("mapmatch");
+  ASSERT_TRUE(CanRun(pipeline, mission));
   for (const auto& options :
        std::vector<std::map<std::string, std::string>>{{{"pseudo", "false"}},
                                                        {},
                                                        {{"init", "uniform"}},
                                                        {{"patterns_above_variance_m2", "0"}}}) {
     VectorSink sink;
-    const PipelineSummary s = pipeline.Run({mission, options}, sink);
+    const EstimatorSummary s = RunBatch(pipeline, {mission, options}, sink);
     ASSERT_EQ(sink.rows.size(), sim.data.steps.size() + 1);  // the start and one per step
     for (const auto& e : sink.rows) {
       ASSERT_TRUE(e.position_n.allFinite());
@@ -68,8 +70,8 @@ TEST(MapMatchPipeline, AWalkThroughAWallOfTheMapRaisesTheWallCrossingAlarm) {
     WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
     const MissionDirectory mission(dir.path());
     VectorSink sink;
-    const PipelineSummary s =
-        MapMatchPipeline().Run({mission, {{"init", "known"}, {"seed", "12"}}}, sink);
+    const EstimatorSummary s =
+        RunNamed("mapmatch", mission, {{"init", "known"}, {"seed", "12"}}, sink);
     if (map_error) {
       EXPECT_GE(s.numbers.at("ff1.wall_alarms"), 1.0);
       EXPECT_EQ(s.numbers.at("ff1.map_error_suspected"), 1.0);
@@ -93,13 +95,13 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
   VectorSink sink;
   {
     const MissionDirectory mission(dir.path());
-    EXPECT_THROW(MapMatchPipeline().Run({mission, {{"init", "maybe"}}}, sink),
+    EXPECT_THROW(RunNamed("mapmatch", mission, {{"init", "maybe"}}, sink),
                  std::invalid_argument);
-    EXPECT_THROW(MapMatchPipeline().Run({mission, {{"particles", "3"}}}, sink),
+    EXPECT_THROW(RunNamed("mapmatch", mission, {{"particles", "3"}}, sink),
                  std::invalid_argument);
-    EXPECT_THROW(MapMatchPipeline().Run({mission, {{"wall_alarm_k", "1.5"}}}, sink),
+    EXPECT_THROW(RunNamed("mapmatch", mission, {{"wall_alarm_k", "1.5"}}, sink),
                  std::invalid_argument);
-    EXPECT_THROW(MapMatchPipeline().Run({mission, {{"relocalize_above_variance_m2", "-2"}}}, sink),
+    EXPECT_THROW(RunNamed("mapmatch", mission, {{"relocalize_above_variance_m2", "-2"}}, sink),
                  std::invalid_argument);
     for (const auto& [key, value] :
          std::vector<std::pair<std::string, std::string>>{{"map_error_wall_alarms", "0"},
@@ -112,7 +114,7 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
                                                           {"seed", "1e30"},
                                                           {"particles", "2500.5"},
                                                           {"map_error_wall_alarms", "2.5"}}) {
-      EXPECT_THROW(MapMatchPipeline().Run({mission, {{key, value}}}, sink), std::invalid_argument)
+      EXPECT_THROW(RunNamed("mapmatch", mission, {{key, value}}, sink), std::invalid_argument)
           << key;
     }
   }
@@ -122,7 +124,7 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
   WriteMissionDirectory(dir.path(), sim.data, &broken);
   try {
     const MissionDirectory mission(dir.path());
-    MapMatchPipeline().Run({mission, {}}, sink);
+    RunNamed("mapmatch", mission, {}, sink);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("floorplan.geojson"), std::string::npos) << e.what();
@@ -135,7 +137,7 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
   WriteMissionDirectory(dir.path(), sim.data, &far);
   try {
     const MissionDirectory mission(dir.path());
-    MapMatchPipeline().Run({mission, {}}, sink);
+    RunNamed("mapmatch", mission, {}, sink);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("too large for a 1 m search grid"), std::string::npos)
@@ -146,9 +148,9 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
   testing::TempDir bare;
   WriteMissionDirectory(bare.path(), sim.data, nullptr);
   const MissionDirectory mission(bare.path());
-  EXPECT_FALSE(MapMatchPipeline().CanRun(mission));
+  EXPECT_FALSE(CanRunNamed("mapmatch", mission));
   try {
-    MapMatchPipeline().Run({mission, {}}, sink);
+    RunNamed("mapmatch", mission, {}, sink);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("needs a floor plan"), std::string::npos) << e.what();
@@ -178,8 +180,8 @@ TEST(MapMatchPipeline, AMultiFloorPlanIsMatchedOnOneFloor) {
   }
   const std::map<std::string, std::string> options{{"pseudo", "false"}};
   VectorSink a, b;
-  MapMatchPipeline().Run({MissionDirectory(single.path()), options}, a);
-  const PipelineSummary s = MapMatchPipeline().Run({MissionDirectory(multi.path()), options}, b);
+  RunNamed("mapmatch", MissionDirectory(single.path()), options, a);
+  const EstimatorSummary s = RunNamed("mapmatch", MissionDirectory(multi.path()), options, b);
   ASSERT_EQ(a.rows.size(), b.rows.size());
   for (std::size_t k = 0; k < a.rows.size(); ++k) {
     ASSERT_EQ(a.rows[k].position_n, b.rows[k].position_n) << k;
@@ -190,13 +192,13 @@ TEST(MapMatchPipeline, AMultiFloorPlanIsMatchedOnOneFloor) {
   // Asked for a floor the plan does not have, or not a whole number: named.
   const MissionDirectory mission(multi.path());
   try {
-    MapMatchPipeline().Run({mission, {{"level", "2"}}}, b);
+    RunNamed("mapmatch", mission, {{"level", "2"}}, b);
     ADD_FAILURE() << "no error";
   } catch (const InputError& e) {
     EXPECT_NE(std::string(e.what()).find("no level 2 (its levels: 0, 1)"), std::string::npos)
         << e.what();
   }
-  EXPECT_THROW(MapMatchPipeline().Run({mission, {{"level", "0.5"}}}, b), std::invalid_argument);
+  EXPECT_THROW(RunNamed("mapmatch", mission, {{"level", "0.5"}}, b), std::invalid_argument);
 }
 
 TEST(MapMatchPipeline, TheWallFollowingModelHoldsHouseTwoFromAnUnknownStart) {
@@ -221,7 +223,7 @@ TEST(MapMatchPipeline, TheWallFollowingModelHoldsHouseTwoFromAnUnknownStart) {
           {"init", "uniform"}, {"seed", std::to_string(seed)}, {"particles", "500"}};
       options.insert(extra.begin(), extra.end());
       VectorSink sink;
-      MapMatchPipeline().Run({mission, options}, sink);
+      RunNamed("mapmatch", mission, options, sink);
       const Metrics m = Evaluate(sim.data.info, sim.data.truth, sink.rows);
       for (std::size_t k = 0; k < checkpoints.size(); ++k) {
         double e = 1e9;

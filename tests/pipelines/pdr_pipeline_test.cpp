@@ -2,15 +2,18 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/core/error.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/pipelines/pdr_pipeline.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark {
 namespace {
+
+using testing::CanRunNamed;
+using testing::RunNamed;
 
 using testing::TempDir;
 
@@ -25,7 +28,7 @@ TEST(PdrPipeline, ErrorFreeStepsReproduceTruthExactly) {
   WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
   const MissionDirectory mission(dir.path());
   VectorSink sink;
-  PdrPipeline().Run({mission, {}}, sink);
+  RunNamed("pdr", mission, {}, sink);
   ASSERT_EQ(sink.rows.size(), sim.data.steps.size() + 1);
   // Each estimate equals the true foot position at the end of its step (<1e-9 m).
   // Truth samples are at 10 Hz, so compare against the step endpoints via the metrics instead:
@@ -41,18 +44,6 @@ TEST(PdrPipeline, ErrorFreeStepsReproduceTruthExactly) {
   EXPECT_LT(m.agents.stats.max_m, 0.9);
 }
 
-TEST(DeadReckoning, SumsStepsAndVariances) {
-  DeadReckoning dr(Vec3(1, 2, 0), 0.5);
-  dr.AddStep({0, 1, "a", Vec3(0.5, 0, 0), Vec3(0.01, 0.02, 0)});
-  dr.AddStep({1, 2, "a", Vec3(0, -0.5, 0), Vec3(0.01, 0.02, 0)});
-  EXPECT_TRUE(dr.position_n().isApprox(Vec3(1.5, 1.5, 0)));
-  EXPECT_NEAR(dr.covariance()(0, 0), 0.25 + 0.02, 1e-15);
-  EXPECT_NEAR(dr.covariance()(1, 1), 0.25 + 0.04, 1e-15);
-  // Unknown variance: the documented default (5 cm + 3 % of 0.5 m)^2.
-  dr.AddStep({2, 3, "a", Vec3(0.5, 0, 0), std::nullopt});
-  EXPECT_NEAR(dr.covariance()(0, 0), 0.27 + std::pow(0.05 + 0.015, 2), 1e-15);
-}
-
 TEST(PdrPipeline, NeedsAStartAndAnAgent) {
   TempDir dir;
   dir.File("mission.json", R"({"nodes":[{"id":"ff1","kind":"agent"},{"id":"lm","kind":"landmark"}]})");
@@ -60,14 +51,14 @@ TEST(PdrPipeline, NeedsAStartAndAnAgent) {
   const MissionDirectory mission(dir.path());
   VectorSink sink;
   try {
-    PdrPipeline().Run({mission, {}}, sink);
+    RunNamed("pdr", mission, {}, sink);
     FAIL();
   } catch (const InputError& e) {
     EXPECT_THAT(e.what(), ::testing::HasSubstr("no 'start'"));
   }
   dir.File("steps.csv", "t0,t1,agent,dx,dy\n0,1,lm,1,0\n");
   const MissionDirectory mission2(dir.path());
-  EXPECT_THROW(PdrPipeline().Run({mission2, {}}, sink), InputError);
+  EXPECT_THROW(RunNamed("pdr", mission2, {}, sink), InputError);
 }
 
 TEST(PdrPipeline, SaysWhenImuCsvIsNotUsed) {
@@ -76,7 +67,7 @@ TEST(PdrPipeline, SaysWhenImuCsvIsNotUsed) {
   dir.File("steps.csv", "t0,t1,agent,dx,dy\n0,1,ff1,1,0\n");
   dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n");
   VectorSink sink;
-  const PipelineSummary s = PdrPipeline().Run({MissionDirectory(dir.path()), {}}, sink);
+  const EstimatorSummary s = RunNamed("pdr", MissionDirectory(dir.path()), {}, sink);
   bool said = false;
   for (const auto& n : s.notes) said = said || n.find("imu.csv not used") != std::string::npos;
   EXPECT_TRUE(said);

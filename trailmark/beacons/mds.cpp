@@ -155,10 +155,4 @@ std::vector<Vec2> RefineSmacof(const RangeMatrix& measured, std::vector<Vec2> X,
   return X;
 }
 
-RigidTransform Procrustes(const std::vector<Vec2>& from, const std::vector<Vec2>& to,
-                          bool allow_reflection) {
-  const RigidFit2 fit = FitRigid(from, to, allow_reflection);
-  return {fit.rotation, fit.translation};
-}
-
 }  // namespace trailmark::beacons

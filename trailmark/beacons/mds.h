@@ -32,14 +32,4 @@ std::vector<Vec2> RefineSmacof(const RangeMatrix& measured, std::vector<Vec2> st
                                int max_iterations = 300, double tolerance = 1e-7,
                                double* stress = nullptr);
 
-/// Similarity without scale: the rigid motion (and reflection when allowed) mapping `from` onto
-/// `to` in least squares (Kabsch/Umeyama). Needs >= 2 (>= 3 non-collinear with reflection).
-struct RigidTransform {
-  Mat2 rotation = Mat2::Identity();  ///< may include a reflection (det -1)
-  Vec2 translation = Vec2::Zero();
-  Vec2 Apply(const Vec2& p) const { return rotation * p + translation; }
-};
-RigidTransform Procrustes(const std::vector<Vec2>& from, const std::vector<Vec2>& to,
-                          bool allow_reflection = true);
-
 }  // namespace trailmark::beacons

@@ -54,25 +54,16 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
     return;
   }
   next_calibration_ = t + options_.calibration_period_s;
-  try {
-    radio::PathLossFit fit;
-    try {
-      fit = radio::FitLogDistanceWithBody(calibration_pairs_, 0.05, 1.0);
-      if (fit.model.body_loss_db < 0 || fit.model.body_loss_db > 20) throw std::invalid_argument("");
-    } catch (const std::invalid_argument&) {
-      fit = radio::FitLogDistance(calibration_pairs_, 0.05, 1.0);
-    }
-    // Physically plausible indoor fits only (n between free space-ish and heavy clutter).
-    if (fit.model.path_loss_exponent < 1.2 || fit.model.path_loss_exponent > 6.0) return;
-    options_.radio = fit.model;
-    for (auto& [key, link] : links_) {
-      if (link.edge >= 0) gen_.SetPersistentModel(link.edge, RssiModel());
-    }
-    summary_.calibration = fit;
-    ++summary_.calibrations;
-    calibrated_ = true;
-  } catch (const std::invalid_argument&) {
+  const radio::PathLossCalibration c =
+      radio::CalibratePathLoss(calibration_pairs_, options_.calibration);
+  if (c.status != radio::CalibrationStatus::kOk) return;
+  options_.radio = c.fit.model;
+  for (auto& [key, link] : links_) {
+    if (link.edge >= 0) gen_.SetPersistentModel(link.edge, RssiModel());
   }
+  summary_.calibration = c.fit;
+  ++summary_.calibrations;
+  calibrated_ = true;
 }
 
 void BreadcrumbLocalizer::AddKnownNode(const std::string& id, const Vec2& position_n,
@@ -720,9 +711,12 @@ void BreadcrumbLocalizer::TryInitialize(StaticNode& node) {
   lo.array() -= reach;
   hi.array() += reach;
   const double step = std::max(options_.init_grid_m, (hi - lo).maxCoeff() / 200.0);
+  // IV-F: the same Huber constant as every other measurement of the network.
+  const double k = options_.huber_k;
+  auto weight = [k](double r) { return std::abs(r) <= k ? 1.0 : k / std::abs(r); };
   auto cost = [&](const Vec2& x) {
     double c = 0;
-    for (const auto& o : node.init) c += Huber(((x - o.from).norm() - o.range_m) / o.sigma_m, 1.5);
+    for (const auto& o : node.init) c += Huber(((x - o.from).norm() - o.range_m) / o.sigma_m, k);
     return c;
   };
   Vec2 best = mean;
@@ -746,7 +740,7 @@ void BreadcrumbLocalizer::TryInitialize(StaticNode& node) {
       const double d = std::max(diff.norm(), 1e-6);
       const Vec2 J = diff / d;
       const double r = (o.range_m - d) / o.sigma_m;
-      const double w = (std::abs(r) <= 1.5 ? 1.0 : 1.5 / std::abs(r)) / (o.sigma_m * o.sigma_m);
+      const double w = weight(r) / (o.sigma_m * o.sigma_m);
       H += w * J * J.transpose();
       g += w * J * (o.range_m - d);
     }
@@ -771,7 +765,7 @@ void BreadcrumbLocalizer::TryInitialize(StaticNode& node) {
     const Vec2 diff = best - o.from;
     const double d = std::max(diff.norm(), 1e-6);
     const double r = (o.range_m - d) / o.sigma_m;
-    const double w = (std::abs(r) <= 1.5 ? 1.0 : 1.5 / std::abs(r)) / (o.sigma_m * o.sigma_m);
+    const double w = weight(r) / (o.sigma_m * o.sigma_m);
     const Eigen::Vector4d J(diff.x() / d, diff.y() / d, o.biased ? 1.0 : 0.0, o.biased ? d : 0.0);
     H4 += w * J * J.transpose();
     any_biased = any_biased || o.biased;
@@ -837,11 +831,12 @@ TimeS BreadcrumbLocalizer::AgentTime(const std::string& id) const {
   return a.started ? a.knots.back().t : -std::numeric_limits<double>::infinity();
 }
 
-const LocalizerSummary& BreadcrumbLocalizer::summary() {
-  summary_.factorizations = gen_.factorizations();
-  summary_.pending_uninitialized = 0;
-  for (const auto& [id, n] : static_) summary_.pending_uninitialized += n.index < 0 ? 1 : 0;
-  return summary_;
+LocalizerSummary BreadcrumbLocalizer::summary() const {
+  LocalizerSummary s = summary_;
+  s.factorizations = gen_.factorizations();
+  s.pending_uninitialized = 0;
+  for (const auto& [id, n] : static_) s.pending_uninitialized += n.index < 0 ? 1 : 0;
+  return s;
 }
 
 }  // namespace trailmark::breadcrumb

@@ -89,6 +89,8 @@ struct LocalizerOptions {
   double calibration_period_s = 30.0;
   double calibration_window_s = 15.0;
   double calibration_min_distance_m = 1.0;
+  /// The fit (radio/path_loss.h): 5 % trimmed per 1 m bin, with the body-shadowing term.
+  radio::PathLossCalibrationOptions calibration = {0.05, 1.0, true};
   /// > 0: without enough local pairs after this long (no encounters, say), the given model is
   /// used. 0 (default): agent RSSI ranges wait for a fit (a mission.json model made in line of
   /// sight misleads in walled rooms: measured on training-building).
@@ -189,7 +191,7 @@ class BreadcrumbLocalizer {
   /// Ids of crumbs detected as moved, with the detection time.
   const std::vector<std::pair<TimeS, std::string>>& MovedNodes() const { return moved_; }
 
-  const LocalizerSummary& summary();
+  LocalizerSummary summary() const;
   const GenNetwork& network() const { return gen_; }
   const LocalizerOptions& options() const { return options_; }
 

@@ -60,6 +60,13 @@ struct MissionEvent {
   std::string node;   ///< may be empty
 };
 
+/// baro.csv (1.1): barometric pressure at the agent (a phone, a boot sensor).
+struct BaroSample {
+  TimeS t = 0;
+  std::string agent;
+  double pressure_hpa = 0;
+};
+
 /// truth.csv.
 struct TruthSample {
   TimeS t = 0;

@@ -83,6 +83,7 @@ struct MissionData {
   std::vector<RangeMeasurement> ranges;
   std::vector<BearingMeasurement> bearings;
   std::vector<MissionEvent> events;
+  std::vector<BaroSample> baro;
   std::vector<TruthSample> truth;
 };
 

@@ -24,6 +24,18 @@ Eigen::Quaterniond Exp(const Vec3& phi) {
 
 }  // namespace
 
+bool InsOptions::IsValid(std::string* why) const {
+  const char* problem = nullptr;
+  if (detector.window < 1) problem = "the detector window must be >= 1 sample";
+  else if (!(detector.window_s >= 0)) problem = "the detector window must be >= 0 s";
+  else if (!(zupt_sigma_mps > 0) || !(zaru_sigma_radps > 0)) problem = "ZUPT/ZARU sigmas must be > 0";
+  else if (!(accel_noise_mps2 > 0) || !(gyro_noise_radps > 0)) problem = "noises must be > 0";
+  else if (!(alignment_s >= 0)) problem = "alignment_s must be >= 0";
+  else if (!(gravity_mps2 > 0)) problem = "gravity must be > 0";
+  if (problem && why) *why = problem;
+  return problem == nullptr;
+}
+
 ZuptIns::ZuptIns(InsOptions options) : options_(options), detector_(options.detector) {
   options_.detector.gravity_mps2 = options_.gravity_mps2;
 }
@@ -114,12 +126,14 @@ void ZuptIns::Align() {
   ba_.setZero();
   bg_ = w.norm() < 0.05 ? w : Vec3::Zero();  // a resting gyro reads its bias
   P_.setZero();
-  P_.block<3, 3>(3, 3) = Eigen::Matrix3d::Identity() * 1e-4;
+  P_.block<3, 3>(kVel, kVel) = Eigen::Matrix3d::Identity() * 1e-4;
   const double sa = options_.initial_attitude_sigma_rad, sy = options_.initial_yaw_sigma_rad;
-  P_.block<3, 3>(6, 6) = Vec3(sa * sa, sa * sa, sy * sy).asDiagonal();
+  P_.block<3, 3>(kAtt, kAtt) = Vec3(sa * sa, sa * sa, sy * sy).asDiagonal();
   if (options_.estimate_biases) {
-    P_.block<3, 3>(9, 9) = Eigen::Matrix3d::Identity() * std::pow(options_.accel_bias_sigma0, 2);
-    P_.block<3, 3>(12, 12) = Eigen::Matrix3d::Identity() * std::pow(options_.gyro_bias_sigma0, 2);
+    P_.block<3, 3>(kAccelBias, kAccelBias) =
+        Eigen::Matrix3d::Identity() * std::pow(options_.accel_bias_sigma0, 2);
+    P_.block<3, 3>(kGyroBias, kGyroBias) =
+        Eigen::Matrix3d::Identity() * std::pow(options_.gyro_bias_sigma0, 2);
   }
   aligned_ = true;
   const std::vector<ImuSample> buffered = std::move(alignment_);
@@ -151,13 +165,13 @@ void ZuptIns::Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt) {
   //   rows dp: [0 I 0 0 0]; dv: [0 0 -[f_n]x -R 0]; dtheta: [0 0 0 0 -R]; biases: 0.
   const Eigen::Matrix3d A = -Skew(f_n);
   const bool biases = options_.estimate_biases;
-  auto apply_F = [&](const Mat15& M) {  // returns F M (rows 9..14 zero)
+  auto apply_F = [&](const Mat15& M) {  // returns F M (the bias rows are zero)
     Mat15 out = Mat15::Zero();
-    out.middleRows<3>(0) = M.middleRows<3>(3);
-    out.middleRows<3>(3) = A * M.middleRows<3>(6);
+    out.middleRows<3>(kPos) = M.middleRows<3>(kVel);
+    out.middleRows<3>(kVel) = A * M.middleRows<3>(kAtt);
     if (biases) {
-      out.middleRows<3>(3) -= R * M.middleRows<3>(9);
-      out.middleRows<3>(6) = -R * M.middleRows<3>(12);
+      out.middleRows<3>(kVel) -= R * M.middleRows<3>(kAccelBias);
+      out.middleRows<3>(kAtt) = -R * M.middleRows<3>(kGyroBias);
     }
     return out;
   };
@@ -165,11 +179,13 @@ void ZuptIns::Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt) {
   const Mat15 FPFt = apply_F(FP.transpose());
   P_ += dt * (FP + FP.transpose()) + (dt * dt) * FPFt;
   const double qa = options_.accel_noise_mps2 * dt, qg = options_.gyro_noise_radps * dt;
-  P_.block<3, 3>(3, 3).diagonal().array() += qa * qa;
-  P_.block<3, 3>(6, 6).diagonal().array() += qg * qg;
+  P_.block<3, 3>(kVel, kVel).diagonal().array() += qa * qa;
+  P_.block<3, 3>(kAtt, kAtt).diagonal().array() += qg * qg;
   if (biases) {
-    P_.block<3, 3>(9, 9).diagonal().array() += options_.accel_bias_rw * options_.accel_bias_rw * dt;
-    P_.block<3, 3>(12, 12).diagonal().array() += options_.gyro_bias_rw * options_.gyro_bias_rw * dt;
+    P_.block<3, 3>(kAccelBias, kAccelBias).diagonal().array() +=
+        options_.accel_bias_rw * options_.accel_bias_rw * dt;
+    P_.block<3, 3>(kGyroBias, kGyroBias).diagonal().array() +=
+        options_.gyro_bias_rw * options_.gyro_bias_rw * dt;
   }
 }
 
@@ -178,38 +194,38 @@ void ZuptIns::Update3(const Vec3& innovation, double sigma) {
   // H selects the error-state rows Offset..Offset+2; K = P H^T (H P H^T + R)^-1
   const Eigen::Matrix3d S =
       P_.block<3, 3>(Offset, Offset) + Eigen::Matrix3d::Identity() * sigma * sigma;
-  const Eigen::Matrix<double, 15, 3> K = P_.middleCols<3>(Offset) * S.inverse();
-  const Eigen::Matrix<double, 15, 1> dx = K * innovation;
-  const Eigen::Matrix<double, 3, 15> HP = P_.middleRows<3>(Offset);
+  const Eigen::Matrix<double, kErrorStateSize, 3> K = P_.middleCols<3>(Offset) * S.inverse();
+  const ErrorVector dx = K * innovation;
+  const Eigen::Matrix<double, 3, kErrorStateSize> HP = P_.middleRows<3>(Offset);
   P_ -= K * HP;
   P_ = 0.5 * (P_ + P_.transpose());
   Inject(dx);
 }
 
-void ZuptIns::Inject(const Eigen::Matrix<double, 15, 1>& dx) {
-  p_ += dx.segment<3>(0);
-  v_ += dx.segment<3>(3);
-  q_ = (Exp(dx.segment<3>(6)) * q_).normalized();  // global (navigation-frame) angle error
+void ZuptIns::Inject(const ErrorVector& dx) {
+  p_ += dx.segment<3>(kPos);
+  v_ += dx.segment<3>(kVel);
+  q_ = (Exp(dx.segment<3>(kAtt)) * q_).normalized();  // global (navigation-frame) angle error
   if (options_.estimate_biases) {
-    ba_ += dx.segment<3>(9);
-    bg_ += dx.segment<3>(12);
+    ba_ += dx.segment<3>(kAccelBias);
+    bg_ += dx.segment<3>(kGyroBias);
   }
 }
 
-void ZuptIns::UpdateZupt() { Update3<3>(-v_, options_.zupt_sigma_mps); }
+void ZuptIns::UpdateZupt() { Update3<kVel>(-v_, options_.zupt_sigma_mps); }
 
 void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
   if (!options_.estimate_biases) return;
   // At rest the gyro reads its bias. Gated (chi-square, 3 dof): a "stance" that still rotates
   // (the detector accepted a slow roll-over) must not be read as bias.
   const Vec3 y = gyro_b - bg_;
-  const Eigen::Matrix3d S = P_.block<3, 3>(12, 12) +
+  const Eigen::Matrix3d S = P_.block<3, 3>(kGyroBias, kGyroBias) +
                             Eigen::Matrix3d::Identity() * options_.zaru_sigma_radps * options_.zaru_sigma_radps;
   if (y.dot(S.ldlt().solve(y)) > options_.zaru_gate_chi2) {
     ++summary_.zaru_gated;
     return;
   }
-  Update3<12>(y, options_.zaru_sigma_radps);
+  Update3<kGyroBias>(y, options_.zaru_sigma_radps);
 }
 
 void ZuptIns::CheckSaturation(const ImuSample& s) {
@@ -262,7 +278,7 @@ void ZuptIns::Process(const ImuSample& s, bool stance) {
   state.position_n = p_;
   state.velocity_n = v_;
   state.q_nb = q_;
-  state.position_cov = P_.block<3, 3>(0, 0);
+  state.position_cov = P_.block<3, 3>(kPos, kPos);
   state.stance = stance;
   StanceBookkeeping(s, stance);
   last_state_ = state;
@@ -293,6 +309,15 @@ void ZuptIns::StanceBookkeeping(const ImuSample& s, bool stance) {
   last_stance_end_p_ = end.position_n;
   last_stance_end_cov_ = end.position_cov;
   if (on_step) on_step(step);
+}
+
+std::optional<TimeS> ZuptIns::EarliestNextStepEnd() const {
+  // A step ends at the last sample of a stance: the last processed sample at the earliest (the
+  // stance it is in may end there), else the first sample still buffered.
+  if (have_last_) return t_last_;
+  if (!alignment_.empty()) return alignment_.front().t;
+  if (!delay_.empty()) return delay_.front().t;
+  return std::nullopt;
 }
 
 void ZuptIns::Finish() {

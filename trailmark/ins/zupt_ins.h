@@ -58,6 +58,8 @@ struct InsOptions {
   // steps
   int min_stance_samples = 3;
   double min_step_length_m = 0.02;    ///< shorter displacements between stances are no step
+  /// Window >= 1 sample, noises and sigmas > 0, alignment >= 0.
+  bool IsValid(std::string* why) const;
 };
 
 /// Filter output at one processed sample.
@@ -95,9 +97,22 @@ class ZuptIns {
   void Finish();
   const InsSummary& summary() const { return summary_; }
   const InsOptions& options() const { return options_; }
+  /// A lower bound on t1 of every step still to come: any step emitted from now on ends at or
+  /// after it (nullopt before the first sample). Lets a consumer that needs steps in time order
+  /// release other rows that are older.
+  std::optional<TimeS> EarliestNextStepEnd() const;
+  /// The latest processed state (nullopt before alignment).
+  std::optional<InsState> LastState() const {
+    return have_last_ ? std::optional<InsState>(last_state_) : std::nullopt;
+  }
+
+  /// Offsets of the error-state blocks (each 3 wide): dp, dv, dtheta, dba, dbg.
+  static constexpr int kPos = 0, kVel = 3, kAtt = 6, kAccelBias = 9, kGyroBias = 12;
+  static constexpr int kErrorStateSize = 15;
 
  private:
-  using Mat15 = Eigen::Matrix<double, 15, 15>;
+  using Mat15 = Eigen::Matrix<double, kErrorStateSize, kErrorStateSize>;
+  using ErrorVector = Eigen::Matrix<double, kErrorStateSize, 1>;
   void Align();
   void Process(const ImuSample& s, bool stance);
   void Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt);
@@ -105,7 +120,7 @@ class ZuptIns {
   void UpdateZaru(const Vec3& gyro_b);
   template <int Offset>
   void Update3(const Vec3& innovation, double sigma);
-  void Inject(const Eigen::Matrix<double, 15, 1>& dx);
+  void Inject(const ErrorVector& dx);
   void StanceBookkeeping(const ImuSample& s, bool stance);
 
   InsOptions options_;

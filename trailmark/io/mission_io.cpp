@@ -333,6 +333,7 @@ void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& 
   write(data.ranges);
   write(data.bearings);
   write(data.events);
+  write(data.baro);
   write(data.truth);
   if (plan != nullptr) {
     std::ofstream out(dir / *info.floorplan, std::ios::binary);
@@ -357,6 +358,7 @@ MissionData ReadMissionData(const MissionDirectory& mission) {
   read(data.ranges);
   read(data.bearings);
   read(data.events);
+  read(data.baro);
   read(data.truth);
   return data;
 }

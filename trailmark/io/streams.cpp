@@ -25,6 +25,8 @@ constexpr double kMaxAbsTimeS = 1e10;        // ~317 years: Unix-epoch seconds s
 constexpr double kMinRssiDbm = -200.0;       // far below any receiver's sensitivity
 constexpr double kMaxRssiDbm = 60.0;         // above any transmitter's power (1 kW)
 constexpr double kMaxStepLengthM = 100.0;    // one row of steps.csv
+constexpr double kMinPressureHpa = 300.0;    // above the summit of Everest (~330 hPa)
+constexpr double kMaxPressureHpa = 1100.0;   // below the deepest mine's air (~1080 hPa)
 
 void CheckTime(const CsvReader& c, double t) {
   if (std::abs(t) > kMaxAbsTimeS) {
@@ -176,6 +178,26 @@ struct Layout<MissionEvent> {
 };
 
 template <>
+struct Layout<BaroSample> {
+  static constexpr ColumnSpec kColumns[] = {{"t", true}, {"agent", true}, {"pressure_hpa", true}};
+  static double Time(const BaroSample& r) { return r.t; }
+  static void Parse(const CsvReader& c, const std::vector<int>& k, BaroSample& r) {
+    r.t = c.Double(k[0]);
+    r.agent.assign(c.NodeId(k[1]));
+    r.pressure_hpa = c.Double(k[2]);
+    if (r.pressure_hpa < kMinPressureHpa || r.pressure_hpa > kMaxPressureHpa) {
+      c.Fail(fmt::format("column 'pressure_hpa': {} is not an air pressure in hPa (expected {:g} "
+                         "to {:g}; Pa or kPa?)",
+                         r.pressure_hpa, kMinPressureHpa, kMaxPressureHpa));
+    }
+  }
+  static std::vector<std::string_view> Ids(const BaroSample& r) { return {r.agent}; }
+  static void Format(CsvWriter& w, const BaroSample& r) {
+    w.Add(r.t).Add(r.agent).Add(r.pressure_hpa);
+  }
+};
+
+template <>
 struct Layout<TruthSample> {
   static constexpr ColumnSpec kColumns[] = {
       {"t", true}, {"id", true}, {"x", true}, {"y", true}, {"z", false}};
@@ -291,6 +313,7 @@ TRAILMARK_INSTANTIATE(RssiPacket)
 TRAILMARK_INSTANTIATE(RangeMeasurement)
 TRAILMARK_INSTANTIATE(BearingMeasurement)
 TRAILMARK_INSTANTIATE(MissionEvent)
+TRAILMARK_INSTANTIATE(BaroSample)
 TRAILMARK_INSTANTIATE(TruthSample)
 TRAILMARK_INSTANTIATE(Estimate)
 #undef TRAILMARK_INSTANTIATE

@@ -149,6 +149,10 @@ struct StreamTraits<MissionEvent> {
   static constexpr const char* kFileName = "events.csv";
 };
 template <>
+struct StreamTraits<BaroSample> {
+  static constexpr const char* kFileName = "baro.csv";
+};
+template <>
 struct StreamTraits<TruthSample> {
   static constexpr const char* kFileName = "truth.csv";
 };

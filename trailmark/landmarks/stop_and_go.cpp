@@ -99,8 +99,20 @@ struct Problem {
 };
 
 /// Grid search of one position against fixed anchors with ranges (robust cost).
-Vec2 GridInit(const std::vector<Vec2>& anchors, const std::vector<double>& ranges,
-              const std::vector<double>& sigmas, const StopAndGoOptions& o) {
+Vec2 GridInit(std::vector<Vec2> anchors, std::vector<double> ranges, std::vector<double> sigmas,
+              const StopAndGoOptions& o) {
+  if (o.init_max_anchors > 0 && anchors.size() > static_cast<std::size_t>(o.init_max_anchors)) {
+    const std::size_t n = anchors.size(), m = static_cast<std::size_t>(o.init_max_anchors);
+    std::vector<Vec2> a;
+    std::vector<double> r, s;
+    for (std::size_t k = 0; k < m; ++k) {
+      const std::size_t i = k * (n - 1) / (m - 1 > 0 ? m - 1 : 1);
+      a.push_back(anchors[i]);
+      r.push_back(ranges[i]);
+      s.push_back(sigmas[i]);
+    }
+    anchors = std::move(a), ranges = std::move(r), sigmas = std::move(s);
+  }
   Vec2 lo = anchors.front(), hi = lo;
   double reach = 0;
   for (std::size_t k = 0; k < anchors.size(); ++k) {
@@ -137,6 +149,7 @@ StopAndGoResult SolveStopAndGo(StopAndGoProblem problem, const StopAndGoOptions&
   const int B = static_cast<int>(problem.landmarks.size());
   const int q = static_cast<int>(problem.standing.size());
   problem.landmark_known.resize(B, false);
+  problem.landmark_start_given.resize(B, false);
   problem.standing_known.resize(q, false);
   problem.range_m.resize(q);
   problem.sigma_m.resize(q);
@@ -198,7 +211,8 @@ StopAndGoResult SolveStopAndGo(StopAndGoProblem problem, const StopAndGoOptions&
       result.notes.push_back(fmt::format("landmark {} heard from {} standing positions (< 3)", j,
                                          anchors.size()));
     }
-    if (!anchors.empty()) problem.landmarks[j] = GridInit(anchors, r, s, o);
+    if (!anchors.empty() && !problem.landmark_start_given[j])
+      problem.landmarks[j] = GridInit(anchors, r, s, o);
   }
   for (int p = 0; p < q; ++p) {
     if (problem.standing_known[p]) continue;

@@ -35,11 +35,17 @@ struct StopAndGoOptions {
   double svd_relative_threshold = 1e-9;  ///< pseudo-inverse cut-off (eq. 17 "with SVD")
   double init_grid_m = 0.25;
   double init_margin_m = 5.0;
+  /// > 0: the grid search of an unknown position uses at most this many of its measurements,
+  /// evenly spaced (it only finds the basin; the descent uses them all). 0: all.
+  int init_max_anchors = 0;
 };
 
 struct StopAndGoProblem {
   std::vector<Vec2> landmarks;          ///< initial/known positions S_j (B)
   std::vector<bool> landmark_known;     ///< fixed when true
+  /// Unknown landmarks whose entry in `landmarks` is the starting point of the descent (a
+  /// previous solution); the others are initialized by grid search. Empty: all by grid search.
+  std::vector<bool> landmark_start_given;
   std::vector<Vec2> standing;           ///< initial/known positions H_p (q)
   std::vector<bool> standing_known;
   /// Measured ranges z[p][j] (metres); empty when landmark j was not heard at stop p.

@@ -1,115 +1,330 @@
+#include "trailmark/pipelines/registry.h"
+
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
-#include <algorithm>
-#include <chrono>
-#include <fstream>
-#include <limits>
+#include <cmath>
 #include <nlohmann/json.hpp>
+#include <stdexcept>
 
-#include "trailmark/pipelines/beacons_pipeline.h"
-#include "trailmark/pipelines/breadcrumb_pipeline.h"
-#include "trailmark/pipelines/ins_pipeline.h"
-#include "trailmark/pipelines/landmarks_pipeline.h"
-#include "trailmark/pipelines/mapmatch_pipeline.h"
-#include "trailmark/pipelines/pdr_pipeline.h"
-#include "trailmark/pipelines/pipeline.h"
+#include "trailmark/beacons/trail_estimator.h"
+#include "trailmark/breadcrumb/breadcrumb_estimator.h"
+#include "trailmark/ins/dead_reckoning.h"
+#include "trailmark/ins/ins_estimator.h"
+#include "trailmark/landmarks/landmark_estimator.h"
+#include "trailmark/mapmatch/map_match_estimator.h"
 
 namespace trailmark {
 
-std::vector<Estimate> VectorSink::TakeSortedByTime() {
-  std::vector<Estimate> out = std::move(rows);
-  rows.clear();
-  std::stable_sort(out.begin(), out.end(),
-                   [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+namespace {
+
+/// A pipeline's options: its estimator's, how its steps come (`ins.` keys, and `reorder_s`
+/// where rows are put in time order), and the floor it works on.
+template <class EstimatorOptions>
+struct PipelineOptions {
+  EstimatorOptions estimator;
+  StepFrontEndOptions steps;
+  std::optional<int> level;
+};
+
+const OptionTable<PdrOptions>& PdrOptionTable() {
+  static const OptionTable<PdrOptions> table = [] {
+    OptionTable<PdrOptions> t;
+    t.Real("step_noise_m", &PdrOptions::default_step_noise_m, "m", OptionBounds::NonNegative(),
+           "per-axis sigma of a step without variances: this + step_relative_sigma x length");
+    t.Real("step_relative_sigma", &PdrOptions::default_step_relative_sigma, "",
+           OptionBounds::NonNegative(), "per-axis sigma of such a step, fraction of its length");
+    return t;
+  }();
+  return table;
+}
+
+enum class Front { kNone, kPerAgent, kGlobal };
+
+/// The entry of one pipeline: typed options (defaults, table), the front end and the factory
+/// of the inner estimator.
+template <class E>
+PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Front front,
+                  std::function<std::unique_ptr<OnlineEstimator>(const EstimatorInputs&,
+                                                                 const E&)>
+                      inner) {
+  using P = PipelineOptions<E>;
+  auto all = std::make_shared<OptionTable<P>>();
+  all->Include("", &P::estimator, table);
+  if (front == Front::kPerAgent) all->Include("", &P::steps, StepSourceOptionTable());
+  if (front == Front::kGlobal) all->Include("", &P::steps, OrderedStepSourceOptionTable());
+  if (spec.needs_floor_plan) {
+    all->Integer("level", &P::level, OptionBounds::Between(-1000000, 1000000),
+                 "the floor of a multi-floor plan to work on",
+                 "the plan's level 0, else its lowest");
+  }
+  P default_options;
+  default_options.estimator = defaults;
+  spec.options = all->Describe(default_options);
+  const std::string name = spec.name;
+  auto parse = [all, default_options, name](const OptionValues& values) {
+    P o = default_options;
+    std::string why;
+    if (!all->Apply(values, &o, &why)) throw std::invalid_argument("pipeline " + name + ": " + why);
+    return o;
+  };
+  spec.floor_level = [parse](const OptionValues& values) { return parse(values).level; };
+  const bool needs_plan = spec.needs_floor_plan;
+  spec.make = [parse, inner, front, name, needs_plan](
+                  const EstimatorInputs& in, const OptionValues& values,
+                  Feed feed) -> std::unique_ptr<OnlineEstimator> {
+    const P o = parse(values);
+    std::string why;
+    if constexpr (requires(const E& e) { e.IsValid(&why); }) {
+      if (!o.estimator.IsValid(&why)) throw std::invalid_argument("pipeline " + name + ": " + why);
+    }
+    if (!o.steps.IsValid(&why)) throw std::invalid_argument("pipeline " + name + ": " + why);
+    if (needs_plan && in.floor_plan == nullptr)
+      throw std::invalid_argument("the " + name + " pipeline needs the incident's floor plan");
+    auto estimator = inner(in, o.estimator);
+    if (front == Front::kNone) return estimator;
+    return std::make_unique<StepFrontEnd>(
+        in.info, o.steps, front == Front::kGlobal ? RowOrder::kGlobal : RowOrder::kPerAgent, feed,
+        std::move(estimator));
+  };
+  return spec;
+}
+
+const StreamSet kStepStreams{Stream::kSteps, Stream::kImu};
+
+std::vector<PipelineSpec> BuildRegistry() {
+  std::vector<PipelineSpec> out;
+  {
+    PipelineSpec s;
+    s.name = "pdr";
+    s.description = "dead reckoning of PDR steps from each agent's start (baseline)";
+    s.needs = {kStepStreams};
+    s.uses = kStepStreams;
+    s.steps_based = true;
+    s.baseline = true;
+    s.serve_rank = 6;
+    out.push_back(Make<PdrOptions>(
+        s, {}, PdrOptionTable(), Front::kPerAgent,
+        [](const EstimatorInputs& in, const PdrOptions& o) {
+          return std::make_unique<DeadReckoningEstimator>(in.info, o);
+        }));
+  }
+  {
+    PipelineSpec s;
+    s.name = "breadcrumb";
+    s.description =
+        "breadcrumb paper: incremental generalized-electrical-network estimator over PDR "
+        "steps, RSSI/ranges between agents and dropped crumbs (IV)";
+    s.needs = {kStepStreams};
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kRanges, Stream::kEvents};
+    s.steps_based = true;
+    s.serve_rank = 1;
+    out.push_back(Make<breadcrumb::BreadcrumbEstimatorOptions>(
+        s, {}, breadcrumb::BreadcrumbOptionTable(), Front::kGlobal,
+        [](const EstimatorInputs& in, const breadcrumb::BreadcrumbEstimatorOptions& o) {
+          return std::make_unique<breadcrumb::BreadcrumbEstimator>(in.info, o);
+        }));
+  }
+  {
+    PipelineSpec s;
+    s.name = "ins";
+    s.description =
+        "zero-velocity-aided INS of raw foot IMU samples (ZUPT/ZARU error-state KF; detectors "
+        "shoe, are, mv, mag, adaptive)";
+    s.needs = {{Stream::kImu}};
+    s.uses = {Stream::kImu};
+    s.serve_rank = 5;
+    s.report_options = {{"output_hz", "10"}};  // the truth's rate: keeps reports small
+    out.push_back(Make<ins::InsEstimatorOptions>(
+        s, {}, ins::InsEstimatorOptionTable(), Front::kNone,
+        [](const EstimatorInputs& in, const ins::InsEstimatorOptions& o) {
+          return std::make_unique<ins::InsEstimator>(in.info, o);
+        }));
+  }
+  for (const bool ukf : {false, true}) {
+    PipelineSpec s;
+    s.name = ukf ? "landmarks-ukf" : "landmarks-stopgo";
+    s.description =
+        ukf ? "radio-landmarks paper: landmarks from stop-and-go, responder by a UKF of PDR/INS "
+              "motion and every RSSI answer (sec. 5.4)"
+            : "radio-landmarks paper: stop-and-go localization of landmarks and stops, dead "
+              "reckoning re-anchored at each stop (sec. 5.3, 6.2)";
+    s.needs = {kStepStreams, {Stream::kRssi}};
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kEvents};
+    s.min_landmarks = 3;
+    s.steps_based = true;
+    if (ukf) s.serve_rank = 3;
+    s.paper_scenarios = {"landmark-corridor"};
+    landmarks::LandmarkEstimatorOptions defaults;
+    defaults.tracking = ukf ? landmarks::Tracking::kUkf : landmarks::Tracking::kStopAndGo;
+    out.push_back(Make<landmarks::LandmarkEstimatorOptions>(
+        s, defaults, landmarks::LandmarkOptionTable(), Front::kGlobal,
+        [](const EstimatorInputs& in, const landmarks::LandmarkEstimatorOptions& o) {
+          return std::make_unique<landmarks::LandmarkEstimator>(in.info, o);
+        }));
+  }
+  for (const bool track : {false, true}) {
+    PipelineSpec s;
+    s.name = track ? "beacons-ekf" : "beacons-mds";
+    s.description =
+        track ? "ultrasound-beacons paper: SCAAT EKF (position, PDR heading and scale "
+                "corrections) on PDR steps and ultrasound range/bearing (sec. 6)"
+              : "ultrasound-beacons paper: beacon positions by MDS with shortest-path "
+                "completion and SMACOF refinement, anchored online (sec. 5)";
+    s.needs = track ? std::vector<StreamSet>{kStepStreams, {Stream::kRanges}}
+                    : std::vector<StreamSet>{{Stream::kRanges}};
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRanges, Stream::kEvents};
+    if (track) s.uses.Add(Stream::kBearings);
+    s.steps_based = true;
+    if (track) s.serve_rank = 2;
+    s.paper_scenarios = {"beacon-trail"};
+    beacons::BeaconTrailOptions defaults;
+    defaults.tracker = track ? beacons::Tracker::kScaat : beacons::Tracker::kNone;
+    out.push_back(Make<beacons::BeaconTrailOptions>(
+        s, defaults, track ? beacons::BeaconTrackerOptionTable() : beacons::BeaconMapOptionTable(),
+        Front::kGlobal, [](const EstimatorInputs& in, const beacons::BeaconTrailOptions& o) {
+          return std::make_unique<beacons::BeaconTrailEstimator>(in.info, o);
+        }));
+  }
+  {
+    PipelineSpec s;
+    s.name = "mapmatch";
+    s.description =
+        "map-aided search paper: particle filter on odometry and the floor plan with pseudo "
+        "observations from directional-search patterns (ICP); no initial position needed";
+    s.needs = {kStepStreams};
+    s.uses = kStepStreams;
+    s.needs_floor_plan = true;
+    s.steps_based = true;
+    s.raises_map_alerts = true;
+    s.serve_rank = 4;
+    s.paper_scenarios = {"house1-search"};
+    out.push_back(Make<mapmatch::MapMatchEstimatorOptions>(
+        s, {}, mapmatch::MapMatchOptionTable(), Front::kPerAgent,
+        [](const EstimatorInputs& in, const mapmatch::MapMatchEstimatorOptions& o) {
+          return std::make_unique<mapmatch::MapMatchEstimator>(in.info, *in.floor_plan,
+                                                               in.floor_plan_source, o);
+        }));
+  }
   return out;
 }
 
-const std::vector<std::unique_ptr<Pipeline>>& AllPipelines() {
-  static const auto* pipelines = [] {
-    auto* v = new std::vector<std::unique_ptr<Pipeline>>();
-    v->push_back(std::make_unique<PdrPipeline>());
-    v->push_back(std::make_unique<BreadcrumbPipeline>());
-    v->push_back(std::make_unique<InsPipeline>());
-    v->push_back(std::make_unique<LandmarksPipeline>(false));
-    v->push_back(std::make_unique<LandmarksPipeline>(true));
-    v->push_back(std::make_unique<BeaconsPipeline>(false));
-    v->push_back(std::make_unique<BeaconsPipeline>(true));
-    v->push_back(std::make_unique<MapMatchPipeline>());
-    return v;
-  }();
-  return *pipelines;
+std::string StreamsText(StreamSet set, const char* separator) {
+  std::string text;
+  for (Stream s : set.List()) text += (text.empty() ? "" : separator) + std::string(StreamFileName(s));
+  return text;
 }
 
-const Pipeline* FindPipeline(const std::string& name) {
-  for (const auto& p : AllPipelines()) {
-    if (p->name() == name) return p.get();
+}  // namespace
+
+bool PipelineSpec::CanRun(const MissionInfo& info, StreamSet present, bool has_floor_plan) const {
+  for (const StreamSet& alternatives : needs) {
+    bool any = false;
+    for (Stream s : alternatives.List()) any = any || present.Has(s);
+    if (!any) return false;
+  }
+  if (needs_floor_plan && !has_floor_plan) return false;
+  int landmarks = 0;
+  for (const NodeInfo& n : info.nodes) landmarks += n.kind == NodeKind::kLandmark;
+  return landmarks >= min_landmarks;
+}
+
+std::vector<std::string> PipelineSpec::NeedsText() const {
+  std::vector<std::string> out;
+  for (const StreamSet& alternatives : needs) out.push_back(StreamsText(alternatives, " or "));
+  if (needs_floor_plan) out.push_back("floorplan.geojson (mission.json \"floorplan\")");
+  if (min_landmarks > 0) out.push_back(fmt::format("{}+ landmarks in mission.json", min_landmarks));
+  return out;
+}
+
+const std::vector<PipelineSpec>& Pipelines() {
+  static const std::vector<PipelineSpec> registry = BuildRegistry();
+  return registry;
+}
+
+const PipelineSpec* FindPipeline(std::string_view name) {
+  for (const auto& p : Pipelines()) {
+    if (p.name == name) return &p;
   }
   return nullptr;
 }
 
-std::vector<std::string> RunnablePipelines(const MissionDirectory& mission) {
-  std::vector<std::string> names;
-  for (const auto& p : AllPipelines()) {
-    if (p->CanRun(mission)) names.push_back(p->name());
-  }
-  return names;
+const PipelineSpec& RequirePipeline(std::string_view name) {
+  if (const PipelineSpec* p = FindPipeline(name)) return *p;
+  std::string known;
+  for (const auto& p : Pipelines()) known += (known.empty() ? "" : ", ") + p.name;
+  throw std::invalid_argument(fmt::format("unknown pipeline '{}' (known: {})", name, known));
 }
 
 namespace {
 
-class CsvEstimateSink : public EstimateSink {
- public:
-  explicit CsvEstimateSink(const std::string& path) : writer_(path) {}
-  // estimates.csv is in non-decreasing time (spec). An estimate is known when it is written:
-  // a row stamped earlier than one already written (e.g. an agent's start, emitted with its
-  // first step, after another agent's rows) is stamped with the latest time instead.
-  void Add(const Estimate& e) override {
-    if (e.t < last_t_) {
-      Estimate copy = e;
-      copy.t = last_t_;
-      writer_.Write(copy);
-      ++restamped_;
-    } else {
-      writer_.Write(e);
-      last_t_ = e.t;
-    }
-    ++count_;
+nlohmann::json OptionJson(const OptionInfo& o) {
+  nlohmann::json j = {{"key", o.key},
+                      {"type", ToString(o.type)},
+                      {"default", o.default_value},
+                      {"unit", o.unit},
+                      {"description", o.description}};
+  if (o.type == OptionType::kReal || o.type == OptionType::kInteger) {
+    if (std::isfinite(o.bounds.min)) j["min"] = o.bounds.min;
+    if (std::isfinite(o.bounds.max)) j["max"] = o.bounds.max;
+    if (o.bounds.min_open) j["min_exclusive"] = true;
+    if (o.bounds.max_open) j["max_exclusive"] = true;
+    j["range"] = o.bounds.Describe();
   }
-  std::size_t restamped() const { return restamped_; }
-  void Close() { writer_.Close(); }
-  std::size_t count() const { return count_; }
-
- private:
-  RowWriter<Estimate> writer_;
-  std::size_t count_ = 0;
-  std::size_t restamped_ = 0;
-  double last_t_ = -std::numeric_limits<double>::infinity();
-};
+  if (o.type == OptionType::kChoice) j["choices"] = o.choices;
+  return j;
+}
 
 }  // namespace
 
-RunResult RunPipeline(const Pipeline& pipeline, const PipelineContext& context,
-                      const std::filesystem::path& out_dir) {
-  std::filesystem::create_directories(out_dir);
-  CsvEstimateSink sink((out_dir / "estimates.csv").string());
-  const auto t0 = std::chrono::steady_clock::now();
-  RunResult result;
-  result.pipeline = pipeline.name();
-  result.summary = pipeline.Run(context, sink);
-  sink.Close();
-  result.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  result.estimates = sink.count();
-  nlohmann::json diag;
-  diag["pipeline"] = pipeline.name();
-  diag["mission"] = context.mission.dir().string();
-  diag["estimates"] = result.estimates;
-  diag["wall_time_s"] = result.wall_time_s;
-  diag["rows_restamped"] = sink.restamped();
-  diag["numbers"] = result.summary.numbers;
-  diag["notes"] = result.summary.notes;
-  diag["options"] = context.options;
-  std::ofstream(out_dir / "diagnostics.json") << diag.dump(2) << "\n";
-  return result;
+std::string RegistryJson() {
+  nlohmann::json all = nlohmann::json::array();
+  for (const auto& p : Pipelines()) {
+    nlohmann::json uses = nlohmann::json::array();
+    for (Stream s : p.uses.List()) uses.push_back(std::string(StreamFileName(s)));
+    nlohmann::json options = nlohmann::json::array();
+    for (const auto& o : p.options) options.push_back(OptionJson(o));
+    all.push_back({{"name", p.name},
+                   {"description", p.description},
+                   {"needs", p.NeedsText()},
+                   {"uses", uses},
+                   {"live", true},
+                   {"capabilities",
+                    {{"steps_from_imu", p.steps_based},
+                     {"needs_floor_plan", p.needs_floor_plan},
+                     {"raises_map_alerts", p.raises_map_alerts},
+                     {"baseline", p.baseline}}},
+                   {"options", options}});
+  }
+  return all.dump(2);
+}
+
+std::string RegistryMarkdown() {
+  std::string md =
+      "# Pipeline options\n\n"
+      "Generated from the registry (`trailmark pipelines --markdown`; a test checks that this "
+      "file is up to date). Every key is set with `--option key=value` on `trailmark run`, "
+      "`serve` and `reproduce`; an unknown key, a malformed value or one out of range is an "
+      "error that names the key (and, for an unknown one, the valid keys). Defaults come from "
+      "each estimator's `Options` struct, which cites where they come from.\n";
+  for (const auto& p : Pipelines()) {
+    md += fmt::format("\n## `{}`\n\n{}.\n\nNeeds: {}. Uses when present: {}.\n\n", p.name,
+                      p.description, fmt::join(p.NeedsText(), "; "), StreamsText(p.uses, ", "));
+    if (p.options.empty()) {
+      md += "No options.\n";
+      continue;
+    }
+    md += "| key | type | default | unit | range | description |\n|---|---|---|---|---|---|\n";
+    for (const auto& o : p.options) {
+      std::string type = ToString(o.type);
+      if (o.type == OptionType::kChoice) type = fmt::format("{}", fmt::join(o.choices, " \\| "));
+      const std::string range =
+          (o.type == OptionType::kReal || o.type == OptionType::kInteger) ? o.bounds.Describe() : "";
+      md += fmt::format("| `{}` | {} | {} | {} | {} | {} |\n", o.key, type, o.default_value,
+                        o.unit, range, o.description);
+    }
+  }
+  return md;
 }
 
 }  // namespace trailmark

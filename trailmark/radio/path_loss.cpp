@@ -39,35 +39,43 @@ double BodyFactor(const Vec2& wearer, double heading_rad, const Vec2& other) {
 
 namespace {
 
-std::vector<CalibrationPair> Trimmed(const std::vector<CalibrationPair>& pairs,
-                                     double trim_fraction, double bin_width_m,
-                                     std::size_t* trimmed) {
+/// Why a fit could not be made (empty: it could).
+using FitProblem = const char*;
+
+FitProblem Trimmed(const std::vector<CalibrationPair>& pairs, double trim_fraction,
+                   double bin_width_m, std::vector<CalibrationPair>* kept, std::size_t* trimmed) {
   std::map<long, std::vector<CalibrationPair>> bins;
   for (const auto& p : pairs) {
     if (!(p.distance_m > 0) || !std::isfinite(p.rssi_dbm) || !std::isfinite(p.body_factor)) {
-      throw std::invalid_argument("FitLogDistance: distances must be > 0 and RSSI finite");
+      return "distances must be > 0 and RSSI finite";
     }
     bins[std::lround(p.distance_m / bin_width_m)].push_back(p);
   }
-  std::vector<CalibrationPair> kept;
+  kept->clear();
   *trimmed = 0;
   for (auto& [key, v] : bins) {
     std::sort(v.begin(), v.end(),
               [](const auto& a, const auto& b) { return a.rssi_dbm < b.rssi_dbm; });
     const auto drop = static_cast<std::size_t>(std::floor(trim_fraction * v.size()));
-    for (std::size_t k = drop; k + drop < v.size(); ++k) kept.push_back(v[k]);
+    for (std::size_t k = drop; k + drop < v.size(); ++k) kept->push_back(v[k]);
     *trimmed += 2 * drop;
   }
-  return kept;
+  return nullptr;
 }
 
-}  // namespace
+/// The pairs kept after trimming, at least `min_pairs` of them.
+FitProblem Kept(const std::vector<CalibrationPair>& pairs, double trim_fraction, double bin_width_m,
+                std::size_t min_pairs, std::vector<CalibrationPair>* kept, PathLossFit* fit) {
+  if (FitProblem p = Trimmed(pairs, trim_fraction, bin_width_m, kept, &fit->pairs_trimmed))
+    return p;
+  if (kept->size() < min_pairs) return min_pairs == 3 ? "fewer than 3 pairs" : "too few pairs";
+  return nullptr;
+}
 
-PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
-                                   double trim_fraction, double bin_width_m) {
-  PathLossFit fit;
-  const auto kept = Trimmed(pairs, trim_fraction, bin_width_m, &fit.pairs_trimmed);
-  if (kept.size() < 10) throw std::invalid_argument("FitLogDistanceWithBody: fewer than 10 pairs");
+FitProblem TryFitWithBody(const std::vector<CalibrationPair>& pairs, double trim_fraction,
+                          double bin_width_m, PathLossFit* fit) {
+  std::vector<CalibrationPair> kept;
+  if (FitProblem p = Kept(pairs, trim_fraction, bin_width_m, 10, &kept, fit)) return p;
   // rssi = alpha - 10 n log10(d) - L_body * body_factor
   Eigen::MatrixXd A(kept.size(), 3);
   Eigen::VectorXd y(kept.size());
@@ -79,22 +87,19 @@ PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
   }
   const Eigen::Matrix3d N = A.transpose() * A;
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(N);
-  if (eig.eigenvalues().minCoeff() < 1e-9 * N.trace()) {
-    throw std::invalid_argument("FitLogDistanceWithBody: degenerate geometry");
-  }
+  if (eig.eigenvalues().minCoeff() < 1e-9 * N.trace()) return "degenerate geometry";
   const Eigen::Vector3d x = N.ldlt().solve(A.transpose() * y);
   const double ss = (A * x - y).squaredNorm();
-  fit.model = {x(0), x(1), std::sqrt(ss / std::max(1.0, kept.size() - 3.0)), x(2)};
-  fit.residual_sigma_db = fit.model.sigma_db;
-  fit.pairs_used = kept.size();
-  return fit;
+  fit->model = {x(0), x(1), std::sqrt(ss / std::max(1.0, kept.size() - 3.0)), x(2)};
+  fit->residual_sigma_db = fit->model.sigma_db;
+  fit->pairs_used = kept.size();
+  return nullptr;
 }
 
-PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double trim_fraction,
-                           double bin_width_m) {
-  PathLossFit fit;
-  const auto kept = Trimmed(pairs, trim_fraction, bin_width_m, &fit.pairs_trimmed);
-  if (kept.size() < 3) throw std::invalid_argument("FitLogDistance: fewer than 3 pairs");
+FitProblem TryFit(const std::vector<CalibrationPair>& pairs, double trim_fraction,
+                  double bin_width_m, PathLossFit* fit) {
+  std::vector<CalibrationPair> kept;
+  if (FitProblem p = Kept(pairs, trim_fraction, bin_width_m, 3, &kept, fit)) return p;
   // rssi = alpha + slope * log10(d), slope = -10 n
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   for (const auto& p : kept) {
@@ -106,7 +111,7 @@ PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double tri
   }
   const double n = static_cast<double>(kept.size());
   const double den = n * sxx - sx * sx;
-  if (den <= 1e-12 * n * n) throw std::invalid_argument("FitLogDistance: need 2 distinct distances");
+  if (den <= 1e-12 * n * n) return "need 2 distinct distances";
   const double slope = (n * sxy - sx * sy) / den;
   const double alpha = (sy - slope * sx) / n;
   double ss = 0;
@@ -114,10 +119,66 @@ PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double tri
     const double r = p.rssi_dbm - (alpha + slope * std::log10(p.distance_m));
     ss += r * r;
   }
-  fit.model = {alpha, -slope / 10.0, std::sqrt(ss / std::max(1.0, n - 2)), 0.0};
-  fit.residual_sigma_db = fit.model.sigma_db;
-  fit.pairs_used = kept.size();
+  fit->model = {alpha, -slope / 10.0, std::sqrt(ss / std::max(1.0, n - 2)), 0.0};
+  fit->residual_sigma_db = fit->model.sigma_db;
+  fit->pairs_used = kept.size();
+  return nullptr;
+}
+
+}  // namespace
+
+PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
+                                   double trim_fraction, double bin_width_m) {
+  PathLossFit fit;
+  if (FitProblem p = TryFitWithBody(pairs, trim_fraction, bin_width_m, &fit))
+    throw std::invalid_argument(std::string("FitLogDistanceWithBody: ") + p);
   return fit;
+}
+
+PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double trim_fraction,
+                           double bin_width_m) {
+  PathLossFit fit;
+  if (FitProblem p = TryFit(pairs, trim_fraction, bin_width_m, &fit))
+    throw std::invalid_argument(std::string("FitLogDistance: ") + p);
+  return fit;
+}
+
+bool PathLossCalibrationOptions::IsValid(std::string* why) const {
+  if (trim_fraction >= 0 && trim_fraction < 0.5 && bin_width_m > 0 && min_exponent > 0 &&
+      max_exponent > min_exponent && max_body_loss_db >= 0)
+    return true;
+  if (why) *why = "trim in [0, 0.5), bin width > 0, 0 < min exponent < max exponent";
+  return false;
+}
+
+PathLossCalibration CalibratePathLoss(const std::vector<CalibrationPair>& pairs,
+                                      const PathLossCalibrationOptions& options) {
+  PathLossCalibration out;
+  bool have = false;
+  if (options.body_shadowing) {
+    PathLossFit fit;
+    // The body term only when the pairs determine it and its loss is physical.
+    if (!TryFitWithBody(pairs, options.trim_fraction, options.bin_width_m, &fit) &&
+        fit.model.body_loss_db >= 0 && fit.model.body_loss_db <= options.max_body_loss_db) {
+      out.fit = fit;
+      have = true;
+    }
+  }
+  if (!have) {
+    if (FitProblem p = TryFit(pairs, options.trim_fraction, options.bin_width_m, &out.fit)) {
+      out.status = CalibrationStatus::kNoFit;
+      out.why = p;
+      return out;
+    }
+  }
+  const double n = out.fit.model.path_loss_exponent;
+  if (!(n >= options.min_exponent && n <= options.max_exponent)) {
+    out.status = CalibrationStatus::kImplausible;
+    out.why = "path-loss exponent " + std::to_string(n) + " outside the plausible indoor range";
+    return out;
+  }
+  out.status = CalibrationStatus::kOk;
+  return out;
 }
 
 std::optional<TimeS> EncounterDetector::Add(TimeS t, double rssi_dbm) {

@@ -1,0 +1,61 @@
+#pragma once
+/// The papers' experiments on simulated equivalents (and on recorded data where the paper's
+/// data is public), printed side by side with the published figures: `trailmark reproduce
+/// NAME`. One table of reproductions; each writes OUT/NAME/results.md. These sit above the
+/// library (they read and write mission directories and run pipelines of the registry); the
+/// CLI only dispatches to them.
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/options.h"
+#include "trailmark/ins/zupt_ins.h"
+
+namespace trailmark::experiments {
+
+struct ReproductionArgs {
+  int seeds = 8;                      ///< simulated runs (seeds first_seed .. first_seed + seeds - 1)
+  std::filesystem::path out = "out/reproduce";  ///< OUT/NAME/results.md
+  OptionValues options;               ///< passed to the reproduced pipeline (ablations)
+  std::filesystem::path data_dir = "../shared/data";  ///< recorded data
+  int first_seed = 1;
+};
+
+struct Reproduction {
+  std::string name;
+  std::string description;
+  bool takes_first_seed = false;  ///< --first-seed: figures on seeds a setting was not chosen on
+  bool takes_options = false;     ///< --option goes to its pipeline
+  std::function<int(const ReproductionArgs&)> run;
+};
+
+/// Every reproduction, in a stable order.
+const std::vector<Reproduction>& Reproductions();
+/// Runs the reproduction `name`; std::invalid_argument for an unknown name or arguments it
+/// does not take.
+int Reproduce(const std::string& name, const ReproductionArgs& args);
+
+/// Prints `text` and writes it to out/results.md under a "# title" heading; returns 0.
+int WriteReproduction(const std::filesystem::path& out, const std::string& title,
+                      const std::string& text);
+/// The INS options of `values` (the keys of the ins pipeline); std::invalid_argument otherwise.
+ins::InsOptions ParseInsOptions(const OptionValues& values);
+
+int ReproduceBreadcrumb(int seeds, const std::filesystem::path& out, const OptionValues& options);
+/// The ZUPT INS on the recorded foot-IMU sets under data_dir.
+int ReproduceIns(const std::filesystem::path& data_dir, const std::filesystem::path& out,
+                 const OptionValues& options = {});
+/// The radio-landmarks paper's stop-and-go experiment; recorded BLE figures from data_dir.
+int ReproduceLandmarks(int seeds, const std::filesystem::path& out,
+                       const std::filesystem::path& data_dir);
+/// MDS beacon localization (Figs. 4-5, `runs` simulations per point) and tracking on the six
+/// lab traces (Table 1, Figs. 6-9, `seeds` each).
+int ReproduceBeacons(int runs, int seeds, const std::filesystem::path& out);
+/// The map-aided search paper on the two simulated houses (Figs. 7-9) with seeds first_seed ..
+/// first_seed + seeds - 1; `extra` options go to every mapmatch run.
+int ReproduceMapMatch(int seeds, const std::filesystem::path& out, const OptionValues& extra = {},
+                      int first_seed = 1);
+
+}  // namespace trailmark::experiments

@@ -1,0 +1,172 @@
+// Dead reckoning and the StepFrontEnd (how every steps-based estimator gets its steps and its
+// row order) against exact references.
+#include "trailmark/ins/step_front_end.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <map>
+
+#include "trailmark/ins/dead_reckoning.h"
+#include "trailmark/sim/imu_sim.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark {
+namespace {
+
+TEST(DeadReckoning, SumsStepsAndVariances) {
+  DeadReckoning dr(Vec3(1, 2, 0), 0.5);
+  dr.AddStep({0, 1, "a", Vec3(0.5, 0, 0), Vec3(0.01, 0.02, 0)});
+  dr.AddStep({1, 2, "a", Vec3(0, -0.5, 0), Vec3(0.01, 0.02, 0)});
+  EXPECT_TRUE(dr.position_n().isApprox(Vec3(1.5, 1.5, 0)));
+  EXPECT_NEAR(dr.covariance()(0, 0), 0.25 + 0.02, 1e-15);
+  EXPECT_NEAR(dr.covariance()(1, 1), 0.25 + 0.04, 1e-15);
+  // Unknown variance: the documented default (5 cm + 3 % of 0.5 m)^2.
+  dr.AddStep({2, 3, "a", Vec3(0.5, 0, 0), std::nullopt});
+  EXPECT_NEAR(dr.covariance()(0, 0), 0.27 + std::pow(0.05 + 0.015, 2), 1e-15);
+}
+
+/// Records the rows it is fed.
+class Recorder : public OnlineEstimator {
+ public:
+  explicit Recorder(std::vector<MissionRow>* rows) : rows_(rows) {}
+  void Add(const MissionRow& row, EstimateSink&) override { rows_->push_back(row); }
+  void Finish(EstimateSink&) override {}
+  std::optional<Estimate> Current(const std::string&) const override { return std::nullopt; }
+  EstimatorSummary Summary() const override { return {}; }
+
+ private:
+  std::vector<MissionRow>* rows_;
+};
+
+struct TwoWalkers {
+  SimulatedMission sim;
+  std::vector<MissionRow> merged;  ///< IMU and RSSI in time order (a batch merge)
+  std::vector<MissionRow> expected;  ///< what the inner estimator must see
+};
+
+TwoWalkers MakeTwoWalkers() {
+  TrainingBuildingOptions o;
+  o.rooms_per_side = 1;
+  TwoWalkers w{SimulateTrainingBuilding(o, 2), {}, {}};
+  ImuSimOptions imu;
+  imu.rate_hz = 100;
+  AddFootImu(w.sim, imu, 4);
+  // Both walks end together (a foot IMU that stops sending holds its last step until the end
+  // of data, which a live feed does not wait for).
+  std::map<std::string, TimeS> last;
+  for (const auto& s : w.sim.data.imu) last[s.agent] = s.t;
+  TimeS end = 1e300;
+  for (const auto& [agent, t] : last) end = std::min(end, t);
+  std::erase_if(w.sim.data.imu, [end](const ImuSample& s) { return s.t > end; });
+  std::erase_if(w.sim.data.rssi, [end](const RssiPacket& p) { return p.t > end; });
+  for (const auto& p : w.sim.data.rssi) w.merged.emplace_back(p);
+  for (const auto& s : w.sim.data.imu) w.merged.emplace_back(s);
+  std::stable_sort(w.merged.begin(), w.merged.end(), [](const MissionRow& a, const MissionRow& b) {
+    return RowTime(a) != RowTime(b) ? RowTime(a) < RowTime(b) : a.index() < b.index();
+  });
+  // The reference: the INS over every sample first, its steps in t1 order, merged with the
+  // RSSI as if read from steps.csv (what the batch pipelines did before the front end), rows
+  // of the same time and stream by node.
+  ins::MultiAgentIns reference(w.sim.data.info, {});
+  std::vector<Step> steps;
+  reference.on_step = [&](const Step& s) { steps.push_back(s); };
+  for (const auto& s : w.sim.data.imu) reference.Add(s);
+  reference.Finish();
+  std::stable_sort(steps.begin(), steps.end(),
+                   [](const Step& a, const Step& b) { return a.t1 < b.t1; });
+  for (const auto& s : steps) w.expected.emplace_back(s);
+  for (const auto& p : w.sim.data.rssi) w.expected.emplace_back(p);
+  std::stable_sort(w.expected.begin(), w.expected.end(),
+                   [](const MissionRow& a, const MissionRow& b) {
+                     if (RowTime(a) != RowTime(b)) return RowTime(a) < RowTime(b);
+                     if (a.index() != b.index()) return a.index() < b.index();
+                     return RowNode(a) < RowNode(b);
+                   });
+  return w;
+}
+
+void ExpectSameRows(const std::vector<MissionRow>& a, const std::vector<MissionRow>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(a[i].index(), b[i].index()) << i;
+    ASSERT_EQ(RowTime(a[i]), RowTime(b[i])) << i;
+    ASSERT_EQ(RowNode(a[i]), RowNode(b[i])) << i;
+  }
+}
+
+TEST(StepFrontEnd, PutsInsStepsInTheirPlaceAmongTheOtherRows) {
+  const TwoWalkers w = MakeTwoWalkers();
+  ASSERT_GT(w.expected.size(), w.sim.data.rssi.size() + 40);  // 40+ steps
+  std::vector<MissionRow> seen;
+  StepFrontEnd front(w.sim.data.info, {}, RowOrder::kGlobal, Feed::kTimeOrdered,
+                     std::make_unique<Recorder>(&seen));
+  NullSink sink;
+  std::size_t held_max = 0;
+  for (const MissionRow& r : w.merged) {
+    front.Add(r, sink);
+    held_max = std::max<std::size_t>(held_max, front.Summary().numbers.at("rows_waiting"));
+  }
+  front.Finish(sink);
+  ExpectSameRows(w.expected, seen);
+  // It holds rows only while an INS may still emit an earlier step (a stride or so).
+  EXPECT_LT(held_max, 200u);
+}
+
+TEST(StepFrontEnd, LiveRowsOfInterleavedDevicesComeOutInTimeOrder) {
+  const TwoWalkers w = MakeTwoWalkers();
+  // One device after the other, 0.3 s at a time: ff2's rows of a period before ff1's.
+  std::vector<MissionRow> arrivals = w.merged;
+  std::stable_sort(arrivals.begin(), arrivals.end(), [](const MissionRow& a, const MissionRow& b) {
+    const long pa = static_cast<long>(std::floor(RowTime(a) / 0.3));
+    const long pb = static_cast<long>(std::floor(RowTime(b) / 0.3));
+    return pa != pb ? pa < pb : RowNode(a) > RowNode(b);
+  });
+  std::vector<MissionRow> seen;
+  StepFrontEndOptions options;
+  options.reorder_s = 0.5;
+  StepFrontEnd front(w.sim.data.info, options, RowOrder::kGlobal, Feed::kLive,
+                     std::make_unique<Recorder>(&seen));
+  NullSink sink;
+  for (const MissionRow& r : arrivals) front.Add(r, sink);
+  front.Finish(sink);
+  EXPECT_EQ(front.Summary().numbers.at("rows_late"), 0.0);
+  ExpectSameRows(w.expected, seen);
+}
+
+TEST(StepFrontEnd, AnAgentsFirstSourceWinsAndTheOtherIsCounted) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  info.nodes.push_back(NodeInfo::Base("base", Vec3::Zero()));
+  std::vector<MissionRow> seen;
+  StepFrontEnd front(info, {}, RowOrder::kPerAgent, Feed::kLive, std::make_unique<Recorder>(&seen));
+  NullSink sink;
+  front.Add(Step{0, 1, "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+  front.Add(ImuSample{1.0, "ff1", Vec3(0, 0, 9.8), Vec3::Zero()}, sink);  // steps came first
+  EXPECT_EQ(seen.size(), 1u);
+  EXPECT_EQ(front.Summary().numbers.at("rows_ignored"), 1.0);
+  EXPECT_THROW(front.Add(Step{1, 2, "base", Vec3(0.7, 0, 0), std::nullopt}, sink),
+               std::invalid_argument);
+  EXPECT_THROW(front.Add(ImuSample{1.0, "nobody", Vec3(0, 0, 9.8), Vec3::Zero()}, sink),
+               std::invalid_argument);
+}
+
+TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(1, 1, 0), 0.2));
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3(5, 0, 0), 0.0));
+  DeadReckoningEstimator est(info);
+  VectorSink sink;
+  est.Add(Step{0, 1, "ff1", Vec3(0.5, 0, 0), Vec3(0.01, 0.01, 0)}, sink);
+  est.Add(Step{0, 1.5, "ff2", Vec3(0, 0.5, 0), Vec3(0.01, 0.01, 0)}, sink);
+  est.Add(RssiPacket{1.6, "ff1", "ff2", -60}, sink);
+  ASSERT_EQ(sink.rows.size(), 4u);  // each start, each step
+  EXPECT_EQ(sink.rows[1].position_n, Vec3(1.5, 1, 0));
+  EXPECT_NEAR(sink.rows[1].sxx, 0.04 + 0.01, 1e-15);
+  EXPECT_EQ(est.Current("ff2")->position_n, Vec3(5, 0.5, 0));
+  EXPECT_EQ(est.Current("ff2")->t, 1.5);
+  EXPECT_EQ(est.Summary().numbers.at("rows_ignored"), 1.0);
+}
+
+}  // namespace
+}  // namespace trailmark

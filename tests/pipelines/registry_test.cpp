@@ -1,0 +1,125 @@
+// The pipeline registry: one table that the CLI, the server and the docs read.
+#include "trailmark/pipelines/registry.h"
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "test_util.h"
+#include "trailmark/pipelines/batch_run.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(Registry, EightPipelinesEachWithItsSchemaAndFactory) {
+  std::set<std::string> names;
+  for (const auto& p : Pipelines()) {
+    names.insert(p.name);
+    EXPECT_FALSE(p.description.empty()) << p.name;
+    EXPECT_FALSE(p.needs.empty()) << p.name;
+    EXPECT_FALSE(p.options.empty()) << p.name;
+    EXPECT_TRUE(p.make) << p.name;
+    EXPECT_TRUE(p.floor_level) << p.name;
+    for (const StreamSet& need : p.needs) {
+      for (Stream s : need.List()) EXPECT_TRUE(p.uses.Has(s)) << p.name << " needs what it uses";
+    }
+    std::set<std::string> keys;
+    for (const auto& o : p.options) {
+      EXPECT_TRUE(keys.insert(o.key).second) << p.name << ": key " << o.key << " twice";
+      EXPECT_FALSE(o.description.empty()) << p.name << " " << o.key;
+    }
+  }
+  EXPECT_EQ(names, (std::set<std::string>{"pdr", "ins", "breadcrumb", "landmarks-stopgo",
+                                          "landmarks-ukf", "beacons-mds", "beacons-ekf",
+                                          "mapmatch"}));
+  EXPECT_EQ(FindPipeline("nope"), nullptr);
+  EXPECT_THAT([] { RequirePipeline("nope"); },
+              ::testing::ThrowsMessage<std::invalid_argument>(HasSubstr("known: pdr, ")));
+}
+
+TEST(Registry, EveryDefaultIsAValueItsParserAccepts) {
+  // The schema is generated from the Options structs: each key given its documented default
+  // builds the same estimator as no option at all.
+  const SimulatedMission house = SimulateScenario("house1-search", 1);
+  const SimulatedMission corridor = SimulateScenario("landmark-corridor", 1);
+  for (const auto& p : Pipelines()) {
+    const SimulatedMission& sim = p.min_landmarks > 0 ? corridor : house;
+    for (const auto& o : p.options) {
+      // (unset optional settings: their default is a word, e.g. "auto (per detector)")
+      if (o.default_value.rfind("auto", 0) == 0 || o.default_value.rfind("the plan", 0) == 0)
+        continue;
+      const OptionValues one{{o.key, o.default_value}};
+      EXPECT_NO_THROW(p.make({sim.data.info, &sim.plan}, one, Feed::kTimeOrdered))
+          << p.name << " " << o.key << "=" << o.default_value;
+    }
+  }
+}
+
+TEST(Registry, OutOfRangeAndUnknownOptionsAreErrorsNamingTheKey) {
+  const SimulatedMission sim = SimulateScenario("house1-search", 1);
+  const EstimatorInputs in{sim.data.info, &sim.plan};
+  try {
+    RequirePipeline("mapmatch").make(in, {{"particles", "3"}}, Feed::kTimeOrdered);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("pipeline mapmatch: option particles='3'"));
+    EXPECT_THAT(e.what(), HasSubstr("within 10 .. 1e+06"));
+  }
+  try {
+    RequirePipeline("ins").make(in, {{"zupt_sigma_mps", "1"}}, Feed::kTimeOrdered);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("unknown option 'zupt_sigma_mps'"));
+    EXPECT_THAT(e.what(), HasSubstr("zupt_sigma"));
+  }
+  EXPECT_THROW(RequirePipeline("pdr").make(in, {{"ins.window", "0"}}, Feed::kTimeOrdered),
+               std::invalid_argument);
+}
+
+TEST(Registry, JsonListsNameNeedsUsesLiveAndOptions) {
+  const auto j = nlohmann::json::parse(RegistryJson());
+  ASSERT_EQ(j.size(), Pipelines().size());
+  for (const auto& p : j) {
+    for (const char* key : {"name", "needs", "uses", "live", "options"})
+      EXPECT_TRUE(p.contains(key)) << key;
+    EXPECT_TRUE(p["live"].get<bool>());
+    for (const auto& o : p["options"]) {
+      for (const char* key : {"key", "type", "default", "unit", "description"})
+        EXPECT_TRUE(o.contains(key)) << p["name"] << " " << key;
+    }
+  }
+  EXPECT_EQ(j[0]["name"], "pdr");
+  EXPECT_EQ(j[0]["needs"][0], "steps.csv or imu.csv");
+}
+
+TEST(Registry, TheDocsOptionTablesAreTheRegistrysText) {
+  std::ifstream in(std::string(TRAILMARK_SOURCE_DIR) + "/docs/pipeline-options.md");
+  ASSERT_TRUE(in) << "docs/pipeline-options.md missing";
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_EQ(text.str(), RegistryMarkdown())
+      << "docs/pipeline-options.md is stale: regenerate it with `trailmark pipelines --markdown "
+         "> docs/pipeline-options.md`";
+}
+
+TEST(Registry, RunnableFollowsTheNeeds) {
+  testing::TempDir dir;
+  dir.File("mission.json", R"({"nodes":[{"id":"ff1","kind":"agent","start":[0,0,0]}]})");
+  EXPECT_TRUE(RunnablePipelines(MissionDirectory(dir.path())).empty());
+  dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n");
+  EXPECT_THAT(RunnablePipelines(MissionDirectory(dir.path())),
+              ::testing::ElementsAre("pdr", "breadcrumb", "ins"));
+  dir.File("ranges.csv", "t,a,b,range\n0,ff1,b1,1\n");
+  EXPECT_THAT(RunnablePipelines(MissionDirectory(dir.path())),
+              ::testing::Contains("beacons-ekf"));
+}
+
+}  // namespace
+}  // namespace trailmark

@@ -1,0 +1,469 @@
+#include "trailmark/beacons/trail_estimator.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace trailmark::beacons {
+
+bool BeaconTrailOptions::IsValid(std::string* why) const {
+  if (!(entry_track_m >= 0) || !(mds_period_s >= 0)) {
+    if (why) *why = "entry_track_m and mds_period_s must be >= 0";
+    return false;
+  }
+  if (!(drop_sigma_m > 0) || !(close_pass_m >= 0) || !(pdr_drift_per_m >= 0) ||
+      !(way_out_window_s >= 0)) {
+    if (why) *why = "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s >= 0";
+    return false;
+  }
+  return ekf.IsValid(why) && map.IsValid(why);
+}
+
+namespace {
+
+void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
+  using O = BeaconTrailOptions;
+  t.Choice("beacons", [](O& o) -> bool& { return o.map.mds_for_surveyed; },
+           std::vector<std::pair<std::string, bool>>{{"auto", false}, {"mds", true}},
+           "auto: surveyed beacons at their survey; mds: every beacon from MDS (Fig. 8)");
+  t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
+  t.Real("entry_track_m", &O::entry_track_m, "m", OptionBounds::NonNegative(),
+         "PDR track compared with the entry heading (0: never)");
+  t.Real("mds_period_s", &O::mds_period_s, "s", OptionBounds::NonNegative(),
+         "the beacon map is re-solved at most this often");
+}
+
+}  // namespace
+
+const OptionTable<BeaconTrailOptions>& BeaconMapOptionTable() {
+  static const OptionTable<BeaconTrailOptions> table = [] {
+    OptionTable<BeaconTrailOptions> t;
+    AddMapOptions(t);
+    return t;
+  }();
+  return table;
+}
+
+const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
+  static const OptionTable<BeaconTrailOptions> table = [] {
+    using O = BeaconTrailOptions;
+    OptionTable<O> t;
+    t.Choice("filter", &O::tracker,
+             std::vector<std::pair<std::string, Tracker>>{{"scaat", Tracker::kScaat},
+                                                          {"us-only", Tracker::kUltrasoundOnly}},
+             "scaat: the SCAAT EKF on PDR and ultrasound; us-only: the paper's ultrasound-only KF");
+    t.Choice("update", &O::update,
+             std::vector<std::pair<std::string, UpdateMode>>{
+                 {"range-bearing", UpdateMode::kRangeBearing}, {"position", UpdateMode::kPosition}},
+             "range-bearing: two scalar updates (ours); position: converted to a fix (the paper)");
+    t.Choice("init", &O::init_from_ultrasound,
+             std::vector<std::pair<std::string, bool>>{{"auto", false}, {"ultrasound", true}},
+             "auto: the mission's start when given; ultrasound: always from ultrasound");
+    t.Real("gate_sigma", [](O& o) -> double& { return o.ekf.gate_sigma; }, "",
+           OptionBounds::Positive(), "EKF innovation gate, in sigmas");
+    t.Real("heading_sigma_rad", [](O& o) -> double& { return o.ekf.initial_heading_sigma_rad; },
+           "rad", OptionBounds::Positive(), "initial sigma of the PDR heading correction");
+    t.Real("heading_walk_rad_per_sqrt_m",
+           [](O& o) -> double& { return o.ekf.heading_walk_rad_per_sqrt_m; }, "rad/sqrt(m)",
+           OptionBounds::NonNegative(), "random walk of the heading correction per metre");
+    t.Real("range_sigma_m", [](O& o) -> double& { return o.ekf.range_sigma_m; }, "m",
+           OptionBounds::Positive(), "sigma of an ultrasound range without one");
+    t.Real("bearing_sigma_rad", [](O& o) -> double& { return o.ekf.bearing_sigma_rad; }, "rad",
+           OptionBounds::Positive(), "sigma of a bearing without one");
+    AddMapOptions(t);
+    return t;
+  }();
+  return table;
+}
+
+BeaconTrailEstimator::BeaconTrailEstimator(const MissionInfo& info, BeaconTrailOptions options)
+    : options_(std::move(options)), map_(options_.map) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument("beacons: " + why);
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind == NodeKind::kAgent) {
+      Agent a;
+      a.id = n.id;
+      const auto start = info.AgentStart(n);
+      if (start && !options_.init_from_ultrasound) {
+        a.has_start = true;
+        a.pdr_n = a.start_n = start->head<2>();
+        a.entry_heading_rad = n.start_heading_rad;
+        a.entry_heading_sigma_rad =
+            n.start_heading_sigma_rad.value_or(options_.default_entry_heading_sigma_rad);
+        const double s = n.start_sigma_m.value_or(options_.ekf.initial_position_sigma_m);
+        if (options_.tracker == Tracker::kScaat) {
+          a.ekf.emplace(a.pdr_n, Mat2::Identity() * s * s, 0.0,
+                        options_.ekf.initial_heading_sigma_rad, 1.0,
+                        options_.ekf.initial_scale_sigma, options_.ekf);
+        }
+      }
+      agents_[n.id] = std::move(a);
+    } else {
+      declared_rank_[n.id] = static_cast<int>(declared_rank_.size());
+      // Surveyed nodes (landmarks, the base) are beacons once they range.
+      if (n.position)
+        surveyed_[n.id] = {n.position->head<2>(), n.position_sigma_m.value_or(0.05)};
+    }
+  }
+}
+
+int BeaconTrailEstimator::Beacon(const std::string& id) {
+  if (const auto i = map_.Find(id)) return *i;
+  const int i = map_.Add(id);
+  beacon_t_.push_back(0);
+  const auto s = surveyed_.find(id);
+  if (s != surveyed_.end()) map_.SetSurveyed(i, s->second.first, s->second.second);
+  return i;
+}
+
+std::vector<int> BeaconTrailEstimator::Ranks() const {
+  // Deployment order: drops first (in drop order), then the others in the order mission.json
+  // declares them, then in order of first sight.
+  std::vector<int> rank;
+  const int n = static_cast<int>(map_.size());
+  for (int i = 0; i < n; ++i) {
+    const auto d = drop_rank_.find(map_.id(i));
+    const auto m = declared_rank_.find(map_.id(i));
+    rank.push_back(d != drop_rank_.end()
+                       ? d->second
+                       : (m != declared_rank_.end() ? 1000000 + m->second : 2000000 + i));
+  }
+  return rank;
+}
+
+std::vector<std::vector<int>> BeaconTrailEstimator::Neighbours() const {
+  std::vector<std::vector<int>> nb;
+  for (int i = 0; i < static_cast<int>(map_.size()); ++i) nb.push_back(map_.Neighbours(i));
+  return nb;
+}
+
+std::pair<std::optional<Vec2>, std::optional<Mat2>> BeaconTrailEstimator::AgentEstimate(
+    const Agent& a) const {
+  if (a.ekf) return {a.ekf->position(), a.ekf->position_cov()};
+  if (a.us_kf) return {a.us_kf->position(), a.us_kf->position_cov()};
+  if (a.has_start) return {a.pdr_n, Mat2::Identity() * a.pdr_var_m2};
+  return {std::nullopt, std::nullopt};
+}
+
+void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
+  const bool used = std::holds_alternative<MissionEvent>(row) || std::holds_alternative<Step>(row) ||
+                    std::holds_alternative<RangeMeasurement>(row) ||
+                    (std::holds_alternative<BearingMeasurement>(row) &&
+                     options_.tracker != Tracker::kNone);
+  if (!used) {
+    ++rows_ignored_;
+    return;
+  }
+  const TimeS t = RowTime(row);
+  if (const auto* step = std::get_if<Step>(&row); step && !agents_.count(step->agent)) {
+    throw std::invalid_argument("'" + step->agent + "' has steps but is not an agent");
+  }
+  if (t > pending_t_) FlushPending(sink);
+  last_t_ = t;
+  if (const auto* e = std::get_if<MissionEvent>(&row)) {
+    if (e->event == "drop" && !e->node.empty()) {
+      const int i = Beacon(e->node);
+      drop_rank_.emplace(e->node, static_cast<int>(drop_rank_.size()));
+      auto it = agents_.find(e->agent);
+      if (it != agents_.end()) {
+        const auto [p, cov] = AgentEstimate(it->second);
+        if (p)
+          map_.SetAnchorHint(
+              i, *p, *cov + Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m);
+      }
+    }
+  } else if (const auto* step = std::get_if<Step>(&row)) {
+    Agent& a = agents_.at(step->agent);
+    const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
+    a.pdr_n += d;
+    // Dead-reckoning drift for the drop hints of the map-only mode.
+    a.pdr_var_m2 += std::pow(options_.pdr_drift_per_m * d.norm(), 2) +
+                    step->variance_m2.value_or(Vec3::Zero()).x();
+    if (a.ekf) {
+      const Vec3 v = step->variance_m2.value_or(Vec3::Constant(0.0));
+      Mat2 cov = Mat2::Zero();
+      cov(0, 0) = v.x();
+      cov(1, 1) = v.y();
+      a.ekf->PredictStep(d, cov);
+      FixEntryHeading(a, d);
+      Emit(step->t1, a, sink);
+    } else {
+      FixEntryHeading(a, d);
+    }
+  } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
+    if (!r->kind.empty() && r->kind != "ultrasound")
+      return Ignore("ranges of another kind than ultrasound");
+    const bool a_agent = agents_.count(r->a) != 0, b_agent = agents_.count(r->b) != 0;
+    if (a_agent && b_agent) return Ignore("agent-to-agent ranges");
+    if (!a_agent && !b_agent) {
+      if (r->a == r->b) return Ignore("ranges of a node to itself");
+      const int i = Beacon(r->a), j = Beacon(r->b);
+      if (!map_.AddRange(i, j, r->range_m)) ++implausible_links_;
+      return;
+    }
+    const std::string& agent = a_agent ? r->a : r->b;
+    const int beacon = Beacon(a_agent ? r->b : r->a);
+    agents_[agent].heard[beacon] = t;
+    // A beacon without drop event or survey: anchored where an agent first passes close by.
+    if (!map_.HasAnchor(beacon) && r->range_m <= options_.close_pass_m) {
+      const auto [p, cov] = AgentEstimate(agents_[agent]);
+      if (p) {
+        map_.SetAnchorHint(beacon, *p, *cov + Mat2::Identity() * (r->range_m * r->range_m + 0.1));
+        ++close_pass_anchors_;
+      }
+    }
+    pending_.push_back({t, agent, beacon, r->range_m, r->sigma_m.value_or(0.0)});
+    pending_t_ = t;
+  } else if (const auto* b = std::get_if<BearingMeasurement>(&row)) {
+    // Bearing from a beacon (a) to the agent (b).
+    auto it = agents_.find(b->b);
+    if (it == agents_.end() || agents_.count(b->a))
+      return Ignore("bearings not from a beacon to an agent");
+    const int beacon = Beacon(b->a);
+    std::optional<PendingRange> range;
+    for (auto p = pending_.begin(); p != pending_.end(); ++p) {
+      if (p->agent == b->b && p->beacon == beacon && std::abs(p->t - t) < 1e-6) {
+        range = *p;
+        pending_.erase(p);
+        break;
+      }
+    }
+    Measure(it->second, t, beacon, range, b->bearing_rad, b->sigma_rad.value_or(0.0), sink);
+  }
+  if (map_.dirty() && t - last_solve_ >= options_.mds_period_s) SolveAndEmit(t, sink);
+}
+
+void BeaconTrailEstimator::Finish(EstimateSink& sink) {
+  FlushPending(sink);
+  if (map_.dirty())
+    SolveAndEmit(last_t_, sink);
+  else
+    EmitBeacons(last_t_, sink);
+}
+
+void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
+  if (a.heading_fixed || !a.entry_heading_rad) return;
+  a.first_track_n += d;
+  if (a.first_track_n.norm() < options_.entry_track_m) return;
+  a.heading_fixed = true;
+  const double sigma = std::hypot(a.entry_heading_sigma_rad, options_.entry_track_heading_sigma_rad);
+  const double psi =
+      WrapAngle(*a.entry_heading_rad - std::atan2(a.first_track_n.y(), a.first_track_n.x()));
+  if (a.ekf) {
+    entry_fixes_ += a.ekf->UpdateHeadingCorrection(psi, sigma) == UpdateResult::kAccepted;
+  } else if (options_.tracker == Tracker::kNone) {
+    a.pdr_rotation_rad = psi;
+    a.pdr_n = a.start_n + Eigen::Rotation2Dd(psi) * Vec2(a.pdr_n - a.start_n);
+    ++entry_fixes_;
+  }
+}
+
+void BeaconTrailEstimator::FlushPending(EstimateSink& sink) {
+  auto pending = std::move(pending_);
+  pending_.clear();
+  for (const auto& p : pending)
+    Measure(agents_[p.agent], p.t, p.beacon, p, std::nullopt, 0.0, sink);
+  pending_t_ = std::numeric_limits<double>::infinity();
+}
+
+void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
+                                   const std::optional<PendingRange>& range,
+                                   std::optional<double> bearing, double bearing_sigma,
+                                   EstimateSink& sink) {
+  if (options_.tracker == Tracker::kNone) return;
+  const auto pos = map_.Position(beacon);
+  if (!pos) {
+    ++no_position_;
+    return;
+  }
+  if (options_.tracker == Tracker::kUltrasoundOnly && !(range && bearing)) {
+    return Ignore("ranges or bearings without their pair (the ultrasound-only filter needs both)");
+  }
+  if (options_.tracker == Tracker::kUltrasoundOnly) {
+    if (!a.us_kf) {
+      if (a.has_start) {
+        a.us_kf.emplace(a.pdr_n, t, options_.us_kf);
+      } else {
+        Vec2 z;
+        Mat2 R;
+        PolarToPosition(*pos, range->range_m, *bearing,
+                        range->sigma_m > 0 ? range->sigma_m : options_.us_kf.range_sigma_m,
+                        bearing_sigma > 0 ? bearing_sigma : options_.us_kf.bearing_sigma_rad, &z,
+                        &R);
+        auto o = options_.us_kf;
+        o.initial_position_sigma_m = std::sqrt(R.trace());
+        a.us_kf.emplace(z, t, o);
+        Emit(t, a, sink);
+        return;
+      }
+    }
+    if (a.us_kf->UpdatePosition(t, *pos, range->range_m, *bearing, range->sigma_m,
+                                bearing_sigma) == UpdateResult::kAccepted) {
+      Emit(t, a, sink);
+    }
+    return;
+  }
+  if (!a.ekf) {
+    InitMeasurement m;
+    m.pdr_n = a.pdr_n;
+    m.beacon_n = pos->position_n;
+    if (!range) return;
+    m.range_m = range->range_m;
+    m.range_sigma_m = range->sigma_m > 0 ? range->sigma_m : options_.ekf.range_sigma_m;
+    m.bearing_rad = bearing;
+    m.bearing_sigma_rad = bearing_sigma > 0 ? bearing_sigma : options_.ekf.bearing_sigma_rad;
+    a.init_buffer.push_back(m);
+    const InitResult init = InitializeFromUltrasound(a.init_buffer, options_.init);
+    if (!init.ok) {
+      a.init_why = init.why;
+      return;
+    }
+    a.ekf.emplace(StartFromInit(init, a.pdr_n, options_.ekf));
+    a.initialized_at = t;
+    a.init_buffer.clear();
+    Emit(t, a, sink);
+    return;
+  }
+  bool accepted = false;
+  if (options_.update == UpdateMode::kPosition && range && bearing) {
+    accepted = a.ekf->UpdatePosition(*pos, range->range_m, *bearing, range->sigma_m,
+                                     bearing_sigma) == UpdateResult::kAccepted;
+  } else {
+    if (range)
+      accepted |=
+          a.ekf->UpdateRange(*pos, range->range_m, range->sigma_m) == UpdateResult::kAccepted;
+    if (bearing)
+      accepted |= a.ekf->UpdateBearing(*pos, *bearing, bearing_sigma) == UpdateResult::kAccepted;
+  }
+  if (accepted) Emit(t, a, sink);
+}
+
+void BeaconTrailEstimator::SolveAndEmit(TimeS t, EstimateSink& sink) {
+  map_.Solve();
+  last_solve_ = t;
+  EmitBeacons(t, sink);
+}
+
+void BeaconTrailEstimator::EmitBeacons(TimeS t, EstimateSink& sink) {
+  for (int i = 0; i < static_cast<int>(map_.size()); ++i) {
+    const auto p = map_.Position(i);
+    if (!p) continue;
+    beacon_t_[i] = t;
+    sink.Add({t, map_.id(i), Vec3(p->position_n.x(), p->position_n.y(), 0), p->cov(0, 0),
+              p->cov(0, 1), p->cov(1, 1)});
+  }
+}
+
+void BeaconTrailEstimator::Emit(TimeS t, Agent& a, EstimateSink& sink) {
+  // Agents are estimated only by the trackers (the map-only mode reports beacons alone).
+  if (options_.tracker == Tracker::kNone) return;
+  const auto [p, c] = AgentEstimate(a);
+  if (!p) return;
+  a.t = t;
+  sink.Add({t, a.id, Vec3(p->x(), p->y(), 0), (*c)(0, 0), (*c)(0, 1), (*c)(1, 1)});
+}
+
+std::optional<Estimate> BeaconTrailEstimator::Current(const std::string& node) const {
+  if (const auto it = agents_.find(node); it != agents_.end()) {
+    if (options_.tracker == Tracker::kNone) return std::nullopt;
+    const auto [p, c] = AgentEstimate(it->second);
+    if (!p) return std::nullopt;
+    return Estimate{it->second.t, node, Vec3(p->x(), p->y(), 0), (*c)(0, 0), (*c)(0, 1),
+                    (*c)(1, 1)};
+  }
+  const auto i = map_.Find(node);
+  if (!i) return std::nullopt;
+  const auto p = map_.Position(*i);
+  if (!p) return std::nullopt;
+  return Estimate{beacon_t_[*i], node, Vec3(p->position_n.x(), p->position_n.y(), 0),
+                  p->cov(0, 0), p->cov(0, 1), p->cov(1, 1)};
+}
+
+WayOutReport BeaconTrailEstimator::WayOut(const std::string& agent, TimeS at_s,
+                                          double window_s) const {
+  WayOutReport report;
+  std::vector<int> heard;
+  if (const auto it = agents_.find(agent); it != agents_.end()) {
+    for (const auto& [b, t] : it->second.heard) {
+      if (t >= at_s - window_s) heard.push_back(b), report.heard.push_back(map_.id(b));
+    }
+  }
+  std::string why;
+  for (int b : beacons::WayOut(Neighbours(), Ranks(), heard, &why)) {
+    report.route.push_back(map_.id(b));
+    const auto p = map_.Position(b);
+    report.route_positions_n.push_back(p ? std::optional<Vec2>(p->position_n) : std::nullopt);
+  }
+  if (!why.empty()) report.broken = why;
+  return report;
+}
+
+EstimatorSummary BeaconTrailEstimator::Summary() const {
+  EstimatorSummary summary;
+  const auto& ms = map_.summary();
+  summary.notes.push_back(ms.BriefReport());
+  for (const auto& [reason, n] : ignored_) {
+    summary.notes.push_back(fmt::format("ignored {} row(s): {}", n, reason));
+  }
+  if (ms.unknown > 0) {
+    summary.notes.push_back(fmt::format(
+        "{} beacon(s) could not be placed in the navigation frame: the layout needs two surveyed "
+        "beacons, or drop events with steps (the dropper's position), in its connected part",
+        ms.unknown));
+  }
+  if (no_position_ > 0) {
+    summary.notes.push_back(fmt::format(
+        "{} ultrasound measurement(s) of beacons not yet placed were not used", no_position_));
+  }
+  auto& num = summary.numbers;
+  num["beacons"] = static_cast<double>(map_.size());
+  num["beacons_from_mds"] = static_cast<double>(ms.from_mds);
+  num["beacons_surveyed"] = static_cast<double>(ms.from_survey);
+  num["beacons_unplaced"] = static_cast<double>(ms.unknown);
+  num["mds_solves"] = static_cast<double>(ms.solves);
+  num["anchor_rms_m"] = ms.anchor_rms_m;
+  num["entry_heading_fixes"] = static_cast<double>(entry_fixes_);
+  num["beacons_anchored_by_close_pass"] = static_cast<double>(close_pass_anchors_);
+  num["implausible_beacon_links"] = static_cast<double>(implausible_links_);
+  num["rows_ignored"] = static_cast<double>(rows_ignored_);
+  if (options_.tracker == Tracker::kNone) return summary;
+  num["measurements_without_beacon_position"] = static_cast<double>(no_position_);
+  for (const auto& [id, a] : agents_) {
+    if (a.ekf) {
+      const auto& s = a.ekf->summary();
+      summary.notes.push_back(id + ": " + s.BriefReport());
+      num[id + ".range_updates"] = static_cast<double>(s.range_updates);
+      num[id + ".bearing_updates"] = static_cast<double>(s.bearing_updates);
+      num[id + ".position_updates"] = static_cast<double>(s.position_updates);
+      num[id + ".gated"] = static_cast<double>(s.gated);
+      num[id + ".heading_correction_rad"] = a.ekf->psi();
+      num[id + ".scale_correction"] = a.ekf->scale();
+      if (!a.has_start) {
+        summary.notes.push_back(fmt::format(
+            "{}: no start; initialized from ultrasound at t = {:.2f} s", id, a.initialized_at));
+        num[id + ".initialized_at_s"] = a.initialized_at;
+      }
+    } else if (a.us_kf) {
+      num[id + ".position_updates"] = static_cast<double>(a.us_kf->accepted());
+      num[id + ".gated"] = static_cast<double>(a.us_kf->gated());
+    } else {
+      summary.notes.push_back(id + ": never initialized (" +
+                              (a.init_why.empty() ? "no ultrasound measurement" : a.init_why) +
+                              ")");
+    }
+    // The way back out from where the agent last heard beacons (sec. 4).
+    const WayOutReport way = WayOut(id, last_t_, options_.way_out_window_s);
+    std::string text;
+    for (const auto& b : way.route) text += (text.empty() ? "" : " -> ") + b;
+    if (!way.route.empty())
+      summary.notes.push_back(id + ": way out " + text + (way.broken ? " (" + *way.broken + ")" : ""));
+    num[id + ".way_out_hops"] = static_cast<double>(way.route.size());
+  }
+  return summary;
+}
+
+}  // namespace trailmark::beacons

@@ -1,0 +1,143 @@
+#pragma once
+/// The ultrasound-beacons paper's estimators as one online estimator over an incident:
+///  - the beacon map (beacon_map.h) from beacon-to-beacon ultrasound ranges, by MDS with
+///    shortest-path completion and SMACOF, anchored online to surveyed beacons or to where the
+///    responder's estimate dropped each beacon (`beacons-mds` reports the beacons only);
+///  - the responder tracked by the SCAAT EKF (u, v, psi, scale; scaat_ekf.h) on PDR steps and
+///    every ultrasound range/bearing between a beacon and the agent (`beacons-ekf`), or by the
+///    paper's ultrasound-only Kalman filter (filter us-only). Agents without a start are
+///    initialized from their first ultrasound measurements (InitializeFromUltrasound);
+///  - the way back out (sec. 4): the beacons heard last, the route by the smallest-id rule.
+/// Beacons: every crumb, and every landmark or base that appears in an ultrasound range; their
+/// deployment order is the order of the drop events, else of mission.json. Needs every row in
+/// global time order (the registry feeds it through a StepFrontEnd). No I/O.
+
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/beacons/beacon_map.h"
+#include "trailmark/beacons/scaat_ekf.h"
+#include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
+#include "trailmark/core/options.h"
+
+namespace trailmark::beacons {
+
+/// How agents are tracked: not at all (the map only: `beacons-mds`), by the SCAAT EKF, or by
+/// the paper's ultrasound-only Kalman filter.
+enum class Tracker { kNone, kScaat, kUltrasoundOnly };
+/// How a range + bearing pair updates the EKF: as two scalar updates (ours), or converted to a
+/// position fix (the paper's).
+enum class UpdateMode { kRangeBearing, kPosition };
+
+struct BeaconTrailOptions {
+  Tracker tracker = Tracker::kScaat;
+  UpdateMode update = UpdateMode::kRangeBearing;
+  bool init_from_ultrasound = false;  ///< ignore mission starts: initialize from ultrasound
+  double mds_period_s = 2.0;          ///< s; the map is re-solved at most this often
+  double drop_sigma_m = 0.3;   ///< m; where a dropped beacon lands around the dropper's estimate
+  double entry_track_m = 1.0;  ///< m; PDR track compared with the entry heading (0: never)
+  double close_pass_m = 1.5;   ///< m; a beacon with no drop event is anchored at a range this short
+  /// Dead-reckoning drift of the drop hints without a tracker: 1 sigma per metre (ours: 5 %).
+  double pdr_drift_per_m = 0.05;
+  /// PDR direction noise over the entry track, added to the start heading's own sigma.
+  double entry_track_heading_sigma_rad = 0.05;
+  double default_entry_heading_sigma_rad = 0.05;  ///< a start_heading without its sigma
+  double way_out_window_s = 3.0;  ///< s; beacons heard this recently start the way out
+  ScaatEkfOptions ekf;
+  UltrasoundOnlyKfOptions us_kf;
+  BeaconMapOptions map;
+  InitOptions init;
+  bool IsValid(std::string* why) const;
+};
+/// `beacons-mds`: the map's keys (beacons, refine, entry_track_m, mds_period_s).
+const OptionTable<BeaconTrailOptions>& BeaconMapOptionTable();
+/// `beacons-ekf`: the map's keys and the tracker's (filter, update, init, sigmas, gate).
+const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable();
+
+/// The way back out for one agent at a time: the beacons heard in the last window, the route
+/// by the smallest-id rule, and where each beacon of it is (when placed).
+struct WayOutReport {
+  std::vector<std::string> heard;
+  std::vector<std::string> route;     ///< beacon ids to follow, ending at the entry beacon
+  std::optional<std::string> broken;  ///< why the route does not reach the entry
+  std::vector<std::optional<Vec2>> route_positions_n;
+};
+
+class BeaconTrailEstimator : public OnlineEstimator {
+ public:
+  BeaconTrailEstimator(const MissionInfo& info, BeaconTrailOptions options);
+  /// Rows in global time order: drop events, steps, ultrasound ranges (beacon-beacon and
+  /// beacon-agent) and bearings (beacon to agent); others are counted and ignored. Throws
+  /// std::invalid_argument for steps of a node that is not an agent.
+  void Add(const MissionRow& row, EstimateSink& sink) override;
+  /// The pending ranges, a last map solve, the beacons' final estimates.
+  void Finish(EstimateSink& sink) override;
+  std::optional<Estimate> Current(const std::string& node) const override;
+  EstimatorSummary Summary() const override;
+  /// The way out of `agent` at time `at_s` from the map as it is now.
+  WayOutReport WayOut(const std::string& agent, TimeS at_s, double window_s) const;
+  const BeaconMap& map() const { return map_; }
+  /// The time of the latest row.
+  TimeS last_t() const { return last_t_; }
+
+ private:
+  struct PendingRange {
+    TimeS t;
+    std::string agent;
+    int beacon;
+    double range_m, sigma_m;
+  };
+  struct Agent {
+    std::string id;
+    Vec2 pdr_n = Vec2::Zero();  ///< dead reckoning (from the start, or from the init buffer)
+    double pdr_var_m2 = 0.01;
+    bool has_start = false;
+    std::optional<ScaatEkf> ekf;
+    std::optional<UltrasoundOnlyKf> us_kf;
+    std::vector<InitMeasurement> init_buffer;
+    std::string init_why;
+    TimeS initialized_at = 0;
+    TimeS t = 0;                 ///< of the latest estimate
+    std::map<int, TimeS> heard;  ///< beacon -> last time heard
+    // Entry heading (mission.json start_heading): the PDR's direction over its first metre is
+    // compared with it once, which fixes the PDR heading offset in the navigation frame.
+    std::optional<double> entry_heading_rad;
+    double entry_heading_sigma_rad = 0.05;
+    Vec2 first_track_n = Vec2::Zero();
+    bool heading_fixed = false;
+    Vec2 start_n = Vec2::Zero();
+    double pdr_rotation_rad = 0;  ///< applied to the dead reckoning of the map-only mode
+  };
+
+  int Beacon(const std::string& id);
+  std::vector<int> Ranks() const;
+  std::vector<std::vector<int>> Neighbours() const;
+  std::pair<std::optional<Vec2>, std::optional<Mat2>> AgentEstimate(const Agent& a) const;
+  void Ignore(const std::string& reason) { ++ignored_[reason]; }
+  void FixEntryHeading(Agent& a, const Vec2& d);
+  void FlushPending(EstimateSink& sink);
+  void Measure(Agent& a, TimeS t, int beacon, const std::optional<PendingRange>& range,
+               std::optional<double> bearing, double bearing_sigma, EstimateSink& sink);
+  void SolveAndEmit(TimeS t, EstimateSink& sink);
+  void EmitBeacons(TimeS t, EstimateSink& sink);
+  void Emit(TimeS t, Agent& a, EstimateSink& sink);
+
+  BeaconTrailOptions options_;
+  BeaconMap map_;
+  std::map<std::string, Agent> agents_;
+  std::map<std::string, std::pair<Vec2, double>> surveyed_;
+  std::map<std::string, int> declared_rank_, drop_rank_;
+  std::vector<PendingRange> pending_;
+  std::vector<TimeS> beacon_t_;  ///< when each beacon was last emitted
+  TimeS pending_t_ = std::numeric_limits<double>::infinity();
+  TimeS last_t_ = 0;
+  TimeS last_solve_ = -std::numeric_limits<double>::infinity();
+  std::size_t implausible_links_ = 0, no_position_ = 0;
+  std::map<std::string, std::size_t> ignored_;
+  std::size_t rows_ignored_ = 0, close_pass_anchors_ = 0, entry_fixes_ = 0;
+};
+
+}  // namespace trailmark::beacons

@@ -1,0 +1,280 @@
+#include "trailmark/breadcrumb/breadcrumb_estimator.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+namespace trailmark::breadcrumb {
+
+bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
+  const LocalizerOptions& l = localizer;
+  if (!(l.state_period_s >= 0) || !(l.max_latency_s >= 0) || !(l.encounter_sigma_m > 0) ||
+      !(l.drop_sigma_m > 0) || !(l.default_range_sigma_m > 0) || !(l.gate_sigma > 0) ||
+      !(l.huber_k > 0) || !(l.moved_sigma_m > 0) || !(l.max_speed_mps > 0) ||
+      !(static_period_s >= 0)) {
+    if (why) *why = "sigmas, gates and periods must be positive";
+    return false;
+  }
+  return true;
+}
+
+const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
+  static const OptionTable<BreadcrumbEstimatorOptions> table = [] {
+    using L = LocalizerOptions;
+    OptionTable<L> t;
+    const auto pos = OptionBounds::Positive(), nonneg = OptionBounds::NonNegative();
+    t.Real("state_period_s", &L::state_period_s, "s", nonneg,
+           "measurements closer in time share one agent state (IV-E)");
+    t.Real("max_latency_s", &L::max_latency_s, "s", nonneg,
+           "how long a radio measurement may wait for the PDR to cover its time");
+    t.Real("step_sigma_floor_m", &L::step_sigma_floor_m, "m", nonneg,
+           "floor of a step's per-axis sigma: this + step_sigma_floor_relative x length");
+    t.Real("step_sigma_floor_relative", &L::step_sigma_floor_relative, "", nonneg,
+           "floor of a step's per-axis sigma, fraction of its length");
+    t.Flag("heading_scale", &L::estimate_heading_scale,
+           "estimate each agent's PDR heading and scale correction (ours)");
+    t.Real("heading_per_turn_sigma", &L::heading_per_turn_sigma, "", nonneg,
+           "heading random walk per turn, fraction of its angle");
+    t.Flag("gyro_scale", &L::estimate_gyro_scale,
+           "estimate each agent's gyro scale-factor error (ours)");
+    t.Real("heading_rw", &L::heading_rw_rad_per_sqrt_s, "rad/sqrt(s)", nonneg,
+           "heading random walk over time");
+    t.Real("min_rssi_dbm", &L::min_rssi_dbm, "dBm", OptionBounds::Any(),
+           "weaker packets are not range edges (mostly NLOS)");
+    t.Flag("agent_rssi", &L::use_agent_rssi, "use agent-to-node RSSI as range edges");
+    t.Flag("static_rssi", &L::use_static_rssi, "use node-to-node RSSI links");
+    t.Flag("encounters", &L::use_encounters, "encounters as ~1 m edges (sec. V-A)");
+    t.Real("encounter_dbm", [](L& o) -> double& { return o.encounter.threshold_dbm; }, "dBm",
+           OptionBounds::Any(), "an RSSI peak above this is an encounter (paper: -40 dBm)");
+    t.Real("encounter_sigma_m", &L::encounter_sigma_m, "m", pos, "sigma of an encounter edge");
+    t.Real("drop_sigma_m", &L::drop_sigma_m, "m", pos,
+           "where a dropped crumb lies around the foot");
+    t.Real("range_sigma_m", &L::default_range_sigma_m, "m", pos,
+           "sigma of ranges.csv rows without one");
+    t.Real("agent_rssi_sigma_db", &L::agent_rssi_sigma_db, "dB", nonneg,
+           "per-packet sigma of agent RSSI edges (0: agent_rssi_sigma_factor x calibrated sigma)");
+    t.Real("agent_rssi_sigma_factor", &L::agent_rssi_sigma_factor, "", pos,
+           "packets of a link are correlated: sigma = this x the calibrated sigma");
+    t.Flag("calibrate", &L::calibrate_online,
+           "fit the path-loss model online from local geometry (else mission.json's model)");
+    t.Real("calibration_timeout_s", &L::calibration_timeout_s, "s", nonneg,
+           "> 0: use mission.json's model when no fit after this long (0: never)");
+    t.Real("rssi_nlos_k", &L::rssi_nlos_k, "", pos,
+           "a packet weaker than predicted is down-weighted beyond this many sigma");
+    t.Real("static_link_floor", &L::static_link_floor_fraction, "", nonneg,
+           "crumb-crumb link variance floor, fraction of sigma^2");
+    t.Flag("range_bias", &L::estimate_range_bias,
+           "estimate a range offset (and scale) per range kind");
+    t.Real("range_scale_sigma", &L::range_scale_sigma0, "", nonneg,
+           "prior sigma of the range scale (0: scale fixed at 1)");
+    t.Real("gate_sigma", &L::gate_sigma, "", pos,
+           "reject a measurement whose innovation exceeds this many sigma (IV-F)");
+    t.Real("huber_k", &L::huber_k, "", pos, "Huber down-weighting beyond this many sigma");
+    t.Flag("detect_moved", &L::detect_moved, "detect kicked crumbs (sec. V-C)");
+    t.Real("moved_sigma_m", &L::moved_sigma_m, "m", pos, "size of a kick (\"1 to 2 metres\")");
+    t.Real("max_speed_mps", &L::max_speed_mps, "m/s", pos,
+           "steps faster than this are dropped (IV-F)");
+
+    using O = BreadcrumbEstimatorOptions;
+    OptionTable<O> out;
+    out.Include("", &O::localizer, t);
+    out.Real("static_period_s", &O::static_period_s, "s", nonneg,
+             "how often static estimates are checked for output");
+    return out;
+  }();
+  return table;
+}
+
+BreadcrumbEstimator::BreadcrumbEstimator(const MissionInfo& info,
+                                         BreadcrumbEstimatorOptions options)
+    : options_(std::move(options)) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument("breadcrumb: " + why);
+  if (info.radio) {
+    options_.localizer.radio = radio::LogDistanceModel::From(*info.radio);
+  } else {
+    setup_notes_.push_back(
+        "mission.json has no radio calibration: default log-distance model (alpha -40 dBm at "
+        "1 m, n 2.3, sigma 4 dB)");
+  }
+  loc_ = std::make_unique<BreadcrumbLocalizer>(options_.localizer);
+  for (const NodeInfo& n : info.nodes) {
+    switch (n.kind) {
+      case NodeKind::kAgent: {
+        const auto start = info.AgentStart(n);
+        loc_->AddAgent(n.id, start ? std::optional<Vec2>(start->head<2>()) : std::nullopt,
+                       n.start_sigma_m.value_or(options_.localizer.known_start_sigma_m),
+                       n.start_heading_sigma_rad);
+        agents_.push_back(n.id);
+        agent_z_[n.id] = start ? start->z() : 0.0;
+        if (start) known_starts_.push_back(n.id);
+        if (!start) {
+          setup_notes_.push_back(fmt::format(
+              "agent '{}' has no start: it is localized from its ranges only (1 km prior)", n.id));
+        }
+        break;
+      }
+      default:
+        if (n.position) {
+          loc_->AddKnownNode(n.id, n.position->head<2>(), n.position_sigma_m.value_or(0.0));
+        } else {
+          loc_->AddUnknownNode(n.id);
+        }
+    }
+  }
+}
+
+BreadcrumbEstimator::~BreadcrumbEstimator() = default;
+
+void BreadcrumbEstimator::Emit(const Estimate& e, EstimateSink& sink) {
+  current_[e.id] = e;
+  sink.Add(e);
+}
+
+void BreadcrumbEstimator::EmitAgent(const std::string& id, EstimateSink& sink) {
+  if (auto e = loc_->Estimate(id)) {
+    const Mat2& c = e->covariance;
+    Emit({loc_->AgentTime(id), id, Vec3(e->position_n.x(), e->position_n.y(), agent_z_[id]),
+          c(0, 0), c(0, 1), c(1, 1)},
+         sink);
+  }
+}
+
+void BreadcrumbEstimator::EmitStatic(TimeS t, bool all, EstimateSink& sink) {
+  for (const auto& id : loc_->StaticNodes()) {
+    auto e = loc_->Estimate(id);
+    if (!e) continue;
+    auto it = last_static_.find(id);
+    if (!all && it != last_static_.end() && (it->second - e->position_n).norm() < 0.02) continue;
+    last_static_[id] = e->position_n;
+    const Mat2& c = e->covariance;
+    Emit({t, id, Vec3(e->position_n.x(), e->position_n.y(), 0.0), c(0, 0), c(0, 1), c(1, 1)},
+         sink);
+  }
+}
+
+void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
+  const bool used = std::holds_alternative<Step>(row) || std::holds_alternative<RssiPacket>(row) ||
+                    std::holds_alternative<RangeMeasurement>(row) ||
+                    std::holds_alternative<MissionEvent>(row);
+  if (!used) {
+    ++ignored_;  // bearings, IMU (the StepFrontEnd turns it into steps), barometer
+    return;
+  }
+  const TimeS t = RowTime(row);
+  if (const auto* step = std::get_if<Step>(&row); step && !loc_->IsAgent(step->agent)) {
+    throw std::invalid_argument(
+        fmt::format("'{}' has steps but is not an agent in mission.json", step->agent));
+  }
+  if (!any_) {
+    // Emit the known nodes (base, surveyed landmarks) and the agents' starts once, at the
+    // first time in the data (a first step's t0: the start is known a priori).
+    const auto* first_step = std::get_if<Step>(&row);
+    const TimeS t_start = first_step ? std::min(first_step->t0, t) : t;
+    EmitStatic(t_start, true, sink);
+    for (const auto& id : known_starts_) {
+      if (auto e = loc_->Estimate(id)) {
+        const Mat2& c = e->covariance;
+        Emit({t_start, id, Vec3(e->position_n.x(), e->position_n.y(), agent_z_[id]), c(0, 0),
+              c(0, 1), c(1, 1)},
+             sink);
+      }
+    }
+    next_static_ = t + options_.static_period_s;
+    any_ = true;
+  }
+  t_last_ = std::max(t_last_, t);
+  const auto clock0 = std::chrono::steady_clock::now();
+  if (const auto* step = std::get_if<Step>(&row)) {
+    loc_->AddStep(*step);
+    EmitAgent(step->agent, sink);
+  } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
+    loc_->AddRssi(*p);
+  } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
+    loc_->AddRange(*r);
+  } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
+    loc_->AddEvent(*e);
+  }
+  if (t >= next_static_) {
+    EmitStatic(t, false, sink);
+    next_static_ = t + options_.static_period_s;
+  }
+  // Per-row latency: the row's processing plus any estimate it produced.
+  latency_us_.push_back(static_cast<float>(
+      std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0)
+          .count()));
+}
+
+void BreadcrumbEstimator::Finish(EstimateSink& sink) {
+  loc_->Finish();
+  for (const auto& id : agents_) {
+    if (std::isfinite(loc_->AgentTime(id))) EmitAgent(id, sink);
+  }
+  EmitStatic(t_last_, true, sink);
+}
+
+std::optional<Estimate> BreadcrumbEstimator::Current(const std::string& node) const {
+  const auto it = current_.find(node);
+  if (it == current_.end()) return std::nullopt;
+  return it->second;
+}
+
+EstimatorSummary BreadcrumbEstimator::Summary() const {
+  EstimatorSummary summary;
+  summary.notes = setup_notes_;
+  const auto& s = loc_->summary();
+  auto& num = summary.numbers;
+  num["steps"] = static_cast<double>(s.steps);
+  num["steps_rejected"] = static_cast<double>(s.steps_rejected);
+  num["rssi_packets"] = static_cast<double>(s.rssi_packets);
+  num["rssi_below_min"] = static_cast<double>(s.rssi_weak);
+  num["rssi_agent_edges"] = static_cast<double>(s.rssi_agent_used);
+  num["rssi_static_packets"] = static_cast<double>(s.rssi_static_used);
+  num["range_edges"] = static_cast<double>(s.ranges_used);
+  num["gated"] = static_cast<double>(s.gated);
+  num["downweighted"] = static_cast<double>(s.downweighted);
+  num["encounters"] = static_cast<double>(s.encounters);
+  num["drops"] = static_cast<double>(s.drops);
+  num["moved_detected"] = static_cast<double>(s.moved_detected);
+  num["agent_states"] = static_cast<double>(s.agent_states);
+  num["delayed_initializations"] = static_cast<double>(s.delayed_initializations);
+  num["static_nodes_never_localized"] = static_cast<double>(s.pending_uninitialized);
+  num["unusable"] = static_cast<double>(s.unusable);
+  num["factorizations"] = static_cast<double>(s.factorizations);
+  num["rows_ignored"] = static_cast<double>(ignored_);
+  if (!latency_us_.empty()) {
+    std::vector<float> l = latency_us_;
+    auto pct = [&](double q) {
+      const auto k = static_cast<std::size_t>(q / 100.0 * (l.size() - 1));
+      std::nth_element(l.begin(), l.begin() + k, l.end());
+      return static_cast<double>(l[k]);
+    };
+    num["update_latency_us_p50"] = pct(50);
+    num["update_latency_us_p99"] = pct(99);
+    num["update_latency_us_max"] = pct(100);
+  }
+  num["calibrations"] = static_cast<double>(s.calibrations);
+  num["calibration_pairs"] = static_cast<double>(s.calibration_pairs);
+  if (s.calibration) {
+    num["calibrated_alpha_dbm"] = s.calibration->model.alpha_dbm;
+    num["calibrated_path_loss_exponent"] = s.calibration->model.path_loss_exponent;
+    num["calibrated_sigma_db"] = s.calibration->model.sigma_db;
+    num["calibrated_body_loss_db"] = s.calibration->model.body_loss_db;
+  }
+  for (const char* kind : {"uwb", "ultrasound", "rssi", ""}) {
+    if (auto b = loc_->RangeBias(kind)) {
+      num[std::string("range_offset_m_") + (*kind ? kind : "unknown")] = b->x();
+      num[std::string("range_scale_") + (*kind ? kind : "unknown")] = b->y();
+    }
+  }
+  for (const auto& n : s.notes) summary.notes.push_back(n);
+  for (const auto& [t, id] : loc_->MovedNodes()) {
+    summary.notes.push_back(fmt::format("t={:.1f}: breadcrumb '{}' detected as moved", t, id));
+  }
+  return summary;
+}
+
+}  // namespace trailmark::breadcrumb

@@ -1,0 +1,66 @@
+#pragma once
+/// `breadcrumb`: the collaborative localization of the breadcrumb paper (the GEN estimator,
+/// localizer.h) as an online estimator over an incident: PDR steps, RSSI between all nodes,
+/// direct ranges, drop events. Output: each agent at every step; static nodes (base, landmarks,
+/// crumbs) when their estimate changed (checked every `static_period_s` of mission time) and
+/// at the end. Needs every row in global time order (the registry feeds it through a
+/// StepFrontEnd). No I/O.
+
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/breadcrumb/localizer.h"
+#include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
+#include "trailmark/core/options.h"
+
+namespace trailmark::breadcrumb {
+
+struct BreadcrumbEstimatorOptions {
+  LocalizerOptions localizer;
+  double static_period_s = 1.0;  ///< s; how often static estimates are checked for output
+  bool IsValid(std::string* why) const;
+};
+/// The `--option` keys (docs/pipeline-options.md).
+const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable();
+
+class BreadcrumbEstimator : public OnlineEstimator {
+ public:
+  /// The localizer set up for the incident's nodes; mission.json's radio calibration replaces
+  /// the options' model. Throws std::invalid_argument on invalid options.
+  BreadcrumbEstimator(const MissionInfo& info, BreadcrumbEstimatorOptions options);
+  ~BreadcrumbEstimator() override;
+  /// Rows in global time order (steps by t1). Throws std::invalid_argument for steps of a node
+  /// that is not an agent.
+  void Add(const MissionRow& row, EstimateSink& sink) override;
+  /// Every agent's and static node's final estimate.
+  void Finish(EstimateSink& sink) override;
+  /// The node's latest estimate as emitted (agents at their latest step, static nodes at their
+  /// latest change).
+  std::optional<Estimate> Current(const std::string& node) const override;
+  /// The localizer's counters, calibration, range offsets, latency percentiles and notes.
+  EstimatorSummary Summary() const override;
+  const BreadcrumbLocalizer& localizer() const { return *loc_; }
+
+ private:
+  void Emit(const Estimate& e, EstimateSink& sink);
+  void EmitAgent(const std::string& id, EstimateSink& sink);
+  void EmitStatic(TimeS t, bool all, EstimateSink& sink);
+  std::vector<std::string> agents_;
+  BreadcrumbEstimatorOptions options_;
+  std::unique_ptr<BreadcrumbLocalizer> loc_;
+  std::map<std::string, double> agent_z_;
+  std::vector<std::string> known_starts_;
+  std::vector<std::string> setup_notes_;
+  std::map<std::string, Vec2> last_static_;
+  std::map<std::string, Estimate> current_;
+  std::vector<float> latency_us_;
+  TimeS t_last_ = 0, next_static_ = -1e300;
+  bool any_ = false;
+  std::size_t ignored_ = 0;
+};
+
+}  // namespace trailmark::breadcrumb

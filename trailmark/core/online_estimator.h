@@ -1,0 +1,122 @@
+#pragma once
+/// The one interface every estimator of trailmark implements (pdr, ins, breadcrumb,
+/// landmarks-stopgo, landmarks-ukf, beacons-mds, beacons-ekf, mapmatch), as OpenVINS'
+/// `feed_measurement_*` / `get_state()` or GTSAM's `ISAM2::update` / `calculateEstimate` do:
+/// mission rows go in one at a time, estimates come out to a sink as they become known, the
+/// current estimate of any node can be asked for at any time, a summary reports, and `Finish`
+/// ends the data. The batch run (`trailmark run`) is a mission's streams merged in time order
+/// into it; the live server feeds the same object from its committed journal rows. No I/O.
+
+#include <cstdint>
+#include <initializer_list>
+#include <map>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include "trailmark/core/measurements.h"
+
+namespace trailmark {
+
+/// One row of any measurement stream. At equal times rows go in this order (the variant's):
+/// events, steps, ranges, bearings, RSSI, IMU, barometer — how a time-ordered merge of a
+/// mission's streams breaks ties.
+using MissionRow = std::variant<MissionEvent, Step, RangeMeasurement, BearingMeasurement,
+                                RssiPacket, ImuSample, BaroSample>;
+
+/// The time a row became known: t1 for steps, t for every other row.
+TimeS RowTime(const MissionRow& row);
+/// The node whose device produced the row (the agent of IMU, steps, events and barometer; the
+/// receiver of RSSI; the first node of ranges and bearings): its rows of one stream come in
+/// time order.
+const std::string& RowNode(const MissionRow& row);
+
+/// The measurement streams of the mission format (spec: "Streams").
+enum class Stream : std::uint8_t { kSteps, kImu, kRssi, kRanges, kBearings, kEvents, kBaro };
+inline constexpr Stream kAllStreams[] = {Stream::kSteps,  Stream::kImu,      Stream::kRssi,
+                                         Stream::kRanges, Stream::kBearings, Stream::kEvents,
+                                         Stream::kBaro};
+/// "imu.csv", "steps.csv", ... (the spec's file names).
+std::string_view StreamFileName(Stream stream);
+/// The stream a row belongs to.
+Stream RowStream(const MissionRow& row);
+
+/// A set of streams (a bit per Stream).
+class StreamSet {
+ public:
+  constexpr StreamSet() = default;
+  constexpr StreamSet(std::initializer_list<Stream> streams) {
+    for (Stream s : streams) bits_ |= Bit(s);
+  }
+  constexpr bool Has(Stream s) const { return (bits_ & Bit(s)) != 0; }
+  constexpr StreamSet& Add(Stream s) {
+    bits_ |= Bit(s);
+    return *this;
+  }
+  constexpr bool empty() const { return bits_ == 0; }
+  std::vector<Stream> List() const;
+  friend constexpr bool operator==(StreamSet, StreamSet) = default;
+
+ private:
+  static constexpr std::uint16_t Bit(Stream s) {
+    return static_cast<std::uint16_t>(1u << static_cast<unsigned>(s));
+  }
+  std::uint16_t bits_ = 0;
+};
+
+/// Receives estimates as an estimator produces them (each node's in non-decreasing time).
+class EstimateSink {
+ public:
+  virtual ~EstimateSink() = default;
+  virtual void Add(const Estimate& estimate) = 0;
+};
+
+/// Keeps every estimate in memory (tests, reproductions, the server's replay).
+class VectorSink : public EstimateSink {
+ public:
+  void Add(const Estimate& estimate) override { rows.push_back(estimate); }
+  /// The rows in non-decreasing time (stable: equal times keep their order); empties the sink.
+  std::vector<Estimate> TakeSortedByTime();
+  std::vector<Estimate> rows;
+};
+
+/// Drops every estimate (an estimator run for its final state or its summary only).
+class NullSink : public EstimateSink {
+ public:
+  void Add(const Estimate&) override {}
+};
+
+/// What an estimator reports besides its estimates: counters and figures by name, and notes
+/// in words (written to diagnostics.json by the batch run, served by the live server). Each
+/// estimator also has a typed summary of its own; this is its flat form.
+struct EstimatorSummary {
+  std::map<std::string, double> numbers;
+  std::vector<std::string> notes;
+  /// Adds every number and note of `other` (numbers of the same name are overwritten).
+  void Merge(const EstimatorSummary& other);
+  /// One line: the numbers as "key value" pairs.
+  std::string BriefReport() const;
+};
+
+class OnlineEstimator {
+ public:
+  virtual ~OnlineEstimator() = default;
+  /// One row. Each node's rows of one stream come in non-decreasing time; an estimator that
+  /// needs all rows in global time order says so in its documentation (the pipeline registry
+  /// then feeds it through a StepFrontEnd that restores the order). Rows of streams the
+  /// estimator does not use are counted and ignored. Estimates the row produces go to `sink`.
+  /// Throws std::invalid_argument for a row it cannot use (e.g. steps of a node that is not an
+  /// agent of the mission); the estimator stays usable.
+  virtual void Add(const MissionRow& row, EstimateSink& sink) = 0;
+  /// End of data: whatever the estimator still holds is processed, final estimates emitted.
+  virtual void Finish(EstimateSink& sink) = 0;
+  /// The current estimate of `node` (its latest position and horizontal covariance), nullopt
+  /// when the estimator has none (an unknown node, or one not yet localized).
+  virtual std::optional<Estimate> Current(const std::string& node) const = 0;
+  /// What the estimator reports so far.
+  virtual EstimatorSummary Summary() const = 0;
+};
+
+}  // namespace trailmark

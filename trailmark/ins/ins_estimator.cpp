@@ -1,0 +1,226 @@
+#include "trailmark/ins/ins_estimator.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+namespace trailmark::ins {
+
+const OptionTable<InsOptions>& InsOptionTable() {
+  static const OptionTable<InsOptions> table = [] {
+    using O = InsOptions;
+    OptionTable<O> t;
+    t.Choice("detector", [](O& o) -> DetectorKind& { return o.detector.kind; },
+             std::vector<std::pair<std::string, DetectorKind>>{{"shoe", DetectorKind::kShoe},
+                                                               {"are", DetectorKind::kAre},
+                                                               {"mv", DetectorKind::kMv},
+                                                               {"mag", DetectorKind::kMag},
+                                                               {"adaptive", DetectorKind::kAdaptive}},
+             "zero-velocity detector (Skog et al. 2010; adaptive: ours, docs/ins.md)");
+    t.Integer("window", [](O& o) -> int& { return o.detector.window; },
+              OptionBounds::Between(1, 100000),
+              "detector window in samples (setting it clears window_s)")
+        .AlsoSets([](O& o) { o.detector.window_s = 0; });
+    t.Real("window_s", [](O& o) -> double& { return o.detector.window_s; }, "s",
+           OptionBounds::NonNegative(),
+           "detector window in seconds, one setting for every sample rate (0: use window)");
+    t.Real("gamma", [](O& o) -> std::optional<double>& { return o.detector.gamma; }, "",
+           OptionBounds::Positive(), "detector threshold", "auto (per detector, docs/ins.md)");
+    t.Real("detector_sigma_a", [](O& o) -> double& { return o.detector.sigma_a_mps2; }, "m/s^2",
+           OptionBounds::Positive(), "accelerometer noise normalizing the detector statistic");
+    t.Real("detector_sigma_g", [](O& o) -> double& { return o.detector.sigma_g_radps; }, "rad/s",
+           OptionBounds::Positive(), "gyro noise normalizing the detector statistic");
+    t.Real("adaptive_reference", [](O& o) -> double& { return o.detector.adaptive_reference; },
+           "", OptionBounds::Positive(), "adaptive: swing energy of normal walking (E_ref)");
+    t.Real("adaptive_power", [](O& o) -> double& { return o.detector.adaptive_power; }, "",
+           OptionBounds::Any(), "adaptive: exponent p of the threshold scaling");
+    t.Real("adaptive_min_scale", [](O& o) -> double& { return o.detector.adaptive_min_scale; },
+           "", OptionBounds::Positive(), "adaptive: smallest threshold scale");
+    t.Real("adaptive_max_scale", [](O& o) -> double& { return o.detector.adaptive_max_scale; },
+           "", OptionBounds::Positive(), "adaptive: largest threshold scale");
+    t.Real("adaptive_tau_s", [](O& o) -> double& { return o.detector.adaptive_tau_s; }, "s",
+           OptionBounds::Positive(), "adaptive: time constant of the swing-energy tracker");
+    t.Real("accel_noise", &O::accel_noise_mps2, "m/s^2", OptionBounds::Positive(),
+           "accelerometer process noise per sample (PyShoe)");
+    t.Real("gyro_noise", &O::gyro_noise_radps, "rad/s", OptionBounds::Positive(),
+           "gyro process noise per sample (PyShoe)");
+    t.Flag("biases", &O::estimate_biases, "estimate accelerometer and gyro biases");
+    t.Flag("zaru", &O::zaru, "zero angular rate updates in stance (gated)");
+    t.Real("zaru_sigma", &O::zaru_sigma_radps, "rad/s", OptionBounds::Positive(),
+           "ZARU measurement sigma");
+    t.Real("zupt_sigma", &O::zupt_sigma_mps, "m/s", OptionBounds::Positive(),
+           "ZUPT measurement sigma");
+    t.Real("zaru_gate", &O::zaru_gate_chi2, "", OptionBounds::Positive(),
+           "ZARU chi-square gate (3 degrees of freedom)");
+    t.Real("alignment_s", &O::alignment_s, "s", OptionBounds::NonNegative(),
+           "stationary start used for roll, pitch and gyro bias");
+    t.Real("gravity", &O::gravity_mps2, "m/s^2", OptionBounds::Positive(), "local gravity");
+    return t;
+  }();
+  return table;
+}
+
+struct MultiAgentIns::Agent {
+  std::unique_ptr<ZuptIns> ins;
+  TimeS newest = -1e300;
+};
+
+MultiAgentIns::MultiAgentIns(MissionInfo info, InsOptions options)
+    : info_(std::move(info)), options_(options) {}
+
+MultiAgentIns::~MultiAgentIns() = default;
+
+void MultiAgentIns::Add(const ImuSample& sample) {
+  auto it = agents_.find(sample.agent);
+  if (it == agents_.end()) {
+    const NodeInfo* node = info_.Find(sample.agent);
+    if (node == nullptr || node->kind != NodeKind::kAgent) {
+      throw std::invalid_argument(
+          fmt::format("'{}' has IMU samples but is not an agent in mission.json", sample.agent));
+    }
+    InsOptions o = options_;
+    if (auto start = info_.AgentStart(*node)) o.initial_position_n = *start;
+    if (node->start_heading_rad) o.initial_yaw_rad = *node->start_heading_rad;
+    it = agents_.emplace(sample.agent, std::make_unique<Agent>()).first;
+    Agent* a = it->second.get();
+    a->ins = std::make_unique<ZuptIns>(o);
+    const std::string id = sample.agent;
+    a->ins->on_state = [this, id](const InsState& st) {
+      if (on_state) on_state(id, st);
+    };
+    a->ins->on_step = [this](const Step& step) {
+      if (on_step) on_step(step);
+    };
+  }
+  it->second->newest = std::max(it->second->newest, sample.t);
+  it->second->ins->Add(sample);
+}
+
+void MultiAgentIns::Finish() {
+  for (auto& [id, a] : agents_) {
+    try {
+      a->ins->Finish();
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(id + ": " + e.what());
+    }
+  }
+}
+
+std::optional<InsState> MultiAgentIns::State(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  return it == agents_.end() ? std::nullopt : it->second->ins->LastState();
+}
+
+std::optional<TimeS> MultiAgentIns::EarliestNextStepEnd(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  return it == agents_.end() ? std::nullopt : it->second->ins->EarliestNextStepEnd();
+}
+
+std::optional<TimeS> MultiAgentIns::NewestSample(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  return it == agents_.end() ? std::nullopt : std::optional<TimeS>(it->second->newest);
+}
+
+std::optional<TimeS> MultiAgentIns::EarliestNextStepEndOfActive(TimeS active_since) const {
+  std::optional<TimeS> earliest;
+  for (const auto& [id, a] : agents_) {
+    if (a->newest < active_since) continue;
+    if (const auto b = a->ins->EarliestNextStepEnd()) {
+      earliest = earliest ? std::min(*earliest, *b) : *b;
+    }
+  }
+  return earliest;
+}
+
+std::vector<std::string> MultiAgentIns::Agents() const {
+  std::vector<std::string> out;
+  for (const auto& [id, a] : agents_) out.push_back(id);
+  return out;
+}
+
+EstimatorSummary MultiAgentIns::Summary() const {
+  EstimatorSummary summary;
+  for (const auto& [id, a] : agents_) {
+    const auto& s = a->ins->summary();
+    summary.numbers[id + ".samples"] = static_cast<double>(s.samples);
+    summary.numbers[id + ".steps"] = static_cast<double>(s.steps);
+    summary.numbers[id + ".stance_fraction"] =
+        s.samples ? static_cast<double>(s.stance_samples) / s.samples : 0.0;
+    summary.numbers[id + ".distance_m"] = s.distance_m;
+    summary.numbers[id + ".gaps"] = static_cast<double>(s.gaps);
+    summary.numbers[id + ".saturated_samples"] = static_cast<double>(s.saturated);
+    summary.numbers[id + ".gyro_bias_z_deg_per_h"] =
+        s.gyro_bias.z() * 180 / std::numbers::pi * 3600;
+    for (const auto& w : s.warnings) summary.notes.push_back(id + ": " + w);
+  }
+  summary.notes.push_back("detector: " + ToString(options_.detector.kind));
+  return summary;
+}
+
+bool InsEstimatorOptions::IsValid(std::string* why) const {
+  if (!ins.IsValid(why)) return false;
+  if (!(output_hz >= 0)) {
+    if (why) *why = "output_hz must be >= 0";
+    return false;
+  }
+  return true;
+}
+
+const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
+  static const OptionTable<InsEstimatorOptions> table = [] {
+    OptionTable<InsEstimatorOptions> t;
+    t.Include("", &InsEstimatorOptions::ins, InsOptionTable());
+    t.Real("output_hz", &InsEstimatorOptions::output_hz, "Hz", OptionBounds::NonNegative(),
+           "estimates per agent per second (0: every sample)");
+    return t;
+  }();
+  return table;
+}
+
+InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
+    : options_(options), ins_(std::move(info), options.ins) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument("ins: " + why);
+  ins_.on_state = [this](const std::string& id, const InsState& st) {
+    if (sink_ == nullptr) return;
+    if (options_.output_hz > 0) {
+      auto [it, fresh] = next_output_.emplace(id, -1e300);
+      if (st.t < it->second) return;
+      it->second = st.t + 1.0 / options_.output_hz;
+    }
+    const auto& c = st.position_cov;
+    sink_->Add({st.t, id, st.position_n, c(0, 0), c(0, 1), c(1, 1)});
+  };
+}
+
+void InsEstimator::Add(const MissionRow& row, EstimateSink& sink) {
+  const auto* imu = std::get_if<ImuSample>(&row);
+  if (imu == nullptr) {
+    ++ignored_;
+    return;
+  }
+  sink_ = &sink;
+  ins_.Add(*imu);
+}
+
+void InsEstimator::Finish(EstimateSink& sink) {
+  sink_ = &sink;
+  ins_.Finish();
+}
+
+std::optional<Estimate> InsEstimator::Current(const std::string& node) const {
+  const auto st = ins_.State(node);
+  if (!st) return std::nullopt;
+  const auto& c = st->position_cov;
+  return Estimate{st->t, node, st->position_n, c(0, 0), c(0, 1), c(1, 1)};
+}
+
+EstimatorSummary InsEstimator::Summary() const {
+  EstimatorSummary s = ins_.Summary();
+  s.numbers["rows_ignored"] = static_cast<double>(ignored_);
+  return s;
+}
+
+}  // namespace trailmark::ins

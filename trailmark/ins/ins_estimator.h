@@ -1,0 +1,88 @@
+#pragma once
+/// The zero-velocity INS (zupt_ins.h) for every agent of an incident, and the `ins` estimator:
+/// one ZuptIns per agent, created at its first IMU sample with the agent's start and heading
+/// from the mission (else the origin and heading 0). Its steps feed every steps-based
+/// estimator through the StepFrontEnd (step_front_end.h); its positions are the `ins`
+/// pipeline's estimates. No I/O.
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
+#include "trailmark/core/options.h"
+#include "trailmark/ins/zupt_ins.h"
+
+namespace trailmark::ins {
+
+/// The INS's settings as `--option` keys (docs/pipeline-options.md).
+const OptionTable<InsOptions>& InsOptionTable();
+
+/// One ZuptIns per agent.
+class MultiAgentIns {
+ public:
+  MultiAgentIns(MissionInfo info, InsOptions options);
+  ~MultiAgentIns();
+  MultiAgentIns(const MultiAgentIns&) = delete;
+  MultiAgentIns& operator=(const MultiAgentIns&) = delete;
+  /// A sample of its agent (each agent's samples in time order). Throws std::invalid_argument
+  /// for a sample the INS refuses (units, NaN) or a node that is not an agent of the mission.
+  void Add(const ImuSample& sample);
+  /// End of data: every agent's INS processes what it still holds.
+  void Finish();
+  /// Every processed sample: (agent, state).
+  std::function<void(const std::string&, const InsState&)> on_state;
+  /// Every step.
+  std::function<void(const Step&)> on_step;
+  /// The agent's latest state (nullopt before its INS is aligned).
+  std::optional<InsState> State(const std::string& agent) const;
+  /// The earliest end time of a step the agent's INS may still emit (ZuptIns::
+  /// EarliestNextStepEnd), and the time of its newest sample; nullopt for an agent not seen.
+  std::optional<TimeS> EarliestNextStepEnd(const std::string& agent) const;
+  std::optional<TimeS> NewestSample(const std::string& agent) const;
+  /// The earliest EarliestNextStepEnd of the agents whose newest sample is at or after
+  /// `active_since` (a device further behind does not hold the others back); nullopt if none.
+  std::optional<TimeS> EarliestNextStepEndOfActive(TimeS active_since) const;
+  /// The agents seen so far.
+  std::vector<std::string> Agents() const;
+  /// Per agent: samples, steps, stance fraction, distance, gaps, saturation, gyro bias,
+  /// warnings; and the detector.
+  EstimatorSummary Summary() const;
+  const InsOptions& options() const { return options_; }
+
+ private:
+  struct Agent;
+  MissionInfo info_;
+  InsOptions options_;
+  std::map<std::string, std::unique_ptr<Agent>> agents_;
+};
+
+struct InsEstimatorOptions {
+  InsOptions ins;
+  double output_hz = 0;  ///< Hz; estimates at most this often per agent (0: every sample)
+  bool IsValid(std::string* why) const;
+};
+const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable();
+
+/// `ins`: each agent's INS position (with its horizontal covariance) at every sample, or at
+/// `output_hz`. Agents are independent: each agent's samples in time order is all it needs.
+class InsEstimator : public OnlineEstimator {
+ public:
+  InsEstimator(MissionInfo info, InsEstimatorOptions options);
+  void Add(const MissionRow& row, EstimateSink& sink) override;
+  void Finish(EstimateSink& sink) override;
+  std::optional<Estimate> Current(const std::string& node) const override;
+  EstimatorSummary Summary() const override;
+
+ private:
+  InsEstimatorOptions options_;
+  MultiAgentIns ins_;
+  EstimateSink* sink_ = nullptr;
+  std::map<std::string, TimeS> next_output_;
+  std::size_t ignored_ = 0;
+};
+
+}  // namespace trailmark::ins

@@ -1,0 +1,130 @@
+#include "trailmark/ins/step_front_end.h"
+
+#include <fmt/format.h>
+
+#include <stdexcept>
+
+namespace trailmark {
+
+bool StepFrontEndOptions::IsValid(std::string* why) const {
+  if (!ins.IsValid(why)) return false;
+  if (!(reorder_s >= 0)) {
+    if (why) *why = "reorder_s must be >= 0";
+    return false;
+  }
+  return true;
+}
+
+const OptionTable<StepFrontEndOptions>& StepSourceOptionTable() {
+  static const OptionTable<StepFrontEndOptions> table = [] {
+    OptionTable<StepFrontEndOptions> t;
+    t.Include("ins.", &StepFrontEndOptions::ins, ins::InsOptionTable());
+    return t;
+  }();
+  return table;
+}
+
+const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable() {
+  static const OptionTable<StepFrontEndOptions> table = [] {
+    OptionTable<StepFrontEndOptions> t = StepSourceOptionTable();
+    t.Real("reorder_s", &StepFrontEndOptions::reorder_s, "s", OptionBounds::NonNegative(),
+           "live: how long a row waits for older rows of other devices (estimates lag by it)");
+    return t;
+  }();
+  return table;
+}
+
+StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrder order,
+                           Feed feed, std::unique_ptr<OnlineEstimator> inner)
+    : info_(info),
+      options_(options),
+      order_(order),
+      feed_(feed),
+      inner_(std::move(inner)),
+      ins_(std::move(info), options.ins) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument(why);
+  ins_.on_step = [this](const Step& step) {
+    ++ins_steps_;
+    Deliver(step, *sink_);
+  };
+}
+
+bool StepFrontEnd::UseSource(const std::string& agent, bool imu) {
+  const NodeInfo* node = info_.Find(agent);
+  if (node == nullptr || node->kind != NodeKind::kAgent) {
+    throw std::invalid_argument(fmt::format("'{}' has {} but is not an agent in mission.json",
+                                            agent, imu ? "IMU samples" : "steps"));
+  }
+  const auto [it, first] = source_is_imu_.emplace(agent, imu);
+  if (it->second == imu) return true;
+  ++ignored_;
+  return false;
+}
+
+void StepFrontEnd::Deliver(const MissionRow& row, EstimateSink& sink) {
+  if (order_ == RowOrder::kPerAgent) {
+    inner_->Add(row, sink);
+  } else {
+    buffer_.Push(row);
+  }
+}
+
+void StepFrontEnd::Release(EstimateSink& sink) {
+  const bool live = feed_ == Feed::kLive;
+  TimeS until = live ? newest_ - options_.reorder_s : newest_;
+  if (const auto b = ins_.EarliestNextStepEndOfActive(live ? until : -1e300)) {
+    until = std::min(until, *b);
+  }
+  buffer_.ReleaseBefore(until, [&](const MissionRow& r) { inner_->Add(r, sink); });
+}
+
+void StepFrontEnd::Add(const MissionRow& row, EstimateSink& sink) {
+  sink_ = &sink;
+  newest_ = std::max(newest_, RowTime(row));
+  if (const auto* imu = std::get_if<ImuSample>(&row)) {
+    if (UseSource(imu->agent, true)) ins_.Add(*imu);
+  } else if (const auto* step = std::get_if<Step>(&row)) {
+    if (UseSource(step->agent, false)) Deliver(row, sink);
+  } else {
+    Deliver(row, sink);
+  }
+  if (order_ == RowOrder::kGlobal) Release(sink);
+}
+
+void StepFrontEnd::Finish(EstimateSink& sink) {
+  sink_ = &sink;
+  ins_.Finish();
+  buffer_.ReleaseAll([&](const MissionRow& r) { inner_->Add(r, sink); });
+  inner_->Finish(sink);
+}
+
+std::optional<Estimate> StepFrontEnd::Current(const std::string& node) const {
+  return inner_->Current(node);
+}
+
+EstimatorSummary StepFrontEnd::Summary() const {
+  EstimatorSummary s = inner_->Summary();
+  const auto agents = ins_.Agents();
+  if (!agents.empty()) {
+    const EstimatorSummary ins = ins_.Summary();
+    for (const auto& id : agents) {
+      const auto it = ins.numbers.find(id + ".steps");
+      if (it != ins.numbers.end()) s.numbers["ins." + id + ".steps"] = it->second;
+    }
+    for (const auto& note : ins.notes) {
+      if (note.rfind("detector: ", 0) != 0) s.notes.push_back("ins " + note);
+    }
+    s.notes.push_back(
+        fmt::format("steps from imu.csv through the ZUPT INS ({} steps)", ins_steps_));
+  }
+  s.numbers["rows_ignored"] += static_cast<double>(ignored_);
+  if (order_ == RowOrder::kGlobal) {
+    s.numbers["rows_late"] = static_cast<double>(buffer_.late());
+    s.numbers["rows_waiting"] = static_cast<double>(buffer_.size());
+    if (feed_ == Feed::kLive) s.numbers["reorder_s"] = options_.reorder_s;
+  }
+  return s;
+}
+
+}  // namespace trailmark

@@ -1,0 +1,332 @@
+#include "trailmark/landmarks/landmark_estimator.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <stdexcept>
+
+namespace trailmark::landmarks {
+
+namespace {
+/// Added to solved covariances so that they stay positive definite: (1 cm)^2.
+constexpr double kCovarianceFloorM2 = 1e-4;
+/// Added to a step's drift variance so that it is never zero: (0.1 mm)^2.
+constexpr double kStepVarianceFloorM2 = 1e-8;
+/// A position fix needs ranges to three landmarks (two leave a mirror ambiguity).
+constexpr int kRangesForFix = 3;
+}  // namespace
+
+bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
+  if (!(drift_per_m > 0) || !(rssi_sigma_db > 0)) {
+    if (why) *why = "drift_per_m and rssi_sigma_db must be > 0";
+    return false;
+  }
+  if (!(min_range_sigma_m > 0) || !(known_start_sigma_m > 0) || !(unknown_start_sigma_m > 0) ||
+      !(surveyed_sigma_m > 0) || min_stops_heard < 1 || !(regrid_growth >= 1)) {
+    if (why) *why = "sigmas must be > 0, min_stops_heard >= 1, regrid_growth >= 1";
+    return false;
+  }
+  return calibration.IsValid(why);
+}
+
+const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
+  static const OptionTable<LandmarkEstimatorOptions> table = [] {
+    using O = LandmarkEstimatorOptions;
+    OptionTable<O> t;
+    t.Real("drift_per_m", &O::drift_per_m, "", OptionBounds::Positive(),
+           "PDR drift, 1 sigma per metre walked");
+    t.Real("rssi_sigma_db", &O::rssi_sigma_db, "dB", OptionBounds::Positive(),
+           "UKF: sigma of one RSSI answer");
+    t.Integer("regrid_below_stops", &O::regrid_below_stops, OptionBounds::NonNegative(),
+              "a landmark heard at up to this many stops is grid-searched at every solve");
+    t.Real("regrid_growth", &O::regrid_growth, "", OptionBounds::AtLeast(1),
+           "beyond, it is grid-searched again when its stops grew by this factor (1: always)");
+    t.Choice("loss", [](O& o) -> Loss& { return o.stop_and_go.loss; },
+             std::vector<std::pair<std::string, Loss>>{
+                 {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
+             "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
+    return t;
+  }();
+  return table;
+}
+
+LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorOptions options)
+    : options_(std::move(options)) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
+  calibrated_ = info.radio.has_value();
+  if (calibrated_) {
+    model_ = radio::LogDistanceModel::From(*info.radio);
+  } else {
+    setup_notes_.push_back(
+        "mission.json has no radio calibration: fitted online from the stops' RSSI of surveyed "
+        "landmarks (default log-distance model until then)");
+  }
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind != NodeKind::kLandmark) continue;
+    index_[n.id] = static_cast<int>(ids_.size());
+    ids_.push_back(n.id);
+    known_.push_back(n.position.has_value());
+    estimate_.push_back(n.position ? std::optional<Vec2>(n.position->head<2>()) : std::nullopt);
+    const double s = n.position_sigma_m.value_or(options_.surveyed_sigma_m);
+    estimate_cov_.push_back(Mat2::Identity() * s * s);
+    estimate_t_.push_back(0);
+    grid_heard_.push_back(0);
+  }
+  if (ids_.size() < 3) {
+    throw std::invalid_argument("the radio-landmark estimators need at least 3 landmarks");
+  }
+  const int B = static_cast<int>(ids_.size());
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind != NodeKind::kAgent) continue;
+    Agent a;
+    const auto start = info.AgentStart(n);
+    a.position = start ? Vec2(start->head<2>()) : Vec2::Zero();
+    const double s = start ? n.start_sigma_m.value_or(options_.known_start_sigma_m)
+                           : options_.unknown_start_sigma_m;
+    a.cov = Mat2::Identity() * s * s;
+    if (!start) {
+      setup_notes_.push_back(
+          fmt::format("agent '{}' has no start: {:g} m prior", n.id, options_.unknown_start_sigma_m));
+    }
+    a.sum.assign(B, 0.0);
+    a.count.assign(B, 0);
+    if (options_.tracking == Tracking::kUkf) {
+      LandmarkUkfOptions uo;
+      uo.initial_sigma_m = s;
+      uo.rssi_sigma_db = options_.rssi_sigma_db;
+      a.ukf.emplace(a.position, model_, uo);
+    }
+    agents_[n.id] = std::move(a);
+  }
+}
+
+void LandmarkEstimator::EmitAgent(TimeS t, const std::string& id, const Agent& a,
+                                  EstimateSink& sink) {
+  const Vec2 p = a.ukf ? a.ukf->position() : a.position;
+  const Mat2 c = a.ukf ? a.ukf->position_cov() : a.cov;
+  sink.Add({t, id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+}
+
+void LandmarkEstimator::EmitLandmarks(TimeS t, EstimateSink& sink) {
+  for (std::size_t j = 0; j < ids_.size(); ++j) {
+    if (!estimate_[j]) continue;
+    estimate_t_[j] = t;
+    const Mat2& c = estimate_cov_[j];
+    sink.Add({t, ids_[j], Vec3(estimate_[j]->x(), estimate_[j]->y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+  }
+}
+
+void LandmarkEstimator::RangesOf(const Stop& s, std::vector<std::optional<double>>* r,
+                                 std::vector<double>* sg) const {
+  for (std::size_t j = 0; j < ids_.size(); ++j) {
+    if (s.rssi[j]) {
+      const auto range = radio::ToRange(model_, *s.rssi[j]);
+      r->push_back(range.range_m);
+      sg->push_back(std::max(range.sigma_m, options_.min_range_sigma_m));
+    } else {
+      r->push_back(std::nullopt);
+      sg->push_back(1.0);  // unused: no range
+    }
+  }
+}
+
+void LandmarkEstimator::Refit() {
+  double dmin = 1e300, dmax = 0;
+  for (const auto& c : calibration_) {
+    dmin = std::min(dmin, c.distance_m);
+    dmax = std::max(dmax, c.distance_m);
+  }
+  if (calibration_.size() < options_.calibration_min_pairs ||
+      !(dmax > options_.calibration_min_spread * dmin))
+    return;
+  const radio::PathLossCalibration c = radio::CalibratePathLoss(calibration_, options_.calibration);
+  if (c.status != radio::CalibrationStatus::kOk) return;
+  model_ = c.fit.model;
+  model_.sigma_db = std::max(c.fit.residual_sigma_db, options_.min_radio_sigma_db);
+  ++refits_;
+  for (auto& [id, a] : agents_) {
+    if (a.ukf) a.ukf->SetRadioModel(model_);
+  }
+}
+
+void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, EstimateSink& sink) {
+  const int B = static_cast<int>(ids_.size());
+  a.stopped = false;
+  Stop s;
+  s.standing = a.position;
+  for (int j = 0; j < B; ++j) {
+    s.rssi.push_back(a.count[j] ? std::optional<double>(a.sum[j] / a.count[j]) : std::nullopt);
+  }
+  stops_.push_back(s);
+  // Online calibration (no calibration in mission.json): every stop's averaged RSSI of a
+  // surveyed landmark at the PDR distance is a pair; refit once the distances spread.
+  if (!calibrated_) {
+    for (int j = 0; j < B; ++j) {
+      if (known_[j] && s.rssi[j]) {
+        calibration_.push_back({std::max((s.standing - *estimate_[j]).norm(),
+                                         options_.calibration_min_distance_m),
+                                *s.rssi[j]});
+      }
+    }
+    Refit();
+  }
+  // Landmarks from every stop so far (standing positions from the PDR, sec. 6.2).
+  std::vector<int> heard(B, 0);
+  for (const auto& st : stops_) {
+    for (int j = 0; j < B; ++j) heard[j] += st.rssi[j].has_value();
+  }
+  StopAndGoProblem prob;
+  for (int j = 0; j < B; ++j) {
+    const bool warm = !known_[j] && estimate_[j] && heard[j] > options_.regrid_below_stops &&
+                      heard[j] < options_.regrid_growth * grid_heard_[j];
+    if (!known_[j] && !warm) grid_heard_[j] = heard[j];
+    prob.landmarks.push_back(known_[j] || warm ? *estimate_[j] : Vec2::Zero());
+    prob.landmark_known.push_back(known_[j]);
+    prob.landmark_start_given.push_back(warm);
+  }
+  for (const auto& st : stops_) {
+    prob.standing.push_back(st.standing);
+    prob.standing_known.push_back(true);
+    std::vector<std::optional<double>> r;
+    std::vector<double> sg;
+    RangesOf(st, &r, &sg);
+    prob.range_m.push_back(r);
+    prob.sigma_m.push_back(sg);
+  }
+  const StopAndGoResult res = SolveStopAndGo(prob, options_.stop_and_go);
+  solve_notes_.clear();
+  for (const auto& n : res.notes) solve_notes_.insert(n);
+  for (int j = 0; j < B; ++j) {
+    if (known_[j]) continue;
+    if (heard[j] >= options_.min_stops_heard) {
+      estimate_[j] = res.landmarks[j];
+      estimate_cov_[j] = res.landmark_cov[j] + Mat2::Identity() * kCovarianceFloorM2;
+    }
+  }
+  EmitLandmarks(t, sink);
+  // Re-localize the handheld at this stop with the landmarks (sec. 6.2).
+  StopAndGoProblem fix;
+  std::vector<std::optional<double>> r;
+  std::vector<double> sg;
+  RangesOf(s, &r, &sg);
+  int usable = 0;
+  for (int j = 0; j < B; ++j) {
+    fix.landmarks.push_back(estimate_[j].value_or(Vec2::Zero()));
+    fix.landmark_known.push_back(true);
+    if (!estimate_[j]) r[j].reset();
+    usable += r[j].has_value();
+  }
+  if (usable >= kRangesForFix && !a.ukf) {
+    fix.standing = {a.position};
+    fix.standing_known = {false};
+    fix.range_m = {r};
+    fix.sigma_m = {sg};
+    const StopAndGoResult fr = SolveStopAndGo(fix, options_.stop_and_go);
+    const Mat2 c_fix = fr.standing_cov[0] + Mat2::Identity() * kCovarianceFloorM2;
+    // Combine the fix with dead reckoning (information-weighted).
+    const Mat2 K = a.cov * (a.cov + c_fix).inverse();
+    a.position += K * (fr.standing[0] - a.position);
+    a.cov = (Mat2::Identity() - K) * a.cov;
+    a.cov = 0.5 * (a.cov + a.cov.transpose());
+    ++fixes_;
+    a.t = t;
+    EmitAgent(t, id, a, sink);
+  }
+}
+
+void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
+  const TimeS t = RowTime(row);
+  const bool used = std::holds_alternative<Step>(row) || std::holds_alternative<RssiPacket>(row) ||
+                    std::holds_alternative<MissionEvent>(row);
+  if (!used) {
+    ++ignored_;
+    return;
+  }
+  if (const auto* step = std::get_if<Step>(&row); step && !agents_.count(step->agent)) {
+    throw std::invalid_argument("'" + step->agent + "' has steps but is not an agent");
+  }
+  if (first_) {
+    EmitLandmarks(t, sink);
+    first_ = false;
+  }
+  t_last_ = std::max(t_last_, t);
+  if (const auto* step = std::get_if<Step>(&row)) {
+    Agent& a = agents_.at(step->agent);
+    const Vec2 d = step->delta_n.head<2>();
+    const double s = options_.drift_per_m * d.norm();
+    a.position += d;
+    a.cov += Mat2::Identity() * (s * s + kStepVarianceFloorM2);
+    if (a.ukf) a.ukf->PredictWithDisplacement(d, Mat2::Identity() * (s * s + kStepVarianceFloorM2));
+    a.t = step->t1;
+    EmitAgent(step->t1, step->agent, a, sink);
+  } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
+    const bool rx_agent = agents_.count(p->rx) != 0;
+    const std::string& agent = rx_agent ? p->rx : p->tx;
+    const std::string& other = rx_agent ? p->tx : p->rx;
+    auto ait = agents_.find(agent);
+    auto lit = index_.find(other);
+    if (ait == agents_.end() || lit == index_.end()) return;
+    Agent& a = ait->second;
+    const int j = lit->second;
+    if (a.stopped) {
+      a.sum[j] += p->rssi_dbm;
+      ++a.count[j];
+    }
+    if (a.ukf && estimate_[j] && a.ukf->UpdateRssi(*estimate_[j], estimate_cov_[j], p->rssi_dbm)) {
+      ++ukf_updates_;
+    }
+  } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
+    auto ait = agents_.find(e->agent);
+    if (ait == agents_.end()) return;
+    Agent& a = ait->second;
+    if (e->event == "stop") {
+      a.stopped = true;
+      std::fill(a.sum.begin(), a.sum.end(), 0.0);
+      std::fill(a.count.begin(), a.count.end(), 0);
+      if (a.ukf) a.ukf->ZeroMotion();
+    } else if (e->event == "go" && a.stopped) {
+      EndOfStop(e->t, e->agent, a, sink);
+    }
+  }
+}
+
+void LandmarkEstimator::Finish(EstimateSink& sink) { EmitLandmarks(t_last_, sink); }
+
+std::optional<Estimate> LandmarkEstimator::Current(const std::string& node) const {
+  if (const auto it = agents_.find(node); it != agents_.end()) {
+    const Agent& a = it->second;
+    const Vec2 p = a.ukf ? a.ukf->position() : a.position;
+    const Mat2 c = a.ukf ? a.ukf->position_cov() : a.cov;
+    return Estimate{a.t, node, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
+  }
+  if (const auto it = index_.find(node); it != index_.end() && estimate_[it->second]) {
+    const int j = it->second;
+    const Mat2& c = estimate_cov_[j];
+    return Estimate{estimate_t_[j], node, Vec3(estimate_[j]->x(), estimate_[j]->y(), 0), c(0, 0),
+                    c(0, 1), c(1, 1)};
+  }
+  return std::nullopt;
+}
+
+EstimatorSummary LandmarkEstimator::Summary() const {
+  EstimatorSummary summary;
+  summary.notes = setup_notes_;
+  for (const auto& n : solve_notes_) summary.notes.push_back(n);
+  int localized = 0;
+  for (std::size_t j = 0; j < ids_.size(); ++j) localized += !known_[j] && estimate_[j].has_value();
+  summary.numbers["stops"] = static_cast<double>(stops_.size());
+  summary.numbers["landmarks_localized"] = localized;
+  summary.numbers["landmarks_known"] =
+      static_cast<double>(std::count(known_.begin(), known_.end(), true));
+  summary.numbers["handheld_fixes"] = static_cast<double>(fixes_);
+  summary.numbers["ukf_rssi_updates"] = static_cast<double>(ukf_updates_);
+  summary.numbers["radio_refits"] = refits_;
+  summary.numbers["radio_path_loss_exponent"] = model_.path_loss_exponent;
+  summary.numbers["radio_alpha_dbm"] = model_.alpha_dbm;
+  summary.numbers["rows_ignored"] = static_cast<double>(ignored_);
+  return summary;
+}
+
+}  // namespace trailmark::landmarks

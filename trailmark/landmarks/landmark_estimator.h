@@ -1,0 +1,125 @@
+#pragma once
+/// The radio-landmarks paper's estimators as one online estimator over an incident:
+///  - stop-and-go (sec. 5.3, 6.2): dead reckoning between stops; at every stop (events stop/go)
+///    the RSSI of each landmark is averaged; after each stop the stop-and-go problem
+///    (stop_and_go.h) is solved over all stops so far with the standing positions from the
+///    PDR, giving the unknown landmarks; the handheld is then re-localized at the stop with
+///    the landmarks and dead reckoning continues from that fix (information-weighted);
+///  - UKF (sec. 5.4): the same landmark estimation, plus the UKF (landmark_ukf.h) with the
+///    steps as motion model (ours: the ZUPT INS displacement, `PredictWithDisplacement`) and
+///    every RSSI answer of a localized landmark as an update.
+/// Landmarks with a `position` are known (surveyed, with `position_sigma`); the others are
+/// estimated. The radio model comes from mission.json, else it is fitted online
+/// (radio::CalibratePathLoss) from the stops' averaged RSSI of surveyed landmarks at the PDR
+/// distance. Needs every row in global time order (the registry feeds it through a
+/// StepFrontEnd). No I/O.
+
+#include <map>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
+#include "trailmark/core/options.h"
+#include "trailmark/landmarks/landmark_ukf.h"
+#include "trailmark/landmarks/stop_and_go.h"
+#include "trailmark/radio/path_loss.h"
+
+namespace trailmark::landmarks {
+
+enum class Tracking { kStopAndGo, kUkf };
+
+struct LandmarkEstimatorOptions {
+  Tracking tracking = Tracking::kStopAndGo;
+  double drift_per_m = 0.05;      ///< PDR drift, 1 sigma per metre walked (ours: 5 %)
+  double rssi_sigma_db = 6.0;     ///< dB; UKF: one wake-up answer (the paper inflates it, 6.3)
+  /// Robust loss (ours: Huber, the paper's future work); grid searches on at most 50 stops
+  /// (ours: a search over hundreds of stops stalled a live incident for a second).
+  StopAndGoOptions stop_and_go = [] {
+    StopAndGoOptions o;
+    o.init_max_anchors = 50;
+    return o;
+  }();
+  /// The online fit when mission.json has no radio calibration: plain log-distance, no trim
+  /// (the stops' RSSI are averages already), 0.5 m bins.
+  radio::PathLossCalibrationOptions calibration = {0.0, 0.5, false};
+  std::size_t calibration_min_pairs = 4;
+  double calibration_min_spread = 2.0;    ///< the farthest pair at least this x the nearest
+  double calibration_min_distance_m = 0.3;  ///< closer stops are taken as this far
+  double min_radio_sigma_db = 1.0;        ///< a fitted shadowing sigma is never below this
+  int min_stops_heard = 3;                ///< an unknown landmark is placed once heard at this many stops
+  /// Each solve starts an unknown landmark from a grid search over every stop that heard it
+  /// (stop_and_go.h) — while it was heard at up to `regrid_below_stops`, when an estimate can
+  /// still jump to another basin; beyond, only once its stops have grown by `regrid_growth`
+  /// since the last search, else from its current estimate (ours: a grid search over all stops
+  /// at every stop made an incident of 20 firefighters quadratic in its stops; with warm starts
+  /// from 4 stops on, 2 of 8 corridor seeds ended 0.4-0.8 m worse, so few stops keep the grid).
+  int regrid_below_stops = 20;
+  double regrid_growth = 1.5;
+  double min_range_sigma_m = 0.1;         ///< m; floor of an RSSI range's sigma
+  double known_start_sigma_m = 0.05;      ///< m; a start without start_sigma
+  double unknown_start_sigma_m = 100.0;   ///< m; an agent without a start
+  double surveyed_sigma_m = 0.01;         ///< m; a landmark position without position_sigma
+  bool IsValid(std::string* why) const;
+};
+/// The `--option` keys (docs/pipeline-options.md).
+const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable();
+
+class LandmarkEstimator : public OnlineEstimator {
+ public:
+  /// Throws std::invalid_argument with fewer than 3 landmarks in `info` or invalid options.
+  LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorOptions options);
+  /// Rows in global time order: steps, RSSI between an agent and a landmark, stop/go events;
+  /// others are counted and ignored.
+  void Add(const MissionRow& row, EstimateSink& sink) override;
+  /// The landmarks' final estimates.
+  void Finish(EstimateSink& sink) override;
+  std::optional<Estimate> Current(const std::string& node) const override;
+  EstimatorSummary Summary() const override;
+  /// The radio model in use (mission.json's, the default, or the latest online fit).
+  const radio::LogDistanceModel& radio_model() const { return model_; }
+
+ private:
+  struct Agent {
+    Vec2 position = Vec2::Zero();
+    Mat2 cov = Mat2::Identity();
+    bool stopped = false;
+    TimeS t = 0;
+    std::vector<double> sum;
+    std::vector<int> count;
+    std::optional<LandmarkUkf> ukf;
+  };
+  struct Stop {
+    Vec2 standing = Vec2::Zero();
+    std::vector<std::optional<double>> rssi;  ///< averaged per landmark
+  };
+  void EmitAgent(TimeS t, const std::string& id, const Agent& a, EstimateSink& sink);
+  void EmitLandmarks(TimeS t, EstimateSink& sink);
+  void RangesOf(const Stop& s, std::vector<std::optional<double>>* r, std::vector<double>* sg) const;
+  void EndOfStop(TimeS t, const std::string& id, Agent& a, EstimateSink& sink);
+  void Refit();
+
+  LandmarkEstimatorOptions options_;
+  radio::LogDistanceModel model_;
+  bool calibrated_ = false;
+  std::vector<std::string> ids_;
+  std::map<std::string, int> index_;
+  std::vector<bool> known_;
+  std::vector<std::optional<Vec2>> estimate_;
+  std::vector<Mat2> estimate_cov_;
+  std::vector<TimeS> estimate_t_;
+  std::vector<int> grid_heard_;  ///< stops that had heard each landmark at its last grid search
+  std::map<std::string, Agent> agents_;
+  std::vector<Stop> stops_;
+  std::vector<radio::CalibrationPair> calibration_;
+  std::vector<std::string> setup_notes_;
+  std::set<std::string> solve_notes_;  ///< the latest solve's geometry report
+  TimeS t_last_ = 0;
+  bool first_ = true;
+  int refits_ = 0;
+  std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0;
+};
+
+}  // namespace trailmark::landmarks

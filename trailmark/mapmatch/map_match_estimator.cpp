@@ -1,0 +1,373 @@
+#include "trailmark/mapmatch/map_match_estimator.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+#include <map>
+#include <stdexcept>
+
+#include "trailmark/core/error.h"
+
+namespace trailmark::mapmatch {
+
+bool MapMatchEstimatorOptions::IsValid(std::string* why) const {
+  if (!filter.IsValid(why) || !sequences.grid.IsValid(why) || !comparison.IsValid(why))
+    return false;
+  if (!(compare_every_m > 0) || !(variance_alarm_m2 > 0) || !(variance_alarm_min_s >= 0) ||
+      map_error_wall_alarms < 1 || !(walking_direction_m > 0)) {
+    if (why)
+      *why = "compare_every_m and variance_alarm_m2 must be > 0, variance_alarm_min_s >= 0";
+    return false;
+  }
+  return true;
+}
+
+const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
+  static const OptionTable<MapMatchEstimatorOptions> table = [] {
+    using O = MapMatchEstimatorOptions;
+    OptionTable<O> t;
+    const auto any = OptionBounds::Any();
+    t.Choice("init", &O::init,
+             std::vector<std::pair<std::string, StartMode>>{{"auto", StartMode::kAuto},
+                                                            {"known", StartMode::kKnown},
+                                                            {"uniform", StartMode::kUniform}},
+             "initial state: known start, uniform over the building, or auto (known if given)");
+    t.Integer("particles", [](O& o) -> int& { return o.filter.particles; },
+              OptionBounds::Between(10, 1000000), "particles per agent (the paper: 500)");
+    t.Integer("recover_pattern_updates",
+              [](O& o) -> int& { return o.filter.recover_pattern_updates; },
+              OptionBounds::Between(0, 1000000), "forced comparisons after a wall alarm");
+    t.Integer("confirm_pattern_updates",
+              [](O& o) -> int& { return o.filter.confirm_pattern_updates; },
+              OptionBounds::Between(0, 1000000), "comparisons that confirm a recovery");
+    t.Integer("seed", [](O& o) -> std::uint64_t& { return o.filter.seed; },
+              OptionBounds::NonNegative(), "the particle filter's random stream");
+    t.Integer("map_error_wall_alarms", &O::map_error_wall_alarms,
+              OptionBounds::Between(1, 1000000), "wall alarms that make the map-error verdict");
+    auto real = [&](const char* key, auto field, const char* unit, OptionBounds b,
+                    const char* description) { t.Real(key, field, unit, b, description); };
+    real("sigma", [](O& o) -> double& { return o.filter.likelihood_sigma; }, "", any,
+         "sigma of eq. (2), the pattern likelihood");
+    real("tracking_sigma", [](O& o) -> double& { return o.filter.tracking_likelihood_sigma; }, "",
+         any, "sigma of eq. (2) once the track is found (0: sigma throughout)");
+    real("outlier_weight", [](O& o) -> double& { return o.filter.outlier_weight; }, "", any,
+         "alpha of the likelihood alpha + (1 - alpha) exp(-E / sigma^2)");
+    real("new_particle_weight", [](O& o) -> double& { return o.filter.new_particle_weight; }, "",
+         any, "weight of particles drawn from a pattern observation");
+    real("max_match_rmse_m", [](O& o) -> double& { return o.filter.max_match_rmse_m; }, "m", any,
+         "worse ICP matches are not used");
+    real("patterns_above_variance_m2",
+         [](O& o) -> double& { return o.filter.use_patterns_above_variance_m2; }, "m^2", any,
+         "comparisons only while the variance is above this (0: always)");
+    real("relocalize_above_variance_m2",
+         [](O& o) -> double& { return o.filter.relocalize_above_variance_m2; }, "m^2", any,
+         "hysteresis level for comparisons once on track (0: off)");
+    real("known_start_relocalize_above_variance_m2",
+         [](O& o) -> double& { return o.filter.known_start_relocalize_above_variance_m2; }, "m^2",
+         any, "a known start compares again only above this variance");
+    real("wall_alarm_k", [](O& o) -> double& { return o.filter.wall_alarm_k; }, "", any,
+         "CUSUM allowance of the blocked share of the belief");
+    real("wall_alarm_h", [](O& o) -> double& { return o.filter.wall_alarm_h; }, "", any,
+         "CUSUM threshold of the wall alarm");
+    real("recover_position_sigma_m",
+         [](O& o) -> double& { return o.filter.recover_position_sigma_m; }, "m", any,
+         "spread of a recovery's draws");
+    real("recover_heading_sigma_rad",
+         [](O& o) -> double& { return o.filter.recover_heading_sigma_rad; }, "rad", any,
+         "heading spread of a recovery's draws");
+    real("position_noise_m", [](O& o) -> double& { return o.filter.position_noise_m; }, "m", any,
+         "motion noise per step");
+    real("heading_noise_rad_per_m", [](O& o) -> double& { return o.filter.heading_noise_rad_per_m; },
+         "rad/m", any, "heading noise per metre walked");
+    real("wall_follow_offset_m", [](O& o) -> double& { return o.filter.wall_follow_offset_m; }, "m",
+         any, "wall-following model: distance kept from the wall");
+    real("wall_follow_sigma_m", [](O& o) -> double& { return o.filter.wall_follow_sigma_m; }, "m",
+         any, "wall-following model: sigma of that distance");
+    real("wall_follow_leave", [](O& o) -> double& { return o.filter.wall_follow_leave; }, "", any,
+         "wall-following model: probability per step of leaving the wall");
+    real("wall_follow_return", [](O& o) -> double& { return o.filter.wall_follow_return; }, "", any,
+         "wall-following model: probability per step of returning to it");
+    real("wall_follow_off_likelihood",
+         [](O& o) -> double& { return o.filter.wall_follow_off_likelihood; }, "", any,
+         "wall-following model: likelihood off the wall");
+    real("wall_follow_converged_power",
+         [](O& o) -> double& { return o.filter.wall_follow_converged_power; }, "", any,
+         "wall-following weight once converged (0: only while uncertain)");
+    real("grid_m", [](O& o) -> double& { return o.sequences.grid.spacing_m; }, "m", any,
+         "search-pattern grid spacing");
+    real("pattern_length_m", [](O& o) -> double& { return o.comparison.pattern_length_m; }, "m",
+         any, "odometry compared with the patterns");
+    real("point_spacing_m", [](O& o) -> double& { return o.comparison.point_spacing_m; }, "m", any,
+         "spacing of the compared points");
+    real("icp_trim", [](O& o) -> double& { return o.comparison.icp.trim_fraction; }, "", any,
+         "fraction of the worst ICP correspondences left out (0: the paper's plain ICP)");
+    real("compare_every_m", &O::compare_every_m, "m", any, "distance walked between comparisons");
+    real("variance_alarm_m2", &O::variance_alarm_m2, "m^2", any,
+         "map-error indicator level (sec. V-E)");
+    real("variance_alarm_min_s", &O::variance_alarm_min_s, "s", any,
+         "how long the variance must stay above it");
+    t.Flag("pseudo", [](O& o) -> bool& { return o.filter.pseudo_observations; },
+           "pseudo observations from pattern comparisons (sec. IV)");
+    t.Flag("resample", [](O& o) -> bool& { return o.filter.resample_from_patterns; },
+           "resample the lowest-weight particles from the pattern observations");
+    t.Flag("recover", [](O& o) -> bool& { return o.filter.recover_on_wall_alarm; },
+           "recover on a wall alarm (ours)");
+    t.Flag("recover_reweight_converged",
+           [](O& o) -> bool& { return o.filter.recover_reweight_converged; },
+           "forced comparisons also weight a converged belief");
+    t.Flag("stay_inside", [](O& o) -> bool& { return o.filter.stay_inside; },
+           "particles outside the building are eliminated");
+    t.Flag("wall_follow", [](O& o) -> bool& { return o.filter.wall_follow; },
+           "the directional search as a motion model (ours)");
+    return t;
+  }();
+  return table;
+}
+
+namespace {
+
+struct AgentTrack {
+  std::unique_ptr<MapParticleFilter> filter;
+  Vec2 odometry_n = Vec2::Zero();
+  double walked_m = 0, since_compare_m = 0;
+  std::deque<std::pair<double, Vec2>> history;  ///< (distance walked, odometry position)
+  bool alarm = false;
+  TimeS alarm_since = 0, t = 0;
+  std::vector<std::pair<TimeS, TimeS>> alarms;
+  std::vector<std::string> wall_alarms;  ///< when and where the walk crossed the map's walls
+  std::size_t comparisons = 0, skipped_comparisons = 0;
+};
+
+}  // namespace
+
+struct MapMatchEstimator::Impl {
+  MissionInfo info;
+  MapMatchEstimatorOptions o;
+  FloorPlan plan;
+  std::vector<NodeSequence> sequences;
+  std::unique_ptr<SearchGrid> grid;
+  std::shared_ptr<const DistanceField> wall_distance;  ///< shared by the agents' filters
+  std::map<std::string, AgentTrack> agents;
+  EstimatorSummary setup;
+  std::size_t icp_runs = 0, icp_abandoned = 0, ignored = 0;
+  TimeS t_last = 0;
+
+  std::vector<std::pair<TimeS, TimeS>> Alarms(const AgentTrack& a) const {
+    auto alarms = a.alarms;
+    if (a.alarm && t_last - a.alarm_since >= o.variance_alarm_min_s)
+      alarms.emplace_back(a.alarm_since, t_last);
+    return alarms;
+  }
+};
+
+MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, FloorPlan plan,
+                                     std::string plan_source, MapMatchEstimatorOptions options)
+    : impl_(std::make_unique<Impl>()) {
+  Impl& m = *impl_;
+  m.info = info;
+  m.o = std::move(options);
+  std::string why;
+  if (!m.o.IsValid(&why)) throw std::invalid_argument("mapmatch: " + why);
+  m.plan = std::move(plan);
+  for (const auto& p : CheckFloorPlan(m.plan, m.o.sequences.wall_snap_m)) {
+    if (p.fatal) throw InputError(plan_source, 0, p.message);
+    m.setup.notes.push_back("floor plan: " + p.message);
+  }
+  // The entry: the first agent's start, else the single base, else a corner of the building.
+  std::optional<Vec2> entry;
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind != NodeKind::kAgent) continue;
+    if (const auto s = info.AgentStart(n)) {
+      entry = s->head<2>();
+      break;
+    }
+  }
+  if (!entry) {
+    entry = m.plan.Bounds().min;
+    m.setup.notes.push_back(
+        "no agent start or base: the search sequence starts at the building's corner");
+  }
+  try {
+    m.sequences = ExtractSearchSequences(m.plan, *entry, m.o.sequences);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(plan_source, 0, e.what());
+  }
+  m.grid = std::make_unique<SearchGrid>(m.plan, m.o.sequences.grid);
+  if (m.o.filter.wall_follow) {
+    try {
+      m.wall_distance = MakeWallDistanceField(m.plan);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(plan_source, 0, e.what());
+    }
+  }
+  std::size_t nodes = 0;
+  for (const auto& s : m.sequences) nodes += s.nodes.size();
+  const double cell = m.o.sequences.grid.spacing_m;
+  m.setup.numbers["search_sequences"] = static_cast<double>(m.sequences.size());
+  m.setup.numbers["search_nodes"] = static_cast<double>(nodes);
+  m.setup.numbers["inside_area_m2"] = m.grid->inside_count() * cell * cell;
+}
+
+MapMatchEstimator::~MapMatchEstimator() = default;
+
+void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
+  Impl& m = *impl_;
+  const auto* step = std::get_if<Step>(&row);
+  if (step == nullptr) {
+    ++m.ignored;
+    return;
+  }
+  auto emit = [&](TimeS t, const std::string& id, AgentTrack& a) {
+    const Vec2 mean = a.filter->Mean();
+    const Mat2 c = a.filter->Covariance();
+    a.t = t;
+    sink.Add({t, id, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+  };
+  auto it = m.agents.find(step->agent);
+  if (it == m.agents.end()) {
+    const NodeInfo* node = m.info.Find(step->agent);
+    if (node == nullptr || node->kind != NodeKind::kAgent) {
+      throw std::invalid_argument(
+          fmt::format("'{}' has steps but is not an agent in mission.json", step->agent));
+    }
+    const auto start = m.info.AgentStart(*node);
+    const bool known =
+        m.o.init == StartMode::kKnown || (m.o.init == StartMode::kAuto && start.has_value());
+    if (known && !start) {
+      throw std::invalid_argument(
+          fmt::format("init=known but agent '{}' has no start in mission.json", step->agent));
+    }
+    AgentTrack a;
+    MapParticleFilterOptions o = m.o.filter;
+    o.seed = m.o.filter.seed + m.agents.size();
+    a.filter = std::make_unique<MapParticleFilter>(*m.grid, m.sequences, o, m.wall_distance);
+    if (known) {
+      a.filter->InitializeKnown(
+          start->head<2>(), 0.0,
+          std::max(node->start_sigma_m.value_or(m.o.default_start_sigma_m), m.o.min_start_sigma_m),
+          std::max(node->start_heading_sigma_rad.value_or(m.o.default_start_heading_sigma_rad),
+                   m.o.min_start_heading_sigma_rad));
+    } else {
+      a.filter->InitializeUniform();
+    }
+    m.setup.notes.push_back(
+        fmt::format("{}: initial state {}", step->agent, known ? "known" : "unknown (uniform)"));
+    it = m.agents.emplace(step->agent, std::move(a)).first;
+    emit(step->t0, step->agent, it->second);
+  }
+  AgentTrack& a = it->second;
+  const Vec2 d = step->delta_n.head<2>();
+  a.filter->Predict(d);
+  a.odometry_n += d;
+  a.walked_m += d.norm();
+  a.since_compare_m += d.norm();
+  a.history.emplace_back(a.walked_m, a.odometry_n);
+  while (a.history.size() > 2 && a.history[1].first <= a.walked_m - m.o.comparison.pattern_length_m)
+    a.history.pop_front();
+  if (m.o.filter.pseudo_observations && a.since_compare_m >= m.o.compare_every_m &&
+      a.walked_m >= m.o.comparison.pattern_length_m) {
+    a.since_compare_m = 0;
+    if (!a.filter->WantsPatterns()) {
+      ++a.skipped_comparisons;  // converged: the comparison would not be used
+    } else {
+      std::vector<Vec2> trajectory;
+      for (const auto& h : a.history) trajectory.push_back(h.second);
+      const PatternComparison pc = ComparePatterns(trajectory, m.sequences, m.o.comparison);
+      m.icp_runs += pc.icp_runs;
+      m.icp_abandoned += pc.icp_abandoned;
+      // The odometry's walking direction over its last metre.
+      Vec2 dir = Vec2::Zero();
+      for (auto h = a.history.rbegin(); h != a.history.rend(); ++h) {
+        dir = a.odometry_n - h->second;
+        if (a.walked_m - h->first >= m.o.walking_direction_m) break;
+      }
+      a.filter->UpdatePatterns(pc, std::atan2(dir.y(), dir.x()));
+      ++a.comparisons;
+    }
+  }
+  emit(step->t1, step->agent, a);
+  // Map-error evidence (ours): the walk keeps crossing the map's walls (the filter's CUSUM
+  // of the blocked share of the belief).
+  if (a.filter->LastStepRaisedWallAlarm()) {
+    const Vec2 where = a.filter->Mean();
+    a.wall_alarms.push_back(
+        fmt::format("t={:.1f} s near ({:.1f}, {:.1f})", step->t1, where.x(), where.y()));
+  }
+  // Map-error indicator (sec. V-E): the estimated variance above the alarm level.
+  const double variance = a.filter->Covariance().trace();
+  if (!a.alarm && variance > m.o.variance_alarm_m2) a.alarm = true, a.alarm_since = step->t1;
+  if (a.alarm && variance <= m.o.variance_alarm_m2) {
+    a.alarm = false;
+    if (step->t1 - a.alarm_since >= m.o.variance_alarm_min_s)
+      a.alarms.emplace_back(a.alarm_since, step->t1);
+  }
+  m.t_last = step->t1;
+}
+
+std::optional<Estimate> MapMatchEstimator::Current(const std::string& node) const {
+  const auto it = impl_->agents.find(node);
+  if (it == impl_->agents.end()) return std::nullopt;
+  const Vec2 mean = it->second.filter->Mean();
+  const Mat2 c = it->second.filter->Covariance();
+  return Estimate{it->second.t, node, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
+}
+
+std::optional<AgentMapEvidence> MapMatchEstimator::Evidence(const std::string& agent) const {
+  const Impl& m = *impl_;
+  const auto it = m.agents.find(agent);
+  if (it == m.agents.end()) return std::nullopt;
+  AgentMapEvidence e;
+  e.variance_alarms = m.Alarms(it->second);
+  e.wall_alarms = it->second.wall_alarms;
+  // The verdict: the paper's variance indicator, or wall alarms repeated (one alarm can also
+  // be a cloud that drifted off at a narrow door; a moved door makes the walk cross the map's
+  // walls on every pass).
+  e.map_error_suspected = !e.variance_alarms.empty() ||
+                          static_cast<int>(e.wall_alarms.size()) >= m.o.map_error_wall_alarms;
+  return e;
+}
+
+EstimatorSummary MapMatchEstimator::Summary() const {
+  const Impl& m = *impl_;
+  EstimatorSummary summary = m.setup;
+  for (const auto& [id, a] : m.agents) {
+    const AgentMapEvidence e = *Evidence(id);
+    summary.notes.push_back(id + ": " + a.filter->summary().BriefReport());
+    std::string periods;
+    for (const auto& [t0, t1] : e.variance_alarms)
+      periods += fmt::format("{}{:.1f}-{:.1f} s", periods.empty() ? "" : ", ", t0, t1);
+    summary.notes.push_back(
+        fmt::format("{}: variance above {:.1f} m^2 for {:.0f} s or more (map error, or not yet "
+                    "converged): {}",
+                    id, m.o.variance_alarm_m2, m.o.variance_alarm_min_s,
+                    periods.empty() ? "never" : periods));
+    summary.numbers[id + ".variance_alarms"] = static_cast<double>(e.variance_alarms.size());
+    summary.numbers[id + ".wall_alarms"] = static_cast<double>(e.wall_alarms.size());
+    std::string crossings;
+    for (const auto& w : e.wall_alarms) crossings += (crossings.empty() ? "" : "; ") + w;
+    summary.notes.push_back(
+        fmt::format("{}: wall alarms (the walk kept crossing walls of the map): {}", id,
+                    crossings.empty() ? "never" : crossings));
+    summary.numbers[id + ".map_error_suspected"] = e.map_error_suspected ? 1.0 : 0.0;
+    if (e.map_error_suspected) {
+      summary.notes.push_back(fmt::format("{}: map error suspected ({})", id,
+                                          !e.variance_alarms.empty()
+                                              ? "the variance stayed high"
+                                              : "the walk kept crossing the map's walls"));
+    }
+    summary.numbers[id + ".pattern_comparisons"] = static_cast<double>(a.comparisons);
+    summary.numbers[id + ".comparisons_skipped_converged"] =
+        static_cast<double>(a.skipped_comparisons);
+    summary.numbers[id + ".wall_eliminations"] =
+        static_cast<double>(a.filter->summary().wall_eliminations);
+    summary.numbers[id + ".restarts"] = static_cast<double>(a.filter->summary().restarts);
+  }
+  summary.numbers["icp_runs"] = static_cast<double>(m.icp_runs);
+  summary.numbers["icp_abandoned"] = static_cast<double>(m.icp_abandoned);
+  summary.numbers["rows_ignored"] = static_cast<double>(m.ignored);
+  return summary;
+}
+
+}  // namespace trailmark::mapmatch

@@ -1,0 +1,85 @@
+#pragma once
+/// `mapmatch`: the map-aided search paper's navigation filter (sec. IV) as an online estimator:
+/// odometry (steps) and the floor plan (walls cannot be crossed), with pseudo observations from
+/// comparing the last 20 m of odometry with the directional-search patterns of the map every
+/// 2 m walked; works without an initial position. Map-error evidence per agent (ours and sec.
+/// V-E): periods when the estimated variance stayed above the alarm level, wall alarms (the
+/// walk kept crossing the map's walls), and the verdict. Agents are independent: each agent's
+/// steps in time order is all it needs. No I/O.
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
+#include "trailmark/core/options.h"
+#include "trailmark/geometry/floor_plan.h"
+#include "trailmark/mapmatch/particle_filter.h"
+#include "trailmark/mapmatch/pattern_comparison.h"
+#include "trailmark/mapmatch/search_map.h"
+
+namespace trailmark::mapmatch {
+
+/// How each agent's filter starts: known (its start from the mission), uniform over the
+/// building, or auto (known when the agent has a start).
+enum class StartMode { kAuto, kKnown, kUniform };
+
+struct MapMatchEstimatorOptions {
+  StartMode init = StartMode::kAuto;
+  /// Ours: 2,000 particles (the paper: N = 500, `particles=500`); with the wall-following
+  /// model the belief stays sharp, and more particles keep second hypotheses alive through
+  /// furniture (docs/mapmatch.md: measured on held-out searches).
+  MapParticleFilterOptions filter = [] {
+    MapParticleFilterOptions o;
+    o.particles = 2000;
+    return o;
+  }();
+  SearchSequenceOptions sequences;
+  PatternComparisonOptions comparison;
+  double compare_every_m = 2.0;       ///< m walked between pattern comparisons (sec. IV)
+  double variance_alarm_m2 = 3.0;     ///< m^2; map-error indicator level (sec. V-E)
+  double variance_alarm_min_s = 10.0; ///< s; how long the variance must stay above it
+  int map_error_wall_alarms = 5;      ///< wall alarms that make the verdict (docs/mapmatch.md)
+  double walking_direction_m = 1.0;   ///< m of odometry that give the walking direction
+  double default_start_sigma_m = 0.2;           ///< a known start without start_sigma
+  double min_start_sigma_m = 0.05;              ///< the particle cloud is never narrower
+  double default_start_heading_sigma_rad = 0.09;
+  double min_start_heading_sigma_rad = 0.01;
+  bool IsValid(std::string* why) const;
+};
+/// The `--option` keys (docs/pipeline-options.md).
+const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable();
+
+struct AgentMapEvidence {
+  std::vector<std::pair<TimeS, TimeS>> variance_alarms;  ///< periods above the level
+  std::vector<std::string> wall_alarms;                  ///< when and where
+  bool map_error_suspected = false;
+};
+
+class MapMatchEstimator : public OnlineEstimator {
+ public:
+  /// The filter set up for one floor `plan` (search sequences from the first agent's start,
+  /// else the single base, else the building's corner). `plan_source` names the plan in
+  /// errors. Throws std::invalid_argument on invalid options, InputError naming `plan_source`
+  /// for a floor plan that encloses nothing.
+  MapMatchEstimator(const MissionInfo& info, FloorPlan plan, std::string plan_source,
+                    MapMatchEstimatorOptions options);
+  ~MapMatchEstimator() override;
+  /// Steps (others are counted and ignored). Throws std::invalid_argument for steps of a node
+  /// that is not an agent, or of an agent without a start when init is known.
+  void Add(const MissionRow& row, EstimateSink& sink) override;
+  void Finish(EstimateSink&) override {}
+  std::optional<Estimate> Current(const std::string& node) const override;
+  /// Per agent: the filter's counters, the variance and wall alarms, the verdict.
+  EstimatorSummary Summary() const override;
+  /// The map-error evidence of an agent so far (nullopt for an agent not seen).
+  std::optional<AgentMapEvidence> Evidence(const std::string& agent) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace trailmark::mapmatch

@@ -1,0 +1,238 @@
+#include "trailmark/pipelines/batch_run.h"
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <chrono>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "trailmark/core/error.h"
+#include "trailmark/io/merged_stream.h"
+
+namespace trailmark {
+
+StreamSet PresentStreams(const MissionDirectory& mission) {
+  StreamSet present;
+  for (Stream s : kAllStreams) {
+    if (mission.Has(std::string(StreamFileName(s)))) present.Add(s);
+  }
+  return present;
+}
+
+namespace {
+bool HasFloorPlan(const MissionDirectory& mission) {
+  return mission.info().floorplan && mission.Has(*mission.info().floorplan);
+}
+}  // namespace
+
+bool CanRun(const PipelineSpec& pipeline, const MissionDirectory& mission) {
+  return pipeline.CanRun(mission.info(), PresentStreams(mission), HasFloorPlan(mission));
+}
+
+std::vector<std::string> RunnablePipelines(const MissionDirectory& mission) {
+  std::vector<std::string> names;
+  for (const auto& p : Pipelines()) {
+    if (CanRun(p, mission)) names.push_back(p.name);
+  }
+  return names;
+}
+
+void RequireCanRun(const PipelineSpec& pipeline, const MissionDirectory& mission) {
+  if (CanRun(pipeline, mission)) return;
+  const StreamSet present = PresentStreams(mission);
+  const std::string who = "pipeline '" + pipeline.name + "'";
+  for (const StreamSet& alternatives : pipeline.needs) {
+    const auto list = alternatives.List();
+    bool any = false;
+    for (Stream s : list) any = any || present.Has(s);
+    if (any || list.empty()) continue;
+    std::vector<std::string> others;
+    for (std::size_t k = 1; k < list.size(); ++k) others.emplace_back(StreamFileName(list[k]));
+    mission.Require(std::string(StreamFileName(list.front())),
+                    others.empty() ? who : fmt::format("{} (or {})", who, fmt::join(others, ", ")));
+  }
+  if (pipeline.needs_floor_plan && !mission.info().floorplan) {
+    throw InputError(mission.Path("mission.json").string(), 0,
+                     who + " needs a floor plan: mission.json has no \"floorplan\"");
+  }
+  if (pipeline.needs_floor_plan) mission.Require(*mission.info().floorplan, who);
+  throw InputError(mission.dir().string(), 0,
+                   fmt::format("{} needs {}", who, fmt::join(pipeline.NeedsText(), ", ")));
+}
+
+std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
+                                           const MissionDirectory& mission,
+                                           const OptionValues& options,
+                                           std::vector<std::string>* notes) {
+  const std::optional<int> level =
+      pipeline.floor_level ? pipeline.floor_level(options) : std::nullopt;
+  std::vector<int> levels;
+  std::optional<FloorPlan> plan = mission.LoadFloorPlan(level, &levels);
+  if (plan && notes && levels.size() > 1) {
+    notes->push_back(fmt::format("floor plan: {} levels ({}); the filter uses level {}{}",
+                                 levels.size(), fmt::join(levels, ", "),
+                                 level.value_or(DefaultFloorPlanLevel(levels)),
+                                 level ? "" : " (option level=N for another)"));
+  }
+  return plan;
+}
+
+namespace {
+
+/// The streams of the mission a reader of `uses` gets; steps.csv shadows imu.csv for a
+/// steps-based one (noted).
+StreamSet FeedStreams(StreamSet uses, bool steps_based, const MissionDirectory& mission,
+                      const OptionValues& options, std::vector<std::string>* notes) {
+  const StreamSet present = PresentStreams(mission);
+  StreamSet feed;
+  for (Stream s : uses.List()) {
+    if (present.Has(s)) feed.Add(s);
+  }
+  if (steps_based && feed.Has(Stream::kSteps)) {
+    bool ins_options = false;
+    for (const auto& [key, value] : options) ins_options = ins_options || key.rfind("ins.", 0) == 0;
+    if (ins_options) notes->push_back("ins.* options ignored: the mission has steps.csv");
+    if (feed.Has(Stream::kImu)) {
+      notes->push_back(
+          "steps from steps.csv; imu.csv not used (remove steps.csv to run the INS on it, or "
+          "run the ins pipeline)");
+      StreamSet without;
+      for (Stream s : feed.List()) {
+        if (s != Stream::kImu) without.Add(s);
+      }
+      feed = without;
+    }
+  }
+  return feed;
+}
+
+/// Feeds `stream` into `estimator` until its end (or a row after `until`), then Finish.
+void Drive(OnlineEstimator& estimator, MergedStream& stream, const MissionDirectory& mission,
+           EstimateSink& sink, const ProgressCallback& progress,
+           std::optional<TimeS> until = std::nullopt) {
+  MissionRow row;
+  std::size_t rows = 0;
+  while (stream.Next(row)) {
+    if (until && RowTime(row) > *until) break;
+    try {
+      estimator.Add(row, sink);
+    } catch (const std::invalid_argument& e) {
+      stream.Fail(e.what());
+    }
+    if ((++rows & 0xfff) == 0) progress(stream.Progress());
+  }
+  try {
+    estimator.Finish(sink);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(mission.dir().string(), 0, e.what());
+  }
+  progress(1.0);
+}
+
+}  // namespace
+
+EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& context,
+                          EstimateSink& sink) {
+  const MissionDirectory& mission = context.mission;
+  RequireCanRun(pipeline, mission);
+  EstimatorSummary summary;
+  const StreamSet feed =
+      FeedStreams(pipeline.uses, pipeline.steps_based, mission, context.options, &summary.notes);
+  std::optional<FloorPlan> floor;
+  std::string plan_source = "the floor plan";
+  if (pipeline.needs_floor_plan) {
+    floor = LoadPipelineFloor(pipeline, mission, context.options, &summary.notes);
+    plan_source = mission.Path(*mission.info().floorplan).string();
+  }
+  const EstimatorInputs inputs{mission.info(), floor ? &*floor : nullptr, plan_source};
+  const auto estimator = pipeline.make(inputs, context.options, Feed::kTimeOrdered);
+  MergedStream stream(mission, feed);
+  Drive(*estimator, stream, mission, sink, context.progress);
+  summary.Merge(estimator->Summary());
+  return summary;
+}
+
+namespace {
+
+class CsvEstimateSink : public EstimateSink {
+ public:
+  explicit CsvEstimateSink(const std::string& path) : writer_(path) {}
+  // estimates.csv is in non-decreasing time (spec). An estimate is known when it is written:
+  // a row stamped earlier than one already written (e.g. an agent's start, emitted with its
+  // first step, after another agent's rows) is stamped with the latest time instead.
+  void Add(const Estimate& e) override {
+    if (e.t < last_t_) {
+      Estimate copy = e;
+      copy.t = last_t_;
+      writer_.Write(copy);
+      ++restamped_;
+    } else {
+      writer_.Write(e);
+      last_t_ = e.t;
+    }
+    ++count_;
+  }
+  std::size_t restamped() const { return restamped_; }
+  void Close() { writer_.Close(); }
+  std::size_t count() const { return count_; }
+
+ private:
+  RowWriter<Estimate> writer_;
+  std::size_t count_ = 0;
+  std::size_t restamped_ = 0;
+  double last_t_ = -std::numeric_limits<double>::infinity();
+};
+
+}  // namespace
+
+RunResult RunPipeline(const PipelineSpec& pipeline, const PipelineContext& context,
+                      const std::filesystem::path& out_dir) {
+  std::filesystem::create_directories(out_dir);
+  CsvEstimateSink sink((out_dir / "estimates.csv").string());
+  const auto t0 = std::chrono::steady_clock::now();
+  RunResult result;
+  result.pipeline = pipeline.name;
+  result.summary = RunBatch(pipeline, context, sink);
+  sink.Close();
+  result.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  result.estimates = sink.count();
+  nlohmann::json diag;
+  diag["pipeline"] = pipeline.name;
+  diag["mission"] = context.mission.dir().string();
+  diag["estimates"] = result.estimates;
+  diag["wall_time_s"] = result.wall_time_s;
+  diag["rows_restamped"] = sink.restamped();
+  diag["numbers"] = result.summary.numbers;
+  diag["notes"] = result.summary.notes;
+  diag["options"] = context.options;
+  std::ofstream(out_dir / "diagnostics.json") << diag.dump(2) << "\n";
+  return result;
+}
+
+beacons::WayOutReport ComputeWayOut(const MissionDirectory& mission, const std::string& agent,
+                                    std::optional<TimeS> at_s, double window_s) {
+  const NodeInfo* node = mission.info().Find(agent);
+  if (node == nullptr || node->kind != NodeKind::kAgent) {
+    throw InputError(mission.Path("mission.json").string(), 0,
+                     "no agent '" + agent + "' in mission.json");
+  }
+  mission.Require("ranges.csv", "the way out");
+  // The beacon map as beacons-mds builds it: steps (when present) place the layout where the
+  // beacons were dropped.
+  beacons::BeaconTrailOptions options;
+  options.tracker = beacons::Tracker::kNone;
+  auto map = std::make_unique<beacons::BeaconTrailEstimator>(mission.info(), options);
+  const beacons::BeaconTrailEstimator& trail = *map;
+  StepFrontEnd estimator(mission.info(), {}, RowOrder::kGlobal, Feed::kTimeOrdered,
+                         std::move(map));
+  std::vector<std::string> notes;
+  const StreamSet uses{Stream::kSteps, Stream::kImu, Stream::kRanges, Stream::kEvents};
+  MergedStream stream(mission, FeedStreams(uses, true, mission, {}, &notes));
+  NullSink sink;
+  Drive(estimator, stream, mission, sink, [](double) {}, at_s);
+  return trail.WayOut(agent, at_s.value_or(trail.last_t()), window_s);
+}
+
+}  // namespace trailmark

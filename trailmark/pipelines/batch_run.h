@@ -1,0 +1,69 @@
+#pragma once
+/// The batch run of a pipeline on a mission directory (`trailmark run`): the streams it uses
+/// merged in time order (io/merged_stream.h) into its online estimator, the estimates to a
+/// sink or to estimates.csv, the summary to diagnostics.json. The live server runs the very
+/// same estimators on its journal rows (server/incident_server.h).
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/beacons/trail_estimator.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/registry.h"
+
+namespace trailmark {
+
+/// Progress: fraction done in [0, 1].
+using ProgressCallback = std::function<void(double fraction)>;
+
+struct PipelineContext {
+  const MissionDirectory& mission;
+  OptionValues options;  ///< --option key=value from the CLI
+  ProgressCallback progress = [](double) {};
+};
+
+/// The measurement streams a mission directory has.
+StreamSet PresentStreams(const MissionDirectory& mission);
+/// Whether the mission has what the pipeline needs (streams, floor plan, landmarks).
+bool CanRun(const PipelineSpec& pipeline, const MissionDirectory& mission);
+/// Names of the pipelines the mission can feed, in registry order.
+std::vector<std::string> RunnablePipelines(const MissionDirectory& mission);
+/// Throws InputError naming what the mission lacks for the pipeline (a missing file by its
+/// path); returns when it can run.
+void RequireCanRun(const PipelineSpec& pipeline, const MissionDirectory& mission);
+
+/// The floor the pipeline works on, loaded from the mission's plan (its `level` option, else
+/// the default floor); nullopt when the mission has none. `notes` (optional) gets a line
+/// naming the levels of a multi-floor plan.
+std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
+                                           const MissionDirectory& mission,
+                                           const OptionValues& options,
+                                           std::vector<std::string>* notes = nullptr);
+
+/// Runs the pipeline: estimates to `sink` in the order the estimator emits them. Throws
+/// InputError for bad input (file:line of the row an estimator refused) or a mission that
+/// lacks what the pipeline needs, std::invalid_argument for bad options.
+EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& context,
+                          EstimateSink& sink);
+
+struct RunResult {
+  std::string pipeline;
+  std::size_t estimates = 0;
+  double wall_time_s = 0;
+  EstimatorSummary summary;
+};
+
+/// Runs the pipeline and writes `out_dir`/estimates.csv and diagnostics.json.
+RunResult RunPipeline(const PipelineSpec& pipeline, const PipelineContext& context,
+                      const std::filesystem::path& out_dir);
+
+/// The way back out along an ultrasound beacon trail (`trailmark wayout`): the beacon map
+/// of the mission's rows up to `at_s` (default: the end), and the route of `agent` from the
+/// beacons heard in the last `window_s` seconds.
+beacons::WayOutReport ComputeWayOut(const MissionDirectory& mission, const std::string& agent,
+                                    std::optional<TimeS> at_s, double window_s = 3.0);
+
+}  // namespace trailmark
