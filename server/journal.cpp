@@ -1,50 +1,204 @@
 #include "server/journal.h"
 
+#include <fcntl.h>
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <stdexcept>
+#include <tuple>
 
 namespace trailmark::server {
 
 namespace {
 
+const char* kSalvageHint =
+    "`trailmark journal export FILE --mission DIR --out OUT --salvage` writes what is readable";
+
 struct Statement {
-  Statement(sqlite3* db, const char* sql, const std::filesystem::path& file) {
+  Statement(sqlite3* db, const char* sql, const std::filesystem::path& file)
+      : db(db), file(file) {
     if (sqlite3_prepare_v2(db, sql, -1, &stmt, nullptr) != SQLITE_OK) {
       throw std::runtime_error(file.string() + ": journal: " + sqlite3_errmsg(db));
     }
   }
   ~Statement() { sqlite3_finalize(stmt); }
+  /// True for a row, false at the end; any other result is an error, never the end of data.
+  bool Step() {
+    const int rc = sqlite3_step(stmt);
+    if (rc == SQLITE_ROW) return true;
+    if (rc == SQLITE_DONE) return false;
+    throw std::runtime_error(file.string() + ": journal: " + sqlite3_errmsg(db) +
+                             " (the file is damaged; " + kSalvageHint + ")");
+  }
+  /// A column's text; a NULL (what a damaged row reads as) is an error.
+  std::string Text(int column) const {
+    const unsigned char* text = sqlite3_column_text(stmt, column);
+    if (text == nullptr) {
+      throw std::runtime_error(file.string() + ": journal: a row without its column " +
+                               std::to_string(column) + " (the file is damaged; " +
+                               kSalvageHint + ")");
+    }
+    return reinterpret_cast<const char*>(text);
+  }
+  sqlite3* db;
+  const std::filesystem::path& file;
   sqlite3_stmt* stmt = nullptr;
 };
 
+/// What the high-water mark file says was acknowledged.
+struct HighWaterMark {
+  bool present = false;
+  long long commits = 0, rows = 0;
+};
+
+constexpr const char* kHighWaterMarkFormat =
+    "trailmark journal acknowledged: commits %020lld rows %020lld\n";
+
+HighWaterMark ReadHighWaterMark(const std::filesystem::path& file) {
+  HighWaterMark m;
+  std::ifstream in(file);
+  if (!in) return m;
+  std::string line;
+  std::getline(in, line);
+  if (std::sscanf(line.c_str(), "trailmark journal acknowledged: commits %lld rows %lld", &m.commits,
+                  &m.rows) != 2) {
+    throw std::runtime_error(file.string() + ": not a journal high-water mark ('" + line + "')");
+  }
+  m.present = true;
+  return m;
+}
+
 }  // namespace
 
-Journal::Journal(const std::filesystem::path& file) : file_(file) {
-  if (sqlite3_open(file.string().c_str(), &db_) != SQLITE_OK) {
+Journal::Journal(const std::filesystem::path& file, Open mode)
+    : file_(file), mode_(mode), acked_file_(file.string() + ".acked") {
+  const bool normal = mode == Open::kNormal;
+  const HighWaterMark acked = ReadHighWaterMark(acked_file_);
+  const std::string acked_text =
+      acked.present ? std::to_string(acked.commits) + " commits (" + std::to_string(acked.rows) +
+                          " rows) were acknowledged"
+                    : "";
+  std::error_code ec;
+  const bool exists = std::filesystem::exists(file, ec);
+  if (normal && exists && std::filesystem::file_size(file, ec) == 0) {
+    throw std::runtime_error(
+        file.string() + ": the journal is empty (0 bytes)" +
+        (acked.present ? " but " + acked_text : std::string()) +
+        ": refusing to take it for a new incident (remove it and " + acked_file_.string() +
+        " to start one, or restore the journal)");
+  }
+  if (normal && !exists && acked.present && acked.commits > 0) {
+    throw std::runtime_error(file.string() + ": the journal is missing but " + acked_text +
+                             " (" + acked_file_.string() +
+                             "): restore it, or remove the high-water mark to start a new "
+                             "incident");
+  }
+  if (!normal && !exists) throw std::runtime_error(file.string() + ": no such journal");
+  const int flags = normal ? SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE : SQLITE_OPEN_READONLY;
+  if (sqlite3_open_v2(file.string().c_str(), &db_, flags, nullptr) != SQLITE_OK) {
     const std::string why = db_ ? sqlite3_errmsg(db_) : "out of memory";
     sqlite3_close(db_);
     db_ = nullptr;
     throw std::runtime_error(file.string() + ": cannot open the journal: " + why);
   }
-  Exec("PRAGMA journal_mode=WAL");
-  Exec("PRAGMA synchronous=FULL");  // a commit is on disk before it returns
-  Exec(
-      "CREATE TABLE IF NOT EXISTS rows (seq INTEGER PRIMARY KEY AUTOINCREMENT, stream TEXT NOT "
-      "NULL, header TEXT NOT NULL, row TEXT NOT NULL, t REAL NOT NULL, node TEXT NOT NULL, "
-      "UNIQUE(stream, row))");
-  Statement last(db_, "SELECT stream, node, MAX(t) FROM rows GROUP BY stream, node", file_);
-  while (sqlite3_step(last.stmt) == SQLITE_ROW) {
-    last_t_[{reinterpret_cast<const char*>(sqlite3_column_text(last.stmt, 0)),
-             reinterpret_cast<const char*>(sqlite3_column_text(last.stmt, 1))}] =
-        sqlite3_column_double(last.stmt, 2);
+  try {
+    if (normal) {
+      Exec("PRAGMA journal_mode=WAL");
+      Exec("PRAGMA synchronous=FULL");  // a commit is on disk before it returns
+    }
+    {
+      Statement check(db_, "PRAGMA quick_check", file_);
+      const std::string verdict = check.Step() ? check.Text(0) : "no answer";
+      if (verdict != "ok") {
+        const std::string why = "the journal fails its integrity check (" + verdict + ")";
+        if (normal) throw std::runtime_error(file_.string() + ": " + why + "; " + kSalvageHint);
+        problems_.push_back(why);
+      }
+    }
+    if (normal) {
+      Exec(
+          "CREATE TABLE IF NOT EXISTS rows (seq INTEGER PRIMARY KEY AUTOINCREMENT, stream TEXT "
+          "NOT NULL, header TEXT NOT NULL, row TEXT NOT NULL, t REAL NOT NULL, node TEXT NOT "
+          "NULL, UNIQUE(stream, row))");
+      // Commits and rows counted in the transactions themselves (a journal of an older version
+      // starts counting at its rows).
+      Exec("CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value INTEGER NOT NULL)");
+      Exec("INSERT OR IGNORE INTO meta VALUES ('commits', 0)");
+      Exec("INSERT OR IGNORE INTO meta VALUES ('rows', (SELECT COUNT(*) FROM rows))");
+    }
+    try {
+      std::tie(counted_commits_, counted_rows_) = Counted();
+      if (acked.present && (counted_commits_ < acked.commits || counted_rows_ < acked.rows)) {
+        const std::string why =
+            "the journal holds " + std::to_string(counted_commits_) + " commits (" +
+            std::to_string(counted_rows_) + " rows) but " + acked_text + " (" +
+            acked_file_.string() +
+            "): its write-ahead log was lost or damaged, or the file was rolled back";
+        if (normal) throw std::runtime_error(file_.string() + ": " + why + "; " + kSalvageHint);
+        problems_.push_back(why);
+      }
+      Statement last(db_, "SELECT stream, node, MAX(t) FROM rows GROUP BY stream, node", file_);
+      while (last.Step()) {
+        last_t_[{last.Text(0), last.Text(1)}] = sqlite3_column_double(last.stmt, 2);
+      }
+    } catch (const std::runtime_error& e) {
+      if (normal) throw;
+      problems_.push_back(e.what());  // salvage: export reads what it can
+    }
+    if (normal) {
+      acked_fd_ = ::open(acked_file_.c_str(), O_WRONLY | O_CREAT, 0644);
+      if (acked_fd_ < 0) {
+        throw std::runtime_error(acked_file_.string() + ": cannot write the high-water mark: " +
+                                 std::strerror(errno));
+      }
+      WriteHighWaterMark(counted_commits_, counted_rows_);
+    }
+  } catch (...) {
+    if (acked_fd_ >= 0) ::close(acked_fd_);
+    sqlite3_close(db_);
+    db_ = nullptr;
+    throw;
   }
 }
 
-Journal::~Journal() { sqlite3_close(db_); }
+std::pair<long long, long long> Journal::Counted() const {
+  long long commits = 0, rows = 0;
+  bool have_meta = false;
+  {
+    Statement table(db_, "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'meta'",
+                    file_);
+    have_meta = table.Step();
+  }
+  if (have_meta) {
+    Statement meta(db_, "SELECT key, value FROM meta", file_);
+    while (meta.Step()) {
+      const std::string key = meta.Text(0);
+      if (key == "commits") commits = sqlite3_column_int64(meta.stmt, 1);
+      if (key == "rows") rows = sqlite3_column_int64(meta.stmt, 1);
+    }
+  }
+  return {commits, rows};
+}
+
+void Journal::WriteHighWaterMark(long long commits, long long rows) {
+  char text[128];
+  const int n = std::snprintf(text, sizeof text, kHighWaterMarkFormat, commits, rows);
+  if (::pwrite(acked_fd_, text, static_cast<std::size_t>(n), 0) != n || ::fdatasync(acked_fd_) != 0) {
+    throw std::runtime_error(acked_file_.string() + ": cannot write the high-water mark: " +
+                             std::strerror(errno));
+  }
+}
+
+Journal::~Journal() {
+  if (acked_fd_ >= 0) ::close(acked_fd_);
+  sqlite3_close(db_);
+}
 
 void Journal::Exec(const char* sql) const {
   char* error = nullptr;
@@ -57,6 +211,7 @@ void Journal::Exec(const char* sql) const {
 
 std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const Batch*>& batches) {
   std::lock_guard<std::mutex> lock(mutex_);
+  if (mode_ != Open::kNormal) throw std::runtime_error(file_.string() + ": opened to salvage only");
   std::vector<AppendResult> results(batches.size());
   const auto last_before = last_t_;
   Exec("BEGIN IMMEDIATE");
@@ -78,7 +233,7 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
         if (it == last_t_.end() || batch.t[i] >= it->second) continue;
         sqlite3_bind_text(exists.stmt, 1, batch.stream.c_str(), -1, SQLITE_TRANSIENT);
         sqlite3_bind_text(exists.stmt, 2, batch.rows[i].c_str(), -1, SQLITE_TRANSIENT);
-        repeat[i] = sqlite3_step(exists.stmt) == SQLITE_ROW;
+        repeat[i] = exists.Step();
         sqlite3_reset(exists.stmt);
         if (!repeat[i]) {
           const std::size_t line = i < batch.lines.size() ? batch.lines[i] : i + 2;
@@ -112,13 +267,25 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
         }
       }
     }
+    long long accepted = 0;
+    for (const auto& r : results) accepted += static_cast<long long>(r.accepted);
+    Statement count(db_,
+                    "UPDATE meta SET value = value + CASE key WHEN 'commits' THEN 1 ELSE ? END",
+                    file_);
+    sqlite3_bind_int64(count.stmt, 1, accepted);
+    if (count.Step()) throw std::runtime_error("unexpected row from UPDATE");
     Exec("COMMIT");
     ++commits_;
+    counted_commits_ += 1;
+    counted_rows_ += accepted;
   } catch (const std::exception& e) {
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
     last_t_ = last_before;
     throw std::runtime_error(file_.string() + ": journal: " + e.what());
   }
+  // Committed; acknowledged only once the high-water mark says so (else the caller answers
+  // that nothing was acknowledged, and a redelivery is a duplicate).
+  WriteHighWaterMark(counted_commits_, counted_rows_);
   return results;
 }
 
@@ -126,42 +293,68 @@ void Journal::ForEach(const std::function<void(const std::string&, const std::st
                                                const std::string&)>& visit) const {
   std::lock_guard<std::mutex> lock(mutex_);
   Statement select(db_, "SELECT stream, header, row FROM rows ORDER BY seq", file_);
-  while (sqlite3_step(select.stmt) == SQLITE_ROW) {
-    visit(reinterpret_cast<const char*>(sqlite3_column_text(select.stmt, 0)),
-          reinterpret_cast<const char*>(sqlite3_column_text(select.stmt, 1)),
-          reinterpret_cast<const char*>(sqlite3_column_text(select.stmt, 2)));
-  }
+  while (select.Step()) visit(select.Text(0), select.Text(1), select.Text(2));
 }
 
 std::size_t Journal::size() const {
   std::lock_guard<std::mutex> lock(mutex_);
   Statement count(db_, "SELECT COUNT(*) FROM rows", file_);
-  return sqlite3_step(count.stmt) == SQLITE_ROW
-             ? static_cast<std::size_t>(sqlite3_column_int64(count.stmt, 0))
-             : 0;
+  if (!count.Step()) throw std::runtime_error(file_.string() + ": journal: no row count");
+  return static_cast<std::size_t>(sqlite3_column_int64(count.stmt, 0));
 }
 
-void Journal::Export(const std::filesystem::path& dir,
-                     const std::filesystem::path& mission_json) const {
+std::size_t Journal::Export(const std::filesystem::path& dir,
+                            const std::filesystem::path& mission_json) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  // Every readable row by seq (a damaged page stops a query: salvage resumes after it), then
+  // each stream in time order, arrival order among equal times.
+  struct Row {
+    double t;
+    long long seq;
+    std::string row;
+  };
+  std::map<std::string, std::pair<std::string, std::vector<Row>>> streams;  // header, rows
+  long long next = 0, skip = 1;
+  for (int attempt = 0; attempt < 64; ++attempt) {
+    Statement select(db_,
+                     "SELECT seq, stream, header, row, t FROM rows WHERE seq >= ? ORDER BY seq",
+                     file_);
+    sqlite3_bind_int64(select.stmt, 1, next);
+    try {
+      while (select.Step()) {
+        const long long seq = sqlite3_column_int64(select.stmt, 0);
+        auto& [header, rows] = streams[select.Text(1)];
+        if (header.empty()) header = select.Text(2);
+        rows.push_back({sqlite3_column_double(select.stmt, 4), seq, select.Text(3)});
+        next = seq + 1;
+        skip = 1;
+      }
+      break;
+    } catch (const std::runtime_error& e) {
+      if (mode_ != Open::kSalvage) throw;
+      problems_.push_back(std::string("unreadable rows from seq ") + std::to_string(next) +
+                          " on (" + e.what() + ")");
+      next += skip;  // past the damaged rows, further each time
+      skip *= 2;
+    }
+  }
   std::filesystem::create_directories(dir);
   std::filesystem::copy_file(mission_json, dir / "mission.json",
                              std::filesystem::copy_options::overwrite_existing);
-  std::lock_guard<std::mutex> lock(mutex_);
-  std::map<std::string, std::ofstream> files;
-  Statement select(db_, "SELECT stream, header, row FROM rows ORDER BY stream, t, seq", file_);
-  while (sqlite3_step(select.stmt) == SQLITE_ROW) {
-    const std::string stream = reinterpret_cast<const char*>(sqlite3_column_text(select.stmt, 0));
-    auto it = files.find(stream);
-    if (it == files.end()) {
-      it = files.emplace(stream, std::ofstream(dir / stream)).first;
-      it->second << reinterpret_cast<const char*>(sqlite3_column_text(select.stmt, 1)) << "\n";
-    }
-    it->second << reinterpret_cast<const char*>(sqlite3_column_text(select.stmt, 2)) << "\n";
+  std::size_t written = 0;
+  for (auto& [stream, content] : streams) {
+    auto& rows = content.second;
+    std::stable_sort(rows.begin(), rows.end(), [](const Row& a, const Row& b) {
+      return a.t != b.t ? a.t < b.t : a.seq < b.seq;
+    });
+    std::ofstream out(dir / stream);
+    out << content.first << "\n";
+    for (const Row& r : rows) out << r.row << "\n";
+    out.close();
+    if (!out) throw std::runtime_error((dir / stream).string() + ": cannot write the export");
+    written += rows.size();
   }
-  for (auto& [name, f] : files) {
-    f.close();
-    if (!f) throw std::runtime_error((dir / name).string() + ": cannot write the export");
-  }
+  return written;
 }
 
 }  // namespace trailmark::server

@@ -106,6 +106,11 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
   PipelineContext context{mission, options, [&](double f) { bar.Update(f); }};
   RunResult result = RunPipeline(pipeline, context, out);
   bar.Finish();
+  if (result.estimates == 0) {
+    fmt::print(stderr,
+               "warning: {} wrote no estimates for {} (diagnostics.json's notes may say why)\n",
+               name, mission_dir.string());
+  }
   return result;
 }
 

@@ -75,9 +75,10 @@ struct ServeOptions {
 };
 int Serve(const ServeOptions& options);
 int ServeLive(const ServeOptions& options);
-/// `trailmark journal export JOURNAL --mission DIR --out OUT`.
+/// `trailmark journal export JOURNAL --mission DIR --out OUT [--salvage]`: exit 3 when salvaging
+/// found the journal damaged (what was readable is written).
 int JournalExport(const std::filesystem::path& journal, const std::filesystem::path& mission,
-                  const std::filesystem::path& out);
+                  const std::filesystem::path& out, bool salvage = false);
 
 void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
                        const std::vector<std::string>& missions);

@@ -275,6 +275,9 @@ int main(int argc, char** argv) {
       ->add_option("--mission", journal_mission, "directory with the incident's mission.json")
       ->required();
   journal_export->add_option("--out", journal_out, "mission directory to write")->required();
+  bool journal_salvage = false;
+  journal_export->add_flag("--salvage", journal_salvage,
+                           "a damaged journal: write what is readable and say what is not (exit 3)");
   journal->require_subcommand(1);
 
   CLI11_PARSE(app, argc, argv);
@@ -391,7 +394,7 @@ int main(int argc, char** argv) {
         serve_options.token = std::getenv("TRAILMARK_TOKEN");
       return cli::Serve(serve_options);
     } else if (*journal_export) {
-      return cli::JournalExport(journal_file, journal_mission, journal_out);
+      return cli::JournalExport(journal_file, journal_mission, journal_out, journal_salvage);
     } else if (*wayout) {
       const MissionDirectory m(wayout_mission);
       const beacons::WayOutReport w = ComputeWayOut(

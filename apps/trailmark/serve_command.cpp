@@ -105,13 +105,19 @@ int ServeLive(const ServeOptions& o) {
 }
 
 int JournalExport(const std::filesystem::path& journal, const std::filesystem::path& mission,
-                  const std::filesystem::path& out) {
+                  const std::filesystem::path& out, bool salvage) {
   if (!std::filesystem::exists(journal))
     throw std::invalid_argument(journal.string() + ": no such journal");
-  const server::Journal j(journal);
-  j.Export(out, mission / "mission.json");
-  fmt::print("exported {} rows from {} into {}\n", j.size(), journal.string(), out.string());
-  return 0;
+  server::Journal j(journal, salvage ? server::Journal::Open::kSalvage : server::Journal::Open::kNormal);
+  const std::size_t rows = j.Export(out, mission / "mission.json");
+  if (j.problems().empty()) {
+    fmt::print("exported {} rows from {} into {}\n", rows, journal.string(), out.string());
+    return 0;
+  }
+  fmt::print("salvaged {} rows from {} into {}; the journal is damaged:\n", rows,
+             journal.string(), out.string());
+  for (const auto& p : j.problems()) fmt::print("  {}\n", p);
+  return 3;
 }
 
 int Serve(const ServeOptions& o) {

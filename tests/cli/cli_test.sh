@@ -248,6 +248,16 @@ sort -u "$dir/acked.txt" > "$dir/acked.sorted"
 tail -n +2 "$dir/exported/steps.csv" | sort > "$dir/journal.sorted"
 cmp -s "$dir/acked.sorted" "$dir/journal.sorted" || fail "journal differs from what was acknowledged"
 [ "$(wc -l < "$dir/journal.sorted")" -eq "$(tail -n +2 "$dir/m2/steps.csv" | wc -l)" ] || fail "journal row count"
+# A damaged journal (its second page zeroed) is refused — by export and by the server — naming
+# the salvage; the salvage writes what is readable and exits 3.
+cp "$dir/j.db" "$dir/jd.db" && cp "$dir/j.db.acked" "$dir/jd.db.acked"
+dd if=/dev/zero of="$dir/jd.db" bs=4096 seek=1 count=1 conv=notrunc 2> /dev/null
+run_failing "$TM" journal export "$dir/jd.db" --mission "$dir/live" --out "$dir/jdx"
+[ $rc -ne 0 ] && grep -q "salvage" "$dir/err" || { cat "$dir/err"; fail "damaged journal exported"; }
+run_failing "$TM" serve --live "$dir/live" --journal "$dir/jd.db" --port 0 --token T
+[ $rc -ne 0 ] && grep -q "salvage" "$dir/err" || { cat "$dir/err"; fail "server started on a damaged journal"; }
+run_failing "$TM" journal export "$dir/jd.db" --mission "$dir/live" --out "$dir/jds" --salvage
+[ $rc -eq 3 ] || { cat "$dir/err"; fail "salvage exit code $rc"; }
 run_failing "$TM" energy --sleep-ua 0
 [ $rc -ne 0 ] || fail "energy with zero sleep current"
 

@@ -235,6 +235,16 @@ TEST(Streams, EveryKindRoundTripsExactly) {
                   });
 }
 
+TEST(CsvReader, ImuValuesBeyondAnySensorAreRefused) {
+  TempDir dir;
+  const std::string header = "t,agent,ax,ay,az,gx,gy,gz\n";
+  EXPECT_EQ(ErrorOf<ImuSample>(dir.File("imu.csv", header + "0,ff1,0,0,9.8,0.1,0,0\n")), "");
+  EXPECT_THAT(ErrorOf<ImuSample>(dir.File("i1.csv", header + "0,ff1,1e300,0,9.8,0,0,0\n")),
+              AllOf(HasSubstr("i1.csv:2:"), HasSubstr("beyond any foot IMU")));
+  EXPECT_THAT(ErrorOf<ImuSample>(dir.File("i2.csv", header + "0,ff1,0,0,9.8,0,0,360\n")),
+              AllOf(HasSubstr("i2.csv:2:"), HasSubstr("deg/s?")));
+}
+
 TEST(CsvReader, BarometerRowsAreCheckedLikeEveryStream) {
   TempDir dir;
   const std::string header = "t,agent,pressure_hpa\n";

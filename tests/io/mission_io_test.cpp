@@ -92,6 +92,24 @@ TEST(MissionJson, BadInputNamesTheProblem) {
   EXPECT_THAT(ErrorOfMission("[1,2]"), HasSubstr("expected a JSON object"));
 }
 
+TEST(MissionJson, ImplausibleValuesAndPlansOutsideTheMissionAreRefused) {
+  // Values that would only come back as non-finite estimates: named at their JSON pointer.
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"agent","start":[0,0],"start_sigma":1e308}]})"),
+              AllOf(HasSubstr("/nodes/0/start_sigma"), HasSubstr("not a plausible sigma")));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"l","kind":"landmark","position":[-1e308,0]}]})"),
+              AllOf(HasSubstr("/nodes/0/position/0"), HasSubstr("not a position in a local frame")));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"l","kind":"landmark","position":[0,0],"position_sigma":1e300}]})"),
+              HasSubstr("/nodes/0/position_sigma"));
+  EXPECT_THAT(ErrorOfMission(R"({"nodes":[{"id":"a","kind":"agent","start_heading":1e9}]})"),
+              HasSubstr("/nodes/0/start_heading"));
+  for (const char* plan : {"/etc/passwd", "../other/floorplan.geojson", "a/../../x.geojson"}) {
+    EXPECT_THAT(ErrorOfMission(std::string(R"({"floorplan":")") + plan + R"("})"),
+                AllOf(HasSubstr("/floorplan"), HasSubstr("not a file of the mission directory")))
+        << plan;
+  }
+  EXPECT_EQ(ErrorOfMission(R"({"floorplan":"plans/level0.geojson"})"), "");
+}
+
 TEST(MissionDirectory, DroppedCrumbsJoinTheRegistryAndUnknownIdsFail) {
   TempDir dir;
   dir.File("mission.json", R"({"nodes":[{"id":"base","kind":"base","position":[0,0,0]},

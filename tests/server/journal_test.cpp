@@ -97,5 +97,102 @@ TEST(Journal, AGroupCommitsOnceAndExportsEachStreamInTimeOrder) {
                 "\n0,1,ff1,1,0,0,,,\n1,2,ff1,1,0,0,,,\n2,3,ff2,1,0,0,,,\n3,4,ff2,1,0,0,,,\n");
 }
 
+/// A journal of `commits` commits of 20 steps each, closed (checkpointed into the file).
+void Fill(const std::filesystem::path& file, int commits) {
+  Journal j(file);
+  for (int k = 0; k < commits; ++k) {
+    std::vector<double> t;
+    for (int i = 0; i < 20; ++i) t.push_back(2 + 20 * k + i);
+    ASSERT_EQ(j.Append(Steps("ff1", t)).accepted, 20u);
+  }
+}
+
+void Damage(const std::filesystem::path& file, std::size_t offset, std::size_t bytes,
+            bool flip) {
+  std::fstream f(file, std::ios::in | std::ios::out | std::ios::binary);
+  std::string block(bytes, '\0');
+  if (flip) {
+    f.seekg(static_cast<std::streamoff>(offset));
+    f.read(block.data(), static_cast<std::streamsize>(bytes));
+    for (auto& c : block) c = static_cast<char>(~c);
+  }
+  f.seekp(static_cast<std::streamoff>(offset));
+  f.write(block.data(), static_cast<std::streamsize>(bytes));
+}
+
+std::string OpenError(const std::filesystem::path& file) {
+  try {
+    Journal j(file);
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Journal, AZeroedPageIsRefusedAndSalvageWritesWhatIsReadable) {
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  Fill(file, 100);  // 2,000 rows: many pages
+  ASSERT_GT(std::filesystem::file_size(file), 12 * 4096u);
+  Damage(file, 8 * 4096, 4096, false);  // one page of rows zeroed
+  EXPECT_THAT(OpenError(file), ::testing::HasSubstr("--salvage"));
+  Journal salvage(file, Journal::Open::kSalvage);
+  std::ofstream(dir.path() / "mission.json") << "{}";
+  const std::size_t rows = salvage.Export(dir.path() / "out", dir.path() / "mission.json");
+  EXPECT_FALSE(salvage.problems().empty());
+  EXPECT_LT(rows, 2000u);
+  EXPECT_GT(rows, 1000u);  // the rest is written
+  EXPECT_THROW(salvage.Append(Steps("ff1", {5000})), std::runtime_error);
+}
+
+TEST(Journal, FlippedBytesAreRefused) {
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  Fill(file, 50);
+  Damage(file, std::filesystem::file_size(file) / 2, 200, true);
+  EXPECT_THAT(OpenError(file), ::testing::AnyOf(::testing::HasSubstr("integrity"),
+                                                 ::testing::HasSubstr("damaged"),
+                                                 ::testing::HasSubstr("malformed")));
+}
+
+TEST(Journal, ALostWriteAheadLogIsDetectedAtOpen) {
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  const auto copy = dir.path() / "copy.db";
+  {
+    Journal j(file);
+    j.Append(Steps("ff1", {1, 2}));
+    j.Append(Steps("ff1", {3, 4}));
+    // What a crash that lost the write-ahead log leaves: the file without its WAL (the commits
+    // are still only in incident.db-wal), with the high-water mark of what was acknowledged.
+    std::filesystem::copy_file(file, copy);
+    std::filesystem::copy_file(dir.path() / "incident.db.acked", dir.path() / "copy.db.acked");
+  }
+  const std::string why = OpenError(copy);
+  EXPECT_THAT(why, ::testing::HasSubstr("holds 0 commits (0 rows) but 2 commits (4 rows) were "
+                                        "acknowledged"));
+  EXPECT_THAT(why, ::testing::HasSubstr("write-ahead log"));
+  // The original reopens with all its rows, and counts on.
+  Journal j(file);
+  EXPECT_EQ(j.size(), 4u);
+  j.Append(Steps("ff1", {5}));
+}
+
+TEST(Journal, AnEmptyOrMissingJournalIsNotANewIncident) {
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  Fill(file, 2);
+  std::filesystem::resize_file(file, 0);
+  EXPECT_THAT(OpenError(file), ::testing::HasSubstr("empty (0 bytes) but 2 commits (40 rows)"));
+  std::filesystem::remove(file);
+  EXPECT_THAT(OpenError(file), ::testing::HasSubstr("missing but 2 commits"));
+  // Without the high-water mark it is a new incident.
+  std::filesystem::remove(dir.path() / "incident.db.acked");
+  EXPECT_EQ(OpenError(file), "");
+  // A zero-byte file is never taken for a new incident.
+  std::ofstream(dir.path() / "zero.db").close();
+  EXPECT_THAT(OpenError(dir.path() / "zero.db"), ::testing::HasSubstr("empty (0 bytes)"));
+}
+
 }  // namespace
 }  // namespace trailmark::server

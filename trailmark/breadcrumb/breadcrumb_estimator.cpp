@@ -213,7 +213,8 @@ void BreadcrumbEstimator::Finish(EstimateSink& sink) {
   for (const auto& id : agents_) {
     if (std::isfinite(loc_->AgentTime(id))) EmitAgent(id, sink);
   }
-  EmitStatic(t_last_, true, sink);
+  // The final rows at the end of the mission (negative mission times too); with no data, at 0.
+  EmitStatic(any_ ? t_last_ : 0.0, true, sink);
 }
 
 std::optional<Estimate> BreadcrumbEstimator::Current(const std::string& node) const {

@@ -58,7 +58,7 @@ class BreadcrumbEstimator : public OnlineEstimator {
   std::map<std::string, Vec2> last_static_;
   std::map<std::string, Estimate> current_;
   std::vector<float> latency_us_;
-  TimeS t_last_ = 0, next_static_ = -1e300;
+  TimeS t_last_ = -1e300, next_static_ = -1e300;  ///< t_last_: the latest row's time
   bool any_ = false;
   std::size_t ignored_ = 0;
 };

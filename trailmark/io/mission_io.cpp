@@ -1,6 +1,8 @@
 #include "trailmark/io/mission_io.h"
 
 #include <fmt/format.h>
+
+#include <cmath>
 #include <fmt/ranges.h>
 
 #include <algorithm>
@@ -27,6 +29,13 @@ std::optional<double> OptNumber(const json& obj, const char* key, const std::str
   return Number(obj[key], source, where + "/" + key);
 }
 
+// Plausibility bounds (issue 30): beyond them a value is a wrong unit or a corrupted file, and
+// it would only come back as a non-finite estimate. 10,000 km is beyond any incident's frame
+// (a local frame in metres; latitude/longitude must be projected first).
+constexpr double kMaxCoordinateM = 1e7;
+constexpr double kMaxSigmaM = 1e5;       // 100 km: "unknown" is the absent key, not 1e308
+constexpr double kMaxHeadingRad = 1e3;   // a few hundred turns: degrees or garbage beyond
+
 Vec3 Position(const json& j, const std::string& source, const std::string& where) {
   if (!j.is_array() || j.size() < 2 || j.size() > 3) {
     Bad(source, where, "expected [x, y] or [x, y, z] in metres");
@@ -34,6 +43,11 @@ Vec3 Position(const json& j, const std::string& source, const std::string& where
   Vec3 p = Vec3::Zero();
   for (std::size_t i = 0; i < j.size(); ++i) {
     p[static_cast<int>(i)] = Number(j[i], source, fmt::format("{}/{}", where, i));
+    if (std::abs(p[static_cast<int>(i)]) > kMaxCoordinateM) {
+      Bad(source, fmt::format("{}/{}", where, i),
+          fmt::format("{:g} m is not a position in a local frame (|x| <= {:g} m)",
+                      p[static_cast<int>(i)], kMaxCoordinateM));
+    }
   }
   return p;
 }
@@ -105,6 +119,16 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
             std::pair{"start_sigma", node.start_sigma_m},
             std::pair{"start_heading_sigma", node.start_heading_sigma_rad}}) {
         if (sigma && *sigma < 0) Bad(source, where + "/" + key, "must not be negative");
+        if (sigma && *sigma > kMaxSigmaM) {
+          Bad(source, where + "/" + key,
+              fmt::format("{:g} is not a plausible sigma (at most {:g}; leave the key out when "
+                          "unknown)",
+                          *sigma, kMaxSigmaM));
+        }
+      }
+      if (node.start_heading_rad && std::abs(*node.start_heading_rad) > kMaxHeadingRad) {
+        Bad(source, where + "/start_heading",
+            fmt::format("{:g} is not a heading in radians", *node.start_heading_rad));
       }
       if (node.kind == NodeKind::kBase && !node.position) {
         Bad(source, where, "a base node needs its known 'position'");
@@ -132,6 +156,16 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
   }
   if (root.contains("floorplan") && !root["floorplan"].is_null()) {
     info.floorplan = String(root, "floorplan", source, "/", false);
+    // A file of the mission directory: never an absolute path or one leading out of it.
+    const std::filesystem::path plan(*info.floorplan);
+    bool outside = plan.is_absolute() || plan.has_root_name() || info.floorplan->empty();
+    for (const auto& part : plan) outside = outside || part == "..";
+    if (outside) {
+      Bad(source, "/floorplan",
+          fmt::format("'{}' is not a file of the mission directory (a relative path without "
+                      "'..')",
+                      *info.floorplan));
+    }
   }
   return info;
 }

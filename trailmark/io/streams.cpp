@@ -25,6 +25,8 @@ constexpr double kMaxAbsTimeS = 1e10;        // ~317 years: Unix-epoch seconds s
 constexpr double kMinRssiDbm = -200.0;       // far below any receiver's sensitivity
 constexpr double kMaxRssiDbm = 60.0;         // above any transmitter's power (1 kW)
 constexpr double kMaxStepLengthM = 100.0;    // one row of steps.csv
+constexpr double kMaxAccelMps2 = 1e4;        // ~1,000 g: beyond every accelerometer (high-g: 400 g)
+constexpr double kMaxGyroRadps = 200.0;      // beyond any MEMS range (2000 deg/s = 35 rad/s)
 constexpr double kMinPressureHpa = 300.0;    // above the summit of Everest (~330 hPa)
 constexpr double kMaxPressureHpa = 1100.0;   // below the deepest mine's air (~1080 hPa)
 
@@ -46,6 +48,14 @@ struct Layout<ImuSample> {
     r.agent.assign(c.NodeId(k[1]));
     r.accel_b = Vec3(c.Double(k[2]), c.Double(k[3]), c.Double(k[4]));
     r.gyro_b = Vec3(c.Double(k[5]), c.Double(k[6]), c.Double(k[7]));
+    if (r.accel_b.cwiseAbs().maxCoeff() > kMaxAccelMps2) {
+      c.Fail(fmt::format("an acceleration of {:g} m/s^2 is beyond any foot IMU (|a| <= {:g})",
+                         r.accel_b.cwiseAbs().maxCoeff(), kMaxAccelMps2));
+    }
+    if (r.gyro_b.cwiseAbs().maxCoeff() > kMaxGyroRadps) {
+      c.Fail(fmt::format("an angular rate of {:g} rad/s is beyond any gyro (|w| <= {:g}; deg/s?)",
+                         r.gyro_b.cwiseAbs().maxCoeff(), kMaxGyroRadps));
+    }
   }
   static std::vector<std::string_view> Ids(const ImuSample& r) { return {r.agent}; }
   static void Format(CsvWriter& w, const ImuSample& r) {

@@ -292,7 +292,10 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   }
 }
 
-void LandmarkEstimator::Finish(EstimateSink& sink) { EmitLandmarks(t_last_, sink); }
+void LandmarkEstimator::Finish(EstimateSink& sink) {
+  // At the end of the mission (negative mission times too); with no data, at 0.
+  EmitLandmarks(first_ ? 0.0 : t_last_, sink);
+}
 
 std::optional<Estimate> LandmarkEstimator::Current(const std::string& node) const {
   if (const auto it = agents_.find(node); it != agents_.end()) {

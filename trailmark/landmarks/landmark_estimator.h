@@ -116,7 +116,7 @@ class LandmarkEstimator : public OnlineEstimator {
   std::vector<radio::CalibrationPair> calibration_;
   std::vector<std::string> setup_notes_;
   std::set<std::string> solve_notes_;  ///< the latest solve's geometry report
-  TimeS t_last_ = 0;
+  TimeS t_last_ = -1e300;  ///< the latest row's time
   bool first_ = true;
   int refits_ = 0;
   std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0;
