@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Google Benchmark: I/O throughput per stream kind (rows/s), the wall index, and the pdr
 // pipeline on the default mission. `trailmark bench` prints the same figures as a table.
 #include <benchmark/benchmark.h>

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # Fails when a file of the core layer (FILES, |-separated) includes a header of a higher layer
 # or of file, CLI, HTTP, MQTT, database or logging code. Writes STAMP when all pass.
 set(forbidden

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # Turns a text file into a C++ header holding it as a raw string split into chunks (compilers
 # limit the length of one string literal).
 file(READ ${IN} content)

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # Turns the Vite build of the dashboard (every file under DIR) into a C++ source defining
 # trailmark::server::FindWebAsset, so that the server binary serves it without files on disk.
 file(GLOB_RECURSE files RELATIVE ${DIR} ${DIR}/*)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The papers' experiments on simulated equivalents (and on recorded data where the paper's
 /// data is public), printed side by side with the published figures: `trailmark reproduce

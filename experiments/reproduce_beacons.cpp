@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark reproduce beacons` (static part): the ultrasound-beacons paper's MDS beacon
 // localization (sec. 5, Figs. 4-5) over 100 simulations per point, with shortest-path and RSSI
 // completion, and the SMACOF refinement on the measured links (ours).

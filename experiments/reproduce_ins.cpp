@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark reproduce ins`: the ZUPT INS on the recorded foot-IMU sets of ../shared/data with
 // one configuration per detector, side by side with the peers' published figures.
 

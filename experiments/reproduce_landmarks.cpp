@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark reproduce landmarks`: the radio-landmarks paper's stop-and-go experiment (sec. 6.1-
 // 6.2) on simulated corridors, side by side with the paper.
 

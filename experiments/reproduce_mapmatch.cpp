@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark reproduce mapmatch`: the map-aided search paper's experiments (sec. V, Figs. 7-9)
 // on simulated equivalents: RMSE over time for known/unknown initial state, with/without
 // pseudo observations and resampling, on both houses; the map-error indicator; speed.

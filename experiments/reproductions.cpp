@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark reproduce NAME`: the papers' experiments on simulated equivalents, side by side
 // with the published figures.
 

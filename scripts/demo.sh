@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # The main job: install, build Release, simulate the default mission, run every pipeline on it,
 # print the summary table and write out/demo/report.html.
 set -euo pipefail

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Installs everything trailmark needs to build, test and report, from Debian 12 packages
 # (and npm for the report's charting bundle). Idempotent: re-running installs nothing new.
 set -euo pipefail

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Install, build (Release with tests) and run every test: unit tests, the CLI end to end, the
 # installed-package consumer and a bounded libFuzzer run of the readers.
 set -euo pipefail

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "server/incident_server.h"
 
 #include <httplib.h>
@@ -11,6 +12,7 @@
 #include <stdexcept>
 
 #include "server/journal.h"
+#include "trailmark_generated/version.h"
 #include "trailmark/core/error.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
@@ -255,7 +257,8 @@ void IncidentServer::Start() {
     }
   });
   svr.Get("/api/health", [](const httplib::Request&, httplib::Response& res) {
-    res.set_content(R"({"ok": true})", "application/json");
+    res.set_content(nlohmann::json{{"ok", true}, {"version", TRAILMARK_VERSION}}.dump(),
+                    "application/json");
   });
   svr.Get("/api/state", [this, authorized, refuse, json](const httplib::Request& req,
                                                           httplib::Response& res) {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// `trailmark serve`: the incident server (issue 7). Replays a mission's online estimates at a
 /// chosen speed, or runs live on measurements POSTed over HTTP or received over MQTT (journaled

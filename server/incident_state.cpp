@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "server/incident_state.h"
 
 #include <fmt/format.h>

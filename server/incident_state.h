@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// What the incident commander sees, as data: the latest estimate of every node and the alerts
 /// derived from them — no data for a while (link lost), motionless (like a PASS alarm),

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "server/journal.h"
 
 #include <fcntl.h>

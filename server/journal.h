@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The durable journal of an incident (issue 7): every accepted measurement row is committed
 /// to SQLite (WAL, synchronous=FULL) before it is acknowledged; an exact repeat of a row already

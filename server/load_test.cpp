@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "server/load_test.h"
 
 #include <fmt/format.h>

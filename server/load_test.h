@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The live server under load (issue 7, item 7), on loopback in one process: N simulated
 /// firefighters, each a client thread that POSTs its foot IMU (100 Hz) in batches and its RSSI

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "server/mqtt_bridge.h"
 
 #include <mqtt/async_client.h>

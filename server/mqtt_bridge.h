@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Field devices over MQTT (issue 7): the server subscribes, with a persistent session and
 /// QoS 1, to the incident's topic tree

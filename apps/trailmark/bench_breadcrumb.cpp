@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark bench breadcrumb`: the issue-8 incident benchmark — many firefighters, hundreds of
 // breadcrumbs, a million measurements over hours — through the incremental GEN localizer, with
 // per-update latency, memory over time, and the reference costs of re-solving the batch problem

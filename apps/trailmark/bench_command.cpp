@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark bench`: rows/s reading and writing each stream kind, and the pdr pipeline on the
 // default mission, as a table and JSON. Google Benchmark (bench/) measures the same kernels.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // The CLI's commands. Each is a plain function so tests and the demo can call them.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // trailmark: the command-line contract (docs/cli.md).
 //   trailmark simulate SCENARIO --seed N --out DIR
 //   trailmark run --pipeline NAME MISSION --out DIR
@@ -18,6 +19,7 @@
 #include <map>
 
 #include "commands.h"
+#include "trailmark_generated/version.h"
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
@@ -47,7 +49,7 @@ std::map<std::string, std::string> ParseKeyValues(const std::vector<std::string>
 int main(int argc, char** argv) {
   CLI::App app{"trailmark: where every firefighter is, without GPS or infrastructure"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "trailmark 0.1.0");
+  app.set_version_flag("--version", std::string("trailmark ") + TRAILMARK_VERSION);
 
   std::string scenario = "office-loop";
   std::uint64_t seed = 1;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // A progress bar on stderr with rate and ETA, drawn only when stderr is a terminal (logs and CI
 // stay clean) and only after the task has run for a second.

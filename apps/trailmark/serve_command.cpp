@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // `trailmark serve --replay MISSION`: the incident server on a recorded or simulated mission.
 #include <fmt/format.h>
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The online beacon map (MDS + anchoring) and the way back out.
 #include "trailmark/beacons/beacon_map.h"
 

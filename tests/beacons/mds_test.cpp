@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // MDS beacon localization (ultrasound-beacons paper, sec. 5): exact distances give the exact
 // layout (up to a rigid motion and flip), shortest-path completion, Procrustes anchoring, and
 // SMACOF on the measured links removing the shortest-path bias.

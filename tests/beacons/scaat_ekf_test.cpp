@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The SCAAT EKF of the ultrasound-beacons paper (sec. 6), its ultrasound-only baseline and the
 // initialization from ultrasound: Jacobians against numerical derivatives, the EKF against a
 // plain linear Kalman filter where the model is linear, NEES consistency on simulated data,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The incremental GEN (breadcrumb paper sec. IV) against the batch references: BLUE from the
 // incidence matrix (eqs. (1)-(5)) on linear graphs, and dense Gauss-Newton with ranges.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The breadcrumb localizer: exact on a PDR-only chain, end to end on the simulated office loop
 // (the targets), two firefighters sharing a network, kicked crumbs, and never a NaN or
 // a non-PSD covariance under fuzzed measurement streams.

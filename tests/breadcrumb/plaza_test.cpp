@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Recorded data: CMU Plaza 1 (vehicle odometry + UWB ranges to 4 beacons of unknown position,
 // ../shared/data/plaza1-range-slam). The whole log through the breadcrumb pipeline: every
 // beacon initialized and localized better than GTSAM iSAM2's 3.32 m mean (folder README), no

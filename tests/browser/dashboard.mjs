@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The dashboard of `trailmark serve` in Debian's Chromium (headless, through playwright-core):
 // after a few seconds of replay the page lists the right firefighters near the positions the
 // API reports and keeps following them live (server-sent events); a click selects one; the

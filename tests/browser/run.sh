@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Browser test of the dashboard: a replayed two-firefighter mission (371 s at 10x, so the replay
 # outlasts a slow Chromium start on a loaded machine), Debian's Chromium headless.
 set -euo pipefail

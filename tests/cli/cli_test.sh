@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # End-to-end: the command-line contract on a fresh simulated mission, and bad input gives a
 # clear error with a non-zero exit code (never a crash).
 set -euo pipefail
@@ -13,6 +14,9 @@ matches() { grep "$@" > /dev/null; }
 run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 
 "$TM" --help | matches simulate || fail "--help"
+# One version: project(trailmark VERSION ...) is what the CLI says.
+version=$(sed -n 's/^project(trailmark VERSION \([0-9.]*\).*/\1/p' "$(dirname "$0")/../../CMakeLists.txt")
+"$TM" --version | matches "^trailmark $version\$" || fail "--version is not $version"
 for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy wayout serve journal; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // A separate project using the installed package: estimators of the library driven row by row
 // from memory, with no files at all — dead reckoning, and the breadcrumb paper's GEN estimator
 // behind the StepFrontEnd (INS steps from a foot IMU, rows in time order).

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Installs this build into a temporary prefix and builds a separate consumer against it.
 set -euo pipefail
 build="$1"; src="$2"

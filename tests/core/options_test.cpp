@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // OptionTable: typed options from text, described once (core/options.h).
 #include "trailmark/core/options.h"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // TimeOrderBuffer against a reference: a stable sort of the same rows by (time, stream).
 #include "trailmark/core/time_order_buffer.h"
 

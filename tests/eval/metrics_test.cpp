@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Metrics against hand-computed cases.
 #include <gtest/gtest.h>
 

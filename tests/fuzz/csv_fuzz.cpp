@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // libFuzzer target: arbitrary bytes as every stream kind and as mission.json / GeoJSON. Any
 // outcome but an InputError (or a clean read) is a bug: crashes, hangs, leaks, UB.
 #include <cstdint>

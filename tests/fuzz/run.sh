@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # Builds the libFuzzer target with clang (ASan + UBSan) and runs it for a bounded time on a
 # seed corpus of valid and broken files.
 set -euo pipefail

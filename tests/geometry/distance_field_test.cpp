@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The walls' distance field against the exact point-to-segment distance.
 #include "trailmark/geometry/distance_field.h"
 

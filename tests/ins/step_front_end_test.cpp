@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Dead reckoning and the StepFrontEnd (how every steps-based estimator gets its steps and its
 // row order) against exact references.
 #include "trailmark/ins/step_front_end.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The ZUPT INS: an exact reference (pure translation with known acceleration pulses), drift of
 // a stationary IMU for 10 minutes within what ZUPTs allow, detectors against labelled stance,
 // bad units reported, and the recorded PyShoe trials (skipped without ../shared/data).

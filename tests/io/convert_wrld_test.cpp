@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The WRLD indoor-map converter: exact metres on a hand-made building, named errors, and the
 // real Westport House map (../shared/data/floorplan-westport-house, read in place; skipped
 // without it) converted into a mission whose floors read back as they were converted.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Every reader rejects bad input with file, line and problem; good input in any column order.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The landmark UKF: equal to a linear Kalman filter on the linear parts (prediction and
 // acceleration/velocity updates), an RSSI update that moves the estimate toward a landmark it
 // hears loudly, covariances symmetric positive definite throughout.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Stop-and-go localization (radio-landmarks paper, sec. 5.3): exact ranges converge to the truth,
 // handheld localization with known landmarks, the solvability condition of eq. (8), degenerate
 // geometry reported, a robust loss against NLOS outliers, and the energy model of sec. 4.2.

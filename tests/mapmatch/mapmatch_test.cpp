@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Map-aided search (mapmatch/): pattern extraction on hand-made floor plans (exact node
 // sequences), floor-plan checks, eq. (1), ICP on known transforms, pattern comparison of an
 // exact pattern, and the particle filter's wall constraint.

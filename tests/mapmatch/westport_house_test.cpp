@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The map-aided search on a real building's floor plan: Westport House (Dundee), floor 1, from
 // the WRLD indoor-map example in ../shared/data/floorplan-westport-house (CC BY 4.0, WRLD; read
 // in place, not copied). The walls there are polygons with thickness, the outer wall has

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: MIT
 # Shared by the MQTT tests (sourced): a scratch directory cleaned up on exit, `fail`, and
 # `start_broker "CONFIG LINES"`, which starts Mosquitto on a free loopback port (sets $port and
 # $broker_pid) with the given configuration after its listener line.

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
 # MQTT end to end: a Mosquitto broker started here on a free loopback port, `trailmark serve
 # --live --mqtt`, devices publishing rows (QoS 1), a malformed message, a last-will "lost"; the
 # state over HTTP, the retained estimate over MQTT, and the journal equal to what was published.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The ultrasound-beacon pipelines end to end on simulated lab missions.
 
 #include <gtest/gtest.h>

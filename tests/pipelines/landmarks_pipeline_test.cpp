@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The landmark pipelines end to end on the simulated stop-and-go corridor mission.
 #include <gtest/gtest.h>
 

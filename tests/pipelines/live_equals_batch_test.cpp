@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Batch and live are the same code: every pipeline of the registry, fed a mission row by row
 // through the live path (the estimator the server builds, Feed::kLive), gives the batch run's
 // estimates — node by node, the same rows, bit for bit — whether the rows arrive in time order

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The mapmatch pipeline end to end on the simulated house search, and its input checks.
 
 #include <gtest/gtest.h>

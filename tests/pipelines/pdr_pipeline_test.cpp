@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The pdr pipeline against an exact reference: error-free steps must reproduce the truth.
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The pipeline registry: one table that the CLI, the server and the docs read.
 #include "trailmark/pipelines/registry.h"
 

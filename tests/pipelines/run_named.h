@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 // Runs a pipeline of the registry by name on a mission directory (the batch run), for tests.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The same mission an hour earlier (mission times may be negative, spec) gives the same
 // estimates an hour earlier: every pipeline of the registry, node by node. Catches a clock that
 // starts at 0 (the final rows of crumbs and landmarks were stamped at t = 0, after a mission

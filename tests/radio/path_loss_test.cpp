@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Radio model: exact recovery of the log-distance (+ body) parameters, trimming, encounter and
 // link-change detectors.
 #include "trailmark/radio/path_loss.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The incident state behind `trailmark serve`: the /api/state contract and the alerts.
 #include "server/incident_state.h"
 

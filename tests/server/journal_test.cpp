@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The incident journal: committed rows survive reopening, repeats are dropped, rows out of time
 // order are refused without journaling anything, group commits, export in time order.
 #include "server/journal.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The live server runs the batch run's estimators: a mission posted as its devices would (CSV
 // bodies, journaled, committed, fed to the estimator) gives the batch estimates, node by node,
 // bit for bit — but the last ones, which wait for data after them (the reorder window, a step

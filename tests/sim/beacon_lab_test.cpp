@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The simulated ultrasound-beacon lab: deployment rules (sec. 4), the moving-node ultrasound
 // characterization (sec. 3.B), the retreat by the smallest-id rule.
 #include "trailmark/sim/beacon_lab.h"

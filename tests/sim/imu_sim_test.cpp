@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Foot-IMU simulation against the INS: a perfect IMU is integrated back to the true foot path
 // (the simulator and the mechanization agree), the tactical-grade closed 400 m loop ends within
 // 1 % of the distance (issue 3), stairs climb, and the output is deterministic per seed.

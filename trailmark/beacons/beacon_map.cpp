@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/beacons/beacon_map.h"
 
 #include <fmt/format.h>

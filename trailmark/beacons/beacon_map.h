@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The beacon trail as a tracker needs it, built online: beacon-to-beacon ultrasound ranges
 /// (median per pair), positions from MDS with shortest-path completion and SMACOF refinement

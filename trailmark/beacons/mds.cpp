@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/beacons/mds.h"
 
 #include "trailmark/geometry/rigid_fit.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Static localization of dropped beacons (ultrasound-beacons paper, sec. 5): classical
 /// multidimensional scaling (Torgerson; Shang et al. 2003) on a distance matrix whose missing

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/beacons/scaat_ekf.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Tracking along an ultrasound beacon trail (ultrasound-beacons paper, sec. 6).
 ///

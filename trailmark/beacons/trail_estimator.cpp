@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/beacons/trail_estimator.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The ultrasound-beacons paper's estimators as one online estimator over an incident:
 ///  - the beacon map (beacon_map.h) from beacon-to-beacon ultrasound ranges, by MDS with

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/breadcrumb/batch_reference.h"
 
 #include <Eigen/Dense>

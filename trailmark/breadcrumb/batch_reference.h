@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Batch references for the incremental GEN estimator (tests and benchmarks only).
 ///

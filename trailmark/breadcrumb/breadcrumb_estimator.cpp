@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/breadcrumb/breadcrumb_estimator.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// `breadcrumb`: the collaborative localization of the breadcrumb paper (the GEN estimator,
 /// localizer.h) as an online estimator over an incident: PDR steps, RSSI between all nodes,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/breadcrumb/gen_network.h"
 
 #include <Eigen/Dense>

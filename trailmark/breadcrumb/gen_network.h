@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The generalized electrical network (GEN) of the breadcrumb paper, section IV: the
 /// information form of a relative-measurement graph, kept incrementally.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/breadcrumb/localizer.h"
 
 #include <fmt/format.h>

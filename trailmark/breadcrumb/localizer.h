@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Collaborative localization of firefighters and breadcrumbs (breadcrumb paper, sections
 /// IV-E and IV-F) on top of the GEN (gen_network.h).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Errors in user input carry the file, the line (0 when not applicable) and the problem, and
 /// print as "file:line: problem" like a compiler diagnostic.

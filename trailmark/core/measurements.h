@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// One struct per row kind of the mission format (spec: "Streams"). Plain values, no I/O.
 

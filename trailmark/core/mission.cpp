@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/core/mission.h"
 
 namespace trailmark {

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The in-memory description of a mission (mission.json of the spec). No I/O here.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/core/online_estimator.h"
 
 #include <algorithm>

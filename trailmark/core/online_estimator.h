@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The one interface every estimator of trailmark implements (pdr, ins, breadcrumb,
 /// landmarks-stopgo, landmarks-ukf, beacons-mds, beacons-ekf, mapmatch), as OpenVINS'

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Typed options from `key=value` text, described once. Every estimator has an `Options` struct
 /// whose member initializers are its defaults (the paper's, or ours with the reason); next to it

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Deterministic random numbers: the same seed gives the same mission on every platform
 /// (std::normal_distribution is implementation-defined, so the normal draw is our own).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Rows held until no earlier row can still come, then handed out in time order: by time, then
 /// by stream (the MissionRow variant's order: events, steps, ranges, bearings, RSSI, IMU,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/core/types.h"
 
 #include <cmath>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Basic value types shared by every layer of trailmark. No I/O here.
 

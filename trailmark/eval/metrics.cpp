@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/eval/metrics.h"
 
 #include <algorithm>

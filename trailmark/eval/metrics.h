@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Accuracy metrics of estimates against truth (spec: "metrics.json"). Kept apart from every
 /// estimator, as OpenVINS keeps ov_eval apart. No I/O (io/metrics_io writes metrics.json).

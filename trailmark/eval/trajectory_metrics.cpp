@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/eval/trajectory_metrics.h"
 
 #include "trailmark/geometry/rigid_fit.h"

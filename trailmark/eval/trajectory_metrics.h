@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Trajectory metrics of the inertial-navigation literature. No I/O.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/geometry/distance_field.h"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The distance to the nearest wall, sampled on a square grid over a floor plan and clamped
 /// at `max_distance_m` (a wall farther than that counts as "far"). Built by visiting, for each

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/geometry/floor_plan.h"
 
 #include <algorithm>

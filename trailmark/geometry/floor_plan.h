@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// A floor plan in the navigation frame: walls, doors (openings in walls) and rooms, with a
 /// spatial index over the solid wall pieces. No I/O (io/floor_plan_geojson reads the file).

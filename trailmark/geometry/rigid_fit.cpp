@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/geometry/rigid_fit.h"
 
 #include <Eigen/Dense>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Least-squares rigid motion between two 2-D point sets (Kabsch/Umeyama without scale), with
 /// or without reflection. Used by trajectory alignment (eval/) and beacon anchoring (beacons/).

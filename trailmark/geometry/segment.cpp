@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/geometry/segment.h"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// 2-D segments and the predicates the floor plan needs. No I/O.
 

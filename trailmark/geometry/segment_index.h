@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Uniform-grid spatial index over 2-D segments for "does this step cross a wall?" and
 /// ray-casting queries. Walls of a building are short and evenly spread, so a grid with

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/ins/dead_reckoning.h"
 
 #include <fmt/format.h>

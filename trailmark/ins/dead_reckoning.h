@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Pedestrian dead reckoning: every agent starts at its `start` (or the single base, spec) and
 /// adds its steps. The baseline every other estimator is compared with, and the `pdr`

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/ins/ins_estimator.h"
 
 #include <fmt/format.h>

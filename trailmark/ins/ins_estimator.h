@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The zero-velocity INS (zupt_ins.h) for every agent of an incident, and the `ins` estimator:
 /// one ZuptIns per agent, created at its first IMU sample with the agent's start and heading

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/ins/step_front_end.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// How every steps-based estimator (pdr, breadcrumb, landmarks, beacons, mapmatch) gets its
 /// steps and its row order, in batch and live alike:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/ins/zupt_detectors.h"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Zero-velocity (stance) detectors for a foot-mounted IMU, as evaluated by Skog, Händel,
 /// Nilsson, Rantakokko, "Zero-velocity detection — an algorithm evaluation", IEEE TBME 2010

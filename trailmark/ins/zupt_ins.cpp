@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/ins/zupt_ins.h"
 
 #include <fmt/format.h>

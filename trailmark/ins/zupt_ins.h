@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Zero-velocity-aided inertial navigation for a foot-mounted IMU (Foxlin 2005; Skog et al.
 /// 2010; Nilsson et al. 2014, "Foot-mounted inertial navigation made easy" — OpenShoe).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Converters of the other recorded foot-IMU sets of ../shared/data into missions (see each
 /// folder's README for source, license and format). Throw InputError with file:line.

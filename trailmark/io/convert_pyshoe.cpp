@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/convert_pyshoe.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Converter: one trial of the PyShoe VICON set (../shared/data/pyshoe-vicon/<trial>.csv: t_s,
 /// accel, gyro, Vicon position per sample, zv_best) into the mission format: imu.csv (agent

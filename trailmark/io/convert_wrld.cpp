@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/convert_wrld.h"
 
 #include <fmt/format.h>

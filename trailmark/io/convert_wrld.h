@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Converter: a building in the WRLD Indoor Map Format v1 (wrld3d/wrld-indoor-maps-api:
 /// main.json naming the levels, one GeoJSON FeatureCollection per level in WGS84 lon/lat) into

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/csv.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Streaming CSV for the mission format: one header line, '#' comment lines, columns in any
 /// order, extra columns ignored, empty cell = unknown. Reads in fixed-size chunks, so memory

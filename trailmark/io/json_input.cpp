@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/json_input.h"
 
 #include <fmt/format.h>

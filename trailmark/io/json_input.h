@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Internal to io/: reading JSON input files with errors that name the file, the line (parse
 /// errors) or the JSON pointer of the offending value. Not part of the public headers' API

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/merged_stream.h"
 
 #include <optional>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Reads several streams of a mission directory as one sequence in time order (steps by t1,
 /// the time their displacement became known), as an online estimator receives them in a batch

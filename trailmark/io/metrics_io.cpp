@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/metrics_io.h"
 
 #include <fstream>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// metrics.json (spec: "Outputs of a pipeline").
 

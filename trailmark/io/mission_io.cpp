@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/io/mission_io.h"
 
 #include <fmt/format.h>

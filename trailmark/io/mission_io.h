@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// mission.json and the mission directory (spec: ../shared/spec/mission-format.md).
 

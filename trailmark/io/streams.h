@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Typed, streaming readers and writers for every CSV stream of the mission format.
 ///

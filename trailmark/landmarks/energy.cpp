@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/landmarks/energy.h"
 
 #include <algorithm>

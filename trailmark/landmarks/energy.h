@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Landmark battery lifetime (radio-landmarks paper, sec. 4.2, eqs. (1)-(2)). No I/O.
 ///   Q_left  = Q_bat - t_sleep * I_sleep                                              (1)

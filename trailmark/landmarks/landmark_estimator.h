@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The radio-landmarks paper's estimators as one online estimator over an incident:
 ///  - stop-and-go (sec. 5.3, 6.2): dead reckoning between stops; at every stop (events stop/go)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/landmarks/landmark_ukf.h"
 
 #include <Eigen/Cholesky>

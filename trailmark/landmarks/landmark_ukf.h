@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Unscented Kalman filter of the radio-landmarks paper (sec. 5.4, eqs. 18-22): state
 /// x = (M, V, A) — position, velocity, acceleration in 2-D (eq. 18); the Wiener-process

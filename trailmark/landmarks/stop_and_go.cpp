@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/landmarks/stop_and_go.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Stop-and-go localization of radio landmarks and standing positions (radio-landmarks paper,
 /// sec. 5.3, eqs. (6)-(17)). The handheld stops at q positions H_p and measures a range z_pj to

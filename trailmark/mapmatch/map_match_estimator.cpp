@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/mapmatch/map_match_estimator.h"
 
 #include <fmt/format.h>

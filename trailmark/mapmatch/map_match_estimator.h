@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// `mapmatch`: the map-aided search paper's navigation filter (sec. IV) as an online estimator:
 /// odometry (steps) and the floor plan (walls cannot be crossed), with pseudo observations from

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/mapmatch/particle_filter.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The information fusion of the map-aided search paper (sec. IV-E): a particle filter whose
 /// particles carry a position and the heading offset between the odometry frame and the map.

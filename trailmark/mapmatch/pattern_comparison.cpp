@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/mapmatch/pattern_comparison.h"
 
 #include <Eigen/Geometry>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Pattern comparison of the map-aided search paper (sec. IV-D, Algorithm 1): the last
 /// `pattern_length_m` of odometry is rotated to the building's principal directions (eq. 1),

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/mapmatch/search_map.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The floor plan as the map-aided search paper uses it (sec. IV-B, IV-C): walls as a
 /// topological graph, a square grid over the building, and the node sequences of directional

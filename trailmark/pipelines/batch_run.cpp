@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/pipelines/batch_run.h"
 
 #include <fmt/format.h>

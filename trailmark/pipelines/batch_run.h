@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The batch run of a pipeline on a mission directory (`trailmark run`): the streams it uses
 /// merged in time order (io/merged_stream.h) into its online estimator, the estimates to a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/pipelines/registry.h"
 
 #include <fmt/format.h>

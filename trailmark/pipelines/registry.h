@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The one table of trailmark's pipelines. Each entry names an online estimator of the library
 /// (core/online_estimator.h), the streams it needs and uses, what it can do, its options (the

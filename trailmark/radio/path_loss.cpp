@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/radio/path_loss.h"
 
 #include <Eigen/Dense>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// RSSI <-> distance with the log-distance path-loss model
 ///   rssi = alpha - 10 n log10(d / 1 m) + X,  X ~ N(0, sigma^2) in dB

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/report/html_report.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// One self-contained HTML report (works offline: Chart.js is embedded, nothing is fetched):
 /// floor plan, truth and estimated trajectories per pipeline, crumb/landmark estimates with 95 %

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The ultrasound-beacon experiment (ultrasound-beacons paper, sec. 4 and 7): a 15 x 9 m lab
 /// whose beacons are placed by the paper's deployment rules, a foot-mounted ultrasound node

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/house_search.h"
 
 #include <fmt/format.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The map-aided search paper's experiments (sec. V-A) as simulations: two houses and a
 /// firefighter doing directional (left- or right-hand) searches — following the walls at

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/imu_sim.h"
 
 #include <algorithm>

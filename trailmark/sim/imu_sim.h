@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Foot-mounted IMU simulation: the instrumented foot's true motion from a walk (stance while the
 /// other foot swings, then a swing to the next footprint two steps ahead), turned into specific

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/landmark_corridor.h"
 
 #include <cmath>

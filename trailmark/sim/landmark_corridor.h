@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The stop-and-go experiment of the radio-landmarks paper (sec. 6.1-6.2, Fig. 11): 5 landmarks
 /// in a corridor (smoke-detector style, alternating walls), a handheld that stops at 7 positions

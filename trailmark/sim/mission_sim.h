@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// The mission simulator engine: agents walking routes on a floor plan with PDR errors, each
 /// with a breadcrumb dispenser, one shared network of dropped crumbs and a base; RSSI between

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/pdr_error_model.h"
 
 #include <Eigen/Geometry>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Errors of a foot-mounted PDR (zero-velocity-aided INS) on each step.
 ///

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/rssi_channel.h"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Received signal strength between two nodes:
 ///   rssi = alpha - 10 n log10(d / 1 m) - L_walls - L_body - L_zones + X,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/scenarios.h"
 
 #include "trailmark/sim/beacon_lab.h"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Simulated missions with truth. Deterministic per seed. No I/O: io/mission_writer writes them.
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// A large synthetic incident for benchmarks (issue 8, item 7): many firefighters, each working
 /// its own sector of a big building for hours, dropping breadcrumbs and hearing the nearest ones.

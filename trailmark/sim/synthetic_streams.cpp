@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/synthetic_streams.h"
 
 #include <cmath>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// Synthetic rows of every stream kind, for I/O benchmarks and round-trip tests. The values are
 /// plausible (a walk at 1.2 m/s, 100 Hz IMU) but carry no scenario.

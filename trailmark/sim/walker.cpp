@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #include "trailmark/sim/walker.h"
 
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 #pragma once
 /// A pedestrian walking a route: steps at a realistic length and cadence, stops, and the true
 /// trajectory sampled at a fixed rate. Wall following builds routes from a floor plan.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Built into fixed file names (index.html, assets/app.js, assets/app.css) that the server
 // embeds; no external resources: the dashboard works on an isolated incident network.
 import { defineConfig } from 'vite';

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The server's JSON contract (docs/server.md): GET /api/state, /api/history, /api/floorplan and
 // the server-sent events of /api/events (each message: the state).
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // Pure helpers (no DOM): the 95 % ellipse of a 2-D covariance, the view transform, lookups in a
 // trail by time.
 import type { TrailRow } from './api';

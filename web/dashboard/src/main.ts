@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: MIT
 // The incident commander's dashboard: floor plan, every firefighter with position, 95 % ellipse,
 // trail and name; crumbs, landmarks, the base; status and alerts per firefighter; a timeline
 // to scrub back. Live through server-sent events; history from /api/history.
