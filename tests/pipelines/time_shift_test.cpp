@@ -67,21 +67,13 @@ void ExpectShifted(const std::string& pipeline, const SimulatedMission& sim) {
   }
 }
 
-SimulatedMission WithFootImu(SimulatedMission sim) {
-  ImuSimOptions imu;
-  imu.rate_hz = 100;
-  AddFootImu(sim, imu, 2);
-  sim.data.steps.clear();
-  return sim;
-}
-
 TEST(TimeShift, EveryPipelineGivesTheSameEstimatesEarlier) {
   TrainingBuildingOptions tb;
   tb.rooms_per_side = 1;
   const SimulatedMission building = SimulateTrainingBuilding(tb, 3);
   ExpectShifted("pdr", building);
   ExpectShifted("breadcrumb", building);
-  ExpectShifted("ins", WithFootImu(building));
+  ExpectShifted("ins", testing::WithFootImuOnly(building, 2));
   ExpectShifted("landmarks-stopgo", SimulateScenario("landmark-corridor", 1));
   ExpectShifted("landmarks-ukf", SimulateScenario("landmark-corridor", 1));
   ExpectShifted("beacons-mds", SimulateScenario("beacon-trail", 1));

@@ -113,16 +113,8 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
   EXPECT_GT(compared, 10 * held);
 }
 
-SimulatedMission WithFootImu(SimulatedMission sim) {
-  ImuSimOptions imu;
-  imu.rate_hz = 100;
-  AddFootImu(sim, imu, 3);
-  sim.data.steps.clear();
-  return sim;
-}
-
 TEST(LiveServer, BeaconsEkfOnTheJournalIsTheBatchRun) {
-  ExpectLiveIsTheBatchPrefix("beacons-ekf", WithFootImu(SimulateScenario("beacon-trail", 4)));
+  ExpectLiveIsTheBatchPrefix("beacons-ekf", testing::WithFootImuOnly(SimulateScenario("beacon-trail", 4), 3));
 }
 
 TEST(LiveServer, LandmarksUkfOnTheJournalIsTheBatchRun) {
