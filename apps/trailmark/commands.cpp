@@ -19,6 +19,7 @@
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/variation.h"
 
 namespace trailmark::cli {
 
@@ -62,7 +63,10 @@ SimulatedMission SimulateSearchOnFile(const SimulateSearchArgs& a, std::uint64_t
 }  // namespace
 
 void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& out,
-              const SimulateImu& imu, const SimulateSearchArgs& search) {
+              const SimulateImu& imu, const SimulateSearchArgs& search, const SimulateVary& vary) {
+  const VariationFamily family = ParseVariationFamily(vary.family);
+  if (!vary.k && vary.family != "all")
+    throw std::invalid_argument("--family needs --vary K (the variant to draw)");
   if (scenario != "search" && search.Given())
     throw std::invalid_argument(
         "--floorplan, --level, --entry, --heading, --hand and --minutes are for the 'search' "
@@ -87,7 +91,25 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
                                  o.grade.name + " grade, " + imu.motion + ".";
     if (imu.drop_steps) sim.data.steps.clear();
   }
-  WriteMissionDirectory(out, sim.data, &sim.plan);
+  MissionWriteStyle style;
+  if (vary.k) {
+    // Last, after every sensor: the variant moves what was simulated, never the reverse.
+    const Variation v = DrawVariation(family, *vary.k);
+    const std::vector<std::string> notes = ApplyVariation(v, sim);
+    style = v.write;
+    nlohmann::json drawn = nlohmann::json::object();
+    for (const auto& [key, value] : v.Describe()) drawn[key] = value;
+    sim.data.info.description += fmt::format(". Variant {} of family {}.", *vary.k, vary.family);
+    WriteMissionDirectory(out, sim.data, &sim.plan, style);
+    std::ofstream j(out / "variation.json");
+    j << nlohmann::json{{"scenario", scenario}, {"seed", seed}, {"variation", drawn}, {"notes", notes}}
+             .dump(2)
+      << "\n";
+    if (!j) throw std::runtime_error((out / "variation.json").string() + ": write failed");
+    for (const auto& [key, value] : v.Describe()) fmt::print("  {:<26} {}\n", key, value);
+  } else {
+    WriteMissionDirectory(out, sim.data, &sim.plan);
+  }
   const auto& d = sim.data;
   std::size_t crumbs = 0;
   for (const auto& e : d.events) crumbs += e.event == "drop";
@@ -124,13 +146,16 @@ Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
   const Metrics metrics = Evaluate(mission.info(), truth, estimates);
   WriteMetricsJson(metrics_out, metrics);
   if (print) {
-    fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9}\n", "node", "kind",
-               "samples", "mean m", "median", "p95 m", "max m", "final m", "dist m", "mean %dist");
+    fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>6}\n", "node",
+               "kind", "samples", "mean m", "median", "p95 m", "max m", "final m", "dist m",
+               "mean %dist", "in95 %");
     auto row = [](const NodeMetrics& m) {
-      fmt::print("{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9}\n",
-                 m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m,
-                 m.stats.p95_m, m.stats.max_m, m.stats.final_m, m.distance_m,
-                 m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-");
+      fmt::print(
+          "{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9} {:>6.0f}\n",
+          m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m,
+          m.stats.p95_m, m.stats.max_m, m.stats.final_m, m.distance_m,
+          m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-",
+          100.0 * m.stats.in95);
     };
     for (const auto& m : metrics.nodes) row(m);
     row(metrics.agents);
@@ -219,22 +244,22 @@ void PrintSummaryTable(const std::vector<std::pair<RunResult, Metrics>>& rows,
                        const std::vector<std::string>& missions) {
   std::size_t width = 14;  // the pipeline column fits the longest name (landmarks-stopgo)
   for (const auto& [run, m] : rows) width = std::max(width, run.pipeline.size());
-  fmt::print("\n{:<18} {:<{}} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10}\n", "mission",
-             "pipeline", width, "mean m", "p95 m", "max m", "final m", "mean %dist", "max %dist",
-             "static m", "run time s");
+  fmt::print("\n{:<18} {:<{}} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>7} {:>10}\n",
+             "mission", "pipeline", width, "mean m", "p95 m", "max m", "final m", "mean %dist",
+             "max %dist", "static m", "in95 %", "run time s");
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const auto& [run, m] = rows[k];
     const auto& a = m.agents;
     const bool agents = a.stats.samples > 0;
     auto num = [&](double v) { return agents ? fmt::format("{:.2f}", v) : std::string("-"); };
     fmt::print(
-        "{:<18} {:<{}} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>10.3f}\n",
+        "{:<18} {:<{}} {:>8} {:>8} {:>8} {:>8} {:>10} {:>10} {:>11} {:>7} {:>10.3f}\n",
         k < missions.size() ? missions[k] : "", run.pipeline, width, num(a.stats.mean_m),
         num(a.stats.p95_m), num(a.stats.max_m), num(a.stats.final_m),
         a.mean_pct_of_distance ? fmt::format("{:.2f}", *a.mean_pct_of_distance) : "-",
         a.max_pct_of_distance ? fmt::format("{:.2f}", *a.max_pct_of_distance) : "-",
         m.static_nodes.stats.samples > 0 ? fmt::format("{:.2f}", m.static_nodes.stats.mean_m) : "-",
-        run.wall_time_s);
+        agents ? fmt::format("{:.0f}", 100.0 * a.stats.in95) : std::string("-"), run.wall_time_s);
   }
 }
 

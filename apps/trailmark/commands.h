@@ -37,8 +37,14 @@ struct SimulateSearchArgs {
            minutes != 10;
   }
 };
+/// `--vary K [--family F]`: a variant of the scenario (sim/variation.h, docs/simulator.md).
+struct SimulateVary {
+  std::optional<std::uint64_t> k;
+  std::string family = "all";
+};
 void Simulate(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out,
-              const SimulateImu& imu = {}, const SimulateSearchArgs& search = {});
+              const SimulateImu& imu = {}, const SimulateSearchArgs& search = {},
+              const SimulateVary& vary = {});
 RunResult Run(const std::string& pipeline, const std::filesystem::path& mission,
               const std::filesystem::path& out, const std::map<std::string, std::string>& options);
 /// Evaluates, prints the per-node table, writes metrics.json next to the estimates (or `out`).

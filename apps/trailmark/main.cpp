@@ -81,6 +81,14 @@ int main(int argc, char** argv) {
   simulate->add_option("--minutes", sim_search.minutes, "search: duration (default 10)")
       ->check(CLI::Range(0.1, 1440.0));
 
+  cli::SimulateVary sim_vary;
+  simulate->add_option("--vary", sim_vary.k,
+                       "draw variant K of the scenario: another frame, radio, ranges, surveys, "
+                       "PDR errors, events, start, CSV style (docs/simulator.md)");
+  simulate->add_option("--family", sim_vary.family,
+                       "with --vary: only this family (frame, radio, ranges, nodes, pdr, events, "
+                       "start, csv; default all)");
+
   app.add_subcommand("scenarios", "list the simulator's scenarios");
 
   std::string pipeline, mission;
@@ -285,7 +293,7 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   try {
     if (*simulate) {
-      cli::Simulate(scenario, seed, out, sim_imu, sim_search);
+      cli::Simulate(scenario, seed, out, sim_imu, sim_search, sim_vary);
     } else if (app.got_subcommand("scenarios")) {
       for (const auto& s : Scenarios()) fmt::print("{:<18} {}\n", s.name, s.description);
       fmt::print("{:<18} {}\n", "search",

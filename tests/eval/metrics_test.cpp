@@ -2,6 +2,10 @@
 // Metrics against hand-computed cases.
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
+#include <cmath>
+
+#include "trailmark/core/random.h"
 #include "trailmark/eval/metrics.h"
 
 namespace trailmark {
@@ -68,6 +72,44 @@ TEST(Evaluate, StaticNodesAtEstimatesAndEndAgainstTruthInForce) {
   // The agent has no estimates at all: every instant uncovered.
   EXPECT_EQ(m.agents.stats.samples, 0u);
   EXPECT_EQ(m.agents.uncovered, 2u);
+}
+
+TEST(Nees, HandComputedAndClaimedCertainty) {
+  // e = (1, 2), S = [2 0.5; 0.5 1]: det 1.75, S^-1 = [1 -0.5; -0.5 2] / 1.75,
+  // e^T S^-1 e = (1 - 2 + 8) / 1.75 = 4.
+  EXPECT_NEAR(HorizontalNees(Vec2(1, 2), 2.0, 0.5, 1.0), 4.0, 1e-12);
+  EXPECT_NEAR(HorizontalNees(Vec2(3, 0), 9.0, 0.0, 1.0), 1.0, 1e-12);
+  // A zero or indefinite covariance with an error claims a certainty it does not have.
+  EXPECT_TRUE(std::isinf(HorizontalNees(Vec2(0.5, 0), 0, 0, 0)));
+  EXPECT_TRUE(std::isinf(HorizontalNees(Vec2(0.5, 0), 1, 2, 1)));
+  EXPECT_EQ(HorizontalNees(Vec2(0, 0), 0, 0, 0), 0.0);
+  EXPECT_NEAR(kChi2Dof2P95, -2.0 * std::log(0.05), 1e-12);
+}
+
+TEST(Nees, HonestGaussianErrorsGiveIn95NearNinetyFivePercentAndMeanNeesTwo) {
+  // Errors drawn from the stated covariance: in95 -> 0.95, mean NEES -> 2 (chi-square, 2 dof);
+  // the same errors under a covariance four times too small: in95 falls to 1 - exp(-5.99/8).
+  const double sxx = 4.0, sxy = 1.2, syy = 1.0;
+  Eigen::Matrix2d S;
+  S << sxx, sxy, sxy, syy;
+  const Eigen::Matrix2d L = S.llt().matrixL();
+  Random rng(7);
+  std::vector<TruthSample> truth;
+  std::vector<Estimate> honest, overconfident;
+  for (int i = 0; i < 20000; ++i) {
+    const double t = i * 0.1;
+    truth.push_back({t, "ff1", Vec3(t, 0, 0)});
+    const Vec2 e = L * Vec2(rng.Normal(), rng.Normal());
+    const Vec3 p(t + e.x(), e.y(), 0);
+    honest.push_back({t, "ff1", p, sxx, sxy, syy});
+    overconfident.push_back({t, "ff1", p, sxx / 4, sxy / 4, syy / 4});
+  }
+  const Metrics m = Evaluate(Info(), truth, honest);
+  EXPECT_NEAR(m.agents.stats.in95, 0.95, 0.006);  // binomial sd 0.0015
+  EXPECT_NEAR(m.agents.stats.mean_nees, 2.0, 0.06);
+  const Metrics o = Evaluate(Info(), truth, overconfident);
+  EXPECT_NEAR(o.agents.stats.in95, 1.0 - std::exp(-kChi2Dof2P95 / 8.0), 0.01);
+  EXPECT_NEAR(o.agents.stats.mean_nees, 8.0, 0.25);
 }
 
 }  // namespace

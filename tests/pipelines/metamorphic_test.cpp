@@ -5,7 +5,6 @@
 // origin of the frame (a grid tied to x/y, a prior at the origin).
 #include <gtest/gtest.h>
 
-#include <Eigen/Geometry>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -15,55 +14,13 @@
 #include "trailmark/io/mission_io.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/variation.h"
 
 namespace trailmark {
 namespace {
 
-/// A rigid motion of the navigation frame (about the z axis).
-struct Frame {
-  double angle_rad = 0;
-  Vec2 shift = Vec2::Zero();
-  Vec2 Point(const Vec2& p) const { return Eigen::Rotation2Dd(angle_rad) * p + shift; }
-  Vec3 Point(const Vec3& p) const {
-    const Vec2 q = Point(Vec2(p.head<2>()));
-    return Vec3(q.x(), q.y(), p.z());
-  }
-  Vec3 Direction(const Vec3& d) const {
-    const Vec2 q = Eigen::Rotation2Dd(angle_rad) * Vec2(d.head<2>());
-    return Vec3(q.x(), q.y(), d.z());
-  }
-  Vec2 Back(const Vec2& p) const { return Eigen::Rotation2Dd(-angle_rad) * (p - shift); }
-};
-
-/// The mission drawn in `f`: positions, starts, headings, steps, bearings, truth and the plan.
-/// (Foot-IMU samples are in the body frame: the start heading carries the rotation.)
-SimulatedMission Drawn(SimulatedMission sim, const Frame& f) {
-  MissionData& d = sim.data;
-  for (NodeInfo& n : d.info.nodes) {
-    if (n.position) n.position = f.Point(*n.position);
-    if (n.start) n.start = f.Point(*n.start);
-    if (n.start_heading_rad) n.start_heading_rad = WrapAngle(*n.start_heading_rad + f.angle_rad);
-  }
-  for (Step& s : d.steps) {
-    s.delta_n = f.Direction(s.delta_n);
-    // A per-axis variance is not rotation-invariant; the same total as isotropic.
-    if (s.variance_m2) {
-      const double h = 0.5 * (s.variance_m2->x() + s.variance_m2->y());
-      s.variance_m2 = Vec3(h, h, s.variance_m2->z());
-    }
-  }
-  for (BearingMeasurement& b : d.bearings) b.bearing_rad = WrapAngle(b.bearing_rad + f.angle_rad);
-  for (TruthSample& t : d.truth) t.position_n = f.Point(t.position_n);
-  std::vector<Segment2> walls, doors;
-  for (const auto& w : sim.plan.walls()) walls.push_back({f.Point(w.a), f.Point(w.b)});
-  for (const auto& w : sim.plan.doors()) doors.push_back({f.Point(w.a), f.Point(w.b)});
-  std::vector<Room> rooms = sim.plan.rooms();
-  for (Room& r : rooms) {
-    for (Vec2& p : r.ring) p = f.Point(p);
-  }
-  sim.plan = FloorPlan(walls, doors, rooms);
-  return sim;
-}
+using Frame = FrameMotion;
+SimulatedMission Drawn(SimulatedMission sim, const Frame& f) { return DrawnInFrame(std::move(sim), f); }
 
 /// Isotropic step variances (what Drawn does to them), so that both frames have the same input.
 SimulatedMission Isotropic(SimulatedMission sim) { return Drawn(std::move(sim), Frame{}); }
@@ -131,13 +88,13 @@ TEST(Metamorphic, BeaconTrailsDoNotDependOnTheFrame) {
 
 TEST(Metamorphic, RadioLandmarksDoNotDependOnTheFramesOrigin) {
   const SimulatedMission sim = SimulateScenario("landmark-corridor", 2);
-  const Frame shifted{0.0, kRotatedShifted.shift};
+  const Frame shifted{0.0, kRotatedShifted.shift_m};
   EXPECT_LT(LargestDifference("landmarks-stopgo", sim, shifted), 1e-6);
   EXPECT_LT(LargestDifference("landmarks-ukf", sim, shifted), 1e-6);
 }
 
 TEST(Metamorphic, MapMatchingDoesNotDependOnTheFramesOrigin) {
-  const Frame shifted{0.0, kRotatedShifted.shift};
+  const Frame shifted{0.0, kRotatedShifted.shift_m};
   EXPECT_LT(LargestDifference("mapmatch", SimulateScenario("house1-search", 2), shifted,
                               {{"init", "known"}}),
             1e-6);

@@ -2,6 +2,7 @@
 #pragma once
 /// The in-memory description of a mission (mission.json of the spec). No I/O here.
 
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <vector>
@@ -64,6 +65,16 @@ struct MissionInfo {
   const NodeInfo* SingleBase() const;
   /// The agent's start: its own `start`, else the single base's position (spec).
   std::optional<Vec3> AgentStart(const NodeInfo& agent) const;
+};
+
+/// How a mission is drawn on disk, among the ways the spec allows ("Conventions: CSV", "Floor
+/// plans"); a reader must accept all of them. Plain data: io/mission_io's writer applies it.
+struct MissionWriteStyle {
+  bool csv_comments = false;          ///< '#' comment lines at the top and between rows
+  bool csv_shuffled_columns = false;  ///< each stream's columns in another order
+  bool csv_extra_column = false;      ///< an extra column that readers ignore
+  bool polyline_walls = false;        ///< connected walls as one multi-vertex LineString
+  std::uint64_t seed = 0;             ///< for the column order and where comments go
 };
 
 }  // namespace trailmark

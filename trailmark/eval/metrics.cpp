@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 
@@ -10,6 +11,11 @@ namespace trailmark {
 namespace {
 
 double HorizontalError(const Vec3& a, const Vec3& b) { return (a - b).head<2>().norm(); }
+
+ErrorSample Sample(TimeS t, const Estimate& e, const Vec3& truth_n) {
+  const Vec2 d = (e.position_n - truth_n).head<2>();
+  return {t, d.norm(), HorizontalNees(d, e.sxx, e.sxy, e.syy)};
+}
 
 void FinishPercentages(NodeMetrics& m) {
   if (m.distance_m > 0 && m.stats.samples > 0) {
@@ -19,6 +25,16 @@ void FinishPercentages(NodeMetrics& m) {
 }
 
 }  // namespace
+
+double HorizontalNees(const Vec2& error_n, double sxx, double sxy, double syy) {
+  const double det = sxx * syy - sxy * sxy;
+  if (!(sxx > 0) || !(syy > 0) || !(det > 0) || !std::isfinite(det)) {
+    return error_n.norm() <= 1e-3 ? 0.0 : std::numeric_limits<double>::infinity();
+  }
+  // S^-1 = [syy -sxy; -sxy sxx] / det.
+  const double x = error_n.x(), y = error_n.y();
+  return (syy * x * x - 2.0 * sxy * x * y + sxx * y * y) / det;
+}
 
 double Percentile(std::vector<double> values, double q) {
   if (values.empty()) return 0.0;
@@ -35,13 +51,18 @@ ErrorStatistics ComputeStatistics(const std::vector<ErrorSample>& series) {
   if (series.empty()) return s;
   std::vector<double> e;
   e.reserve(series.size());
-  double sum = 0, sum2 = 0;
+  double sum = 0, sum2 = 0, nees_sum = 0;
+  std::size_t inside = 0, finite = 0;
   for (const auto& x : series) {
     e.push_back(x.error_m);
     sum += x.error_m;
     sum2 += x.error_m * x.error_m;
+    inside += x.nees <= kChi2Dof2P95;
+    if (std::isfinite(x.nees)) nees_sum += x.nees, ++finite;
   }
   const double n = static_cast<double>(series.size());
+  s.in95 = static_cast<double>(inside) / n;
+  s.mean_nees = finite > 0 ? nees_sum / static_cast<double>(finite) : 0.0;
   s.mean_m = sum / n;
   s.rmse_m = std::sqrt(sum2 / n);
   s.max_m = *std::max_element(e.begin(), e.end());
@@ -98,7 +119,7 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
           ++m.uncovered;
           continue;
         }
-        m.series.push_back({s->t, HorizontalError(es[k - 1]->position_n, s->position_n)});
+        m.series.push_back(Sample(s->t, *es[k - 1], s->position_n));
       }
     } else {
       std::size_t j = 0;  // tr[j] is the truth in force
@@ -106,9 +127,9 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
         while (j + 1 < tr.size() && tr[j + 1]->t <= t) ++j;
         return tr[j]->position_n;
       };
-      for (const Estimate* e : es) m.series.push_back({e->t, HorizontalError(e->position_n, truth_at(e->t))});
+      for (const Estimate* e : es) m.series.push_back(Sample(e->t, *e, truth_at(e->t)));
       if (!es.empty() && es.back()->t < end_t) {
-        m.series.push_back({end_t, HorizontalError(es.back()->position_n, truth_at(end_t))});
+        m.series.push_back(Sample(end_t, *es.back(), truth_at(end_t)));
       }
       if (es.empty()) m.uncovered = 1;
     }

@@ -21,12 +21,26 @@ namespace trailmark {
 struct ErrorSample {
   TimeS t = 0;
   double error_m = 0;  ///< horizontal error
+  /// Normalized estimation error squared of the horizontal error, e^T S^-1 e with the estimate's
+  /// own 2x2 covariance S (chi-square, 2 dof, when the covariance is honest). +inf for an error
+  /// larger than 1 mm under a covariance that is not positive definite (a claimed certainty).
+  double nees = 0;
 };
+
+/// NEES of a horizontal error under the covariance [sxx sxy; sxy syy] (see ErrorSample::nees).
+double HorizontalNees(const Vec2& error_n, double sxx, double sxy, double syy);
+/// The 95 % point of the chi-square distribution with 2 degrees of freedom: -2 ln(0.05).
+inline constexpr double kChi2Dof2P95 = 5.991464547107979;
 
 struct ErrorStatistics {
   std::size_t samples = 0;
   double mean_m = 0, median_m = 0, p75_m = 0, p95_m = 0, max_m = 0, rmse_m = 0;
   double final_m = 0;  ///< error at the last scored instant
+  /// Share of samples whose truth lies inside the estimate's own 95 % ellipse (NEES <= 5.991);
+  /// 0.95 for an honest covariance (issue 21: between 0.85 and 0.99).
+  double in95 = 0;
+  /// Mean NEES over the samples with a finite NEES (2 for an honest covariance).
+  double mean_nees = 0;
 };
 
 struct NodeMetrics {

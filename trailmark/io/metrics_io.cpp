@@ -20,6 +20,8 @@ nlohmann::json NodeJson(const NodeMetrics& m, std::size_t max_series) {
   j["max_m"] = m.stats.max_m;
   j["rmse_m"] = m.stats.rmse_m;
   j["final_m"] = m.stats.final_m;
+  j["in95"] = m.stats.in95;  // share of truth inside the estimate's own 95 % ellipse
+  j["mean_nees"] = m.stats.mean_nees;
   j["distance_m"] = m.distance_m;
   j["mean_pct_of_distance"] = m.mean_pct_of_distance ? nlohmann::json(*m.mean_pct_of_distance)
                                                      : nlohmann::json(nullptr);

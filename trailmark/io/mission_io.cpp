@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "trailmark/core/error.h"
+#include "trailmark/core/random.h"
 #include "trailmark/io/json_input.h"
 
 namespace trailmark {
@@ -308,7 +309,8 @@ int DefaultFloorPlanLevel(const std::vector<int>& levels) {
 namespace {
 
 // The plan's walls, doors and rooms as GeoJSON features; with `level`, every feature carries it.
-void AppendFloorFeatures(json& features, const FloorPlan& plan, std::optional<int> level) {
+void AppendFloorFeatures(json& features, const FloorPlan& plan, std::optional<int> level,
+                         bool polyline_walls = false) {
   auto properties = [&](json p) {
     if (level) p["level"] = *level;
     return p;
@@ -321,7 +323,22 @@ void AppendFloorFeatures(json& features, const FloorPlan& plan, std::optional<in
                           {"coordinates", json::array({json::array({s.a.x(), s.a.y()}),
                                                        json::array({s.b.x(), s.b.y()})})}}}});
   };
-  for (const auto& w : plan.walls()) add_line(w, "wall");
+  const auto& walls = plan.walls();
+  for (std::size_t i = 0; i < walls.size();) {
+    // A run of walls each starting where the previous ended: one LineString when asked.
+    std::size_t j = i + 1;
+    while (polyline_walls && j < walls.size() && walls[j].a == walls[j - 1].b) ++j;
+    if (j == i + 1) {
+      add_line(walls[i], "wall");
+    } else {
+      json coords = json::array({json::array({walls[i].a.x(), walls[i].a.y()})});
+      for (std::size_t k = i; k < j; ++k) coords.push_back(json::array({walls[k].b.x(), walls[k].b.y()}));
+      features.push_back({{"type", "Feature"},
+                          {"properties", properties({{"kind", "wall"}})},
+                          {"geometry", {{"type", "LineString"}, {"coordinates", coords}}}});
+    }
+    i = j;
+  }
   for (const auto& d : plan.doors()) add_line(d, "door");
   for (const auto& r : plan.rooms()) {
     json ring = json::array();
@@ -340,9 +357,9 @@ std::string FeatureCollection(json features) {
 
 }  // namespace
 
-std::string FloorPlanToGeoJson(const FloorPlan& plan) {
+std::string FloorPlanToGeoJson(const FloorPlan& plan, bool polyline_walls) {
   json features = json::array();
-  AppendFloorFeatures(features, plan, std::nullopt);
+  AppendFloorFeatures(features, plan, std::nullopt, polyline_walls);
   return FeatureCollection(std::move(features));
 }
 
@@ -352,15 +369,75 @@ std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& flo
   return FeatureCollection(std::move(features));
 }
 
+std::string RestyleCsv(const std::string& text, const MissionWriteStyle& style,
+                       std::uint64_t stream_seed) {
+  Random rng(style.seed ^ (stream_seed * 0x9e3779b97f4a7c15ULL));
+  std::vector<std::string> lines;
+  for (std::size_t at = 0; at < text.size();) {
+    std::size_t end = text.find('\n', at);
+    if (end == std::string::npos) end = text.size();
+    lines.push_back(text.substr(at, end - at));
+    at = end + 1;
+  }
+  if (lines.empty()) return text;
+  auto split = [](const std::string& line) {
+    std::vector<std::string> cells;
+    std::size_t at = 0;
+    for (std::size_t comma; (comma = line.find(',', at)) != std::string::npos; at = comma + 1)
+      cells.push_back(line.substr(at, comma - at));
+    cells.push_back(line.substr(at));
+    return cells;
+  };
+  const std::size_t columns = split(lines.front()).size();
+  std::vector<std::size_t> order(columns);
+  for (std::size_t i = 0; i < columns; ++i) order[i] = i;
+  if (style.csv_shuffled_columns) {
+    for (std::size_t i = columns; i > 1; --i)
+      std::swap(order[i - 1], order[static_cast<std::size_t>(rng.Uniform() * static_cast<double>(i))]);
+  }
+  const std::size_t extra_at =
+      static_cast<std::size_t>(rng.Uniform() * static_cast<double>(columns + 1));
+  std::string out;
+  out.reserve(text.size() + text.size() / 8);
+  if (style.csv_comments) out += "# written by trailmark simulate --vary: comments, column order and extra columns are allowed\n";
+  for (std::size_t li = 0; li < lines.size(); ++li) {
+    if (lines[li].empty()) continue;
+    if (style.csv_comments && li > 0 && rng.Uniform() < 0.01) out += "# a comment between rows\n";
+    const std::vector<std::string> cells = split(lines[li]);
+    std::vector<std::string> drawn;
+    for (std::size_t i = 0; i < columns; ++i) drawn.push_back(order[i] < cells.size() ? cells[order[i]] : "");
+    if (style.csv_extra_column)
+      drawn.insert(drawn.begin() + static_cast<std::ptrdiff_t>(extra_at),
+                   li == 0 ? "operator_note" : (li % 3 == 0 ? "\"smoke, heavy\"" : ""));
+    for (std::size_t i = 0; i < drawn.size(); ++i) {
+      if (i > 0) out += ',';
+      out += drawn[i];
+    }
+    out += '\n';
+  }
+  return out;
+}
+
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
-                           const FloorPlan* plan) {
+                           const FloorPlan* plan, const MissionWriteStyle& style) {
   std::filesystem::create_directories(dir);
   MissionInfo info = data.info;
   if (plan != nullptr && !info.floorplan) info.floorplan = "floorplan.geojson";
   WriteMissionInfo(dir / "mission.json", info);
+  const bool restyle = style.csv_comments || style.csv_shuffled_columns || style.csv_extra_column;
+  std::uint64_t stream_seed = 0;
   auto write = [&](const auto& rows) {
     using Row = typename std::decay_t<decltype(rows)>::value_type;
-    if (!rows.empty()) WriteAll<Row>((dir / StreamFileName<Row>()).string(), rows);
+    ++stream_seed;
+    if (rows.empty()) return;
+    const std::filesystem::path path = dir / StreamFileName<Row>();
+    WriteAll<Row>(path.string(), rows);
+    if (restyle) {
+      const std::string text = RestyleCsv(ReadText(path), style, stream_seed);
+      std::ofstream out(path, std::ios::binary | std::ios::trunc);
+      out << text;
+      if (!out) throw std::runtime_error(path.string() + ": write failed");
+    }
   };
   write(data.imu);
   write(data.steps);
@@ -372,7 +449,7 @@ void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& 
   write(data.truth);
   if (plan != nullptr) {
     std::ofstream out(dir / *info.floorplan, std::ios::binary);
-    out << FloorPlanToGeoJson(*plan);
+    out << FloorPlanToGeoJson(*plan, style.polyline_walls);
     if (!out) throw std::runtime_error((dir / *info.floorplan).string() + ": write failed");
   }
 }

@@ -40,14 +40,21 @@ int DefaultFloorPlanLevel(const std::vector<int>& levels_present);
 FloorPlan ReadFloorPlanFloor(const std::filesystem::path& path,
                              std::optional<int> level = std::nullopt,
                              std::vector<int>* levels_present = nullptr);
-std::string FloorPlanToGeoJson(const FloorPlan& plan);
+/// `polyline_walls`: walls that continue one another as one multi-vertex LineString (spec 1.1).
+std::string FloorPlanToGeoJson(const FloorPlan& plan, bool polyline_walls = false);
 /// Several floors in one file: every feature of a floor carries its `level`.
 std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors);
 
 /// Writes mission.json, every non-empty stream and (when given) the floor plan into `dir`,
 /// creating it. Streams are written in the order held; the caller keeps them time-sorted.
+/// `style`: another of the ways the spec allows to draw the same mission.
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
-                           const FloorPlan* plan = nullptr);
+                           const FloorPlan* plan = nullptr, const MissionWriteStyle& style = {});
+
+/// The same CSV text drawn another way the spec allows: comment lines, the columns in another
+/// order, an extra (quoted) column. Cells are taken as written by CsvWriter (no quotes).
+std::string RestyleCsv(const std::string& text, const MissionWriteStyle& style,
+                       std::uint64_t stream_seed);
 
 /// Reads every stream of a (small) mission into memory.
 class MissionDirectory;
