@@ -59,4 +59,8 @@ int ReproduceBeacons(int runs, int seeds, const std::filesystem::path& out);
 int ReproduceMapMatch(int seeds, const std::filesystem::path& out, const OptionValues& extra = {},
                       int first_seed = 1);
 
+/// Every pipeline x every variation family on its paper's scenario, against dead reckoning on
+/// the same variant (issue 21, item 5): variants K = first_seed .. first_seed + variants - 1.
+int ReproduceRobustness(int variants, const std::filesystem::path& out, int first_seed = 1);
+
 }  // namespace trailmark::experiments

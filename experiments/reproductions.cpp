@@ -187,6 +187,12 @@ const std::vector<Reproduction>& Reproductions() {
        [](const ReproductionArgs& a) {
          return ReproduceMapMatch(a.seeds, a.out / "mapmatch", a.options, a.first_seed);
        }},
+      {"robustness",
+       "every pipeline x every variation family (simulate --vary) against dead reckoning",
+       true, false,
+       [](const ReproductionArgs& a) {
+         return ReproduceRobustness(a.seeds, a.out / "robustness", a.first_seed);
+       }},
   };
   return table;
 }

@@ -8,6 +8,9 @@
 #include <algorithm>
 #include <map>
 
+#include <Eigen/Geometry>
+
+#include "trailmark/core/random.h"
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
@@ -15,8 +18,16 @@
 namespace trailmark {
 namespace {
 
+/// Only the white step noise: the covariance is the sum of the step variances.
+PdrOptions WhiteOnly() {
+  PdrOptions o;
+  o.start_heading_sigma_rad = o.heading_drift_sigma_rad_per_s = o.heading_walk_sigma_rad = 0;
+  o.step_scale_sigma = 0;
+  return o;
+}
+
 TEST(DeadReckoning, SumsStepsAndVariances) {
-  DeadReckoning dr(Vec3(1, 2, 0), 0.5);
+  DeadReckoning dr(Vec3(1, 2, 0), 0.5, WhiteOnly());
   dr.AddStep({0, 1, "a", Vec3(0.5, 0, 0), Vec3(0.01, 0.02, 0)});
   dr.AddStep({1, 2, "a", Vec3(0, -0.5, 0), Vec3(0.01, 0.02, 0)});
   EXPECT_TRUE(dr.position_n().isApprox(Vec3(1.5, 1.5, 0)));
@@ -25,6 +36,60 @@ TEST(DeadReckoning, SumsStepsAndVariances) {
   // Unknown variance: the documented default (5 cm + 3 % of 0.5 m)^2.
   dr.AddStep({2, 3, "a", Vec3(0.5, 0, 0), std::nullopt});
   EXPECT_NEAR(dr.covariance()(0, 0), 0.27 + std::pow(0.05 + 0.015, 2), 1e-15);
+}
+
+TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
+  // Exact reference: the covariance of the position over many walks whose steps are turned by
+  // a heading offset + drift x time + a random walk and stretched by one scale error, all
+  // drawn from the options' sigmas. Walk: 40 steps east, 60 s standing, 40 steps north.
+  PdrOptions o;
+  o.start_heading_sigma_rad = 0.05;
+  o.heading_drift_sigma_rad_per_s = 0.001;
+  o.heading_walk_sigma_rad = 0.01;
+  o.step_scale_sigma = 0.03;
+  std::vector<Step> steps;
+  TimeS t = 0;
+  for (int i = 0; i < 80; ++i) {
+    if (i == 40) t += 60;
+    const Vec3 d = i < 40 ? Vec3(0.7, 0, 0) : Vec3(0, 0.7, 0);
+    steps.push_back({t, t + 0.5, "a", d, Vec3(1e-4, 1e-4, 0)});
+    t += 0.5;
+  }
+  DeadReckoning dr(Vec3::Zero(), 0.1, o);
+  for (const Step& s : steps) dr.AddStep(s);
+  Random rng(3);
+  const int n = 20000;
+  std::vector<Vec2> ends;
+  Vec2 mean = Vec2::Zero();
+  for (int k = 0; k < n; ++k) {
+    double heading = rng.Normal(0, o.start_heading_sigma_rad);
+    const double rate = rng.Normal(0, o.heading_drift_sigma_rad_per_s);
+    const double scale = rng.Normal(0, o.step_scale_sigma);
+    Vec2 p(rng.Normal(0, 0.1), rng.Normal(0, 0.1));
+    TimeS last = steps.front().t1;
+    for (const Step& s : steps) {
+      heading += rate * (s.t1 - last);
+      last = s.t1;
+      const Vec2 d = (1 + scale) * (Eigen::Rotation2Dd(heading) * Vec2(s.delta_n.head<2>()));
+      p += d + Vec2(rng.Normal(0, 0.01), rng.Normal(0, 0.01));
+      heading += rng.Normal(0, o.heading_walk_sigma_rad);
+    }
+    ends.push_back(p);
+    mean += p / n;
+  }
+  Mat2 empirical = Mat2::Zero();
+  for (const Vec2& p : ends) empirical += (p - mean) * (p - mean).transpose() / (n - 1);
+  const Mat2 c = dr.covariance();
+  // First-order propagation of small angles: within the Monte Carlo's 2-3 % sampling error.
+  EXPECT_NEAR(c(0, 0), empirical(0, 0), 0.05 * empirical(0, 0));
+  EXPECT_NEAR(c(1, 1), empirical(1, 1), 0.05 * empirical(1, 1));
+  EXPECT_NEAR(c(0, 1), empirical(0, 1), 0.05 * std::sqrt(empirical(0, 0) * empirical(1, 1)));
+  // Standing 60 s with a drift rate grows the error of the second leg: more than without it.
+  PdrOptions no_drift = o;
+  no_drift.heading_drift_sigma_rad_per_s = 0;
+  DeadReckoning still(Vec3::Zero(), 0.1, no_drift);
+  for (const Step& s : steps) still.AddStep(s);
+  EXPECT_GT(c.trace(), 1.5 * still.covariance().trace());
 }
 
 /// Records the rows it is fed.
@@ -163,7 +228,11 @@ TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
   est.Add(RssiPacket{1.6, "ff1", "ff2", -60}, sink);
   ASSERT_EQ(sink.rows.size(), 4u);  // each start, each step
   EXPECT_EQ(sink.rows[1].position_n, Vec3(1.5, 1, 0));
-  EXPECT_NEAR(sink.rows[1].sxx, 0.04 + 0.01, 1e-15);
+  // Start + step noise, plus the shared errors of the first step: its length x the scale sigma
+  // along it, x the start heading sigma across it.
+  const PdrOptions o;
+  EXPECT_NEAR(sink.rows[1].sxx, 0.04 + 0.01 + std::pow(0.5 * o.step_scale_sigma, 2), 1e-15);
+  EXPECT_NEAR(sink.rows[1].syy, 0.04 + 0.01 + std::pow(0.5 * o.start_heading_sigma_rad, 2), 1e-15);
   EXPECT_EQ(est.Current("ff2")->position_n, Vec3(5, 0.5, 0));
   EXPECT_EQ(est.Current("ff2")->t, 1.5);
   EXPECT_EQ(est.Summary().numbers.at("rows_ignored"), 1.0);

@@ -100,5 +100,48 @@ TEST(Metamorphic, MapMatchingDoesNotDependOnTheFramesOrigin) {
             1e-6);
 }
 
+/// The largest difference between the estimates on `sim` as written by default and on the same
+/// mission in the other door convention (walls drawn with gaps, doors across them) written in
+/// another style the spec allows (columns shuffled, an extra quoted column, comment lines,
+/// connected walls as multi-vertex LineStrings).
+double StyleDifference(const std::string& pipeline, const SimulatedMission& sim,
+                       const OptionValues& options = {}) {
+  const auto a = Run(pipeline, sim, options);
+  SimulatedMission other = sim;
+  other.plan = FloorPlan(sim.plan.solid_walls(), sim.plan.doors(), sim.plan.rooms());
+  MissionWriteStyle style;
+  style.csv_comments = style.csv_shuffled_columns = style.csv_extra_column = true;
+  style.polyline_walls = true;
+  style.seed = 5;
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), other.data, &other.plan, style);
+  VectorSink sink;
+  testing::RunNamed(pipeline, MissionDirectory(dir.path()), options, sink);
+  EXPECT_EQ(a.size(), sink.rows.size()) << pipeline;
+  double worst = 0;
+  for (std::size_t i = 0; i < std::min(a.size(), sink.rows.size()); ++i) {
+    EXPECT_EQ(a[i].id, sink.rows[i].id) << pipeline;
+    worst = std::max(worst, (a[i].position_n - sink.rows[i].position_n).norm());
+  }
+  return worst;
+}
+
+TEST(Metamorphic, NoPipelineDependsOnTheDoorConventionOrTheCsvStyle) {
+  const SimulatedMission office = SimulateScenario("office-loop-1lap", 2);
+  EXPECT_LT(StyleDifference("pdr", office), 1e-9);
+  EXPECT_LT(StyleDifference("breadcrumb", office), 1e-9);
+  const SimulatedMission corridor = SimulateScenario("landmark-corridor", 2);
+  EXPECT_LT(StyleDifference("landmarks-stopgo", corridor), 1e-9);
+  EXPECT_LT(StyleDifference("landmarks-ukf", corridor), 1e-9);
+  const SimulatedMission trail = SimulateScenario("beacon-trail", 2);
+  EXPECT_LT(StyleDifference("beacons-mds", trail), 1e-9);
+  EXPECT_LT(StyleDifference("beacons-ekf", trail), 1e-9);
+  // Map matching reads the plan: its enclosed area, grid and walls must not change (the
+  // search grid's flood fill once leaked through doors drawn across gaps: "no enclosed area").
+  const SimulatedMission house = SimulateScenario("house1-search", 2);
+  EXPECT_LT(StyleDifference("mapmatch", house), 1e-9);
+  EXPECT_LT(StyleDifference("mapmatch", house, {{"init", "known"}}), 1e-9);
+}
+
 }  // namespace
 }  // namespace trailmark

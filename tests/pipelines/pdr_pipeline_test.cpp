@@ -35,9 +35,11 @@ TEST(PdrPipeline, ErrorFreeStepsReproduceTruthExactly) {
   // Truth samples are at 10 Hz, so compare against the step endpoints via the metrics instead:
   // the final estimate is the start, as the loop closes.
   EXPECT_NEAR((sink.rows.back().position_n - Vec3::Zero()).norm(), 0.0, 1e-9);
-  // Covariance grows monotonically and stays positive definite and symmetric.
+  // Covariance stays positive definite. (It need not grow monotonically: the heading and scale
+  // errors are shared by all steps, and a loop walked back towards the start undoes their
+  // lever; only the drift rate and the white parts remain when it closes.)
   for (std::size_t i = 1; i < sink.rows.size(); ++i) {
-    EXPECT_GE(sink.rows[i].sxx, sink.rows[i - 1].sxx);
+    EXPECT_GT(sink.rows[i].sxx, 0.0);
     EXPECT_GT(sink.rows[i].sxx * sink.rows[i].syy - sink.rows[i].sxy * sink.rows[i].sxy, 0.0);
   }
   // Against truth at 10 Hz, the online error is at most one step length.

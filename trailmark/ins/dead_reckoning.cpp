@@ -3,31 +3,64 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace trailmark {
 
 bool PdrOptions::IsValid(std::string* why) const {
-  if (default_step_noise_m >= 0 && default_step_relative_sigma >= 0) return true;
-  if (why) *why = "default step noise must be >= 0";
-  return false;
+  for (double x : {default_step_noise_m, default_step_relative_sigma, start_heading_sigma_rad,
+                   heading_drift_sigma_rad_per_s, heading_walk_sigma_rad, step_scale_sigma}) {
+    if (!(x >= 0) || !std::isfinite(x)) {
+      if (why) *why = "step noise and heading, drift and scale sigmas must be finite and >= 0";
+      return false;
+    }
+  }
+  return true;
 }
 
-DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options)
+DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options,
+                             std::optional<double> start_heading_sigma_rad)
     : options_(options), position_n_(start_n) {
-  covariance_ = Mat2::Identity() * start_sigma_m * start_sigma_m;
+  const double heading = start_heading_sigma_rad.value_or(options_.start_heading_sigma_rad);
+  error_cov_.setZero();
+  error_cov_(kX, kX) = error_cov_(kY, kY) = start_sigma_m * start_sigma_m;
+  error_cov_(kHeading, kHeading) = heading * heading;
+  error_cov_(kRate, kRate) = options_.heading_drift_sigma_rad_per_s * options_.heading_drift_sigma_rad_per_s;
+  error_cov_(kScale, kScale) = options_.step_scale_sigma * options_.step_scale_sigma;
 }
 
 void DeadReckoning::AddStep(const Step& step) {
-  position_n_ += step.delta_n;
+  // Time since the last step (or none at the first): the heading error grows by the rate error.
+  const double dt_s = last_t_ ? std::max(0.0, step.t1 - *last_t_) : 0.0;
+  last_t_ = step.t1;
+  Mat5 f = Mat5::Identity();
+  f(kHeading, kRate) = dt_s;
+  // The step, turned by the heading error and stretched by the scale error (first order):
+  // p += d + d_heading (-d_y, d_x) + d_scale d.
+  const double dx = step.delta_n.x(), dy = step.delta_n.y();
+  Mat5 g = Mat5::Identity();
+  g(kX, kHeading) = -dy;
+  g(kY, kHeading) = dx;
+  g(kX, kScale) = dx;
+  g(kY, kScale) = dy;
+  const Mat5 fg = g * f;
+  Mat5 q = Mat5::Zero();
   if (step.variance_m2) {
-    covariance_(0, 0) += step.variance_m2->x();
-    covariance_(1, 1) += step.variance_m2->y();
+    q(kX, kX) = step.variance_m2->x();
+    q(kY, kY) = step.variance_m2->y();
   } else {
     const double s = options_.default_step_noise_m +
                      options_.default_step_relative_sigma * step.delta_n.head<2>().norm();
-    covariance_ += Mat2::Identity() * s * s;
+    q(kX, kX) = q(kY, kY) = s * s;
   }
+  // A step that moves turns the body; a zero-length step (standing) adds no turn error.
+  if (step.delta_n.head<2>().squaredNorm() > 0)
+    q(kHeading, kHeading) = options_.heading_walk_sigma_rad * options_.heading_walk_sigma_rad;
+  error_cov_ = fg * error_cov_ * fg.transpose() + q;
+  error_cov_ = 0.5 * (error_cov_ + error_cov_.transpose());
+  position_n_ += step.delta_n;
 }
 
 DeadReckoningEstimator::DeadReckoningEstimator(MissionInfo info, PdrOptions options)
@@ -58,10 +91,11 @@ void DeadReckoningEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     it = agents_
              .emplace(step->agent,
-                      Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0), options_),
+                      Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0), options_,
+                                          node->start_heading_sigma_rad),
                             step->t0})
              .first;
-    const Mat2& c = it->second.dr.covariance();
+    const Mat2 c = it->second.dr.covariance();
     sink.Add({step->t0, step->agent, *start, c(0, 0), c(0, 1), c(1, 1)});
   }
   Agent& a = it->second;
@@ -69,14 +103,14 @@ void DeadReckoningEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   a.t = step->t1;
   ++a.steps;
   ++steps_;
-  const Mat2& c = a.dr.covariance();
+  const Mat2 c = a.dr.covariance();
   sink.Add({step->t1, step->agent, a.dr.position_n(), c(0, 0), c(0, 1), c(1, 1)});
 }
 
 std::optional<Estimate> DeadReckoningEstimator::Current(const std::string& node) const {
   const auto it = agents_.find(node);
   if (it == agents_.end()) return std::nullopt;
-  const Mat2& c = it->second.dr.covariance();
+  const Mat2 c = it->second.dr.covariance();
   return Estimate{it->second.t, node, it->second.dr.position_n(), c(0, 0), c(0, 1), c(1, 1)};
 }
 

@@ -19,22 +19,44 @@ struct PdrOptions {
   /// (5 cm)^2 + (3 % of length)^2 of variance (ours: a consumer PDR's step noise).
   double default_step_noise_m = 0.05;
   double default_step_relative_sigma = 0.03;
+  /// The errors of PDR that are not white (issue 21): they are shared by every step and make
+  /// the position error grow with the distance walked and with time, also while standing. Each
+  /// is a state of the covariance propagation (not of the estimate: nothing observes them).
+  /// Set a priori, not fitted on any data here:
+  /// heading error at the start when mission.json gives no start_heading_sigma (a heading
+  /// aligned by hand or compass at the entrance: 5 degrees).
+  double start_heading_sigma_rad = 0.087;
+  /// heading drift rate (gyro bias left after calibration; it integrates while standing too):
+  /// 3 degrees per minute, the order of a consumer MEMS foot INS's yaw drift.
+  double heading_drift_sigma_rad_per_s = 0.00087;
+  /// heading random walk per step (turn and scale-factor errors): 0.5 degrees.
+  double heading_walk_sigma_rad = 0.0087;
+  /// step-length scale error shared by all steps of an agent: 3 %.
+  double step_scale_sigma = 0.03;
   bool IsValid(std::string* why) const;
 };
 
-/// Dead reckoning of one agent, usable without files.
+/// Dead reckoning of one agent, usable without files. The position is the sum of the steps;
+/// its covariance propagates the error state [dx, dy, d_heading, d_heading_rate, d_scale]:
+/// a step d turns by the heading error (lever (-d_y, d_x)) and stretches by the scale error,
+/// the heading error grows by the rate error x time between steps (standing included).
 class DeadReckoning {
  public:
-  DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options = {});
+  /// `start_heading_sigma_rad`: empty takes the options' default.
+  DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options = {},
+                std::optional<double> start_heading_sigma_rad = std::nullopt);
   /// Adds one step's displacement and its variance.
   void AddStep(const Step& step);
   const Vec3& position_n() const { return position_n_; }
-  const Mat2& covariance() const { return covariance_; }
+  Mat2 covariance() const { return error_cov_.topLeftCorner<2, 2>(); }
 
  private:
+  using Mat5 = Eigen::Matrix<double, 5, 5>;
+  enum : int { kX = 0, kY = 1, kHeading = 2, kRate = 3, kScale = 4 };
   PdrOptions options_;
   Vec3 position_n_;
-  Mat2 covariance_;
+  Mat5 error_cov_;
+  std::optional<TimeS> last_t_;
 };
 
 /// `pdr`: each agent's dead reckoning, an estimate at every step (and its start at the first

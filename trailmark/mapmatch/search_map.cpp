@@ -177,8 +177,12 @@ SearchGrid::SearchGrid(const FloorPlan& plan, Options options) : plan_(&plan), o
   }
   nx_ = static_cast<int>(nx);
   ny_ = static_cast<int>(ny);
-  // Flood fill from the border with every door closed: what is not reached is inside.
-  const SegmentIndex drawn(plan.walls());
+  // Flood fill from the border with every door closed: what is not reached is inside. A door is
+  // drawn along its wall or across a gap between wall ends (spec 1.1): closing it means adding
+  // its segment to the walls as drawn (for the first convention that changes nothing).
+  std::vector<Segment2> closed = plan.walls();
+  closed.insert(closed.end(), plan.doors().begin(), plan.doors().end());
+  const SegmentIndex drawn(closed);
   std::vector<char> outside(static_cast<std::size_t>(nx_) * ny_, 0);
   std::vector<Cell> stack;
   for (int ix = 0; ix < nx_; ++ix) stack.push_back({ix, 0}), stack.push_back({ix, ny_ - 1});

@@ -35,6 +35,16 @@ const OptionTable<PdrOptions>& PdrOptionTable() {
            "per-axis sigma of a step without variances: this + step_relative_sigma x length");
     t.Real("step_relative_sigma", &PdrOptions::default_step_relative_sigma, "",
            OptionBounds::NonNegative(), "per-axis sigma of such a step, fraction of its length");
+    t.Real("start_heading_sigma_rad", &PdrOptions::start_heading_sigma_rad, "rad",
+           OptionBounds::NonNegative(),
+           "heading error at the start where mission.json gives no start_heading_sigma");
+    t.Real("heading_drift_sigma_rad_per_s", &PdrOptions::heading_drift_sigma_rad_per_s, "rad/s",
+           OptionBounds::NonNegative(),
+           "heading drift rate shared by all steps (grows while standing too), 1 sigma");
+    t.Real("heading_walk_sigma_rad", &PdrOptions::heading_walk_sigma_rad, "rad",
+           OptionBounds::NonNegative(), "heading random walk per moving step, 1 sigma");
+    t.Real("step_scale_sigma", &PdrOptions::step_scale_sigma, "", OptionBounds::NonNegative(),
+           "step-length scale error shared by all steps, 1 sigma (fraction)");
     return t;
   }();
   return table;
