@@ -18,7 +18,7 @@ namespace trailmark {
 
 struct PdrErrorOptions {
   double heading_random_walk_rad = 0.006;         ///< per step, 1 sigma (~0.23 deg)
-  double heading_drift_sigma_rad_per_s = 0.002;   ///< per-walk drift rate, 1 sigma (~2 deg/min)
+  double heading_drift_sigma_rad_per_s = 0.002;   ///< per-walk drift rate, 1 sigma (~6.9 deg/min)
   std::optional<double> heading_drift_rad_per_s;  ///< fixed drift rate instead of a draw
   /// Per-walk gyro scale-factor error: every true turn adds this fraction of its angle to the
   /// heading error (MEMS gyro scale factor 1-3 %: e.g. ADIS16448 / MPU-9250 datasheets).
