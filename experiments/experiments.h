@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "trailmark/core/options.h"
+#include "trailmark/eval/metrics.h"
 #include "trailmark/ins/zupt_ins.h"
 
 namespace trailmark::experiments {
@@ -41,6 +42,14 @@ int Reproduce(const std::string& name, const ReproductionArgs& args);
 /// Prints `text` and writes it to out/results.md under a "# title" heading; returns 0.
 int WriteReproduction(const std::filesystem::path& out, const std::string& title,
                       const std::string& text);
+/// Runs the registry's `pipeline` on a mission into `out` and evaluates it against the
+/// mission's truth; `wall_s` (may be null) gets the run's wall time.
+Metrics RunAndEvaluate(const std::string& pipeline, const std::filesystem::path& mission_dir,
+                       const std::filesystem::path& out, double* wall_s,
+                       const OptionValues& options = {});
+/// Mean of the values; 0 for none.
+double Mean(const std::vector<double>& v);
+
 /// The INS options of `values` (the keys of the ins pipeline); std::invalid_argument otherwise.
 ins::InsOptions ParseInsOptions(const OptionValues& values);
 

@@ -168,12 +168,6 @@ std::string TableHead(const std::vector<std::string>& leading,
   return t + "\n";
 }
 
-double Mean(const std::vector<double>& v) {
-  double sum = 0;
-  for (double x : v) sum += x;
-  return v.empty() ? 0.0 : sum / v.size();
-}
-
 std::string Cell(std::vector<double> e) {
   if (e.empty()) return "-";
   return fmt::format("{:.2f} / {:.2f}", Percentile(e, 50), Percentile(e, 75));

@@ -14,7 +14,6 @@
 #include "experiments/experiments.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/io/streams.h"
 #include "trailmark/pipelines/batch_run.h"
 #include "trailmark/sim/scenarios.h"
 #include "trailmark/sim/variation.h"
@@ -40,11 +39,7 @@ Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs
       o.refusal = "cannot run (streams or nodes missing)";
       return o;
     }
-    PipelineContext context{mission, {}, [](double) {}};
-    RunPipeline(RequirePipeline(pipeline), context, out);
-    const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
-    const auto est = ReadAll<Estimate>((out / "estimates.csv").string(), &mission.registry());
-    const Metrics m = Evaluate(mission.info(), truth, est);
+    const Metrics m = RunAndEvaluate(pipeline, mission_dir, out, nullptr);
     o.ran = true;
     o.agents = m.agents.stats;
     o.statics = m.static_nodes.stats;
@@ -56,13 +51,6 @@ Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs
 
 std::string Scenario(const PipelineSpec& p) {
   return p.paper_scenarios.empty() ? "office-loop" : p.paper_scenarios.front();
-}
-
-double Mean(const std::vector<double>& v) {
-  if (v.empty()) return 0;
-  double s = 0;
-  for (double x : v) s += x;
-  return s / static_cast<double>(v.size());
 }
 
 }  // namespace

@@ -30,18 +30,6 @@ struct SeedResult {
   double wall_s = 0;
 };
 
-Metrics RunAndEvaluate(const std::string& pipeline, const fs::path& mission_dir,
-                       const fs::path& out, double* wall_s,
-                       const OptionValues& options = {}) {
-  const MissionDirectory mission(mission_dir);
-  PipelineContext context{mission, options, [](double) {}};
-  const RunResult r = RunPipeline(RequirePipeline(pipeline), context, out);
-  if (wall_s) *wall_s = r.wall_time_s;
-  const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
-  const auto est = ReadAll<Estimate>((out / "estimates.csv").string(), &mission.registry());
-  return Evaluate(mission.info(), truth, est);
-}
-
 /// Breadcrumb error vs number of measurements (paper Fig. 11): measurements = PDR steps + RSSI
 /// packets + ranges received up to the time of each static estimate row.
 std::vector<std::pair<std::size_t, double>> ErrorVsMeasurements(const fs::path& mission_dir,
@@ -146,6 +134,23 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
   return 0;
 }
 
+
+Metrics RunAndEvaluate(const std::string& pipeline, const fs::path& mission_dir,
+                       const fs::path& out, double* wall_s, const OptionValues& options) {
+  const MissionDirectory mission(mission_dir);
+  PipelineContext context{mission, options, [](double) {}};
+  const RunResult r = RunPipeline(RequirePipeline(pipeline), context, out);
+  if (wall_s) *wall_s = r.wall_time_s;
+  const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
+  const auto est = ReadAll<Estimate>((out / "estimates.csv").string(), &mission.registry());
+  return Evaluate(mission.info(), truth, est);
+}
+
+double Mean(const std::vector<double>& v) {
+  double sum = 0;
+  for (double x : v) sum += x;
+  return v.empty() ? 0.0 : sum / static_cast<double>(v.size());
+}
 
 int WriteReproduction(const fs::path& out, const std::string& title, const std::string& text) {
   fmt::print("{}", text);

@@ -48,6 +48,14 @@ std::map<std::string, std::string> ParseKeyValues(const std::vector<std::string>
 
 int main(int argc, char** argv) {
   CLI::App app{"trailmark: where every firefighter is, without GPS or infrastructure"};
+  // An unsigned option would take "-3" as 2^64 - 3: say so instead.
+  const CLI::Validator kWholeNonNegative(
+      [](std::string& text) {
+        return !text.empty() && text.front() == '-'
+                   ? "must be a whole number >= 0, not '" + text + "'"
+                   : std::string();
+      },
+      "INT >= 0");
   app.require_subcommand(1);
   app.set_version_flag("--version", std::string("trailmark ") + TRAILMARK_VERSION);
 
@@ -57,7 +65,8 @@ int main(int argc, char** argv) {
   auto* simulate = app.add_subcommand("simulate", "simulate a scenario into a mission directory");
   simulate->add_option("scenario", scenario, "scenario name (see 'trailmark scenarios')")
       ->required();
-  simulate->add_option("--seed", seed, "random seed; the same seed gives the same mission");
+  simulate->add_option("--seed", seed, "random seed; the same seed gives the same mission")
+      ->check(kWholeNonNegative);
   simulate->add_option("--out", out, "mission directory to write")->required();
   cli::SimulateImu sim_imu;
   simulate
@@ -82,9 +91,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.1, 1440.0));
 
   cli::SimulateVary sim_vary;
-  simulate->add_option("--vary", sim_vary.k,
-                       "draw variant K of the scenario: another frame, radio, ranges, surveys, "
-                       "PDR errors, events, start, CSV style (docs/simulator.md)");
+  simulate
+      ->add_option("--vary", sim_vary.k,
+                   "draw variant K of the scenario: another frame, radio, ranges, surveys, PDR "
+                   "errors, events, start, CSV style (docs/simulator.md)")
+      ->check(kWholeNonNegative);
   simulate->add_option("--family", sim_vary.family,
                        "with --vary: only this family (frame, radio, ranges, nodes, pdr, events, "
                        "start, csv; default all)");

@@ -46,6 +46,15 @@ head -1 "$dir/run/estimates.csv" | matches "^t,id,x,y,z,sxx,sxy,syy$" || fail "e
 "$TM" eval "$dir/m" "$dir/run/estimates.csv" | matches "^ff1" || fail eval
 test -s "$dir/run/metrics.json" || fail "metrics.json"
 grep -q '"mean_pct_of_distance"' "$dir/run/metrics.json" || fail "metrics keys"
+grep -q '"in95"' "$dir/run/metrics.json" || fail "metrics in95"
+# A variant: written with what was drawn, valid; bad --vary / --family named.
+"$TM" simulate office-loop-1lap --seed 2 --vary 4 --out "$dir/var" | matches "rotation_deg" || fail "simulate --vary"
+grep -q '"family": "all"' "$dir/var/variation.json" || fail "variation.json"
+"$TM" validate "$dir/var" | matches "^valid" || fail "variant valid"
+run_failing "$TM" simulate office-loop --vary -3 --out "$dir/x"
+[ $rc -ne 0 ] && grep -q "whole number >= 0, not '-3'" "$dir/err" || fail "negative --vary"
+run_failing "$TM" simulate office-loop --vary 1 --family weather --out "$dir/x"
+[ $rc -ne 0 ] && grep -q "unknown variation family 'weather' (known: frame" "$dir/err" || fail "bad --family"
 "$TM" report "$dir/run" --out "$dir/r.html" > /dev/null || fail report
 grep -q "new Chart" "$dir/r.html" || fail "report content"
 "$TM" validate "$dir/m" | matches "breadcrumb" || fail "breadcrumb runnable"
