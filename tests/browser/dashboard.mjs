@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // The dashboard of `trailmark serve` in Debian's Chromium (headless, through playwright-core):
 // after a few seconds of replay the page lists the right firefighters near the positions the
-// API reports and keeps following them live (server-sent events); a click selects one; the
+// API reports and keeps following them live (server-sent events); a click or the keyboard selects one; the
 // timeline scrubs back to the start of the incident and LIVE returns; on a tablet-sized
 // portrait screen the panel goes below the map; screenshots are written.
 // usage: node dashboard.mjs URL TOKEN EXPECTED_AGENTS SCREENSHOT.png
@@ -42,6 +42,15 @@ try {
   await page.waitForTimeout(300);
   const selected = await page.$$eval('#list .node.sel', (els) => els.map((e) => e.dataset.id));
   if (selected.length !== 1 || selected[0] !== names[0]) fail(`click did not select ${names[0]}: ${selected}`);
+  // The keyboard reaches the list: Tab to an entry, Enter selects it.
+  if (names.length > 1) {
+    await page.focus(`#list .node[data-id="${names[1]}"]`);
+    await page.keyboard.press('Enter');
+    await page.waitForTimeout(300);
+    const byKey = await page.$$eval('#list .node.sel', (els) => els.map((e) => e.dataset.id));
+    if (byKey.length !== 1 || byKey[0] !== names[1]) fail(`Enter on ${names[1]} selected ${byKey}`);
+    await page.click(`#list .node[data-id="${names[0]}"]`);
+  }
   await page.screenshot({ path: shot });
   // Timeline: back to the start shows the firefighters where they were then (at the entry).
   await page.$eval('#timeline', (el) => { el.value = el.min; el.dispatchEvent(new Event('input')); });

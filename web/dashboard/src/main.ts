@@ -173,40 +173,66 @@ function render(): void {
   renderSide(agents, alerts, t);
 }
 
+// One element per firefighter, kept across renders and updated in place: the list is redrawn on
+// every server-sent message (up to 100 a second), and an element replaced between a press and its
+// release swallows the click. Each entry is a button, so the keyboard reaches it (Tab, Enter).
+const listEntries = new Map<string, HTMLButtonElement>();
+
+function listEntry(id: string): HTMLButtonElement {
+  let entry = listEntries.get(id);
+  if (!entry) {
+    entry = document.createElement('button');
+    entry.type = 'button';
+    entry.className = 'node';
+    entry.dataset.id = id;
+    entry.onclick = () => select(id);
+    listEntries.set(id, entry);
+  }
+  return entry;
+}
+
 function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): void {
   const list = $('list');
-  list.replaceChildren(
-    ...agents.map((n) => {
-      const div = document.createElement('div');
-      div.className = 'node' + (n.id === selected ? ' sel' : '');
-      div.dataset.id = n.id;
-      const name = document.createElement('span');
-      name.className = 'pos';
-      name.textContent = `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`;
-      div.append(name);
-      const a95 = ellipse95(n.sxx, n.sxy, n.syy).a;
-      const detail = document.createElement('small');
-      detail.textContent = ` ±${a95.toFixed(1)} m`;
-      div.append(detail);
-      for (const a of alerts.filter((x) => x.id === n.id)) {
+  const shownIds = new Set(agents.map((n) => n.id));
+  for (const [id, entry] of listEntries) {
+    if (!shownIds.has(id)) (entry.remove(), listEntries.delete(id));
+  }
+  agents.forEach((n, index) => {
+    const entry = listEntry(n.id);
+    entry.classList.toggle('sel', n.id === selected);
+    entry.setAttribute('aria-pressed', String(n.id === selected));
+    const name = document.createElement('span');
+    name.className = 'pos';
+    name.textContent = `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`;
+    const detail = document.createElement('small');
+    detail.textContent = ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m`;
+    const badges = alerts
+      .filter((x) => x.id === n.id)
+      .map((a) => {
         const badge = document.createElement('span');
         badge.className = `badge ${a.kind}`;
         badge.textContent = ALERT_LABEL[a.kind] ?? a.kind;
-        div.append(badge);
-      }
-      div.onclick = () => select(n.id);
-      return div;
-    }),
-  );
-  $('alerts').replaceChildren(
-    ...alerts.map((a) => {
-      const div = document.createElement('div');
-      div.className = `alert ${a.kind}`;
-      div.dataset.kind = a.kind;
-      div.textContent = `${a.t.toFixed(0)} s — ${a.message}`;
-      return div;
-    }),
-  );
+        return badge;
+      });
+    entry.replaceChildren(name, detail, ...badges);
+    if (list.children[index] !== entry) list.insertBefore(entry, list.children[index] ?? null);
+  });
+  // The alert log is a live region: rewritten only when the alerts change, so a screen reader
+  // announces a new alert once instead of the whole list on every message.
+  const alertKey = alerts.map((a) => `${a.kind}|${a.id}|${a.t.toFixed(0)}|${a.message}`).join('\n');
+  const alertLog = $('alerts');
+  if (alertLog.dataset.key !== alertKey) {
+    alertLog.dataset.key = alertKey;
+    alertLog.replaceChildren(
+      ...alerts.map((a) => {
+        const div = document.createElement('div');
+        div.className = `alert ${a.kind}`;
+        div.dataset.kind = a.kind;
+        div.textContent = `${a.t.toFixed(0)} s — ${a.message}`;
+        return div;
+      }),
+    );
+  }
   $('clock').textContent = t === null ? 'waiting for data…' : `${following ? 'live' : 'replay'} — mission time ${t.toFixed(1)} s`;
 }
 
