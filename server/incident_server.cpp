@@ -8,6 +8,7 @@
 #include <chrono>
 #include <fstream>
 #include <future>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -398,6 +399,11 @@ void IncidentServer::Stop() {
   if (replay_thread_.joinable()) replay_thread_.join();
 }
 
+void IncidentServer::SetIntegrityNotes(std::vector<IntegrityNote> notes) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  state_.SetIntegrity(std::move(notes));
+}
+
 void IncidentServer::ReplayLoop() {
   const auto wall0 = std::chrono::steady_clock::now();
   const TimeS t0 = estimates_.empty() ? 0.0 : estimates_.front().t;
@@ -499,6 +505,7 @@ void IncidentServer::CommitLoop() {
 
 void IncidentServer::LiveLoop() {
   auto last_publish = std::chrono::steady_clock::now() - std::chrono::hours(1);
+  auto last_integrity = last_publish;
   VectorSink sink;
   std::vector<MissionRow> rows;
   std::map<std::string, std::string> refusals;  // node -> last reason logged
@@ -532,6 +539,12 @@ void IncidentServer::LiveLoop() {
         }
       }
     }
+    // The estimator's integrity notes, at most once a second (its summary is not free).
+    std::optional<std::vector<IntegrityNote>> integrity;
+    if (std::chrono::steady_clock::now() - last_integrity > std::chrono::seconds(1)) {
+      last_integrity = std::chrono::steady_clock::now();
+      integrity = live_->estimator->Summary().integrity;
+    }
     estimator_lock.unlock();
     stats_.estimated_rows += rows.size();
     std::vector<std::pair<std::string, std::string>> to_publish;
@@ -541,6 +554,7 @@ void IncidentServer::LiveLoop() {
       std::lock_guard<std::mutex> lock(mutex_);
       for (const auto& [id, t] : heard) state_.Heard(id, t);
       for (const auto& e : sink.rows) state_.Apply(e);
+      if (integrity) state_.SetIntegrity(std::move(*integrity));
       state_.Advance(newest);
       if (publish) to_publish = AgentJson(state_);
     }

@@ -86,6 +86,9 @@ class IncidentServer {
   IncidentServer(const IncidentServer&) = delete;
   IncidentServer& operator=(const IncidentServer&) = delete;
 
+  /// Replay: the integrity notes of the run that made the estimates (raised as `integrity`
+  /// alerts as the replay reaches their time). Live mode takes them from its estimator.
+  void SetIntegrityNotes(std::vector<IntegrityNote> notes);
   /// Binds and starts serving and replaying; throws std::runtime_error when it cannot bind.
   void Start();
   void Stop();

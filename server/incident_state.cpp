@@ -59,6 +59,10 @@ void IncidentState::SetDeviceStatus(const std::string& id, const std::string& st
   device_status_[id] = status;
 }
 
+void IncidentState::SetIntegrity(std::vector<IntegrityNote> notes) {
+  integrity_ = std::move(notes);
+}
+
 void IncidentState::Advance(TimeS now) {
   now_ = std::max(now_, now);
   std::vector<Alert> before;
@@ -105,6 +109,16 @@ void IncidentState::Advance(TimeS now) {
                        e.position_n.y()),
            now_});
     }
+  }
+  // Integrity: the latest note of each source up to now decides.
+  std::map<std::string, const IntegrityNote*> latest;
+  for (const IntegrityNote& n : integrity_) {
+    if (n.t <= now_) latest[n.source] = &n;
+  }
+  for (const auto& [source, n] : latest) {
+    if (n->action == "excluded" || n->action == "fallback" || n->action == "disagrees" ||
+        n->action == "repeats")
+      alerts_.push_back({n->node.empty() ? source : n->node, "integrity", n->message, n->t});
   }
   // The log keeps each alert once, when raised (a (node, kind) not active before).
   for (const Alert& a : alerts_) {

@@ -13,6 +13,7 @@
 
 #include "trailmark/core/measurements.h"
 #include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
 
 namespace trailmark::server {
 
@@ -56,6 +57,10 @@ class IncidentState {
   void Heard(const std::string& id, TimeS t);
   /// A device's own status (MQTT last will): "lost" raises a device-lost alert until "online".
   void SetDeviceStatus(const std::string& id, const std::string& status);
+  /// The estimator's integrity notes so far (its Summary().integrity, in time order): a source
+  /// whose latest note at or before now excluded it (or an agent whose estimate disagrees with
+  /// its dead reckoning) is an `integrity` alert until a later note readmits it.
+  void SetIntegrity(std::vector<IntegrityNote> notes);
   /// Mission time now; recomputes the alerts.
   void Advance(TimeS now);
   TimeS now() const { return now_; }
@@ -72,6 +77,7 @@ class IncidentState {
  private:
   MissionInfo info_;
   AlertOptions options_;
+  std::vector<IntegrityNote> integrity_;
   TimeS now_ = -1e300;
   std::map<std::string, NodeState> nodes_;
   std::map<std::string, TimeS> heard_;

@@ -138,7 +138,7 @@ int Serve(const ServeOptions& o) {
   }
   const std::string pipeline = p->name;
   VectorSink sink;
-  RunBatch(*p, {mission, o.options}, sink);
+  const EstimatorSummary summary = RunBatch(*p, {mission, o.options}, sink);
   sink.rows = sink.TakeSortedByTime();
   server::ServerOptions so;
   so.bind = o.bind;
@@ -162,6 +162,7 @@ int Serve(const ServeOptions& o) {
   if (const auto plan = ServedFloorPlan(mission, *p, o.options)) walls = plan->solid_walls();
   server::IncidentServer srv(mission.info(), std::move(sink.rows), so, std::move(heard),
                              std::move(walls));
+  srv.SetIntegrityNotes(summary.integrity);
   srv.Start();
   fmt::print("trailmark serve: {} on '{}' at {}x, listening on {}://{}:{}/\n", pipeline,
              mission.info().name, o.speed, srv.scheme(), o.bind, srv.port());

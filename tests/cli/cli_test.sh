@@ -61,6 +61,7 @@ grep -q "new Chart" "$dir/r.html" || fail "report content"
 "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/bc" --option state_period_s=0.5 > /dev/null \
   || fail "run breadcrumb"
 grep -q '"encounters"' "$dir/bc/diagnostics.json" || fail "breadcrumb diagnostics"
+grep -q '"integrity": \[' "$dir/bc/diagnostics.json" || fail "integrity notes in diagnostics"
 "$TM" eval "$dir/m" "$dir/bc/estimates.csv" | matches "^c1 " || fail "breadcrumb crumbs estimated"
 run_failing "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/x" --option nope=1
 [ $rc -eq 1 ] && grep -q "unknown option 'nope'" "$dir/err" || fail "unknown pipeline option"

@@ -98,6 +98,38 @@ TEST(IncidentState, MapErrorAlertWhenTheVarianceStaysHighOnAMapAidedPipeline) {
   EXPECT_DOUBLE_EQ(s.alert_log()[0].t, 30.0);
 }
 
+TEST(IncidentState, IntegrityNotesAreAlertsFromTheirTimeUntilReadmitted) {
+  IncidentState s(Info());
+  s.Apply(At("ff1", 0, 0));
+  s.SetIntegrity({{10, "landmark lm3", "", "excluded", "landmark lm3 excluded at t 10.0 s"},
+                  {12, "agent ff1", "ff1", "disagrees", "agent ff1 at t 12.0 s: 30 m from dead reckoning"},
+                  {20, "landmark lm3", "", "readmitted", "landmark lm3 readmitted at t 20.0 s"},
+                  {25, "link rssi lm2->ff1", "", "repeats", "the same reading 20 times"}});
+  auto kinds = [&] {
+    std::vector<std::string> ids;
+    for (const Alert& a : s.alerts()) {
+      if (a.kind == "integrity") ids.push_back(a.id);
+    }
+    return ids;
+  };
+  s.Advance(5);
+  EXPECT_TRUE(kinds().empty());  // nothing before its time
+  s.Advance(13);
+  EXPECT_EQ(kinds(), (std::vector<std::string>{"ff1", "landmark lm3"}));  // by source
+  s.Advance(21);
+  EXPECT_EQ(kinds(), (std::vector<std::string>{"ff1"}));
+  s.Advance(30);
+  EXPECT_EQ(kinds(), (std::vector<std::string>{"ff1", "link rssi lm2->ff1"}));
+  // Each raised once in the log, with its message.
+  std::size_t logged = 0;
+  for (const Alert& a : s.alert_log()) logged += a.kind == "integrity";
+  EXPECT_EQ(logged, 3u);
+  // A later readmission of the agent clears its alert.
+  s.SetIntegrity({{12, "agent ff1", "ff1", "disagrees", "x"}, {31, "agent ff1", "ff1", "agrees", "y"}});
+  s.Advance(32);
+  EXPECT_TRUE(kinds().empty());
+}
+
 TEST(IncidentState, HistoryKeepsTheTrailAtItsPeriodAndTheLatestEstimate) {
   IncidentState s(Info());
   for (int k = 0; k <= 40; ++k) s.Apply(At("ff1", 0.1 * k, k));  // 10 Hz for 4 s

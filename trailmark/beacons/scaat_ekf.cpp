@@ -66,8 +66,9 @@ bool ScaatEkfOptions::IsValid(std::string* why) const {
 
 std::string ScaatEkfSummary::BriefReport() const {
   return fmt::format(
-      "SCAAT EKF: {} steps, {} range / {} bearing / {} position updates, {} gated, {} skipped",
-      steps, range_updates, bearing_updates, position_updates, gated, skipped);
+      "SCAAT EKF: {} steps, {} range / {} bearing / {} position updates, {} gated, {} skipped, "
+      "{} refused by the integrity check",
+      steps, range_updates, bearing_updates, position_updates, gated, skipped, refused);
 }
 
 ScaatEkf::ScaatEkf(const Vec2& position_n, const Mat2& position_cov, double psi_rad,
@@ -133,7 +134,8 @@ void ScaatEkf::PredictStep(const Vec2& d, const Mat2& delta_cov) {
 template <int M>
 UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
                               const Eigen::Matrix<double, M, 4>& H,
-                              const Eigen::Matrix<double, M, M>& R, double gate) {
+                              const Eigen::Matrix<double, M, M>& R, double gate,
+                              const Admit& admit) {
   const Eigen::Matrix<double, M, M> S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) {
@@ -144,6 +146,10 @@ UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
   if (!std::isfinite(last_nis_)) {
     ++summary_.skipped;
     return UpdateResult::kSkipped;
+  }
+  if (admit && !admit(last_nis_, M)) {
+    ++summary_.refused;
+    return UpdateResult::kRefused;
   }
   if (last_nis_ > gate) {
     ++summary_.gated;
@@ -158,7 +164,8 @@ UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
   return UpdateResult::kAccepted;
 }
 
-UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m) {
+UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m,
+                                   const Admit& admit) {
   if (!std::isfinite(range_m) || range_m < 0) {
     ++summary_.skipped;
     return UpdateResult::kSkipped;
@@ -176,13 +183,13 @@ UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m,
   R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();  // the beacon's uncertainty (H_b = -H_p)
   Eigen::Matrix<double, 1, 1> y;
   y(0) = range_m - predicted;
-  const UpdateResult r = Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma);
+  const UpdateResult r = Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma, admit);
   summary_.range_updates += r == UpdateResult::kAccepted;
   return r;
 }
 
 UpdateResult ScaatEkf::UpdateBearing(const BeaconPosition& beacon, double bearing_rad,
-                                     double sigma_rad) {
+                                     double sigma_rad, const Admit& admit) {
   if (!std::isfinite(bearing_rad) ||
       (position() - beacon.position_n).norm() < options_.min_range_for_bearing_m) {
     ++summary_.skipped;
@@ -197,14 +204,14 @@ UpdateResult ScaatEkf::UpdateBearing(const BeaconPosition& beacon, double bearin
   R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();
   Eigen::Matrix<double, 1, 1> y;
   y(0) = WrapAngle(bearing_rad - predicted);
-  const UpdateResult r = Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma);
+  const UpdateResult r = Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma, admit);
   summary_.bearing_updates += r == UpdateResult::kAccepted;
   return r;
 }
 
 UpdateResult ScaatEkf::UpdatePosition(const BeaconPosition& beacon, double range_m,
                                       double bearing_rad, double range_sigma_m,
-                                      double bearing_sigma_rad) {
+                                      double bearing_sigma_rad, const Admit& admit) {
   if (!std::isfinite(range_m) || range_m < 0 || !std::isfinite(bearing_rad)) {
     ++summary_.skipped;
     return UpdateResult::kSkipped;
@@ -217,7 +224,7 @@ UpdateResult ScaatEkf::UpdatePosition(const BeaconPosition& beacon, double range
   Eigen::Matrix<double, 2, 4> H = Eigen::Matrix<double, 2, 4>::Zero();
   H.leftCols<2>().setIdentity();
   const Vec2 y = z - position();
-  const UpdateResult r = Update<2>(y, H, R, options_.gate_chi2_2dof);
+  const UpdateResult r = Update<2>(y, H, R, options_.gate_chi2_2dof, admit);
   summary_.position_updates += r == UpdateResult::kAccepted;
   return r;
 }

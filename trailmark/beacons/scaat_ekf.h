@@ -29,6 +29,7 @@
 /// first few ultrasound measurements through non-linear regression", sec. 6). No I/O.
 
 #include <Eigen/Core>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -68,13 +69,17 @@ struct ScaatEkfOptions {
   bool IsValid(std::string* why) const;
 };
 
-/// What happened to one measurement.
-enum class UpdateResult { kAccepted, kGated, kSkipped };
+/// What happened to one measurement (kRefused: by the caller's integrity check, `Admit`).
+enum class UpdateResult { kAccepted, kGated, kSkipped, kRefused };
+
+/// Sees an update's normalized innovation squared and its dimension before it is committed;
+/// false refuses it (integrity/consistency.h: a beacon inconsistent with its stated noise).
+using Admit = std::function<bool(double nis, int dof)>;
 
 struct ScaatEkfSummary {
   std::size_t steps = 0;
   std::size_t range_updates = 0, bearing_updates = 0, position_updates = 0;
-  std::size_t gated = 0, skipped = 0;
+  std::size_t gated = 0, skipped = 0, refused = 0;
   std::string BriefReport() const;
 };
 
@@ -95,13 +100,15 @@ class ScaatEkf {
   /// One PDR step `delta_n` (PDR navigation frame) with its covariance.
   void PredictStep(const Vec2& delta_n, const Mat2& delta_cov);
   /// Scalar range update; sigma <= 0 uses the options' value.
-  UpdateResult UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m = 0);
+  UpdateResult UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m = 0,
+                           const Admit& admit = nullptr);
   /// Scalar bearing update (from the beacon to the node, navigation frame).
   UpdateResult UpdateBearing(const BeaconPosition& beacon, double bearing_rad,
-                             double sigma_rad = 0);
+                             double sigma_rad = 0, const Admit& admit = nullptr);
   /// The paper's update: range and bearing converted to a position fix.
   UpdateResult UpdatePosition(const BeaconPosition& beacon, double range_m, double bearing_rad,
-                              double range_sigma_m = 0, double bearing_sigma_rad = 0);
+                              double range_sigma_m = 0, double bearing_sigma_rad = 0,
+                              const Admit& admit = nullptr);
 
   /// A direct measurement of the heading correction, e.g. from the entry: the known heading
   /// through the door minus the PDR's direction over the first metre (ours).
@@ -123,7 +130,7 @@ class ScaatEkf {
   template <int M>
   UpdateResult Update(const Eigen::Matrix<double, M, 1>& innovation,
                       const Eigen::Matrix<double, M, 4>& H, const Eigen::Matrix<double, M, M>& R,
-                      double gate);
+                      double gate, const Admit& admit = nullptr);
   void Condition();
 
   Options options_;

@@ -20,7 +20,7 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
     if (why) *why = "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s >= 0";
     return false;
   }
-  return ekf.IsValid(why) && map.IsValid(why);
+  return ekf.IsValid(why) && map.IsValid(why) && integrity.IsValid(why);
 }
 
 namespace {
@@ -74,6 +74,7 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
            OptionBounds::Positive(), "sigma of an ultrasound range without one");
     t.Real("bearing_sigma_rad", [](O& o) -> double& { return o.ekf.bearing_sigma_rad; }, "rad",
            OptionBounds::Positive(), "sigma of a bearing without one");
+    t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
     AddMapOptions(t);
     return t;
   }();
@@ -81,7 +82,7 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
 }
 
 BeaconTrailEstimator::BeaconTrailEstimator(const MissionInfo& info, BeaconTrailOptions options)
-    : options_(std::move(options)), map_(options_.map) {
+    : options_(std::move(options)), map_(options_.map), beacon_integrity_("beacon", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("beacons: " + why);
   for (const NodeInfo& n : info.nodes) {
@@ -330,15 +331,24 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
     return;
   }
   bool accepted = false;
+  // Integrity: each beacon's ranges and its bearings are sources of their own (a bearing's
+  // outliers do not condemn the beacon's ranges).
+  const std::string& id = map_.id(beacon);
+  const auto admit = [&](const std::string& source) {
+    return Admit([this, source, t](double nis, int dof) {
+      return beacon_integrity_.Record(source, t, nis, dof);
+    });
+  };
   if (options_.update == UpdateMode::kPosition && range && bearing) {
     accepted = a.ekf->UpdatePosition(*pos, range->range_m, *bearing, range->sigma_m,
-                                     bearing_sigma) == UpdateResult::kAccepted;
+                                     bearing_sigma, admit(id)) == UpdateResult::kAccepted;
   } else {
     if (range)
-      accepted |=
-          a.ekf->UpdateRange(*pos, range->range_m, range->sigma_m) == UpdateResult::kAccepted;
+      accepted |= a.ekf->UpdateRange(*pos, range->range_m, range->sigma_m,
+                                     admit(id + " range")) == UpdateResult::kAccepted;
     if (bearing)
-      accepted |= a.ekf->UpdateBearing(*pos, *bearing, bearing_sigma) == UpdateResult::kAccepted;
+      accepted |= a.ekf->UpdateBearing(*pos, *bearing, bearing_sigma, admit(id + " bearing")) ==
+                  UpdateResult::kAccepted;
   }
   if (accepted) Emit(t, a, sink);
 }
@@ -433,6 +443,7 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["rows_ignored"] = static_cast<double>(rows_ignored_);
   if (options_.tracker == Tracker::kNone) return summary;
   num["measurements_without_beacon_position"] = static_cast<double>(no_position_);
+  beacon_integrity_.Report(summary);
   for (const auto& [id, a] : agents_) {
     if (a.ekf) {
       const auto& s = a.ekf->summary();

@@ -23,6 +23,7 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/integrity/consistency.h"
 
 namespace trailmark::beacons {
 
@@ -51,7 +52,13 @@ struct BeaconTrailOptions {
   UltrasoundOnlyKfOptions us_kf;
   BeaconMapOptions map;
   InitOptions init;
+  /// SCAAT EKF: each beacon's ranges and bearings checked against their stated noise (issue
+  /// 21); an inconsistent beacon (moved, offset, its NLOS) is left out until it agrees again.
+  integrity::ConsistencyOptions integrity;
   bool IsValid(std::string* why) const;
+  /// Whether the agents' starts of mission.json are used (not with init=ultrasound): the
+  /// dead-reckoning guard (integrity/) only checks estimators that trust the same start.
+  bool UsesMissionStart() const { return !init_from_ultrasound; }
 };
 /// `beacons-mds`: the map's keys (beacons, refine, entry_track_m, mds_period_s).
 const OptionTable<BeaconTrailOptions>& BeaconMapOptionTable();
@@ -137,6 +144,7 @@ class BeaconTrailEstimator : public OnlineEstimator {
   TimeS last_t_ = 0;
   TimeS last_solve_ = -std::numeric_limits<double>::infinity();
   std::size_t implausible_links_ = 0, no_position_ = 0;
+  integrity::ConsistencyMonitor beacon_integrity_;
   std::map<std::string, std::size_t> ignored_;
   std::size_t rows_ignored_ = 0, close_pass_anchors_ = 0, entry_fixes_ = 0;
 };

@@ -79,6 +79,7 @@ std::vector<Estimate> VectorSink::TakeSortedByTime() {
 void EstimatorSummary::Merge(const EstimatorSummary& other) {
   for (const auto& [key, value] : other.numbers) numbers[key] = value;
   notes.insert(notes.end(), other.notes.begin(), other.notes.end());
+  integrity.insert(integrity.end(), other.integrity.begin(), other.integrity.end());
 }
 
 std::string EstimatorSummary::BriefReport() const {

@@ -89,12 +89,25 @@ class NullSink : public EstimateSink {
   void Add(const Estimate&) override {}
 };
 
-/// What an estimator reports besides its estimates: counters and figures by name, and notes
-/// in words (written to diagnostics.json by the batch run, served by the live server). Each
-/// estimator also has a typed summary of its own; this is its flat form.
+/// An integrity note (issue 21, trailmark/integrity/): a source found inconsistent with its
+/// stated noise and no longer used, or used again; an agent's estimate that left its own dead
+/// reckoning's region and fell back to it, or came back. The live server raises each as an
+/// `integrity` alert; the batch run writes them to diagnostics.json.
+struct IntegrityNote {
+  TimeS t = 0;          ///< mission time of the change, s
+  std::string source;   ///< "landmark L3", "beacon B2", "agent ff1"
+  std::string node;     ///< the node concerned (the agent of a fallback), may be empty
+  std::string action;   ///< "excluded", "readmitted", "fallback", "resumed", "repeats"
+  std::string message;  ///< in words, with the statistic and its threshold
+};
+
+/// What an estimator reports besides its estimates: counters and figures by name, notes in
+/// words and integrity notes (written to diagnostics.json by the batch run, served by the live
+/// server). Each estimator also has a typed summary of its own; this is its flat form.
 struct EstimatorSummary {
   std::map<std::string, double> numbers;
   std::vector<std::string> notes;
+  std::vector<IntegrityNote> integrity;
   /// Adds every number and note of `other` (numbers of the same name are overwritten).
   void Merge(const EstimatorSummary& other);
   /// One line: the numbers as "key value" pairs.

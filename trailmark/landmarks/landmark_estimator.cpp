@@ -28,7 +28,7 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "sigmas must be > 0, min_stops_heard >= 1, regrid_growth >= 1";
     return false;
   }
-  return calibration.IsValid(why);
+  return calibration.IsValid(why) && integrity.IsValid(why);
 }
 
 const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
@@ -47,13 +47,14 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
              std::vector<std::pair<std::string, Loss>>{
                  {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
              "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
+    t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
     return t;
   }();
   return table;
 }
 
 LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorOptions options)
-    : options_(std::move(options)) {
+    : options_(std::move(options)), landmark_integrity_("landmark", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
   calibrated_ = info.radio.has_value();
@@ -275,8 +276,9 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       a.sum[j] += p->rssi_dbm;
       ++a.count[j];
     }
-    if (a.ukf && estimate_[j] && a.ukf->UpdateRssi(*estimate_[j], estimate_cov_[j], p->rssi_dbm)) {
-      ++ukf_updates_;
+    if (a.ukf && estimate_[j]) {
+      const auto admit = [&](double nis) { return landmark_integrity_.Record(other, p->t, nis, 1); };
+      if (a.ukf->UpdateRssi(*estimate_[j], estimate_cov_[j], p->rssi_dbm, admit)) ++ukf_updates_;
     }
   } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
     auto ait = agents_.find(e->agent);
@@ -330,6 +332,7 @@ EstimatorSummary LandmarkEstimator::Summary() const {
   summary.numbers["radio_path_loss_exponent"] = model_.path_loss_exponent;
   summary.numbers["radio_alpha_dbm"] = model_.alpha_dbm;
   summary.numbers["rows_ignored"] = static_cast<double>(ignored_);
+  if (options_.tracking == Tracking::kUkf) landmark_integrity_.Report(summary);
   return summary;
 }
 

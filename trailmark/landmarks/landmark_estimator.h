@@ -24,6 +24,7 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/integrity/consistency.h"
 #include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/landmarks/stop_and_go.h"
 #include "trailmark/radio/path_loss.h"
@@ -63,6 +64,9 @@ struct LandmarkEstimatorOptions {
   double known_start_sigma_m = 0.05;      ///< m; a start without start_sigma
   double unknown_start_sigma_m = 100.0;   ///< m; an agent without a start
   double surveyed_sigma_m = 0.01;         ///< m; a landmark position without position_sigma
+  /// UKF: each landmark's RSSI innovations checked against their stated noise (issue 21); an
+  /// inconsistent landmark (moved, offset, frozen) is left out until it agrees again.
+  integrity::ConsistencyOptions integrity;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -121,6 +125,7 @@ class LandmarkEstimator : public OnlineEstimator {
   bool first_ = true;
   int refits_ = 0;
   std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0;
+  integrity::ConsistencyMonitor landmark_integrity_;
 };
 
 }  // namespace trailmark::landmarks

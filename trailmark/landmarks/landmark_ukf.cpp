@@ -52,7 +52,8 @@ void LandmarkUkf::Predict(double dt) {
   Symmetrize();
 }
 
-bool LandmarkUkf::UpdateRssi(const Vec2& landmark, const Mat2& landmark_cov, double rssi_dbm) {
+bool LandmarkUkf::UpdateRssi(const Vec2& landmark, const Mat2& landmark_cov, double rssi_dbm,
+                             const std::function<bool(double nis)>& admit) {
   constexpr int n = 6;
   const double a = options_.ut_alpha, k = options_.ut_kappa;
   const double lambda = a * a * (n + k) - n;
@@ -94,6 +95,7 @@ bool LandmarkUkf::UpdateRssi(const Vec2& landmark, const Mat2& landmark_cov, dou
     Pxz += w * (sigma[i] - x_) * (z[i] - z_hat);
   }
   const double nu = rssi_dbm - z_hat;
+  if (admit && !admit(nu * nu / S)) return false;
   if (std::abs(nu) > options_.gate_sigma * std::sqrt(S)) return false;
   const State K = Pxz / S;
   x_ += K * nu;

@@ -15,6 +15,7 @@
 /// acceleration when available. Covariances are kept symmetric positive definite. No I/O.
 
 #include <Eigen/Core>
+#include <functional>
 #include <vector>
 
 #include "trailmark/core/types.h"
@@ -41,9 +42,12 @@ class LandmarkUkf {
   LandmarkUkf(const Vec2& start, radio::LogDistanceModel radio, LandmarkUkfOptions options = {});
   /// Eqs. (19)-(20) over dt seconds.
   void Predict(double dt_s);
-  /// Eq. (21) through the unscented transform; landmark with position covariance. Returns
-  /// false when gated out.
-  bool UpdateRssi(const Vec2& landmark, const Mat2& landmark_cov, double rssi_dbm);
+  /// Eq. (21) through the unscented transform; landmark with position covariance. `admit`,
+  /// when given, sees the update's normalized innovation squared (nu^2 / S, 1 dof) before it
+  /// is committed and may refuse it (the integrity monitor, integrity/consistency.h). Returns
+  /// false when refused or gated out.
+  bool UpdateRssi(const Vec2& landmark, const Mat2& landmark_cov, double rssi_dbm,
+                  const std::function<bool(double nis)>& admit = nullptr);
   /// Eq. (22): a horizontal acceleration measurement (navigation frame, gravity removed).
   void UpdateAcceleration(const Vec2& accel_n);
   /// Velocity pseudo-measurement (e.g. a ZUPT-INS step divided by its duration).

@@ -49,6 +49,9 @@ struct MapMatchEstimatorOptions {
   double default_start_heading_sigma_rad = 0.09;
   double min_start_heading_sigma_rad = 0.01;
   bool IsValid(std::string* why) const;
+  /// Whether the agents' starts of mission.json are used (not with init=uniform): the
+  /// dead-reckoning guard (integrity/) only checks estimators that trust the same start.
+  bool UsesMissionStart() const { return init != StartMode::kUniform; }
 };
 /// The `--option` keys (docs/pipeline-options.md).
 const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable();

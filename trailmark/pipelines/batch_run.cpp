@@ -207,6 +207,12 @@ RunResult RunPipeline(const PipelineSpec& pipeline, const PipelineContext& conte
   diag["rows_restamped"] = sink.restamped();
   diag["numbers"] = result.summary.numbers;
   diag["notes"] = result.summary.notes;
+  // Integrity notes (issue 21): sources excluded and readmitted, fallbacks to dead reckoning.
+  diag["integrity"] = nlohmann::json::array();
+  for (const IntegrityNote& n : result.summary.integrity) {
+    diag["integrity"].push_back({{"t", n.t}, {"source", n.source}, {"node", n.node},
+                                 {"action", n.action}, {"message", n.message}});
+  }
   diag["options"] = context.options;
   std::ofstream(out_dir / "diagnostics.json") << diag.dump(2) << "\n";
   return result;

@@ -12,6 +12,8 @@
 #include "trailmark/breadcrumb/breadcrumb_estimator.h"
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/ins/ins_estimator.h"
+#include "trailmark/integrity/consistency.h"
+#include "trailmark/integrity/dead_reckoning_guard.h"
 #include "trailmark/landmarks/landmark_estimator.h"
 #include "trailmark/mapmatch/map_match_estimator.h"
 
@@ -20,11 +22,14 @@ namespace trailmark {
 namespace {
 
 /// A pipeline's options: its estimator's, how its steps come (`ins.` keys, and `reorder_s`
-/// where rows are put in time order), and the floor it works on.
+/// where rows are put in time order), its dead-reckoning guard (`integrity.` keys) and the
+/// floor it works on.
 template <class EstimatorOptions>
 struct PipelineOptions {
   EstimatorOptions estimator;
   StepFrontEndOptions steps;
+  integrity::GuardOptions guard;
+  integrity::StreamCheckOptions streams;
   std::optional<int> level;
 };
 
@@ -64,6 +69,12 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
   all->Include("", &P::estimator, table);
   if (front == Front::kPerAgent) all->Include("", &P::steps, StepSourceOptionTable());
   if (front == Front::kGlobal) all->Include("", &P::steps, OrderedStepSourceOptionTable());
+  // Every steps-based estimator but dead reckoning itself runs beside its dead-reckoning
+  // shadow (integrity/dead_reckoning_guard.h).
+  const bool guarded = front != Front::kNone && !spec.baseline;
+  if (guarded) all->Include("", &P::guard, integrity::GuardOptionTable());
+  // Every pipeline watches its streams for frozen readings (integrity/consistency.h).
+  all->Include("", &P::streams, integrity::StreamCheckOptionTable());
   if (spec.needs_floor_plan) {
     all->Integer("level", &P::level, OptionBounds::Between(-1000000, 1000000),
                  "the floor of a multi-floor plan to work on",
@@ -81,7 +92,7 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
   };
   spec.floor_level = [parse](const OptionValues& values) { return parse(values).level; };
   const bool needs_plan = spec.needs_floor_plan;
-  spec.make = [parse, inner, front, name, needs_plan](
+  spec.make = [parse, inner, front, name, needs_plan, guarded](
                   const EstimatorInputs& in, const OptionValues& values,
                   Feed feed) -> std::unique_ptr<OnlineEstimator> {
     const P o = parse(values);
@@ -90,13 +101,25 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
       if (!o.estimator.IsValid(&why)) throw std::invalid_argument("pipeline " + name + ": " + why);
     }
     if (!o.steps.IsValid(&why)) throw std::invalid_argument("pipeline " + name + ": " + why);
+    if (!o.guard.IsValid(&why) || !o.streams.IsValid(&why))
+      throw std::invalid_argument("pipeline " + name + ": " + why);
     if (needs_plan && in.floor_plan == nullptr)
       throw std::invalid_argument("the " + name + " pipeline needs the incident's floor plan");
-    auto estimator = inner(in, o.estimator);
-    if (front == Front::kNone) return estimator;
-    return std::make_unique<StepFrontEnd>(
-        in.info, o.steps, front == Front::kGlobal ? RowOrder::kGlobal : RowOrder::kPerAgent, feed,
-        std::move(estimator));
+    std::unique_ptr<OnlineEstimator> estimator = inner(in, o.estimator);
+    bool guard = guarded;
+    if constexpr (requires(const E& e) { e.UsesMissionStart(); }) {
+      guard = guard && o.estimator.UsesMissionStart();
+    }
+    if (guard) {
+      estimator =
+          std::make_unique<integrity::DeadReckoningGuard>(in.info, o.guard, std::move(estimator));
+    }
+    if (front != Front::kNone) {
+      estimator = std::make_unique<StepFrontEnd>(
+          in.info, o.steps, front == Front::kGlobal ? RowOrder::kGlobal : RowOrder::kPerAgent,
+          feed, std::move(estimator));
+    }
+    return std::make_unique<integrity::StreamCheck>(o.streams, std::move(estimator));
   };
   return spec;
 }

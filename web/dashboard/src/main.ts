@@ -30,6 +30,7 @@ const ALERT_LABEL: Record<string, string> = {
   uncertainty: 'UNCERTAIN',
   'map-error': 'MAP ERROR',
   'device-lost': 'DEVICE LOST',
+  integrity: 'INTEGRITY',
 };
 
 function mergeHistory(h: History): void {
