@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/ins/zupt_ins.h"
@@ -43,10 +44,10 @@ int Reproduce(const std::string& name, const ReproductionArgs& args);
 int WriteReproduction(const std::filesystem::path& out, const std::string& title,
                       const std::string& text);
 /// Runs the registry's `pipeline` on a mission into `out` and evaluates it against the
-/// mission's truth; `wall_s` (may be null) gets the run's wall time.
+/// mission's truth; `wall_s` and `summary` (may be null) get the run's wall time and summary.
 Metrics RunAndEvaluate(const std::string& pipeline, const std::filesystem::path& mission_dir,
                        const std::filesystem::path& out, double* wall_s,
-                       const OptionValues& options = {});
+                       const OptionValues& options = {}, EstimatorSummary* summary = nullptr);
 /// Mean of the values; 0 for none.
 double Mean(const std::vector<double>& v);
 
@@ -71,5 +72,11 @@ int ReproduceMapMatch(int seeds, const std::filesystem::path& out, const OptionV
 /// Every pipeline x every variation family on its paper's scenario, against dead reckoning on
 /// the same variant (issue 21, item 5): variants K = first_seed .. first_seed + variants - 1.
 int ReproduceRobustness(int variants, const std::filesystem::path& out, int first_seed = 1);
+
+/// The kinds of lie of the integrity mechanism (sim/lies.h) x magnitudes, on seeds
+/// first_seed .. first_seed + seeds - 1 (issue 21, item 3): how often the lying source is named,
+/// how many honest sources are excluded with it, and p75 without the lie, with it caught, and
+/// with it trusted (integrity.exclude=false, integrity.streams=false).
+int ReproduceIntegrity(int seeds, const std::filesystem::path& out, int first_seed = 1);
 
 }  // namespace trailmark::experiments

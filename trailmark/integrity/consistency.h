@@ -170,6 +170,7 @@ class StreamCheck : public OnlineEstimator {
   StreamCheckOptions options_;
   std::unique_ptr<OnlineEstimator> inner_;
   RepeatDetector radio_, imu_;
+  std::string key_;
 };
 
 }  // namespace trailmark::integrity
