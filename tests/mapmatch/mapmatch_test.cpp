@@ -94,8 +94,22 @@ TEST(FloorPlanChecks, BadPlansAreReportedClearly) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("encloses no area"), std::string::npos) << e.what();
   }
-  // An entry far from anything enclosed.
+  // An entry far from anything enclosed and from every door.
   EXPECT_THROW(ExtractSearchSequences(Room(4, 3), Vec2(50, 50)), std::invalid_argument);
+}
+
+TEST(SearchSequences, AStartOutsideEntersByTheNearestDoor) {
+  // The room's door is on the west wall at y 1-2; a responder 8 m in front of it (and one 8 m
+  // north-west of it) is searched from the door, as if the entry were there.
+  const auto from_door = ExtractSearchSequences(Room(4, 3), Vec2(0, 1.5));
+  for (const Vec2& outside : {Vec2(-8, 1.5), Vec2(-5.6, 7.1)}) {
+    const auto seqs = ExtractSearchSequences(Room(4, 3), outside);
+    ASSERT_EQ(seqs.size(), from_door.size());
+    ASSERT_EQ(seqs[0].nodes.size(), from_door[0].nodes.size());
+    for (std::size_t i = 0; i < seqs[0].nodes.size(); ++i) EXPECT_EQ(seqs[0].nodes[i], from_door[0].nodes[i]);
+  }
+  // Beyond the reach (15 m) it is no entry.
+  EXPECT_THROW(ExtractSearchSequences(Room(4, 3), Vec2(-20, 1.5)), std::invalid_argument);
 }
 
 TEST(PatternComparison, PrincipalRotationOfEquationOne) {

@@ -249,6 +249,45 @@ TEST(Variation, PdrHeadingDriftsWithTimeAlsoWhileStanding) {
               0.0, 1e-9);
 }
 
+TEST(Variation, AStartOutsideExtendsTheWalkInFrontOfTheEntry) {
+  for (const char* scenario : {"office-loop", "house1-search", "landmark-corridor", "beacon-trail"}) {
+    const SimulatedMission base = SimulateScenario(scenario, 3);
+    std::uint64_t k = 0;
+    while (!(DrawVariation(VariationFamily::kStart, k).start_outside_m > 0)) ++k;
+    const Variation v = DrawVariation(VariationFamily::kStart, k);
+    ASSERT_GE(v.start_outside_m, 2.0);
+    ASSERT_LE(v.start_outside_m, 10.0);
+    SimulatedMission m = base;
+    const auto notes = ApplyVariation(v, m);
+    for (std::size_t a = 0; a < base.data.info.nodes.size(); ++a) {
+      const NodeInfo& was = base.data.info.nodes[a];
+      const NodeInfo& now = m.data.info.nodes[a];
+      if (was.kind != NodeKind::kAgent || !was.start) continue;
+      // The stated start is the outside point, start_outside_m from where the scenario began.
+      const TruthSample* first_before = nullptr;
+      const TruthSample* first_now = nullptr;
+      for (const auto& t : base.data.truth) if (t.id == was.id && !first_before) first_before = &t;
+      for (const auto& t : m.data.truth) if (t.id == was.id && !first_now) first_now = &t;
+      ASSERT_TRUE(first_before && first_now) << scenario;
+      EXPECT_NEAR((now.start->head<2>() - first_before->position_n.head<2>()).norm(), v.start_outside_m, 1e-9)
+          << scenario;
+      EXPECT_NEAR((first_now->position_n - *now.start).norm(), 0, 1e-9) << scenario;
+      EXPECT_LT(first_now->t, first_before->t);
+      // The steps of the way in add up to it (within the PDR's 3 % / 2 degrees).
+      Vec2 walked = Vec2::Zero();
+      for (const auto& st : m.data.steps) {
+        if (st.agent == was.id && st.t1 <= first_before->t + 1e-9) walked += st.delta_n.head<2>();
+      }
+      EXPECT_NEAR((now.start->head<2>() + walked - first_before->position_n.head<2>()).norm(), 0,
+                  0.15 * v.start_outside_m)
+          << scenario;
+    }
+    EXPECT_EQ(m.data.steps.size() > base.data.steps.size(), true) << scenario;
+    for (std::size_t i = 1; i < m.data.truth.size(); ++i) ASSERT_LE(m.data.truth[i - 1].t, m.data.truth[i].t);
+    EXPECT_FALSE(notes.empty());
+  }
+}
+
 TEST(Variation, EventsAbsentDeclareTheCrumbsAndNodesGetOneSurveyError) {
   std::uint64_t k = 0;
   while (DrawVariation(VariationFamily::kEvents, k).events != EventsKept::kNone) ++k;

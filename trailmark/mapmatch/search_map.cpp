@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <stdexcept>
@@ -330,12 +331,29 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
         "(gaps in the "
         "outer walls?)");
   }
-  const auto start = grid.Nearest(entry_n);
-  if ((grid.Center(*start) - entry_n).norm() > 3.0 * options.grid.spacing_m + 2.0) {
-    throw std::invalid_argument(
-        fmt::format("the entry ({:.2f}, {:.2f}) is {:.1f} m from the nearest enclosed grid node: "
-                    "no enclosed area at the entry",
-                    entry_n.x(), entry_n.y(), (grid.Center(*start) - entry_n).norm()));
+  const double reach_m = 3.0 * options.grid.spacing_m + 2.0;
+  auto start = grid.Nearest(entry_n);
+  Vec2 entry = entry_n;
+  if ((grid.Center(*start) - entry).norm() > reach_m) {
+    // A responder who starts outside (issue 21: up to 10 m in front of the building) enters
+    // through a door: the search begins at the door nearest to the start.
+    const Segment2* door = nullptr;
+    double best = std::numeric_limits<double>::infinity();
+    for (const Segment2& d : plan.doors()) {
+      const double dist = DistanceToSegment(entry_n, d);
+      if (dist < best) best = dist, door = &d;
+    }
+    if (door != nullptr && best <= options.entry_door_reach_m) {
+      entry = 0.5 * (door->a + door->b);
+      start = grid.Nearest(entry);
+    }
+    if ((grid.Center(*start) - entry).norm() > reach_m) {
+      throw std::invalid_argument(fmt::format(
+          "the entry ({:.2f}, {:.2f}) is {:.1f} m from the nearest enclosed grid node and no door "
+          "within {:g} m leads in: no enclosed area at the entry",
+          entry_n.x(), entry_n.y(), (grid.Center(*grid.Nearest(entry_n)) - entry_n).norm(),
+          options.entry_door_reach_m));
+    }
   }
   std::vector<NodeSequence> sequences;
   {
@@ -344,7 +362,7 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
     // The node closest to the entry first (sec. IV-C).
     const auto first =
         std::min_element(nodes.begin(), nodes.end(), [&](const Vec2& a, const Vec2& b) {
-          return (a - entry_n).squaredNorm() < (b - entry_n).squaredNorm();
+          return (a - entry).squaredNorm() < (b - entry).squaredNorm();
         });
     std::rotate(nodes.begin(), first, nodes.end());
     sequences.push_back({std::move(nodes), false});

@@ -96,12 +96,16 @@ struct SearchSequenceOptions {
   SearchGridOptions grid;
   double wall_snap_m = 0.05;
   int max_extra_sequences = 20;
+  /// An entry outside the building enters by the nearest door within this distance (ours: a
+  /// responder may start up to 10 m in front of the building, issue 21).
+  double entry_door_reach_m = 15.0;
 };
 
 /// The right-hand sequence from the node closest to `entry_n`, plus one sequence around every
 /// group of inner walls the first one never passes, and one in every enclosed part it never
-/// enters (a closed-off room). Throws std::invalid_argument when nothing
-/// is enclosed near the entry.
+/// enters (a closed-off room). An entry outside the building (a responder who starts in front
+/// of it) enters by the door nearest to it. Throws std::invalid_argument when nothing is
+/// enclosed near the entry or near that door.
 std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Vec2& entry_n,
                                                  const SearchSequenceOptions& options = {});
 

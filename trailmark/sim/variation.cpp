@@ -1,11 +1,14 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/sim/variation.h"
 
+#include <fmt/format.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -145,7 +148,11 @@ void DrawFamily(VariationFamily f, Random& r, Variation& v) {
       v.gyro_bias_z_rad_per_s = Signed(r, 0.5, 3.0) * std::numbers::pi / 180 / 60;
       break;
     case VariationFamily::kEvents: v.events = Coin(r) ? EventsKept::kDropsOnly : EventsKept::kNone; break;
-    case VariationFamily::kStart: v.drop_start_heading = true; break;
+    case VariationFamily::kStart:
+      v.drop_start_heading = true;
+      // A third start where the scenario does (at the entry, inside), the others 2-10 m outside.
+      if (r.Uniform() >= 1.0 / 3) v.start_outside_m = r.Uniform(2.0, 10.0);
+      break;
     case VariationFamily::kCsv: {
       v.write.seed = Mix(v.k, static_cast<int>(f), 7);
       // At least one quirk: draw until one is on.
@@ -380,6 +387,79 @@ void ApplyPdr(const Variation& v, SimulatedMission& sim, std::vector<std::string
   if (zeros > 0) notes.push_back(std::to_string(zeros) + " zero-length steps while standing");
 }
 
+/// The responder starts `start_outside_m` outside and walks straight in (see Variation).
+void ApplyStartOutside(const Variation& v, SimulatedMission& sim, Random& r,
+                       std::vector<std::string>& notes) {
+  if (!(v.start_outside_m > 0)) return;
+  MissionData& d = sim.data;
+  if (!d.imu.empty()) {
+    notes.push_back("start outside not applied: the mission has a foot IMU");
+    return;
+  }
+  constexpr double kStepM = 0.7, kStepS = 0.55, kTruthPeriodS = 0.1;
+  std::vector<TruthSample> truth;
+  std::vector<Step> steps;
+  for (NodeInfo& n : d.info.nodes) {
+    if (n.kind != NodeKind::kAgent || !n.start) continue;
+    std::vector<const TruthSample*> mine;
+    for (const TruthSample& t : d.truth) {
+      if (t.id == n.id) mine.push_back(&t);
+    }
+    if (mine.empty()) continue;
+    const Vec3 s0 = mine.front()->position_n;
+    const TimeS t_first = mine.front()->t;
+    // The direction of its first 2 m: it came in walking that way.
+    std::optional<Vec2> u;
+    for (const TruthSample* t : mine) {
+      const Vec2 d2 = (t->position_n - s0).head<2>();
+      if (d2.norm() >= 2.0) {
+        u = d2.normalized();
+        break;
+      }
+    }
+    if (!u) continue;
+    const double length = v.start_outside_m;
+    const int n_steps = static_cast<int>(std::ceil(length / kStepM));
+    const double step_m = length / n_steps;
+    const TimeS t_begin = t_first - n_steps * kStepS;
+    Vec3 outside = s0;
+    outside.head<2>() -= length * *u;
+    for (TimeS t = t_begin; t < t_first - 1e-9; t += kTruthPeriodS) {
+      Vec3 p = outside;
+      p.head<2>() += (t - t_begin) / (t_first - t_begin) * length * *u;
+      truth.push_back({t, n.id, p});
+    }
+    std::optional<Vec3> variance;
+    for (const Step& st : d.steps) {
+      if (st.agent == n.id) {
+        variance = st.variance_m2;
+        break;
+      }
+    }
+    for (int k = 0; k < n_steps; ++k) {
+      // The PDR's own errors on the way in: 2 degrees of heading, 3 % of length (1 sigma).
+      const double turn = r.Normal(0, 2.0 * std::numbers::pi / 180);
+      const double stretch = 1.0 + r.Normal(0, 0.03);
+      Step st;
+      st.t0 = t_begin + k * kStepS;
+      st.t1 = st.t0 + kStepS;
+      st.agent = n.id;
+      st.delta_n.head<2>() = Eigen::Rotation2Dd(turn) * Vec2(*u * step_m * stretch);
+      st.variance_m2 = variance;
+      steps.push_back(st);
+    }
+    n.start = outside;
+    notes.push_back(fmt::format("{} starts {:.1f} m outside and walks in ({} steps)", n.id, length,
+                                n_steps));
+  }
+  d.truth.insert(d.truth.end(), truth.begin(), truth.end());
+  std::stable_sort(d.truth.begin(), d.truth.end(),
+                   [](const TruthSample& a, const TruthSample& b) { return a.t < b.t; });
+  d.steps.insert(d.steps.end(), steps.begin(), steps.end());
+  std::stable_sort(d.steps.begin(), d.steps.end(),
+                   [](const Step& a, const Step& b) { return a.t1 < b.t1; });
+}
+
 void ApplyEvents(const Variation& v, SimulatedMission& sim) {
   MissionData& d = sim.data;
   if (v.events == EventsKept::kAll) return;
@@ -441,7 +521,12 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
   std::vector<std::string> notes;
   auto rng = [&](VariationFamily f) { return Random(Mix(v.k, static_cast<int>(f), 1)); };
   auto on = [&](VariationFamily f) { return v.family == f || v.family == VariationFamily::kAll; };
-  // Measurements first, in the simulator's frame; the frame last.
+  // The walk first (a start outside extends it), then the measurements, in the simulator's
+  // frame; the frame last.
+  if (on(VariationFamily::kStart)) {
+    Random r = rng(VariationFamily::kStart);
+    ApplyStartOutside(v, sim, r, notes);
+  }
   if (on(VariationFamily::kRadio) && v.radio) {
     Random r = rng(VariationFamily::kRadio);
     ApplyRadio(v, sim, r, notes);
@@ -510,8 +595,10 @@ std::vector<std::pair<std::string, std::string>> Variation::Describe() const {
     out.emplace_back("events", events == EventsKept::kAll         ? "all"
                                : events == EventsKept::kDropsOnly ? "drops only"
                                                                   : "none");
-  if (on(VariationFamily::kStart))
+  if (on(VariationFamily::kStart)) {
     out.emplace_back("start_heading", drop_start_heading ? "not given" : "given");
+    out.emplace_back("start_outside_m", Num(start_outside_m));
+  }
   if (on(VariationFamily::kCsv)) {
     out.emplace_back("csv_comments", write.csv_comments ? "yes" : "no");
     out.emplace_back("csv_columns", write.csv_shuffled_columns ? "shuffled" : "as specified");

@@ -90,6 +90,10 @@ struct Variation {
   // events, start
   EventsKept events = EventsKept::kAll;
   bool drop_start_heading = false;
+  /// The responder starts this far outside (0: where the scenario starts, inside at the entry)
+  /// and walks straight in along the direction of its first 2 m; mission.json's start is the
+  /// outside point. Missions with a foot IMU keep their start (its samples are not extended).
+  double start_outside_m = 0;
 
   MissionWriteStyle write;  ///< applied by the writer (io/mission_io)
 
