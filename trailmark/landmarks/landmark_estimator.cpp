@@ -219,6 +219,11 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
     fix.landmark_known.push_back(true);
     if (!estimate_[j]) r[j].reset();
     usable += r[j].has_value();
+    // The fix takes the landmarks as known; their own uncertainty moves each range by its
+    // component along the line of sight: to first order, half the trace of the landmark's
+    // covariance (isotropic) is added to the range's variance (issue 21: the fix was as
+    // confident as if the estimated landmarks were surveyed).
+    if (r[j]) sg[j] = std::sqrt(sg[j] * sg[j] + 0.5 * estimate_cov_[j].trace());
   }
   if (usable >= kRangesForFix && !a.ukf) {
     fix.standing = {a.position};
