@@ -70,9 +70,8 @@ class HistorySink : public EstimateSink {
  private:
   std::vector<Estimate>& history_;
 };
-}  // namespace
 
-namespace {
+/// The typical device's dead reckoning with its shared-error sigmas x overbound.
 PdrOptions Overbounded(PdrOptions o, const GuardOptions& guard) {
   std::string why;
   if (!guard.IsValid(&why)) throw std::invalid_argument(why);
