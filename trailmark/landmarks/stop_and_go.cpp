@@ -114,25 +114,41 @@ Vec2 GridInit(std::vector<Vec2> anchors, std::vector<double> ranges, std::vector
     }
     anchors = std::move(a), ranges = std::move(r), sigmas = std::move(s);
   }
-  Vec2 lo = anchors.front(), hi = lo;
+  // The grid lies in the anchors' own frame — their centroid and principal axes, the major axis
+  // pointing from the first anchor toward the last — so the same anchors drawn rotated or
+  // shifted give the same grid and the same start (issue 21, item 2: an axis-aligned grid
+  // started landmarks in another local minimum of the robust cost, up to 3 m apart, when the
+  // building was rotated).
+  Vec2 centroid = Vec2::Zero();
+  for (const Vec2& a : anchors) centroid += a;
+  centroid /= static_cast<double>(anchors.size());
+  Mat2 spread = Mat2::Zero();
+  for (const Vec2& a : anchors) spread += (a - centroid) * (a - centroid).transpose();
+  const double theta = 0.5 * std::atan2(2 * spread(0, 1), spread(0, 0) - spread(1, 1));
+  Vec2 e1(std::cos(theta), std::sin(theta));
+  if ((anchors.back() - anchors.front()).dot(e1) < 0) e1 = -e1;
+  const Vec2 e2(-e1.y(), e1.x());
+  auto local = [&](const Vec2& p) { return Vec2((p - centroid).dot(e1), (p - centroid).dot(e2)); };
+  Vec2 lo = local(anchors.front()), hi = lo;
   double reach = 0;
   for (std::size_t k = 0; k < anchors.size(); ++k) {
-    lo = lo.cwiseMin(anchors[k]);
-    hi = hi.cwiseMax(anchors[k]);
+    lo = lo.cwiseMin(local(anchors[k]));
+    hi = hi.cwiseMax(local(anchors[k]));
     reach = std::max(reach, ranges[k]);
   }
   lo.array() -= reach + o.init_margin_m;
   hi.array() += reach + o.init_margin_m;
   const double step = std::max(o.init_grid_m, (hi - lo).maxCoeff() / 400.0);
-  Vec2 best = 0.5 * (lo + hi);
+  Vec2 best = centroid + 0.5 * (lo.x() + hi.x()) * e1 + 0.5 * (lo.y() + hi.y()) * e2;
   double best_cost = std::numeric_limits<double>::infinity();
-  for (double x = lo.x(); x <= hi.x(); x += step) {
-    for (double y = lo.y(); y <= hi.y(); y += step) {
+  for (double u = lo.x(); u <= hi.x(); u += step) {
+    for (double v = lo.y(); v <= hi.y(); v += step) {
+      const Vec2 p = centroid + u * e1 + v * e2;
       double c = 0;
       for (std::size_t k = 0; k < anchors.size(); ++k) {
-        c += Rho(((Vec2(x, y) - anchors[k]).norm() - ranges[k]) / sigmas[k], o.loss, o.robust_k);
+        c += Rho(((p - anchors[k]).norm() - ranges[k]) / sigmas[k], o.loss, o.robust_k);
       }
-      if (c < best_cost) best_cost = c, best = Vec2(x, y);
+      if (c < best_cost) best_cost = c, best = p;
     }
   }
   return best;
