@@ -154,7 +154,10 @@ serve_pid=$!
 for _ in $(seq 50); do grep -q "listening on" "$dir/serve.log" && break; sleep 0.1; done
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
 [ -n "$port" ] || { cat "$dir/serve.log"; fail "serve did not start"; }
-sleep 1
+for _ in $(seq 100); do  # the replay releases its first estimates (up to 10 s on a loaded machine)
+  curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/state" | grep -q '"nodes":\[{' && break
+  sleep 0.1
+done
 code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/api/state")
 [ "$code" = 401 ] || fail "serve: /api/state without the token gave $code"
 curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/state" > "$dir/state.json"
@@ -220,14 +223,18 @@ curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/stats" > "$dir
 grep -q '"recent_rejections":\[{' "$dir/stats.json" && grep -q "time order" "$dir/stats.json" \
   || { cat "$dir/stats.json"; fail "rejection reasons in /api/stats"; }
 grep -q "rejected: steps.csv: request body:2: t=0.1" "$dir/live.log" || { cat "$dir/live.log"; fail "rejection not logged"; }
-sleep 0.5
-curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/state" > "$dir/lstate.json"
-grep -q '"id":"ff1"' "$dir/lstate.json" || fail "live state"
 # The incremental live pdr (re-fed from the journal after the restart) ends exactly where the
-# batch pipeline ends on the whole mission.
+# batch pipeline ends on the whole mission. The live estimator runs behind the acknowledgement
+# (rows are estimated after they are committed): poll until it has caught up, up to 10 s.
 "$TM" run --pipeline pdr "$dir/m2" --out "$dir/m2run" > /dev/null
 want=$(awk -F, 'NR > 1 && $2 == "ff1" { x = $3; y = $4 } END { printf "%.6f %.6f", x, y }' "$dir/m2run/estimates.csv")
-got=$(sed 's/.*"id":"ff1"[^}]*"x":\([-0-9.e]*\),"y":\([-0-9.e]*\).*/\1 \2/' "$dir/lstate.json" | awk '{ printf "%.6f %.6f", $1, $2 }')
+for _ in $(seq 100); do
+  curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/state" > "$dir/lstate.json"
+  got=$(sed 's/.*"id":"ff1"[^}]*"x":\([-0-9.e]*\),"y":\([-0-9.e]*\).*/\1 \2/' "$dir/lstate.json" | awk '{ printf "%.6f %.6f", $1, $2 }')
+  [ "$want" = "$got" ] && break
+  sleep 0.1
+done
+grep -q '"id":"ff1"' "$dir/lstate.json" || fail "live state"
 echo "live pdr end: $got (batch: $want)" >&2; [ "$want" = "$got" ] && [ "$want" != "0.000000 0.000000" ] || fail "live pdr ended at ($got), the batch pdr at ($want)"
 curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/history" | matches '"trails":{"ff1":\[\[' || fail "history"
 # Server-sent events: the state as a stream (the dashboard's live updates).
