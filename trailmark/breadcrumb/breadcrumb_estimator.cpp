@@ -19,7 +19,7 @@ bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "sigmas, gates and periods must be positive";
     return false;
   }
-  return true;
+  return l.integrity.IsValid(why);
 }
 
 const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
@@ -79,6 +79,7 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real("max_speed_mps", &L::max_speed_mps, "m/s", pos,
            "steps faster than this are dropped (IV-F)");
 
+    t.Include("", &L::integrity, integrity::ConsistencyOptionTable());
     using O = BreadcrumbEstimatorOptions;
     OptionTable<O> out;
     out.Include("", &O::localizer, t);
@@ -237,6 +238,8 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["rssi_static_packets"] = static_cast<double>(s.rssi_static_used);
   num["range_edges"] = static_cast<double>(s.ranges_used);
   num["gated"] = static_cast<double>(s.gated);
+  num["refused_by_integrity"] = static_cast<double>(s.refused);
+  loc_->node_integrity().Report(summary);
   num["downweighted"] = static_cast<double>(s.downweighted);
   num["encounters"] = static_cast<double>(s.encounters);
   num["drops"] = static_cast<double>(s.drops);

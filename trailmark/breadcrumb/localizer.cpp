@@ -24,7 +24,7 @@ double Huber(double r, double k) {
 }  // namespace
 
 BreadcrumbLocalizer::BreadcrumbLocalizer(LocalizerOptions options)
-    : options_(options), gen_(options.gen) {}
+    : options_(options), gen_(options.gen), node_integrity_("node", options.integrity) {}
 
 ScalarModel BreadcrumbLocalizer::RssiModel() const {
   ScalarModel m;
@@ -445,7 +445,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
 void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i,
                                           const Mat2& cov_j, double z, double variance,
                                           const ScalarModel& model, const Vec2& offset,
-                                          double k_negative, NodeIndex bias) {
+                                          double k_negative, NodeIndex bias,
+                                          const std::string* source, TimeS t) {
   const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
@@ -454,6 +455,10 @@ void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& 
   const Vec2 bias_hat = bias >= 0 ? gen_.Estimate(bias) : Vec2::Zero();
   const double nu = z - (1.0 + bias_hat.y()) * model.Predict(d) - bias_hat.x();
   const double normalized = std::abs(nu) / std::sqrt(S);
+  if (source != nullptr && !node_integrity_.Record(*source, t, nu * nu / S, 1)) {
+    ++summary_.refused;
+    return;
+  }
   if (!std::isfinite(normalized) || normalized > options_.gate_sigma) {
     ++summary_.gated;
     return;
@@ -562,14 +567,15 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const double var = AgentRssiVariance() + slope * slope * offset_var.mean();
       AddScalarRobust(a.state, node->index, cov_here, node->cached_cov,
                       p.value + options_.radio.body_loss_db * body, var, model, offset,
-                      options_.rssi_nlos_k);
+                      options_.rssi_nlos_k, -1, &p.other, p.t);
       ++summary_.rssi_agent_used;
       break;
     }
     case Kind::kRange: {
       const double var = p.sigma * p.sigma + offset_var.mean();
       AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value, var,
-                      ScalarModel{}, offset, options_.huber_k, RangeBiasNode(p.range_kind));
+                      ScalarModel{}, offset, options_.huber_k, RangeBiasNode(p.range_kind),
+                      &p.other, p.t);
       ++summary_.ranges_used;
       break;
     }

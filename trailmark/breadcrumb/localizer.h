@@ -36,6 +36,7 @@
 
 #include "trailmark/breadcrumb/gen_network.h"
 #include "trailmark/core/measurements.h"
+#include "trailmark/integrity/consistency.h"
 #include "trailmark/radio/path_loss.h"
 
 namespace trailmark::breadcrumb {
@@ -133,6 +134,10 @@ struct LocalizerOptions {
   // agents
   double known_start_sigma_m = 0.01;         ///< `start` without `start_sigma`
   double unknown_start_sigma_m = 1000.0;
+  /// Each static node's RSSI and ranges from agents checked against their stated noise
+  /// (issue 21, integrity/consistency.h): an inconsistent crumb, landmark or anchor (moved,
+  /// offset, surveyed wrong) is left out until it agrees again.
+  integrity::ConsistencyOptions integrity;
 };
 
 struct LocalizerSummary {
@@ -140,6 +145,7 @@ struct LocalizerSummary {
   std::size_t rssi_packets = 0, rssi_weak = 0, rssi_agent_used = 0, rssi_static_used = 0;
   std::size_t ranges_used = 0;
   std::size_t gated = 0, downweighted = 0;
+  std::size_t refused = 0;  ///< by the integrity check (a static node inconsistent with its noise)
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   std::size_t unusable = 0;  ///< measurements that could not be attached (with reasons in notes)
@@ -193,6 +199,8 @@ class BreadcrumbLocalizer {
   const std::vector<std::pair<TimeS, std::string>>& MovedNodes() const { return moved_; }
 
   LocalizerSummary summary() const;
+  /// The integrity check of the static nodes (integrity notes, counts).
+  const integrity::ConsistencyMonitor& node_integrity() const { return node_integrity_; }
   const GenNetwork& network() const { return gen_; }
   const LocalizerOptions& options() const { return options_; }
 
@@ -265,9 +273,11 @@ class BreadcrumbLocalizer {
   void ProcessAgent(Agent& a, TimeS covered);
   void AttachState(Agent& a, TimeS t);
   void ApplyPending(Agent& a, const Pending& p);
+  /// `source` (a static node's id, may be null) and `t`: the integrity check of that node.
   void AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j,
                        double z, double variance, const ScalarModel& model, const Vec2& offset,
-                       double k_negative, NodeIndex bias = -1);
+                       double k_negative, NodeIndex bias = -1, const std::string* source = nullptr,
+                       TimeS t = 0);
   NodeIndex RangeBiasNode(const std::string& kind);
   void ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m, double sigma_m,
                             bool biased = false);
@@ -291,6 +301,7 @@ class BreadcrumbLocalizer {
   /// Solves unless throttled; true when the factor matches the current network.
   bool SolveThrottled();
   LocalizerSummary summary_;
+  integrity::ConsistencyMonitor node_integrity_;
   std::vector<radio::CalibrationPair> calibration_pairs_;
   std::map<std::string, NodeIndex> range_bias_;
   bool calibrated_ = false;

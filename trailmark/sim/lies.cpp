@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 #include <stdexcept>
@@ -28,10 +29,14 @@ void ApplyLie(MissionData& m, const Lie& lie) {
   for (NodeInfo& n : m.info.nodes) {
     if (n.id == lie.node) node = &n;
   }
-  if (node == nullptr && lie.kind != LieKind::kRangeScale) {
+  const auto touches = [&](const RssiPacket& p) { return p.tx == lie.node || p.rx == lie.node; };
+  // A moved node must be declared (with a position); an RSSI lie needs the node's packets only
+  // (a dropped crumb is not declared).
+  const bool radio = lie.kind == LieKind::kRssiOffset || lie.kind == LieKind::kFrozenLink;
+  if ((lie.kind == LieKind::kMovedNode && node == nullptr) ||
+      (radio && std::none_of(m.rssi.begin(), m.rssi.end(), touches))) {
     throw std::invalid_argument("lie: no node '" + lie.node + "' in the mission");
   }
-  const auto touches = [&](const RssiPacket& p) { return p.tx == lie.node || p.rx == lie.node; };
   switch (lie.kind) {
     case LieKind::kMovedNode: {
       if (!node->position) throw std::invalid_argument("lie: '" + lie.node + "' is not surveyed");

@@ -28,8 +28,8 @@ struct Lie {
 /// "lm3 surveyed 6 m off", "lm2 RSSI +10 dB", ...
 std::string Describe(const Lie& lie);
 /// Applies the lie to the mission's declarations or streams (the truth is left as it is).
-/// Throws std::invalid_argument for a node the mission does not declare (or, for a moved node,
-/// one without a position).
+/// Throws std::invalid_argument for a moved node the mission does not declare with a position,
+/// or an RSSI lie on a node that has no packets.
 void ApplyLie(MissionData& mission, const Lie& lie);
 /// Declares every node of `kind` surveyed at its true position (its first truth row) with
 /// `sigma_m`; nodes without truth are left as they are.
