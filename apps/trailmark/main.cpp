@@ -94,11 +94,11 @@ int main(int argc, char** argv) {
   simulate
       ->add_option("--vary", sim_vary.k,
                    "draw variant K of the scenario: another frame, radio, ranges, surveys, PDR "
-                   "errors, events, start, CSV style (docs/simulator.md)")
+                   "errors, phone steps, events, start, CSV style (docs/simulator.md)")
       ->check(kWholeNonNegative);
   simulate->add_option("--family", sim_vary.family,
-                       "with --vary: only this family (frame, radio, ranges, nodes, pdr, events, "
-                       "start, csv; default all)");
+                       "with --vary: only this family (frame, radio, ranges, nodes, pdr, phone, "
+                       "events, start, csv; default all)");
 
   app.add_subcommand("scenarios", "list the simulator's scenarios");
 

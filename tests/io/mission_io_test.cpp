@@ -59,6 +59,23 @@ TEST(MissionJson, MinimalMissionAndAgentStartFromBase) {
   EXPECT_EQ(ParseMissionInfo("{}", "m").nodes.size(), 0u);
 }
 
+TEST(MissionDirectory, WritingAgainLeavesNoStreamOfTheEarlierMission) {
+  testing::TempDir dir;
+  MissionData first;
+  first.info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  first.steps.push_back(Step{0, 1, "ff1", Vec3(0.7, 0, 0), std::nullopt});
+  first.events.push_back({0.5, "ff1", "stop", ""});
+  WriteMissionDirectory(dir.path(), first);
+  ASSERT_TRUE(std::filesystem::exists(dir.path() / "events.csv"));
+  MissionData second = first;
+  second.events.clear();  // e.g. a variant without events
+  WriteMissionDirectory(dir.path(), second);
+  EXPECT_FALSE(std::filesystem::exists(dir.path() / "events.csv"));
+  const MissionData back = ReadMissionData(MissionDirectory(dir.path()));
+  EXPECT_TRUE(back.events.empty());
+  EXPECT_EQ(back.steps.size(), 1u);
+}
+
 TEST(MissionJson, RoundTrips) {
   const MissionInfo a = ParseMissionInfo(kSpecExample, "m");
   const MissionInfo b = ParseMissionInfo(MissionInfoToJson(a), "m");

@@ -249,6 +249,36 @@ TEST(Variation, PdrHeadingDriftsWithTimeAlsoWhileStanding) {
               0.0, 1e-9);
 }
 
+TEST(Variation, PhoneStepsTurnWithTheCarryingModeAndMissOrInventSteps) {
+  const SimulatedMission base = SimulateScenario("training-building", 2);  // rooms with pauses
+  for (std::uint64_t k : {1u, 2u, 3u}) {
+    const Variation v = DrawVariation(VariationFamily::kPhone, k);
+    ASSERT_TRUE(v.phone);
+    EXPECT_GE(v.phone_scale, 0.85);
+    EXPECT_LE(v.phone_scale, 1.15);
+    SimulatedMission m = base;
+    const auto notes = ApplyVariation(v, m);
+    ASSERT_FALSE(notes.empty());
+    // About 4 % missed, some phantom steps while standing.
+    const double ratio = static_cast<double>(m.data.steps.size()) / base.data.steps.size();
+    EXPECT_GT(ratio, 0.9) << k;
+    EXPECT_LT(ratio, 1.1) << k;
+    double walked_base = 0, walked = 0;
+    for (const auto& st : base.data.steps) walked_base += st.delta_n.head<2>().norm();
+    for (const auto& st : m.data.steps) walked += st.delta_n.head<2>().norm();
+    EXPECT_GT(walked / walked_base, 0.85 * v.phone_scale) << k;
+    EXPECT_LT(walked / walked_base, 1.05 * v.phone_scale) << k;
+    // The first step (if not missed) points off the walking direction by the first mode's offset.
+    const Step& b0 = base.data.steps.front();
+    const Step& m0 = m.data.steps.front();
+    if (m0.t1 == b0.t1) {
+      const double turn = std::atan2(m0.delta_n.y(), m0.delta_n.x()) - std::atan2(b0.delta_n.y(), b0.delta_n.x());
+      EXPECT_NEAR(WrapAngle(turn - v.phone_first_offset_rad), 0.0, 1e-9) << k;
+    }
+    for (std::size_t i = 1; i < m.data.steps.size(); ++i) ASSERT_LE(m.data.steps[i - 1].t1, m.data.steps[i].t1);
+  }
+}
+
 TEST(Variation, AStartOutsideExtendsTheWalkInFrontOfTheEntry) {
   for (const char* scenario : {"office-loop", "house1-search", "landmark-corridor", "beacon-trail"}) {
     const SimulatedMission base = SimulateScenario(scenario, 3);

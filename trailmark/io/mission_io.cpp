@@ -429,8 +429,14 @@ void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& 
   auto write = [&](const auto& rows) {
     using Row = typename std::decay_t<decltype(rows)>::value_type;
     ++stream_seed;
-    if (rows.empty()) return;
     const std::filesystem::path path = dir / StreamFileName<Row>();
+    if (rows.empty()) {
+      // The directory holds what was written: a stream file of an earlier mission written
+      // there would otherwise be read as this one's.
+      std::error_code ignored;
+      std::filesystem::remove(path, ignored);
+      return;
+    }
     WriteAll<Row>(path.string(), rows);
     if (restyle) {
       const std::string text = RestyleCsv(ReadText(path), style, stream_seed);

@@ -46,7 +46,9 @@ std::string FloorPlanToGeoJson(const FloorPlan& plan, bool polyline_walls = fals
 std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors);
 
 /// Writes mission.json, every non-empty stream and (when given) the floor plan into `dir`,
-/// creating it. Streams are written in the order held; the caller keeps them time-sorted.
+/// creating it; the file of an empty stream is removed (a directory written twice holds the
+/// second mission only). Streams are written in the order held; the caller keeps them
+/// time-sorted.
 /// `style`: another of the ways the spec allows to draw the same mission.
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
                            const FloorPlan* plan = nullptr, const MissionWriteStyle& style = {});

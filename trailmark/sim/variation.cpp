@@ -68,8 +68,8 @@ namespace {
 
 constexpr VariationFamily kSingleFamilies[] = {
     VariationFamily::kFrame, VariationFamily::kRadio, VariationFamily::kRanges,
-    VariationFamily::kNodes, VariationFamily::kPdr,   VariationFamily::kEvents,
-    VariationFamily::kStart, VariationFamily::kCsv};
+    VariationFamily::kNodes, VariationFamily::kPdr,   VariationFamily::kPhone,
+    VariationFamily::kEvents, VariationFamily::kStart, VariationFamily::kCsv};
 
 /// A seed for (k, family, purpose) that does not collide across families (splitmix64).
 std::uint64_t Mix(std::uint64_t k, int family, int purpose) {
@@ -146,6 +146,12 @@ void DrawFamily(VariationFamily f, Random& r, Variation& v) {
       v.heading_drift_rad_per_s = Signed(r, 0.5, 3.0) * std::numbers::pi / 180 / 60;
       v.zero_length_steps = Coin(r);
       v.gyro_bias_z_rad_per_s = Signed(r, 0.5, 3.0) * std::numbers::pi / 180 / 60;
+      break;
+    case VariationFamily::kPhone:
+      v.phone = true;
+      v.phone_scale = r.Uniform(0.85, 1.15);
+      v.phone_first_offset_rad = r.Uniform(-20.0, 20.0) * std::numbers::pi / 180;
+      v.phone_mode_period_s = r.Uniform(30.0, 120.0);
       break;
     case VariationFamily::kEvents: v.events = Coin(r) ? EventsKept::kDropsOnly : EventsKept::kNone; break;
     case VariationFamily::kStart:
@@ -387,6 +393,66 @@ void ApplyPdr(const Variation& v, SimulatedMission& sim, std::vector<std::string
   if (zeros > 0) notes.push_back(std::to_string(zeros) + " zero-length steps while standing");
 }
 
+/// What a hand-held phone's PDR reports of the same walk (see Variation; the magnitudes are
+/// those reported for smartphone PDR, set a priori): the heading is the phone's, offset from the
+/// walking direction by its carrying mode (texting, calling, swinging, pocket), which changes at
+/// random times to a new offset of up to +-45 deg; a step-length model with a shared scale
+/// error and 8 % per step; 4 % of steps missed (their displacement lost) and, when standing
+/// longer than 2 s, phantom steps half of the time (1-3 of 0.6 m, a sway read as walking). The
+/// steps keep the variances the foot PDR stated: the phone claims as much.
+void ApplyPhone(const Variation& v, SimulatedMission& sim, Random& r, std::vector<std::string>& notes) {
+  MissionData& d = sim.data;
+  if (d.steps.empty()) return;
+  struct Mode {
+    double offset_rad = 0;
+    TimeS next_change = 0;
+  };
+  std::map<std::string, Mode> modes;
+  std::map<std::string, const Step*> previous;
+  std::vector<Step> out;
+  out.reserve(d.steps.size());
+  std::size_t missed = 0, phantom = 0, changes = 0;
+  auto next_gap = [&] { return -v.phone_mode_period_s * std::log(1.0 - r.Uniform()); };
+  for (const Step& s : d.steps) {
+    auto [it, first] = modes.try_emplace(s.agent);
+    Mode& m = it->second;
+    if (first) m = {v.phone_first_offset_rad, s.t0 + next_gap()};
+    while (s.t0 >= m.next_change) {
+      m.offset_rad = r.Uniform(-45.0, 45.0) * std::numbers::pi / 180;
+      m.next_change += next_gap();
+      ++changes;
+    }
+    if (auto p = previous.find(s.agent); p != previous.end() && s.t0 - p->second->t1 > 2.0 &&
+                                         r.Uniform() < 0.5) {
+      const Vec2 last = p->second->delta_n.head<2>();
+      const Vec2 dir = last.norm() > 1e-9 ? Vec2(last.normalized()) : Vec2(1, 0);
+      const int n = 1 + static_cast<int>(r.Uniform() * 3.0);
+      for (int k = 0; k < n; ++k) {
+        Step z = *p->second;
+        z.t0 = p->second->t1 + 0.6 * k;
+        z.t1 = z.t0 + 0.5;
+        if (z.t1 >= s.t0) break;
+        z.delta_n.head<2>() = Eigen::Rotation2Dd(m.offset_rad) * Vec2(0.6 * dir);
+        out.push_back(z);
+        ++phantom;
+      }
+    }
+    previous[s.agent] = &s;
+    if (r.Uniform() < 0.04) {
+      ++missed;
+      continue;
+    }
+    Step phone = s;
+    const double stretch = v.phone_scale * (1.0 + r.Normal(0, 0.08));
+    phone.delta_n.head<2>() = Eigen::Rotation2Dd(m.offset_rad) * Vec2(s.delta_n.head<2>() * stretch);
+    out.push_back(phone);
+  }
+  std::stable_sort(out.begin(), out.end(), [](const Step& a, const Step& b) { return a.t1 < b.t1; });
+  d.steps = std::move(out);
+  notes.push_back(fmt::format("phone steps: {} carrying-mode changes, {} steps missed, {} phantom",
+                              changes, missed, phantom));
+}
+
 /// The responder starts `start_outside_m` outside and walks straight in (see Variation).
 void ApplyStartOutside(const Variation& v, SimulatedMission& sim, Random& r,
                        std::vector<std::string>& notes) {
@@ -484,7 +550,8 @@ void ApplyEvents(const Variation& v, SimulatedMission& sim) {
 std::vector<std::pair<VariationFamily, std::string>> VariationFamilies() {
   return {{VariationFamily::kFrame, "frame"},   {VariationFamily::kRadio, "radio"},
           {VariationFamily::kRanges, "ranges"}, {VariationFamily::kNodes, "nodes"},
-          {VariationFamily::kPdr, "pdr"},       {VariationFamily::kEvents, "events"},
+          {VariationFamily::kPdr, "pdr"},       {VariationFamily::kPhone, "phone"},
+          {VariationFamily::kEvents, "events"},
           {VariationFamily::kStart, "start"},   {VariationFamily::kCsv, "csv"},
           {VariationFamily::kAll, "all"}};
 }
@@ -539,6 +606,10 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
     Random r = rng(VariationFamily::kNodes);
     ApplySurvey(sim, r, notes);
   }
+  if (on(VariationFamily::kPhone) && v.phone) {
+    Random r = rng(VariationFamily::kPhone);
+    ApplyPhone(v, sim, r, notes);
+  }
   if (on(VariationFamily::kPdr)) ApplyPdr(v, sim, notes);
   if (on(VariationFamily::kEvents)) ApplyEvents(v, sim);
   if (on(VariationFamily::kStart) && v.drop_start_heading) {
@@ -590,6 +661,11 @@ std::vector<std::pair<std::string, std::string>> Variation::Describe() const {
     out.emplace_back("zero_length_steps", zero_length_steps ? "yes" : "no");
     out.emplace_back("gyro_bias_z_deg_per_min",
                      Num(gyro_bias_z_rad_per_s * 180 / std::numbers::pi * 60));
+  }
+  if (on(VariationFamily::kPhone)) {
+    out.emplace_back("phone_scale", Num(phone_scale));
+    out.emplace_back("phone_first_offset_deg", Num(phone_first_offset_rad * 180 / std::numbers::pi));
+    out.emplace_back("phone_mode_period_s", Num(phone_mode_period_s));
   }
   if (on(VariationFamily::kEvents))
     out.emplace_back("events", events == EventsKept::kAll         ? "all"

@@ -41,8 +41,11 @@ enum class VariationFamily {
   kNodes,   ///< surveyed positions drawn with their stated sigma (one error shared by all uses)
   kPdr,     ///< heading offset and drift also while standing, zero-length steps, gyro bias
   kEvents,  ///< stop/go/wake events absent, or every event absent
-  kStart,   ///< start heading not given
+  kStart,   ///< start heading not given, a start up to 10 m outside
   kCsv,     ///< comments, column order, extra columns
+  /// hand-held phone steps: carrying-mode heading jumps, scale, missed/phantom steps (after the
+  /// others: a family's number seeds its draws, so the older families keep their variants)
+  kPhone,
   kAll,     ///< every family at once
 };
 std::vector<std::pair<VariationFamily, std::string>> VariationFamilies();
@@ -86,6 +89,12 @@ struct Variation {
   double heading_drift_rad_per_s = 0;  ///< accrues with time, also while standing
   bool zero_length_steps = false;      ///< zero steps every 0.5 s while standing (> 1 s gaps)
   double gyro_bias_z_rad_per_s = 0;    ///< added to the foot IMU's z gyro
+
+  // phone (steps.csv replaced by what a hand-held phone's PDR would report of the same walk)
+  bool phone = false;
+  double phone_scale = 1.0;              ///< step-length scale of the phone's model (shared)
+  double phone_first_offset_rad = 0;     ///< heading offset of the first carrying mode
+  double phone_mode_period_s = 60.0;     ///< mean time between carrying-mode changes
 
   // events, start
   EventsKept events = EventsKept::kAll;
