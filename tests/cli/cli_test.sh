@@ -254,7 +254,11 @@ grep -q "pipeline mapmatch (incremental)" "$dir/hlive.log" || { cat "$dir/hlive.
 code=$(curl -s -o "$dir/hack.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer H" \
        --data-binary @"$dir/h1/steps.csv" "http://127.0.0.1:$hport/api/ingest/steps.csv")
 [ "$code" = 200 ] || { cat "$dir/hack.json"; fail "live mapmatch ingest"; }
-sleep 0.5
+# The filter runs behind the acknowledgement: poll until it has estimated (up to 20 s).
+for _ in $(seq 200); do
+  curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | grep -q '"id":"ff1"' && break
+  sleep 0.1
+done
 curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | matches '"id":"ff1"' || fail "live mapmatch state"
 curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/floorplan" | matches '"walls":\[\[' || fail "live floor plan"
 kill $hpid; wait $hpid || true
