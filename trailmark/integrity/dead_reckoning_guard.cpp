@@ -86,10 +86,9 @@ PdrOptions Overbounded(PdrOptions o, const GuardOptions& guard) {
 DeadReckoningGuard::DeadReckoningGuard(MissionInfo info, GuardOptions options,
                                        std::unique_ptr<OnlineEstimator> inner,
                                        const PdrOptions& typical)
-    : info_(std::move(info)),
-      options_(options),
+    : options_(options),
       inner_(std::move(inner)),
-      shadow_(info_, Overbounded(typical, options)) {
+      shadow_(std::move(info), Overbounded(typical, options)) {
   leave_d2_ = ChiSquareQuantile(2, options_.leave_probability);
   return_d2_ = ChiSquareQuantile(2, options_.return_probability);
 }

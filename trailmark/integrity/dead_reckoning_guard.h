@@ -87,7 +87,6 @@ class DeadReckoningGuard : public OnlineEstimator {
   Estimate Act(const Estimate& estimate, const Estimate& dr) const;
   const Estimate* ShadowAt(const std::string& agent, TimeS t) const;
 
-  MissionInfo info_;
   GuardOptions options_;
   std::unique_ptr<OnlineEstimator> inner_;
   DeadReckoningEstimator shadow_;
