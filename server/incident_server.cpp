@@ -148,6 +148,15 @@ nlohmann::json IncidentServer::StateJson() {
   return state_.ToJson();
 }
 
+std::shared_ptr<const std::string> IncidentServer::EventMessage(std::uint64_t version) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!event_message_ || event_message_version_ != version) {
+    event_message_ = std::make_shared<const std::string>("data: " + state_.ToJsonText() + "\n\n");
+    event_message_version_ = version;
+  }
+  return event_message_;
+}
+
 void IncidentServer::Reject(const std::string& reason) {
   ++stats_.rejected_requests;
   {
@@ -299,8 +308,8 @@ void IncidentServer::Start() {
             }
             *last = version_;
           }
-          const std::string message = "data: " + StateJson().dump() + "\n\n";
-          if (!sink.write(message.data(), message.size())) return false;
+          const auto message = EventMessage(*last);
+          if (!sink.write(message->data(), message->size())) return false;
           ++stats_.events_sent;
           // Coalesce: a client gets at most one message per interval, the latest state.
           std::this_thread::sleep_for(std::chrono::duration<double>(options_.events_min_interval_s));

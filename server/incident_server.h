@@ -115,6 +115,9 @@ class IncidentServer {
   void Reject(const std::string& reason);
   /// The state changed: wake the event streams.
   void Changed();
+  /// The event-stream message of the state at `version` (or later): written once per version
+  /// and shared by every client.
+  std::shared_ptr<const std::string> EventMessage(std::uint64_t version);
 
   MissionInfo info_;
   std::vector<Estimate> estimates_;
@@ -136,6 +139,8 @@ class IncidentServer {
   std::mutex event_mutex_;
   std::condition_variable event_cv_;
   std::uint64_t version_ = 0;
+  std::shared_ptr<const std::string> event_message_;  ///< guarded by mutex_
+  std::uint64_t event_message_version_ = 0;
   std::mutex log_mutex_;
   std::deque<std::pair<double, std::string>> recent_rejections_;
 };

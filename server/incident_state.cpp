@@ -154,27 +154,81 @@ nlohmann::json IncidentState::HistoryJson() const {
   return j;
 }
 
-nlohmann::json IncidentState::ToJson() const {
-  nlohmann::json j;
-  j["t"] = std::isfinite(now_) && now_ > -1e299 ? nlohmann::json(now_) : nlohmann::json(nullptr);
-  j["nodes"] = nlohmann::json::array();
+namespace {
+
+/// JSON text of a string (quotes, backslashes and control characters escaped).
+void AppendString(std::string& out, const std::string& text) {
+  out += '"';
+  for (const char c : text) {
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      out += fmt::format("\\u{:04x}", static_cast<unsigned>(c));
+    } else {
+      out += c;
+    }
+  }
+  out += '"';
+}
+
+/// A number as nlohmann::json writes it (shortest round-trip, "2.0" for 2), null when not finite.
+void AppendNumber(std::string& out, double v) {
+  if (!std::isfinite(v)) {
+    out += "null";
+    return;
+  }
+  const std::size_t start = out.size();
+  fmt::format_to(std::back_inserter(out), "{}", v);
+  if (out.find_first_of(".e", start) == std::string::npos) out += ".0";
+}
+
+}  // namespace
+
+std::string IncidentState::ToJsonText() const {
+  std::string out;
+  out.reserve(64 + 160 * nodes_.size() + 120 * alerts_.size());
+  out += "{\"alerts\":[";
+  for (std::size_t k = 0; k < alerts_.size(); ++k) {
+    const Alert& a = alerts_[k];
+    if (k > 0) out += ',';
+    out += "{\"id\":";
+    AppendString(out, a.id);
+    out += ",\"kind\":";
+    AppendString(out, a.kind);
+    out += ",\"message\":";
+    AppendString(out, a.message);
+    out += ",\"t\":";
+    AppendNumber(out, a.t);
+    out += '}';
+  }
+  out += "],\"nodes\":[";
+  bool first = true;
   for (const auto& [id, n] : nodes_) {
     const Estimate& e = n.estimate;
-    j["nodes"].push_back({{"id", id},
-                          {"kind", std::string(ToString(n.kind))},
-                          {"t", e.t},
-                          {"x", e.position_n.x()},
-                          {"y", e.position_n.y()},
-                          {"z", e.position_n.z()},
-                          {"sxx", e.sxx},
-                          {"sxy", e.sxy},
-                          {"syy", e.syy}});
+    if (!first) out += ',';
+    first = false;
+    out += "{\"id\":";
+    AppendString(out, id);
+    out += ",\"kind\":";
+    AppendString(out, std::string(ToString(n.kind)));
+    const std::pair<const char*, double> numbers[] = {
+        {"sxx", e.sxx}, {"sxy", e.sxy},           {"syy", e.syy},           {"t", e.t},
+        {"x", e.position_n.x()}, {"y", e.position_n.y()}, {"z", e.position_n.z()}};
+    for (const auto& [key, value] : numbers) {
+      out += ",\"";
+      out += key;
+      out += "\":";
+      AppendNumber(out, value);
+    }
+    out += '}';
   }
-  j["alerts"] = nlohmann::json::array();
-  for (const auto& a : alerts_) {
-    j["alerts"].push_back({{"id", a.id}, {"kind", a.kind}, {"t", a.t}, {"message", a.message}});
-  }
-  return j;
+  out += "],\"t\":";
+  AppendNumber(out, std::isfinite(now_) && now_ > -1e299 ? now_ : NAN);
+  out += '}';
+  return out;
 }
+
+nlohmann::json IncidentState::ToJson() const { return nlohmann::json::parse(ToJsonText()); }
 
 }  // namespace trailmark::server

@@ -69,6 +69,9 @@ class IncidentState {
   std::size_t stale_estimates() const { return stale_; }
   /// The contract of GET /api/state (docs/server.md).
   nlohmann::json ToJson() const;
+  /// The same document as JSON text (keys sorted, as nlohmann::json writes them), written
+  /// directly: what the event stream sends on every change.
+  std::string ToJsonText() const;
   /// Every alert as it was raised (a kind for a node, once until it clears), in time order.
   const std::vector<Alert>& alert_log() const { return alert_log_; }
   /// GET /api/history: the agents' trails and the alert log, for the dashboard's timeline.

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <stdexcept>
 #include <tuple>
 
@@ -77,8 +78,25 @@ HighWaterMark ReadHighWaterMark(const std::filesystem::path& file) {
 
 }  // namespace
 
+struct Journal::Prepared {
+  Prepared(sqlite3* db, const std::filesystem::path& file)
+      : begin(db, "BEGIN IMMEDIATE", file),
+        commit(db, "COMMIT", file),
+        insert(db,
+               "INSERT OR IGNORE INTO rows (stream, header, row, t, node) VALUES (?, ?, ?, ?, ?)",
+               file),
+        exists(db, "SELECT 1 FROM rows WHERE stream = ? AND row = ?", file),
+        count(db, "UPDATE meta SET value = value + CASE key WHEN 'commits' THEN 1 ELSE ? END",
+              file) {}
+  /// Ready for the next use after an error part-way through a transaction.
+  void ResetAll() {
+    for (Statement* s : {&begin, &commit, &insert, &exists, &count}) sqlite3_reset(s->stmt);
+  }
+  Statement begin, commit, insert, exists, count;
+};
+
 Journal::Journal(const std::filesystem::path& file, Open mode)
-    : file_(file), mode_(mode), acked_file_(file.string() + ".acked") {
+    : mode_(mode), acked_file_(file.string() + ".acked"), file_(file) {
   const bool normal = mode == Open::kNormal;
   const HighWaterMark acked = ReadHighWaterMark(acked_file_);
   const std::string acked_text =
@@ -159,8 +177,10 @@ Journal::Journal(const std::filesystem::path& file, Open mode)
                                  std::strerror(errno));
       }
       WriteHighWaterMark(counted_commits_, counted_rows_);
+      prepared_ = std::make_unique<Prepared>(db_, file_);
     }
   } catch (...) {
+    prepared_.reset();
     if (acked_fd_ >= 0) ::close(acked_fd_);
     sqlite3_close(db_);
     db_ = nullptr;
@@ -197,6 +217,7 @@ void Journal::WriteHighWaterMark(long long commits, long long rows) {
 }
 
 Journal::~Journal() {
+  prepared_.reset();  // statements before the connection
   if (acked_fd_ >= 0) ::close(acked_fd_);
   sqlite3_close(db_);
 }
@@ -214,13 +235,19 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
   std::lock_guard<std::mutex> lock(mutex_);
   if (mode_ != Open::kNormal) throw std::runtime_error(file_.string() + ": opened to salvage only");
   std::vector<AppendResult> results(batches.size());
-  const auto last_before = last_t_;
-  Exec("BEGIN IMMEDIATE");
+  // The times this transaction raises, with what they were (to restore on a rollback).
+  std::vector<std::pair<std::map<std::pair<std::string, std::string>, double>::iterator,
+                        std::optional<double>>>
+      undo;
+  Prepared& p = *prepared_;
+  // The rows' texts outlive each step (bound without a copy; every statement is reset after
+  // its step).
+  auto bind = [](Statement& s, int column, const std::string& text) {
+    sqlite3_bind_text(s.stmt, column, text.data(), static_cast<int>(text.size()), SQLITE_STATIC);
+  };
   try {
-    Statement insert(db_,
-                     "INSERT OR IGNORE INTO rows (stream, header, row, t, node) VALUES (?, ?, ?, ?, ?)",
-                     file_);
-    Statement exists(db_, "SELECT 1 FROM rows WHERE stream = ? AND row = ?", file_);
+    if (p.begin.Step()) throw std::runtime_error("unexpected row from BEGIN");
+    sqlite3_reset(p.begin.stmt);
     for (std::size_t b = 0; b < batches.size(); ++b) {
       const Batch& batch = *batches[b];
       AppendResult& r = results[b];
@@ -229,13 +256,12 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
       // node's last accepted one is a repeat (dropped) or out of order (the batch refused).
       std::vector<bool> repeat(batch.rows.size(), false);
       for (std::size_t i = 0; i < batch.rows.size() && r.error.empty(); ++i) {
-        const auto key = std::make_pair(batch.stream, batch.node[i]);
-        const auto it = last_t_.find(key);
+        const auto it = last_t_.find(std::make_pair(batch.stream, batch.node[i]));
         if (it == last_t_.end() || batch.t[i] >= it->second) continue;
-        sqlite3_bind_text(exists.stmt, 1, batch.stream.c_str(), -1, SQLITE_TRANSIENT);
-        sqlite3_bind_text(exists.stmt, 2, batch.rows[i].c_str(), -1, SQLITE_TRANSIENT);
-        repeat[i] = exists.Step();
-        sqlite3_reset(exists.stmt);
+        bind(p.exists, 1, batch.stream);
+        bind(p.exists, 2, batch.rows[i]);
+        repeat[i] = p.exists.Step();
+        sqlite3_reset(p.exists.stmt);
         if (!repeat[i]) {
           const std::size_t line = i < batch.lines.size() ? batch.lines[i] : i + 2;
           r.error = "request body:" + std::to_string(line) + ": t=" + std::to_string(batch.t[i]) +
@@ -245,24 +271,30 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
         }
       }
       if (!r.error.empty()) continue;
+      bind(p.insert, 1, batch.stream);
+      bind(p.insert, 2, batch.header);
       for (std::size_t i = 0; i < batch.rows.size(); ++i) {
         if (repeat[i]) {
           ++r.duplicates;
           continue;
         }
-        sqlite3_bind_text(insert.stmt, 1, batch.stream.c_str(), -1, SQLITE_TRANSIENT);
-        sqlite3_bind_text(insert.stmt, 2, batch.header.c_str(), -1, SQLITE_TRANSIENT);
-        sqlite3_bind_text(insert.stmt, 3, batch.rows[i].c_str(), -1, SQLITE_TRANSIENT);
-        sqlite3_bind_double(insert.stmt, 4, batch.t[i]);
-        sqlite3_bind_text(insert.stmt, 5, batch.node[i].c_str(), -1, SQLITE_TRANSIENT);
-        if (sqlite3_step(insert.stmt) != SQLITE_DONE) throw std::runtime_error(sqlite3_errmsg(db_));
-        sqlite3_reset(insert.stmt);
+        bind(p.insert, 3, batch.rows[i]);
+        sqlite3_bind_double(p.insert.stmt, 4, batch.t[i]);
+        bind(p.insert, 5, batch.node[i]);
+        const int rc = sqlite3_step(p.insert.stmt);
+        sqlite3_reset(p.insert.stmt);
+        if (rc != SQLITE_DONE) throw std::runtime_error(sqlite3_errmsg(db_));
         if (sqlite3_changes(db_) == 1) {
           ++r.accepted;
           r.fresh[i] = true;
           const auto [it, first] = last_t_.emplace(std::make_pair(batch.stream, batch.node[i]),
                                                    batch.t[i]);
-          if (!first) it->second = std::max(it->second, batch.t[i]);
+          if (first) {
+            undo.emplace_back(it, std::nullopt);
+          } else if (batch.t[i] > it->second) {
+            undo.emplace_back(it, it->second);
+            it->second = batch.t[i];
+          }
         } else {
           ++r.duplicates;
         }
@@ -270,18 +302,26 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
     }
     long long accepted = 0;
     for (const auto& r : results) accepted += static_cast<long long>(r.accepted);
-    Statement count(db_,
-                    "UPDATE meta SET value = value + CASE key WHEN 'commits' THEN 1 ELSE ? END",
-                    file_);
-    sqlite3_bind_int64(count.stmt, 1, accepted);
-    if (count.Step()) throw std::runtime_error("unexpected row from UPDATE");
-    Exec("COMMIT");
+    sqlite3_bind_int64(p.count.stmt, 1, accepted);
+    const bool row = p.count.Step();
+    sqlite3_reset(p.count.stmt);
+    if (row) throw std::runtime_error("unexpected row from UPDATE");
+    if (p.commit.Step()) throw std::runtime_error("unexpected row from COMMIT");
+    sqlite3_reset(p.commit.stmt);
     ++commits_;
     counted_commits_ += 1;
     counted_rows_ += accepted;
   } catch (const std::exception& e) {
+    p.ResetAll();
     sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    last_t_ = last_before;
+    // Newest first: an entry added here is erased, a raised time goes back.
+    for (auto u = undo.rbegin(); u != undo.rend(); ++u) {
+      if (u->second) {
+        u->first->second = *u->second;
+      } else {
+        last_t_.erase(u->first);
+      }
+    }
     throw std::runtime_error(file_.string() + ": journal: " + e.what());
   }
   // Committed; acknowledged only once the high-water mark says so (else the caller answers

@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <utility>
@@ -95,6 +96,8 @@ class Journal {
   /// Time of the last accepted row per (stream, node).
   std::map<std::pair<std::string, std::string>, double> last_t_;
   std::size_t commits_ = 0;
+  struct Prepared;  ///< the append's statements, prepared once (normal mode)
+  std::unique_ptr<Prepared> prepared_;
 };
 
 }  // namespace trailmark::server

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 namespace trailmark::server {
 namespace {
 
@@ -40,6 +42,42 @@ TEST(IncidentState, StateJsonFollowsTheContract) {
   s.Apply(At("ff1", 0.5, 9));
   EXPECT_EQ(s.stale_estimates(), 1u);
   EXPECT_DOUBLE_EQ(s.nodes().at("ff1").estimate.position_n.x(), 2);
+}
+
+// The event stream's text is written directly; it must be the document nlohmann::json builds
+// from the same state (the reference below), with strings that need escaping, numbers of every
+// form and a time that is not finite.
+nlohmann::json ReferenceStateJson(const IncidentState& s) {
+  nlohmann::json j;
+  j["t"] = std::isfinite(s.now()) && s.now() > -1e299 ? nlohmann::json(s.now())
+                                                      : nlohmann::json(nullptr);
+  j["nodes"] = nlohmann::json::array();
+  for (const auto& [id, n] : s.nodes()) {
+    const Estimate& e = n.estimate;
+    j["nodes"].push_back({{"id", id}, {"kind", std::string(ToString(n.kind))}, {"t", e.t},
+                          {"x", e.position_n.x()}, {"y", e.position_n.y()},
+                          {"z", e.position_n.z()}, {"sxx", e.sxx}, {"sxy", e.sxy},
+                          {"syy", e.syy}});
+  }
+  j["alerts"] = nlohmann::json::array();
+  for (const auto& a : s.alerts())
+    j["alerts"].push_back({{"id", a.id}, {"kind", a.kind}, {"t", a.t}, {"message", a.message}});
+  return j;
+}
+
+TEST(IncidentState, EventTextIsTheStateDocument) {
+  IncidentState s(Info());
+  EXPECT_EQ(nlohmann::json::parse(s.ToJsonText()), ReferenceStateJson(s));  // t not finite yet
+  EXPECT_TRUE(nlohmann::json::parse(s.ToJsonText()).at("t").is_null());
+  s.Apply(At("ff1", 1, 2));
+  s.Apply({1.25, "c \"7\"\\\t\x01 \xc3\xa9", Vec3(-1e-7, 3.0e21, 123456.789), 1e300, -0.0, 5e-324});
+  s.Apply(At("ff2", 2, 0.1 + 0.2, 40.0));  // a large ellipse: an uncertainty alert
+  s.Advance(100.5);                         // and link lost for all
+  ASSERT_FALSE(s.alerts().empty());
+  const std::string text = s.ToJsonText();
+  EXPECT_EQ(nlohmann::json::parse(text), ReferenceStateJson(s)) << text;
+  // Numbers stay numbers of the same kind (a whole number is written as 2.0, not 2).
+  EXPECT_TRUE(nlohmann::json::parse(text).at("nodes")[1].at("x").is_number_float()) << text;
 }
 
 TEST(IncidentState, AlertsForLinkLostMotionlessAndUncertainty) {
