@@ -47,7 +47,8 @@ const OptionTable<InsOptions>& InsOptionTable() {
            "accelerometer process noise per sample (PyShoe)");
     t.Real("gyro_noise", &O::gyro_noise_radps, "rad/s", OptionBounds::Positive(),
            "gyro process noise per sample (PyShoe)");
-    t.Flag("biases", &O::estimate_biases, "estimate accelerometer and gyro biases");
+    t.Flag("biases", &O::estimate_biases,
+           "estimate accelerometer and gyro biases (false: the IMU is taken as unbiased)");
     t.Flag("zaru", &O::zaru, "zero angular rate updates in stance (gated)");
     t.Real("zaru_sigma", &O::zaru_sigma_radps, "rad/s", OptionBounds::Positive(),
            "ZARU measurement sigma");

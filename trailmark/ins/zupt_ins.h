@@ -39,6 +39,8 @@ struct InsOptions {
   // Process noise, per-sample sigmas as PyShoe's EKF (accelerometer 0.5 m/s^2, gyro 0.5 deg/s):
   double accel_noise_mps2 = 0.5;
   double gyro_noise_radps = 0.5 * 3.14159265358979 / 180.0;
+  /// Accelerometer and gyro bias states (the gyro's starting from its mean over the alignment);
+  /// false: the IMU is taken as unbiased (calibrated), nothing is subtracted.
   bool estimate_biases = true;
   double accel_bias_rw = 1e-4;        ///< m/s^2 per sqrt(s)
   double gyro_bias_rw = 1e-5;         ///< rad/s per sqrt(s)
