@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <map>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
 #include "trailmark/core/random.h"
@@ -36,6 +37,41 @@ TEST(DeadReckoning, SumsStepsAndVariances) {
   // Unknown variance: the documented default (5 cm + 3 % of 0.5 m)^2.
   dr.AddStep({2, 3, "a", Vec3(0.5, 0, 0), std::nullopt});
   EXPECT_NEAR(dr.covariance()(0, 0), 0.27 + std::pow(0.05 + 0.015, 2), 1e-15);
+}
+
+// A position fix fused by covariance intersection: the exact reference is the information form
+// (omega P^-1 + (1 - omega) R^-1)^-1 and its mean, with omega found here by brute force on a
+// fine grid of the trace; the shared errors' covariance is untouched and the joint stays
+// positive definite; a fix much worse than the estimate is not used.
+TEST(DeadReckoning, PositionFixIsACovarianceIntersection) {
+  DeadReckoning dr(Vec3(1, 2, 0), 0.3);
+  for (int k = 0; k < 40; ++k) dr.AddStep(Step{k * 0.5, k * 0.5 + 0.5, "ff1", Vec3(0.6, 0.2, 0)});
+  const Mat2 P = dr.covariance();
+  const Vec2 x = dr.position_n().head<2>();
+  const auto shared_before = dr.error_covariance().bottomRightCorner<3, 3>().eval();
+  Mat2 R;
+  R << 0.8, -0.3, -0.3, 0.5;
+  const Vec2 z = x + Vec2(1.0, -0.7);
+  double best = 1e300, best_w = 0;
+  for (int k = 0; k <= 100000; ++k) {
+    const double w = k / 100000.0;
+    const double tr = (w * P.inverse() + (1 - w) * R.inverse()).inverse().trace();
+    if (tr < best) best = tr, best_w = w;
+  }
+  const double omega = dr.FusePosition(z, R);
+  EXPECT_NEAR(omega, best_w, 1e-3);
+  const Mat2 info = best_w * P.inverse() + (1 - best_w) * R.inverse();
+  const Mat2 C = info.inverse();
+  const Vec2 mean = C * (best_w * P.inverse() * x + (1 - best_w) * R.inverse() * z);
+  EXPECT_LT((dr.covariance() - C).norm(), 1e-6 * C.norm());
+  EXPECT_LT((dr.position_n().head<2>() - mean).norm(), 1e-6);
+  EXPECT_LT((dr.error_covariance().bottomRightCorner<3, 3>() - shared_before).norm(), 1e-15);
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 5, 5>> eig(dr.error_covariance());
+  EXPECT_GT(eig.eigenvalues().minCoeff(), 0.0);
+  // A fix 100 times less certain than the estimate changes nothing.
+  const Vec3 before = dr.position_n();
+  EXPECT_DOUBLE_EQ(dr.FusePosition(z, dr.covariance() * 100.0), 1.0);
+  EXPECT_EQ(dr.position_n(), before);
 }
 
 TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {

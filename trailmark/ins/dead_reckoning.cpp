@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/LU>
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -61,6 +63,51 @@ void DeadReckoning::AddStep(const Step& step) {
   error_cov_ = fg * error_cov_ * fg.transpose() + q;
   error_cov_ = 0.5 * (error_cov_ + error_cov_.transpose());
   position_n_ += step.delta_n;
+}
+
+double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov) {
+  const Mat2 P = covariance();
+  // The trace (mean squared error) of the intersection's position covariance,
+  // (omega P^-1 + (1 - omega) R^-1)^-1; its minimum over (0, 1) by golden-section search (the
+  // trace of the inverse of a matrix affine in omega is convex: one minimum). The trace, not
+  // the determinant: the determinant chose thin fixes whole, with their long axis (landmark
+  // corridor variants: p75 1.05 m against 0.93 m).
+  const Mat2 Pi = P.inverse(), Ri = fix_cov.inverse();
+  const auto trace_at = [&](double w) { return (w * Pi + (1 - w) * Ri).inverse().trace(); };
+  double lo = 0.0, hi = 1.0;
+  const double g = 0.5 * (std::sqrt(5.0) - 1);
+  double a = hi - g * (hi - lo), b = lo + g * (hi - lo), fa = trace_at(a), fb = trace_at(b);
+  for (int k = 0; k < 60; ++k) {
+    if (fa < fb) {
+      hi = b, b = a, fb = fa, a = hi - g * (hi - lo), fa = trace_at(a);
+    } else {
+      lo = a, a = b, fa = fb, b = lo + g * (hi - lo), fb = trace_at(b);
+    }
+  }
+  double omega = 0.5 * (lo + hi);
+  // The ends: the fix alone or the estimate alone, if better than any mixture.
+  if (trace_at(1.0) <= trace_at(omega)) omega = 1.0;
+  if (omega >= 1.0 - 1e-9) return 1.0;
+  omega = std::max(omega, 1e-6);
+  // The gain of the intersection (position rows only: Schmidt, the shared errors are not
+  // estimated, so their own covariance stays as it is).
+  const Mat2 K2 = (P / omega) * (P / omega + fix_cov / (1 - omega)).inverse();
+  Eigen::Matrix<double, 5, 2> K = Eigen::Matrix<double, 5, 2>::Zero();
+  K.topRows<2>() = K2;
+  Eigen::Matrix<double, 2, 5> H = Eigen::Matrix<double, 2, 5>::Zero();
+  H(0, kX) = H(1, kY) = 1;
+  // Joseph form with that gain (positive semi-definite for any gain; exact if the fix were
+  // independent), then its position block replaced by the intersection's, which is larger
+  // whatever the correlation: the joint stays positive semi-definite.
+  const Mat5 IKH = Mat5::Identity() - K * H;
+  error_cov_ = IKH * error_cov_ * IKH.transpose() + K * fix_cov * K.transpose();
+  const Mat2 I2K = Mat2::Identity() - K2;
+  error_cov_.topLeftCorner<2, 2>() =
+      I2K * (P / omega) * I2K.transpose() + K2 * (fix_cov / (1 - omega)) * K2.transpose();
+  error_cov_ = 0.5 * (error_cov_ + error_cov_.transpose());
+  const Vec2 dp = K.topRows<2>() * (fix_n - position_n_.head<2>());
+  position_n_.head<2>() += dp;
+  return omega;
 }
 
 DeadReckoningEstimator::DeadReckoningEstimator(MissionInfo info, PdrOptions options)

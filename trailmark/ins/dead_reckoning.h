@@ -47,6 +47,16 @@ class DeadReckoning {
                 std::optional<double> start_heading_sigma_rad = std::nullopt);
   /// Adds one step's displacement and its variance.
   void AddStep(const Step& step);
+  /// A position fix (e.g. from landmarks whose map was itself built from this dead reckoning)
+  /// of unknown correlation with the estimate: covariance intersection (Julier & Uhlmann 1997),
+  /// omega minimizing the trace of the fused position covariance, written as a Kalman
+  /// update of the inflated prior P / omega with the inflated fix R / (1 - omega); a Schmidt
+  /// update (the heading, drift-rate and scale errors are not estimated, only their
+  /// covariance is updated, Joseph form). Consistent whatever the correlation, if both are.
+  /// Returns omega (1: the fix was not used).
+  double FusePosition(const Vec2& fix_n, const Mat2& fix_cov);
+  /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale].
+  const Eigen::Matrix<double, 5, 5>& error_covariance() const { return error_cov_; }
   const Vec3& position_n() const { return position_n_; }
   Mat2 covariance() const { return error_cov_.topLeftCorner<2, 2>(); }
 

@@ -47,6 +47,12 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
              std::vector<std::pair<std::string, Loss>>{
                  {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
              "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
+    t.Choice("fix_fusion", [](O& o) -> FixFusion& { return o.fix_fusion; },
+             std::vector<std::pair<std::string, FixFusion>>{
+                 {"independent", FixFusion::kIndependent},
+                 {"intersection", FixFusion::kIntersection}},
+             "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
+             "intersection: shared PDR errors and covariance intersection, honest)");
     t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
     return t;
   }();
@@ -88,6 +94,11 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     const double s = start ? n.start_sigma_m.value_or(options_.known_start_sigma_m)
                            : options_.unknown_start_sigma_m;
     a.cov = Mat2::Identity() * s * s;
+    a.pdr_position = a.position;
+    if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kIntersection) {
+      a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
+                   n.start_heading_sigma_rad);
+    }
     if (!start) {
       setup_notes_.push_back(
           fmt::format("agent '{}' has no start: {:g} m prior", n.id, options_.unknown_start_sigma_m));
@@ -157,7 +168,7 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
   const int B = static_cast<int>(ids_.size());
   a.stopped = false;
   Stop s;
-  s.standing = a.position;
+  s.standing = a.dr ? a.pdr_position : a.position;
   for (int j = 0; j < B; ++j) {
     s.rssi.push_back(a.count[j] ? std::optional<double>(a.sum[j] / a.count[j]) : std::nullopt);
   }
@@ -232,11 +243,21 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
     fix.sigma_m = {sg};
     const StopAndGoResult fr = SolveStopAndGo(fix, options_.stop_and_go);
     const Mat2 c_fix = fr.standing_cov[0] + Mat2::Identity() * kCovarianceFloorM2;
-    // Combine the fix with dead reckoning (information-weighted).
-    const Mat2 K = a.cov * (a.cov + c_fix).inverse();
-    a.position += K * (fr.standing[0] - a.position);
-    a.cov = (Mat2::Identity() - K) * a.cov;
-    a.cov = 0.5 * (a.cov + a.cov.transpose());
+    // Combine the fix with dead reckoning. They are correlated by an unknown amount (the
+    // landmarks were placed from this dead reckoning's standing positions, and the fix reuses
+    // this stop's RSSI): fix_fusion=intersection does covariance intersection; the paper's
+    // independent update makes the ellipse a third of the error (issue 21, docs/landmarks.md).
+    if (a.dr) {
+      a.dr->FusePosition(fr.standing[0], c_fix);
+      a.position = a.dr->position_n().head<2>();
+      a.cov = a.dr->covariance();
+    } else {
+      // The paper's: information-weighted, as if independent.
+      const Mat2 K = a.cov * (a.cov + c_fix).inverse();
+      a.position += K * (fr.standing[0] - a.position);
+      a.cov = (Mat2::Identity() - K) * a.cov;
+      a.cov = 0.5 * (a.cov + a.cov.transpose());
+    }
     ++fixes_;
     a.t = t;
     EmitAgent(t, id, a, sink);
@@ -263,8 +284,15 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = step->delta_n.head<2>();
     const double s = options_.drift_per_m * d.norm();
-    a.position += d;
-    a.cov += Mat2::Identity() * (s * s + kStepVarianceFloorM2);
+    a.pdr_position += d;
+    if (a.dr) {
+      a.dr->AddStep(*step);
+      a.position = a.dr->position_n().head<2>();
+      a.cov = a.dr->covariance() + Mat2::Identity() * kStepVarianceFloorM2;
+    } else {
+      a.position += d;
+      a.cov += Mat2::Identity() * (s * s + kStepVarianceFloorM2);
+    }
     if (a.ukf) a.ukf->PredictWithDisplacement(d, Mat2::Identity() * (s * s + kStepVarianceFloorM2));
     a.t = step->t1;
     EmitAgent(step->t1, step->agent, a, sink);

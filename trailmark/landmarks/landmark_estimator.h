@@ -24,6 +24,7 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/integrity/consistency.h"
 #include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/landmarks/stop_and_go.h"
@@ -32,10 +33,25 @@
 namespace trailmark::landmarks {
 
 enum class Tracking { kStopAndGo, kUkf };
+/// How stop-and-go tracking combines a stop's landmark fix with the dead reckoning.
+enum class FixFusion {
+  /// The paper's: an information-weighted update, as if the fix were independent of the dead
+  /// reckoning, whose covariance grows by white drift (drift_per_m).
+  kIndependent,
+  /// The dead reckoning's own error model (its shared heading, drift-rate and scale errors,
+  /// ins/dead_reckoning.h) and covariance intersection with the fix, whose correlation with it is
+  /// unknown (the map was built from the same dead reckoning); the map from the dead reckoning's
+  /// standing positions. Honest (docs/landmarks.md), less accurate on the corridor.
+  kIntersection,
+};
 
 struct LandmarkEstimatorOptions {
   Tracking tracking = Tracking::kStopAndGo;
-  double drift_per_m = 0.05;      ///< PDR drift, 1 sigma per metre walked (ours: 5 %)
+  FixFusion fix_fusion = FixFusion::kIndependent;
+  /// PDR drift, 1 sigma per metre walked (ours: 5 %); not used by FixFusion::kIntersection,
+  /// which propagates the dead reckoning's own error model (`pdr`'s defaults and the agent's
+  /// start_heading_sigma).
+  double drift_per_m = 0.05;
   double rssi_sigma_db = 6.0;     ///< dB; UKF: one wake-up answer (the paper inflates it, 6.3)
   /// Robust loss (ours: Huber, the paper's future work); grid searches on at most 50 stops
   /// (ours: a search over hundreds of stops stalled a live incident for a second).
@@ -90,6 +106,10 @@ class LandmarkEstimator : public OnlineEstimator {
   struct Agent {
     Vec2 position = Vec2::Zero();
     Mat2 cov = Mat2::Identity();
+    /// FixFusion::kIntersection: the dead reckoning with its shared errors (heading, drift
+    /// rate, scale: issue 21), into which each stop's fix is fused.
+    std::optional<DeadReckoning> dr;
+    Vec2 pdr_position = Vec2::Zero();  ///< the start plus every step, no fix (the map's frame)
     bool stopped = false;
     TimeS t = 0;
     std::vector<double> sum;
