@@ -91,6 +91,11 @@ struct Journal::Prepared {
   /// Ready for the next use after an error part-way through a transaction.
   void ResetAll() {
     for (Statement* s : {&begin, &commit, &insert, &exists, &count}) sqlite3_reset(s->stmt);
+    ClearBindings();
+  }
+  /// The rows' texts are bound without a copy: no statement keeps them past a transaction.
+  void ClearBindings() {
+    for (Statement* s : {&insert, &exists, &count}) sqlite3_clear_bindings(s->stmt);
   }
   Statement begin, commit, insert, exists, count;
 };
@@ -281,9 +286,12 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
         bind(p.insert, 3, batch.rows[i]);
         sqlite3_bind_double(p.insert.stmt, 4, batch.t[i]);
         bind(p.insert, 5, batch.node[i]);
-        const int rc = sqlite3_step(p.insert.stmt);
+        if (sqlite3_step(p.insert.stmt) != SQLITE_DONE) {
+          const std::string why = sqlite3_errmsg(db_);  // before the reset
+          sqlite3_reset(p.insert.stmt);
+          throw std::runtime_error(why);
+        }
         sqlite3_reset(p.insert.stmt);
-        if (rc != SQLITE_DONE) throw std::runtime_error(sqlite3_errmsg(db_));
         if (sqlite3_changes(db_) == 1) {
           ++r.accepted;
           r.fresh[i] = true;
@@ -306,6 +314,7 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
     const bool row = p.count.Step();
     sqlite3_reset(p.count.stmt);
     if (row) throw std::runtime_error("unexpected row from UPDATE");
+    p.ClearBindings();
     if (p.commit.Step()) throw std::runtime_error("unexpected row from COMMIT");
     sqlite3_reset(p.commit.stmt);
     ++commits_;

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 // The landmark pipelines end to end on the simulated stop-and-go corridor mission.
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "pipelines/run_named.h"
@@ -85,6 +86,12 @@ TEST(LandmarksPipeline, IntersectionFusionKeepsTheEllipseHonest) {
   }
   EXPECT_GT(in95_intersection, 0.80);
   EXPECT_LT(in95_independent, 0.60);  // the paper's update is still what it was
+  // The UKF tracks otherwise: the option is refused there, not silently ignored.
+  const SimulatedMission sim = SimulateScenario("landmark-corridor", 1);
+  EXPECT_THAT([&] {
+    RequirePipeline("landmarks-ukf")
+        .make({sim.data.info, &sim.plan}, {{"fix_fusion", "intersection"}}, Feed::kTimeOrdered);
+  }, ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("fix_fusion")));
 }
 
 // Without a calibration in mission.json the radio model is fitted online from the stops' RSSI

@@ -6,6 +6,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <sqlite3.h>
+
 #include <fstream>
 
 #include "test_util.h"
@@ -78,6 +80,35 @@ TEST(Journal, RowsOutOfTimeOrderAreRefusedAndNothingOfTheBatchIsKept) {
   // Negative times are times like any other (a device's first row sets its clock).
   EXPECT_EQ(j.Append(Steps("ff3", {-3, -2})).accepted, 2u);
   EXPECT_EQ(j.Append(Steps("ff3", {-1})).accepted, 1u);
+}
+
+// A transaction that fails part-way (here a trigger of another connection aborts the insert of
+// one row, as a full disk would fail a write) journals nothing of its group and forgets the
+// times it had raised: the same rows are accepted when sent again, and a node it had seen
+// first is new again.
+TEST(Journal, AFailedGroupLeavesNoTraceAndItsRowsAreAcceptedLater) {
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  Journal j(file);
+  ASSERT_EQ(j.Append(Steps("ff1", {1})).accepted, 1u);
+  sqlite3* other = nullptr;
+  ASSERT_EQ(sqlite3_open(file.c_str(), &other), SQLITE_OK);
+  const char* trigger =
+      "CREATE TRIGGER boom BEFORE INSERT ON rows WHEN NEW.node = 'ff3' "
+      "BEGIN SELECT RAISE(ABORT, 'disk full (test)'); END";
+  ASSERT_EQ(sqlite3_exec(other, trigger, nullptr, nullptr, nullptr), SQLITE_OK);
+  const Journal::Batch ff1 = Steps("ff1", {2, 3}), ff2 = Steps("ff2", {5}), ff3 = Steps("ff3", {1});
+  EXPECT_THAT([&] { j.AppendGroup({&ff1, &ff2, &ff3}); },
+              ::testing::ThrowsMessage<std::runtime_error>(::testing::HasSubstr("disk full")));
+  EXPECT_EQ(j.size(), 1u);
+  ASSERT_EQ(sqlite3_exec(other, "DROP TRIGGER boom", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(other);
+  // ff2 at t=4 would be out of order had its t=5 been kept; ff1's 2 and 3 are not duplicates.
+  EXPECT_EQ(j.Append(Steps("ff2", {4})).accepted, 1u);
+  const auto again = j.AppendGroup({&ff1, &ff3});
+  EXPECT_EQ(again[0].accepted, 2u);
+  EXPECT_EQ(again[1].accepted, 1u);
+  EXPECT_EQ(j.size(), 5u);
 }
 
 TEST(Journal, AGroupCommitsOnceAndExportsEachStreamInTimeOrder) {

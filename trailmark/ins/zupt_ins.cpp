@@ -127,7 +127,7 @@ void ZuptIns::Align() {
   ba_.setZero();
   // A resting gyro reads its bias: the estimate's start, with its prior covariance below. Without
   // bias states the IMU is taken as unbiased (an alignment estimate subtracted for good would be
-  // an error the covariance never learns of: NEES 190 on the exact-model test).
+  // an error the covariance never learns of: mean NEES 380 on the exact-model test).
   bg_ = options_.estimate_biases && w.norm() < 0.05 ? w : Vec3::Zero();
   P_.setZero();
   P_.block<3, 3>(kVel, kVel) = Eigen::Matrix3d::Identity() * 1e-4;

@@ -28,6 +28,10 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "sigmas must be > 0, min_stops_heard >= 1, regrid_growth >= 1";
     return false;
   }
+  if (tracking == Tracking::kUkf && fix_fusion != FixFusion::kIndependent) {
+    if (why) *why = "fix_fusion=intersection is for stop-and-go tracking (landmarks-stopgo)";
+    return false;
+  }
   return calibration.IsValid(why) && integrity.IsValid(why);
 }
 
