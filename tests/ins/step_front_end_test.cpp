@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
+#include <stdexcept>
 #include <map>
 
 #include <Eigen/Eigenvalues>
@@ -71,6 +73,13 @@ TEST(DeadReckoning, PositionFixIsACovarianceIntersection) {
   // A fix 100 times less certain than the estimate changes nothing.
   const Vec3 before = dr.position_n();
   EXPECT_DOUBLE_EQ(dr.FusePosition(z, dr.covariance() * 100.0), 1.0);
+  EXPECT_EQ(dr.position_n(), before);
+  // A fix that is not one is refused, and changes nothing.
+  EXPECT_THROW(dr.FusePosition(Vec2(NAN, 0), R), std::invalid_argument);
+  EXPECT_THROW(dr.FusePosition(z, Mat2::Zero()), std::invalid_argument);
+  Mat2 asymmetric = R;
+  asymmetric(0, 1) += 0.1;
+  EXPECT_THROW(dr.FusePosition(z, asymmetric), std::invalid_argument);
   EXPECT_EQ(dr.position_n(), before);
 }
 

@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/LU>
 
 #include <algorithm>
@@ -65,7 +66,17 @@ void DeadReckoning::AddStep(const Step& step) {
   position_n_ += step.delta_n;
 }
 
-double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov) {
+double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
+  // Symmetric to rounding (a solver's covariance is), then made exactly so.
+  const bool symmetric = std::abs(fix_cov_in(0, 1) - fix_cov_in(1, 0)) <=
+                         1e-9 * (std::abs(fix_cov_in(0, 0)) + std::abs(fix_cov_in(1, 1)));
+  const Mat2 fix_cov = 0.5 * (fix_cov_in + fix_cov_in.transpose());
+  if (!fix_n.allFinite() || !fix_cov_in.allFinite() || !symmetric ||
+      Eigen::LLT<Mat2>(fix_cov).info() != Eigen::Success) {
+    throw std::invalid_argument(
+        "DeadReckoning::FusePosition: the fix and its covariance must be finite, the covariance "
+        "symmetric positive definite");
+  }
   const Mat2 P = covariance();
   // The trace (mean squared error) of the intersection's position covariance,
   // (omega P^-1 + (1 - omega) R^-1)^-1; its minimum over (0, 1) by golden-section search (the

@@ -53,7 +53,8 @@ class DeadReckoning {
   /// update of the inflated prior P / omega with the inflated fix R / (1 - omega); a Schmidt
   /// update (the heading, drift-rate and scale errors are not estimated, only their
   /// covariance is updated, Joseph form). Consistent whatever the correlation, if both are.
-  /// Returns omega (1: the fix was not used).
+  /// Returns omega (1: the fix was not used). Throws std::invalid_argument for a fix that is not
+  /// finite or a covariance that is not symmetric positive definite (nothing changes then).
   double FusePosition(const Vec2& fix_n, const Mat2& fix_cov);
   /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale].
   const Eigen::Matrix<double, 5, 5>& error_covariance() const { return error_cov_; }
