@@ -63,6 +63,9 @@ int Bench(std::size_t rows, const std::filesystem::path& json_out);
 /// `trailmark bench breadcrumb`: the large-incident benchmark of the breadcrumb localizer.
 int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
                     double covariance_period_s, const std::filesystem::path& json_out);
+/// `trailmark bench ins --mission DIR`: the INS core on the samples in memory and the whole
+/// `run --pipeline ins`, samples/s, best of `runs`.
+int BenchIns(const std::filesystem::path& mission_dir, int runs, const std::filesystem::path& json_out);
 /// `trailmark bench load`: the live server under load on loopback (server/load_test.h).
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out);
 /// `trailmark serve`: replay a mission's online estimates into the incident server.

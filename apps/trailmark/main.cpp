@@ -153,7 +153,14 @@ int main(int argc, char** argv) {
   std::string bench_what;
   bench->add_option("what", bench_what,
                     "empty: I/O and pdr; 'breadcrumb': the large-incident benchmark (issue 8); "
-                    "'load': the live server under load on loopback (issue 7)");
+                    "'load': the live server under load on loopback (issue 7); 'ins': the foot "
+                    "INS on a mission's imu.csv, core and end to end (--mission)");
+  std::string bench_mission;
+  int bench_runs = 7;
+  bench->add_option("--mission", bench_mission, "ins: the mission directory whose imu.csv is run")
+      ->check(CLI::ExistingDirectory);
+  bench->add_option("--runs", bench_runs, "ins: runs of each measurement (the best is reported)")
+      ->check(CLI::PositiveNumber);
   server::LoadTestOptions load;
   bench->add_option("--firefighters", load.firefighters, "load: firefighters sending at once");
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
@@ -343,6 +350,10 @@ int main(int argc, char** argv) {
     } else if (*bench) {
       if (bench_what == "breadcrumb") {
         return cli::BenchBreadcrumb(incident, solve_period, covariance_period, bench_json);
+      }
+      if (bench_what == "ins") {
+        if (bench_mission.empty()) throw std::invalid_argument("bench ins needs --mission DIR");
+        return cli::BenchIns(bench_mission, bench_runs, bench_json);
       }
       if (bench_what == "load") {
         load.work_dir = load_dir;

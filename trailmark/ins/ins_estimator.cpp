@@ -163,8 +163,8 @@ EstimatorSummary MultiAgentIns::Summary() const {
 
 bool InsEstimatorOptions::IsValid(std::string* why) const {
   if (!ins.IsValid(why)) return false;
-  if (!(output_hz >= 0)) {
-    if (why) *why = "output_hz must be >= 0";
+  if (!(output_hz >= 0) || !std::isfinite(output_hz)) {
+    if (why) *why = "output_hz must be >= 0 and finite";
     return false;
   }
   return true;
@@ -174,8 +174,13 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
   static const OptionTable<InsEstimatorOptions> table = [] {
     OptionTable<InsEstimatorOptions> t;
     t.Include("", &InsEstimatorOptions::ins, InsOptionTable());
+    t.Choice("output", &InsEstimatorOptions::output,
+             std::vector<std::pair<std::string, InsOutput>>{{"rate", InsOutput::kRate},
+                                                            {"steps", InsOutput::kSteps}},
+             "which states become estimates: rate (output_hz and every step end) or steps "
+             "(every step end only)");
     t.Real("output_hz", &InsEstimatorOptions::output_hz, "Hz", OptionBounds::NonNegative(),
-           "estimates per agent per second (0: every sample)");
+           "output=rate: estimates per agent per second, step ends besides (0: every sample)");
     return t;
   }();
   return table;
@@ -186,15 +191,26 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("ins: " + why);
   ins_.on_state = [this](const std::string& id, const InsState& st) {
-    if (sink_ == nullptr) return;
-    if (options_.output_hz > 0) {
-      auto [it, fresh] = next_output_.emplace(id, -1e300);
-      if (st.t < it->second) return;
-      it->second = st.t + 1.0 / options_.output_hz;
-    }
-    const auto& c = st.position_cov;
-    sink_->Add({st.t, id, st.position_n, c(0, 0), c(0, 1), c(1, 1)});
+    if (sink_ == nullptr || options_.output != InsOutput::kRate) return;
+    Output& out = output_[id];
+    // At least 1/output_hz after the last one written, to a microsecond: the choice does not
+    // depend on the clock's origin (a sample exactly on the period is taken in every frame).
+    if (options_.output_hz > 0 && st.t < out.written + 1.0 / options_.output_hz - 1e-6) return;
+    Write(id, st);
   };
+  // A step is emitted when its stance has ended: the agent's latest state is the stance end.
+  ins_.on_step = [this](const Step& step) {
+    if (sink_ == nullptr) return;
+    if (const auto st = ins_.State(step.agent); st && st->t == step.t1) Write(step.agent, *st);
+  };
+}
+
+void InsEstimator::Write(const std::string& agent, const InsState& st) {
+  Output& out = output_[agent];
+  if (st.t <= out.written) return;  // (a step end the rate wrote already)
+  out.written = st.t;
+  const auto& c = st.position_cov;
+  sink_->Add({st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)});
 }
 
 void InsEstimator::Add(const MissionRow& row, EstimateSink& sink) {
@@ -210,6 +226,9 @@ void InsEstimator::Add(const MissionRow& row, EstimateSink& sink) {
 void InsEstimator::Finish(EstimateSink& sink) {
   sink_ = &sink;
   ins_.Finish();
+  for (const std::string& agent : ins_.Agents()) {  // where each agent's data ended
+    if (const auto st = ins_.State(agent)) Write(agent, *st);
+  }
 }
 
 std::optional<Estimate> InsEstimator::Current(const std::string& node) const {

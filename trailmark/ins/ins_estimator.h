@@ -61,15 +61,26 @@ class MultiAgentIns {
   std::map<std::string, std::unique_ptr<Agent>> agents_;
 };
 
+/// Which INS states become estimates.
+enum class InsOutput {
+  kRate,   ///< at most `output_hz` per agent (0: every sample), and every step end
+  kSteps,  ///< every step end only (the foot at rest, ZUPT-corrected), and the last state
+};
+
 struct InsEstimatorOptions {
   InsOptions ins;
-  double output_hz = 0;  ///< Hz; estimates at most this often per agent (0: every sample)
+  InsOutput output = InsOutput::kRate;
+  /// Hz; estimates at most this often per agent (0: every sample). 50 Hz: a foot moves at most
+  /// ~10 cm between two (swing ~5 m/s), a tenth of the INS's error after a minute's walk, and a
+  /// 820 Hz IMU writes 16x fewer rows than samples. Step ends are written whatever the rate.
+  double output_hz = 50;
   bool IsValid(std::string* why) const;
 };
 const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable();
 
-/// `ins`: each agent's INS position (with its horizontal covariance) at every sample, or at
-/// `output_hz`. Agents are independent: each agent's samples in time order is all it needs.
+/// `ins`: each agent's INS position (with its horizontal covariance) at `output_hz` (or every
+/// sample) and at every step end, or at the step ends only; each agent's last state at the end
+/// of data. Agents are independent: each agent's samples in time order is all it needs.
 class InsEstimator : public OnlineEstimator {
  public:
   InsEstimator(MissionInfo info, InsEstimatorOptions options);
@@ -81,8 +92,12 @@ class InsEstimator : public OnlineEstimator {
  private:
   InsEstimatorOptions options_;
   MultiAgentIns ins_;
+  void Write(const std::string& agent, const InsState& state);
   EstimateSink* sink_ = nullptr;
-  std::map<std::string, TimeS> next_output_;
+  struct Output {
+    TimeS written = -1e300;  ///< the time of the last state written
+  };
+  std::map<std::string, Output> output_;
   std::size_t ignored_ = 0;
 };
 

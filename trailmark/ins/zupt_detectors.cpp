@@ -42,12 +42,14 @@ double DefaultGamma(DetectorKind kind) {
 ZuptDetector::ZuptDetector(DetectorOptions options)
     : options_(options), gamma_(options.gamma.value_or(DefaultGamma(options.kind))) {
   if (options_.window < 1) throw std::invalid_argument("ZuptDetector: window must be >= 1");
+  ring_.resize(static_cast<std::size_t>(options_.window));
 }
 
 double ZuptDetector::Statistic(std::size_t begin, std::size_t end) const {
+  // The statistics as the paper writes them, each sample's term summed.
   const double n = static_cast<double>(end - begin);
   Vec3 a_mean = Vec3::Zero();
-  for (std::size_t k = begin; k < end; ++k) a_mean += window_[k].first;
+  for (std::size_t k = begin; k < end; ++k) a_mean += At(k).first;
   a_mean /= n;
   const double inv_a = 1.0 / (options_.sigma_a_mps2 * options_.sigma_a_mps2);
   const double inv_g = 1.0 / (options_.sigma_g_radps * options_.sigma_g_radps);
@@ -58,25 +60,72 @@ double ZuptDetector::Statistic(std::size_t begin, std::size_t end) const {
     case DetectorKind::kAdaptive: {
       const Vec3 up = a_mean.norm() > 1e-9 ? Vec3(a_mean.normalized()) : Vec3::UnitZ();
       for (std::size_t k = begin; k < end; ++k) {
-        t += (window_[k].first - g * up).squaredNorm() * inv_a +
-             window_[k].second.squaredNorm() * inv_g;  // Skog 2010, eq. (10)
+        t += (At(k).first - g * up).squaredNorm() * inv_a +
+             At(k).second.squaredNorm() * inv_g;  // Skog 2010, eq. (10)
       }
       break;
     }
-    case DetectorKind::kAre:
-      for (std::size_t k = begin; k < end; ++k) t += window_[k].second.squaredNorm() * inv_g;
+    case DetectorKind::kAre:  // eq. (13)
+      for (std::size_t k = begin; k < end; ++k) t += At(k).second.squaredNorm() * inv_g;
       break;
-    case DetectorKind::kMv:
-      for (std::size_t k = begin; k < end; ++k) t += (window_[k].first - a_mean).squaredNorm() * inv_a;
+    case DetectorKind::kMv:  // eq. (11)
+      for (std::size_t k = begin; k < end; ++k) t += (At(k).first - a_mean).squaredNorm() * inv_a;
       break;
-    case DetectorKind::kMag:
+    case DetectorKind::kMag:  // eq. (12)
       for (std::size_t k = begin; k < end; ++k) {
-        const double m = window_[k].first.norm() - g;
+        const double m = At(k).first.norm() - g;
         t += m * m * inv_a;
       }
       break;
   }
   return t / n;
+}
+
+double ZuptDetector::RunningStatistic() const {
+  return FromSums(static_cast<double>(size_), sum_a_, sum_aa_, sum_norm_a_, sum_ww_);
+}
+
+double ZuptDetector::FromSums(double n, const Vec3& sum_a, double sum_aa, double sum_norm_a,
+                              double sum_ww) const {
+  const double inv_a = 1.0 / (options_.sigma_a_mps2 * options_.sigma_a_mps2);
+  const double inv_g = 1.0 / (options_.sigma_g_radps * options_.sigma_g_radps);
+  const double g = options_.gravity_mps2;
+  double t = 0;
+  switch (options_.kind) {
+    case DetectorKind::kShoe:
+    case DetectorKind::kAdaptive: {
+      // Skog 2010, eq. (10): sum |a_k - g u|^2 with u the mean's direction (z when it is ~0),
+      // expanded: sum |a_k|^2 - 2 g u . sum a_k + n g^2.
+      const double norm = sum_a.norm();
+      const double u_dot_sum = norm > 1e-9 * n ? norm : sum_a.z();
+      t = (sum_aa - 2 * g * u_dot_sum + n * g * g) * inv_a + sum_ww * inv_g;
+      break;
+    }
+    case DetectorKind::kAre:  // eq. (13)
+      t = sum_ww * inv_g;
+      break;
+    case DetectorKind::kMv:  // eq. (11): sum |a_k - a_mean|^2 = sum |a_k|^2 - |sum a_k|^2 / n
+      t = (sum_aa - sum_a.squaredNorm() / n) * inv_a;
+      break;
+    case DetectorKind::kMag:  // eq. (12): sum (|a_k| - g)^2
+      t = (sum_aa - 2 * g * sum_norm_a + n * g * g) * inv_a;
+      break;
+  }
+  // Each term is a sum of squares: >= 0 (the expanded form may round to a tiny negative).
+  return std::max(0.0, t / n);
+}
+
+void ZuptDetector::Resum() {
+  sum_a_.setZero();
+  sum_aa_ = sum_norm_a_ = sum_ww_ = 0;
+  for (std::size_t k = 0; k < size_; ++k) {
+    const auto& [a, w] = At(k);
+    sum_a_ += a;
+    sum_aa_ += a.squaredNorm();
+    sum_norm_a_ += a.norm();
+    sum_ww_ += w.squaredNorm();
+  }
+  since_resum_ = 0;
 }
 
 ZuptDetector::Decision ZuptDetector::Decide(double statistic, double dt_s) {
@@ -95,22 +144,34 @@ ZuptDetector::Decision ZuptDetector::Decide(double statistic, double dt_s) {
 std::optional<ZuptDetector::Decision> ZuptDetector::Add(const Vec3& accel_b, const Vec3& gyro_b,
                                                         double dt_s) {
   last_dt_ = dt_s > 0 ? dt_s : last_dt_;
-  window_.emplace_back(accel_b, gyro_b);
   ++seen_;
-  const auto W = static_cast<std::size_t>(options_.window);
-  if (window_.size() > W) window_.pop_front();
-  if (window_.size() < W) {
-    // Centred window: the first decisions use a window truncated at the start.
-    if (window_.size() <= static_cast<std::size_t>(Delay())) return std::nullopt;
-    return Decide(Statistic(0, window_.size()), last_dt_);
+  const std::size_t W = ring_.size();
+  if (size_ == W) {  // the oldest sample leaves the window
+    const auto& [a, w] = ring_[head_];
+    sum_a_ -= a;
+    sum_aa_ -= a.squaredNorm();
+    sum_norm_a_ -= a.norm();
+    sum_ww_ -= w.squaredNorm();
+    ring_[head_] = {accel_b, gyro_b};
+    head_ = (head_ + 1) % W;
+  } else {
+    ring_[(head_ + size_) % W] = {accel_b, gyro_b};
+    ++size_;
   }
-  return Decide(Statistic(0, W), last_dt_);
+  sum_a_ += accel_b;
+  sum_aa_ += accel_b.squaredNorm();
+  sum_norm_a_ += accel_b.norm();
+  sum_ww_ += gyro_b.squaredNorm();
+  if (++since_resum_ >= W) Resum();  // bounds the rounding of the running sums
+  // Centred window: the first decisions use a window truncated at the start.
+  if (size_ < W && size_ <= static_cast<std::size_t>(Delay())) return std::nullopt;
+  return Decide(options_.reference_arithmetic ? Statistic(0, size_) : RunningStatistic(), last_dt_);
 }
 
 std::vector<ZuptDetector::Decision> ZuptDetector::Flush() {
   std::vector<Decision> out;
   // The last Delay() samples: windows truncated at the end.
-  const std::size_t W = window_.size();
+  const std::size_t W = size_;
   const std::size_t pending = std::min<std::size_t>(static_cast<std::size_t>(Delay()), W);
   for (std::size_t k = 0; k < pending; ++k) {
     const std::size_t begin = k + 1;

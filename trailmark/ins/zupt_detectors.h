@@ -14,11 +14,17 @@
 /// a threshold that scales with the gait: gamma_k = gamma * (E_swing / E_ref)^p where E_swing is
 /// a slowly-tracked peak of the SHOE statistic over the last strides (running feet never come to
 /// a full rest, so their stance statistic is higher; crawling knees and hands rest longer).
-/// No I/O.
+///
+/// Cost: O(1) per sample. The window's sums (sum a_k, sum |a_k|^2, sum |a_k|, sum |w_k|^2) are
+/// kept running (a ring of W samples, no allocation after the first window) and summed anew
+/// every W samples so rounding cannot accumulate; each statistic is a closed form of them, e.g.
+/// SHOE: sum |a_k - g u|^2 = sum |a_k|^2 - 2 g |sum a_k| + W g^2 with u = sum a_k / |sum a_k|.
+/// `DetectorOptions::reference_arithmetic` sums every window anew instead (the reference the
+/// running form is tested against). No I/O.
 
-#include <deque>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "trailmark/core/types.h"
 
@@ -49,6 +55,8 @@ struct DetectorOptions {
   double adaptive_power = 1.0;        ///< chosen on PyShoe VICON (docs/ins.md)
   double adaptive_min_scale = 1e-3, adaptive_max_scale = 1e3;
   double adaptive_tau_s = 4.0;        ///< time constant of the swing-energy tracker
+  /// Sum every window anew from its samples (O(W) per sample): the reference of the running sums.
+  bool reference_arithmetic = false;
 };
 
 double DefaultGamma(DetectorKind kind);
@@ -70,12 +78,27 @@ class ZuptDetector {
   const DetectorOptions& options() const { return options_; }
 
  private:
+  /// The statistic of the window's samples begin..end-1 (0: oldest), each term summed anew.
   double Statistic(std::size_t begin, std::size_t end) const;
+  /// The statistic of the whole window from the running sums.
+  double RunningStatistic() const;
+  /// The statistic from a window's sums: n samples, sum a, sum |a|^2, sum |a|, sum |w|^2.
+  double FromSums(double n, const Vec3& sum_a, double sum_aa, double sum_norm_a,
+                  double sum_ww) const;
+  void Resum();
   Decision Decide(double statistic, double dt_s);
+  const std::pair<Vec3, Vec3>& At(std::size_t k) const {  // k-th oldest sample of the window
+    return ring_[(head_ + k) % ring_.size()];
+  }
 
   DetectorOptions options_;
   double gamma_;
-  std::deque<std::pair<Vec3, Vec3>> window_;
+  std::vector<std::pair<Vec3, Vec3>> ring_;  ///< W slots; the window is size_ samples from head_
+  std::size_t head_ = 0, size_ = 0;
+  // running sums over the window
+  Vec3 sum_a_ = Vec3::Zero();
+  double sum_aa_ = 0, sum_norm_a_ = 0, sum_ww_ = 0;
+  std::size_t since_resum_ = 0;
   std::size_t seen_ = 0;
   double swing_energy_ = 0;  ///< adaptive: tracked swing statistic
   double last_dt_ = 0.005;

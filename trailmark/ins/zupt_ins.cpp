@@ -23,6 +23,15 @@ Eigen::Quaterniond Exp(const Vec3& phi) {
   return Eigen::Quaterniond(Eigen::AngleAxisd(angle, phi / angle));
 }
 
+/// Y += X M for 15x3 blocks of a column-major matrix and a 3x3 M: three axpys on contiguous
+/// 15-long columns per output column (vectorized; Eigen's lazy product of these blocks is not).
+template <class Dst, class Src>
+[[gnu::always_inline]] inline void AddProduct(Dst&& Y, const Src& X, const Eigen::Matrix3d& M) {
+  for (int j = 0; j < 3; ++j) {
+    Y.col(j) += X.col(0) * M(0, j) + X.col(1) * M(1, j) + X.col(2) * M(2, j);
+  }
+}
+
 }  // namespace
 
 bool InsOptions::IsValid(std::string* why) const {
@@ -39,6 +48,28 @@ bool InsOptions::IsValid(std::string* why) const {
 
 ZuptIns::ZuptIns(InsOptions options) : options_(options), detector_(options.detector) {
   options_.detector.gravity_mps2 = options_.gravity_mps2;
+  options_.detector.reference_arithmetic =
+      options_.detector.reference_arithmetic || options_.reference_arithmetic;
+  detector_ = ZuptDetector(options_.detector);
+  delay_.resize(static_cast<std::size_t>(detector_.Delay()) + 1);
+}
+
+void ZuptIns::PushDelayed(const Sample& s) {
+  if (delay_size_ == delay_.size()) {  // (only when the detector's window grew at alignment)
+    std::vector<Sample> grown(std::max<std::size_t>(2 * delay_.size(), 2));
+    for (std::size_t k = 0; k < delay_size_; ++k) grown[k] = delay_[(delay_head_ + k) % delay_.size()];
+    delay_ = std::move(grown);
+    delay_head_ = 0;
+  }
+  delay_[(delay_head_ + delay_size_) % delay_.size()] = s;
+  ++delay_size_;
+}
+
+ZuptIns::Sample ZuptIns::PopDelayed() {
+  const Sample s = delay_[delay_head_];
+  delay_head_ = (delay_head_ + 1) % delay_.size();
+  --delay_size_;
+  return s;
 }
 
 void ZuptIns::Add(const ImuSample& s) {
@@ -58,13 +89,12 @@ void ZuptIns::Add(const ImuSample& s) {
     if (alignment_.size() >= 5 && s.t - alignment_.front().t >= options_.alignment_s) Align();
     return;
   }
-  const double dt = have_last_ || !delay_.empty() ? s.t - (delay_.empty() ? t_last_ : delay_.back().t)
-                                                  : 0.0;
-  delay_.push_back(s);
+  const double dt = have_last_ || delay_size_ > 0
+                       ? s.t - (delay_size_ == 0 ? t_last_ : NewestDelayed().t)
+                       : 0.0;
+  PushDelayed({s.t, s.accel_b, s.gyro_b});
   if (auto decision = detector_.Add(s.accel_b, s.gyro_b, dt)) {
-    const ImuSample front = delay_.front();
-    delay_.erase(delay_.begin());
-    Process(front, decision->stance);
+    Process(PopDelayed(), decision->stance);
   }
 }
 
@@ -80,7 +110,7 @@ void ZuptIns::AddWithStance(const ImuSample& s, bool stance) {
     if (alignment_.size() >= 5 && s.t - alignment_.front().t >= options_.alignment_s) Align();
     return;
   }
-  Process(s, stance);
+  Process({s.t, s.accel_b, s.gyro_b}, stance);
 }
 
 void ZuptIns::Align() {
@@ -114,6 +144,8 @@ void ZuptIns::Align() {
       options_.detector.window =
           std::max(3, static_cast<int>(std::lround(options_.detector.window_s / dt)));
       detector_ = ZuptDetector(options_.detector);
+      delay_.assign(static_cast<std::size_t>(detector_.Delay()) + 1, Sample{});
+      delay_head_ = delay_size_ = 0;
     }
   }
   // Roll and pitch from gravity: at rest f_b = R_nb^T (0, 0, g).
@@ -146,7 +178,7 @@ void ZuptIns::Align() {
   alignment_stance_.clear();
   for (std::size_t k = 0; k < buffered.size(); ++k) {
     if (external_) {
-      Process(buffered[k], stance[k]);
+      Process({buffered[k].t, buffered[k].accel_b, buffered[k].gyro_b}, stance[k]);
     } else {
       Add(buffered[k]);
     }
@@ -164,28 +196,15 @@ void ZuptIns::Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt) {
   const Vec3 v1 = v_ + (f_n - Vec3(0, 0, options_.gravity_mps2)) * dt;
   p_ += 0.5 * (v_ + v1) * dt;
   v_ = v1;
-
-  // P = Phi P Phi^T + Q with Phi = I + F dt, F block-sparse:
-  //   rows dp: [0 I 0 0 0]; dv: [0 0 -[f_n]x -R 0]; dtheta: [0 0 0 0 -R]; biases: 0.
-  const Eigen::Matrix3d A = -Skew(f_n);
-  const bool biases = options_.estimate_biases;
-  auto apply_F = [&](const Mat15& M) {  // returns F M (the bias rows are zero)
-    Mat15 out = Mat15::Zero();
-    out.middleRows<3>(kPos) = M.middleRows<3>(kVel);
-    out.middleRows<3>(kVel) = A * M.middleRows<3>(kAtt);
-    if (biases) {
-      out.middleRows<3>(kVel) -= R * M.middleRows<3>(kAccelBias);
-      out.middleRows<3>(kAtt) = -R * M.middleRows<3>(kGyroBias);
-    }
-    return out;
-  };
-  const Mat15 FP = apply_F(P_);
-  const Mat15 FPFt = apply_F(FP.transpose());
-  P_ += dt * (FP + FP.transpose()) + (dt * dt) * FPFt;
+  if (options_.reference_arithmetic) {
+    PropagateCovarianceDense(R, f_n, dt);
+  } else {
+    PropagateCovariance(R, f_n, dt);
+  }
   const double qa = options_.accel_noise_mps2 * dt, qg = options_.gyro_noise_radps * dt;
   P_.block<3, 3>(kVel, kVel).diagonal().array() += qa * qa;
   P_.block<3, 3>(kAtt, kAtt).diagonal().array() += qg * qg;
-  if (biases) {
+  if (options_.estimate_biases) {
     P_.block<3, 3>(kAccelBias, kAccelBias).diagonal().array() +=
         options_.accel_bias_rw * options_.accel_bias_rw * dt;
     P_.block<3, 3>(kGyroBias, kGyroBias).diagonal().array() +=
@@ -193,17 +212,76 @@ void ZuptIns::Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt) {
   }
 }
 
+void ZuptIns::PropagateCovarianceDense(const Eigen::Matrix3d& R, const Vec3& f_n, double dt) {
+  // Phi = I + F dt with the continuous error dynamics of the header (Sola 2017, sec. 5.3.3).
+  Mat15 F = Mat15::Zero();
+  F.block<3, 3>(kPos, kVel) = Eigen::Matrix3d::Identity();
+  F.block<3, 3>(kVel, kAtt) = -Skew(f_n);
+  if (options_.estimate_biases) {
+    F.block<3, 3>(kVel, kAccelBias) = -R;
+    F.block<3, 3>(kAtt, kGyroBias) = -R;
+  }
+  const Mat15 Phi = Mat15::Identity() + F * dt;
+  P_ = (Phi * P_ * Phi.transpose()).eval();
+}
+
+void ZuptIns::PropagateCovariance(const Eigen::Matrix3d& R, const Vec3& f_n, double dt) {
+  // P = Phi P Phi^T, Phi = I + F dt, from Phi's blocks besides the identity (all 3x3):
+  //   Phi_pv = dt I,  Phi_vtheta = B = -dt [f_n]x,  Phi_va = C = -dt R,  Phi_thetag = C.
+  // First N = P Phi^T: only N's column blocks p, v, theta change (p += dt v, v += theta B^T +
+  // a C^T, theta += g C^T, in this order, in place: contiguous 15x3 blocks of the column-major
+  // P). Then P = Phi N: in every column only the rows p, v, theta change, the same way. The
+  // result is symmetric to rounding; Process makes it exactly symmetric once per sample.
+  const Eigen::Matrix3d B = -dt * Skew(f_n), Bt = B.transpose();
+  const Eigen::Matrix3d C = -dt * R, Ct = C.transpose();
+  const bool biases = options_.estimate_biases;
+  P_.middleCols<3>(kPos) += dt * P_.middleCols<3>(kVel);
+  AddProduct(P_.middleCols<3>(kVel), P_.middleCols<3>(kAtt), Bt);
+  if (biases) {
+    AddProduct(P_.middleCols<3>(kVel), P_.middleCols<3>(kAccelBias), Ct);
+    AddProduct(P_.middleCols<3>(kAtt), P_.middleCols<3>(kGyroBias), Ct);
+  }
+  // Without bias states their rows and columns stay zero: 9 columns suffice.
+  const int columns = biases ? kErrorStateSize : kAccelBias;
+  for (int j = 0; j < columns; ++j) {
+    auto n = P_.col(j);
+    n.segment<3>(kPos) += dt * n.segment<3>(kVel);
+    if (biases) {
+      n.segment<3>(kVel) += B * n.segment<3>(kAtt) + C * n.segment<3>(kAccelBias);
+      n.segment<3>(kAtt) += C * n.segment<3>(kGyroBias);
+    } else {
+      n.segment<3>(kVel) += B * n.segment<3>(kAtt);
+    }
+  }
+}
+
 template <int Offset>
 void ZuptIns::Update3(const Vec3& innovation, double sigma) {
-  // H selects the error-state rows Offset..Offset+2; K = P H^T (H P H^T + R)^-1
+  // H selects the error-state rows Offset..Offset+2; K = P H^T (H P H^T + R)^-1.
   const Eigen::Matrix3d S =
       P_.block<3, 3>(Offset, Offset) + Eigen::Matrix3d::Identity() * sigma * sigma;
-  const Eigen::Matrix<double, kErrorStateSize, 3> K = P_.middleCols<3>(Offset) * S.inverse();
-  const ErrorVector dx = K * innovation;
-  const Eigen::Matrix<double, 3, kErrorStateSize> HP = P_.middleRows<3>(Offset);
-  P_ -= K * HP;
-  P_ = 0.5 * (P_ + P_.transpose());
-  Inject(dx);
+  const Eigen::Matrix3d S_inv = S.inverse();  // 3x3: closed form (cofactors)
+  if (options_.reference_arithmetic) {
+    Eigen::Matrix<double, 3, kErrorStateSize> H = Eigen::Matrix<double, 3, kErrorStateSize>::Zero();
+    H.middleCols<3>(Offset).setIdentity();
+    const Eigen::Matrix<double, kErrorStateSize, 3> K = P_ * H.transpose() * S_inv;
+    const ErrorVector dx = K * innovation;
+    P_ = (P_ - K * H * P_).eval();
+    P_ = 0.5 * (P_ + P_.transpose());
+    Inject(dx);
+    return;
+  }
+  // P H^T is P's columns Offset..: K = P H^T S^-1, P -= K (P H^T)^T column by column (P's
+  // column j loses K times row j of P H^T), then made exactly symmetric.
+  const Eigen::Matrix<double, kErrorStateSize, 3> PHt = P_.middleCols<3>(Offset);
+  Eigen::Matrix<double, kErrorStateSize, 3> K = Eigen::Matrix<double, kErrorStateSize, 3>::Zero();
+  AddProduct(K, PHt, S_inv);
+  const ErrorVector dx = K.col(0) * innovation(0) + K.col(1) * innovation(1) + K.col(2) * innovation(2);
+  const int columns = options_.estimate_biases ? kErrorStateSize : kAccelBias;
+  for (int j = 0; j < columns; ++j) {
+    P_.col(j) -= K.col(0) * PHt(j, 0) + K.col(1) * PHt(j, 1) + K.col(2) * PHt(j, 2);
+  }
+  Inject(dx);  // (symmetric to rounding; Process makes P exactly symmetric)
 }
 
 void ZuptIns::Inject(const ErrorVector& dx) {
@@ -225,14 +303,14 @@ void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
   const Vec3 y = gyro_b - bg_;
   const Eigen::Matrix3d S = P_.block<3, 3>(kGyroBias, kGyroBias) +
                             Eigen::Matrix3d::Identity() * options_.zaru_sigma_radps * options_.zaru_sigma_radps;
-  if (y.dot(S.ldlt().solve(y)) > options_.zaru_gate_chi2) {
+  if (y.dot(S.inverse() * y) > options_.zaru_gate_chi2) {  // 3x3 SPD: closed-form inverse
     ++summary_.zaru_gated;
     return;
   }
   Update3<kGyroBias>(y, options_.zaru_sigma_radps);
 }
 
-void ZuptIns::CheckSaturation(const ImuSample& s) {
+void ZuptIns::CheckSaturation(const Sample& s) {
   // A clipped axis repeats its full-scale value: >= 3 identical readings beyond 4 g or
   // 5 rad/s (every MEMS range is larger than a walking foot's normal signal below these).
   Eigen::Matrix<double, 6, 1> raw;
@@ -251,7 +329,7 @@ void ZuptIns::CheckSaturation(const ImuSample& s) {
   }
 }
 
-void ZuptIns::Process(const ImuSample& s, bool stance) {
+void ZuptIns::Process(const Sample& s, bool stance) {
   ++summary_.samples;
   CheckSaturation(s);
   if (have_last_) {
@@ -277,6 +355,12 @@ void ZuptIns::Process(const ImuSample& s, bool stance) {
     UpdateZupt();
     if (options_.zaru) UpdateZaru(s.gyro_b);
   }
+  if (!options_.reference_arithmetic) {  // (the dense reference symmetrizes in each update)
+    const int n = options_.estimate_biases ? kErrorStateSize : kAccelBias;
+    for (int j = 1; j < n; ++j) {
+      for (int i = 0; i < j; ++i) P_(i, j) = P_(j, i) = 0.5 * (P_(i, j) + P_(j, i));
+    }
+  }
   InsState state;
   state.t = s.t;
   state.position_n = p_;
@@ -284,13 +368,12 @@ void ZuptIns::Process(const ImuSample& s, bool stance) {
   state.q_nb = q_;
   state.position_cov = P_.block<3, 3>(kPos, kPos);
   state.stance = stance;
-  StanceBookkeeping(s, stance);
+  StanceBookkeeping(stance);
   last_state_ = state;
   if (on_state) on_state(state);
 }
 
-void ZuptIns::StanceBookkeeping(const ImuSample& s, bool stance) {
-  (void)s;
+void ZuptIns::StanceBookkeeping(bool stance) {
   stance_run_ = stance ? stance_run_ + 1 : 0;
   if (stance && stance_run_ >= options_.min_stance_samples) in_stance_phase_ = true;
   if (stance || !in_stance_phase_) return;
@@ -320,7 +403,7 @@ std::optional<TimeS> ZuptIns::EarliestNextStepEnd() const {
   // stance it is in may end there), else the first sample still buffered.
   if (have_last_) return t_last_;
   if (!alignment_.empty()) return alignment_.front().t;
-  if (!delay_.empty()) return delay_.front().t;
+  if (delay_size_ > 0) return delay_[delay_head_].t;
   return std::nullopt;
 }
 
@@ -332,17 +415,11 @@ void ZuptIns::Finish() {
     Align();
   }
   const auto decisions = detector_.Flush();
-  for (std::size_t k = 0; k < decisions.size() && !delay_.empty(); ++k) {
-    const ImuSample front = delay_.front();
-    delay_.erase(delay_.begin());
-    Process(front, decisions[k].stance);
+  for (std::size_t k = 0; k < decisions.size() && delay_size_ > 0; ++k) {
+    Process(PopDelayed(), decisions[k].stance);
   }
-  while (!delay_.empty()) {  // (only when the window never filled)
-    const ImuSample front = delay_.front();
-    delay_.erase(delay_.begin());
-    Process(front, false);
-  }
-  if (in_stance_phase_) StanceBookkeeping(ImuSample{}, false);
+  while (delay_size_ > 0) Process(PopDelayed(), false);  // (only when the window never filled)
+  if (in_stance_phase_) StanceBookkeeping(false);
   summary_.accel_bias = ba_;
   summary_.gyro_bias = bg_;
 }

@@ -61,6 +61,11 @@ struct InsOptions {
   // steps
   int min_stance_samples = 3;
   double min_step_length_m = 0.02;    ///< shorter displacements between stances are no step
+  /// Textbook dense arithmetic: Phi as a full 15x15 matrix (P = Phi P Phi^T + Q), the Kalman
+  /// update with the full H (P = P - K H P, then symmetrized), the detector's window summed
+  /// anew. Slow; the reference the structured arithmetic is tested against (same results to
+  /// rounding).
+  bool reference_arithmetic = false;
   /// Window >= 1 sample, noises and sigmas > 0, alignment >= 0.
   bool IsValid(std::string* why) const;
 };
@@ -117,19 +122,33 @@ class ZuptIns {
   using Mat15 = Eigen::Matrix<double, kErrorStateSize, kErrorStateSize>;
   using ErrorVector = Eigen::Matrix<double, kErrorStateSize, 1>;
   void Align();
-  void Process(const ImuSample& s, bool stance);
+  /// A sample without its agent (the INS holds one agent's samples).
+  struct Sample {
+    TimeS t = 0;
+    Vec3 accel_b = Vec3::Zero(), gyro_b = Vec3::Zero();
+  };
+  void Process(const Sample& s, bool stance);
   void Propagate(const Vec3& accel_b, const Vec3& gyro_b, double dt);
+  void PropagateCovariance(const Eigen::Matrix3d& R, const Vec3& f_n, double dt);
+  void PropagateCovarianceDense(const Eigen::Matrix3d& R, const Vec3& f_n, double dt);
   void UpdateZupt();
   void UpdateZaru(const Vec3& gyro_b);
   template <int Offset>
   void Update3(const Vec3& innovation, double sigma);
   void Inject(const ErrorVector& dx);
-  void StanceBookkeeping(const ImuSample& s, bool stance);
+  void StanceBookkeeping(bool stance);
 
   InsOptions options_;
   ZuptDetector detector_;
   std::vector<ImuSample> alignment_;   ///< buffered until aligned
-  std::vector<ImuSample> delay_;       ///< samples waiting for their detector decision
+  /// Samples waiting for their detector decision: a ring of Delay() + 1 slots.
+  std::vector<Sample> delay_;
+  std::size_t delay_head_ = 0, delay_size_ = 0;
+  void PushDelayed(const Sample& s);
+  Sample PopDelayed();
+  const Sample& NewestDelayed() const {
+    return delay_[(delay_head_ + delay_size_ - 1) % delay_.size()];
+  }
   std::vector<bool> alignment_stance_; ///< external decisions of the buffered samples
   bool external_ = false;
   bool aligned_ = false;
@@ -151,7 +170,7 @@ class ZuptIns {
   // saturation: an axis repeating the same large value (a clipped sensor)
   Eigen::Matrix<double, 6, 1> last_raw_ = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::Matrix<int, 6, 1> repeat_ = Eigen::Matrix<int, 6, 1>::Zero();
-  void CheckSaturation(const ImuSample& s);
+  void CheckSaturation(const Sample& s);
   InsSummary summary_;
 };
 

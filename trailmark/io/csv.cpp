@@ -310,7 +310,11 @@ CsvWriter& CsvWriter::Add(double value) {
                                        rows_ + 1));
   }
   Separator();
-  fmt::format_to(std::back_inserter(row_), "{}", value);
+  // The shortest text that reads back to the same double (std::to_chars without a format).
+  char text[32];
+  const auto [end, error] = std::to_chars(text, text + sizeof text, value);
+  row_.append(text, end);
+  (void)error;  // (32 characters hold any double)
   return *this;
 }
 
