@@ -276,6 +276,29 @@ void BM_BeaconMds(benchmark::State& state) {
 }
 BENCHMARK(BM_BeaconMds)->Arg(21)->Arg(200)->Arg(1000)->Unit(benchmark::kMillisecond);
 
+// Classical MDS alone (double centring + the two leading eigenpairs) on 1,000 beacons'
+// shortest-path distances: arg 0 the dense eigensolver, 1 the partial one (issue 31: < 0.2 s).
+void BM_ClassicalMds(benchmark::State& state) {
+  const int n = 1000;
+  Random rng(7);
+  const double side = std::sqrt(n * 13.5);
+  std::vector<Vec2> p;
+  for (int i = 0; i < n; ++i) p.emplace_back(rng.Uniform(0, side), rng.Uniform(0, side));
+  beacons::RangeMatrix m(n, std::vector<std::optional<double>>(n));
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n; ++j) {
+      const double d = (p[i] - p[j]).norm();
+      if (d < 8.0) m[i][j] = m[j][i] = d + rng.Normal(0, 0.1);
+    }
+  }
+  std::vector<std::vector<double>> full;
+  beacons::FillShortestPaths(m, &full);
+  const auto solver = state.range(0) == 0 ? beacons::MdsEigensolver::kDense
+                                          : beacons::MdsEigensolver::kPartial;
+  for (auto _ : state) benchmark::DoNotOptimize(beacons::ClassicalMds(full, solver));
+}
+BENCHMARK(BM_ClassicalMds)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
 // ICP closest points for one pattern comparison (issue 5, item 2: a library or our own "if
 // measured faster on these tiny point sets"): 40 odometry points against a 20-node pattern.
 // Ours: brute force over the pattern's segments (exact). nanoflann: a k-d tree over the

@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 
 #include "trailmark/core/random.h"
 
@@ -35,6 +37,36 @@ TEST(Mds, ExactDistancesGiveTheExactLayout) {
     for (std::size_t j = 0; j < truth.size(); ++j) full[i][j] = (truth[i] - truth[j]).norm();
   }
   EXPECT_LT(AlignedError(ClassicalMds(full), truth), 1e-9);  // issue 4: to 1e-9 up to a rigid motion
+}
+
+// The partial eigensolver (Spectra, Lanczos) against the dense one, on exact distances (1,000
+// beacons: the layout to 1e-9 m) and on noisy shortest-path-completed ones (a B with many
+// negative eigenvalues): the same layout to 1e-6 m, sign fixed by the same rule.
+TEST(Mds, PartialEigensolverGivesTheDenseLayout) {
+  for (const int n : {80, 1000}) {
+    Random rng(n);
+    const double side = std::sqrt(n * 13.5);
+    std::vector<Vec2> truth;
+    for (int i = 0; i < n; ++i) truth.emplace_back(rng.Uniform(0, side), rng.Uniform(0, side));
+    std::vector<std::vector<double>> exact(n, std::vector<double>(n));
+    RangeMatrix measured(n, std::vector<std::optional<double>>(n));
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < n; ++j) exact[i][j] = (truth[i] - truth[j]).norm();
+      for (int j = i + 1; j < n; ++j) {
+        if (exact[i][j] < 8.0) measured[i][j] = measured[j][i] = exact[i][j] + rng.Normal(0, 0.1);
+      }
+    }
+    std::vector<std::vector<double>> paths;
+    FillShortestPaths(measured, &paths);
+    for (const auto* full : {&exact, &paths}) {
+      const auto dense = ClassicalMds(*full, MdsEigensolver::kDense);
+      const auto partial = ClassicalMds(*full, MdsEigensolver::kPartial);
+      double worst = 0;
+      for (int i = 0; i < n; ++i) worst = std::max(worst, (dense[i] - partial[i]).norm());
+      EXPECT_LT(worst, full == &exact ? 1e-9 : 1e-6) << n << (full == &exact ? " exact" : " paths");
+      if (full == &exact) EXPECT_LT(AlignedError(partial, truth), 1e-9) << n;
+    }
+  }
 }
 
 TEST(Mds, ProcrustesRecoversRotationTranslationAndFlip) {

@@ -6,6 +6,8 @@
 #include <Eigen/Dense>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
+#include <Spectra/MatOp/DenseSymMatProd.h>
+#include <Spectra/SymEigsSolver.h>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -70,7 +72,11 @@ bool FillShortestPaths(const RangeMatrix& measured, std::vector<std::vector<doub
   return connected;
 }
 
-std::vector<Vec2> ClassicalMds(const std::vector<std::vector<double>>& full) {
+namespace {
+constexpr int kPartialFromPoints = 64;
+}  // namespace
+
+std::vector<Vec2> ClassicalMds(const std::vector<std::vector<double>>& full, MdsEigensolver solver) {
   const int n = static_cast<int>(full.size());
   if (n < 3) throw std::invalid_argument("ClassicalMds: needs >= 3 points");
   // B = -1/2 J D^2 J (double centring)
@@ -83,14 +89,40 @@ std::vector<Vec2> ClassicalMds(const std::vector<std::vector<double>>& full) {
   for (int i = 0; i < n; ++i) {
     for (int j = 0; j < n; ++j) B(i, j) = -0.5 * (B(i, j) - row_mean(i) - row_mean(j) + mean);
   }
-  // The two leading eigenpairs. Dense symmetric eigensolver (Householder tridiagonalization):
-  // exact, and ~0.3 s for 1,000 beacons.
-  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(B);
-  const Eigen::VectorXd& all = eig.eigenvalues();  // ascending
-  const Eigen::Vector2d values(all(n - 1), all(n - 2));
+  // The two leading (largest algebraic) eigenpairs.
+  Eigen::Vector2d values;
   Eigen::MatrixXd Q(n, 2);
-  Q.col(0) = eig.eigenvectors().col(n - 1);
-  Q.col(1) = eig.eigenvectors().col(n - 2);
+  bool solved = false;
+  const bool partial = solver == MdsEigensolver::kPartial ||
+                       (solver == MdsEigensolver::kAuto && n >= kPartialFromPoints);
+  if (partial) {
+    // Implicitly restarted Lanczos (Spectra): only products B v, ~0.05 s for 1,000 beacons
+    // against ~0.4 s for the dense solver's full decomposition.
+    Spectra::DenseSymMatProd<double> product(B);
+    const int ncv = std::min(n, 20);
+    Spectra::SymEigsSolver<Spectra::DenseSymMatProd<double>> eigs(product, 2, ncv);
+    eigs.init();
+    eigs.compute(Spectra::SortRule::LargestAlge, 1000, 1e-12);
+    if (eigs.info() == Spectra::CompInfo::Successful) {
+      values = eigs.eigenvalues().head<2>();  // descending
+      Q = eigs.eigenvectors().leftCols(2);
+      solved = true;
+    } else if (solver == MdsEigensolver::kPartial) {
+      throw std::runtime_error("ClassicalMds: the partial eigensolver did not converge");
+    }
+  }
+  if (!solved) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(B);
+    const Eigen::VectorXd& all = eig.eigenvalues();  // ascending
+    values = Eigen::Vector2d(all(n - 1), all(n - 2));
+    Q.col(0) = eig.eigenvectors().col(n - 1);
+    Q.col(1) = eig.eigenvectors().col(n - 2);
+  }
+  for (int c = 0; c < 2; ++c) {  // the sign: largest component positive
+    Eigen::Index at = 0;
+    Q.col(c).cwiseAbs().maxCoeff(&at);
+    if (Q(at, c) < 0) Q.col(c) = -Q.col(c);
+  }
   std::vector<Vec2> X(n);
   for (int i = 0; i < n; ++i) {
     X[i] = Vec2(Q(i, 0) * std::sqrt(std::max(values(0), 0.0)), Q(i, 1) * std::sqrt(std::max(values(1), 0.0)));

@@ -23,9 +23,18 @@ using RangeMatrix = std::vector<std::vector<std::optional<double>>>;
 /// left at the largest finite distance x 2).
 bool FillShortestPaths(const RangeMatrix& measured, std::vector<std::vector<double>>* full);
 
+/// How classical MDS finds the two leading eigenpairs of B.
+enum class MdsEigensolver {
+  kAuto,     ///< partial from 64 points on (dense below: it is faster there), dense if it fails
+  kDense,    ///< Eigen's dense symmetric solver (Householder tridiagonalization, O(n^3))
+  kPartial,  ///< Spectra's implicitly restarted Lanczos for the top two (O(n^2) per iteration)
+};
+
 /// Classical MDS: the 2-D configuration whose distances best match `full` (double centring,
-/// the two leading eigenpairs of B = -1/2 J D^2 J).
-std::vector<Vec2> ClassicalMds(const std::vector<std::vector<double>>& full);
+/// the two leading eigenpairs of B = -1/2 J D^2 J). Each eigenvector's sign is fixed (its
+/// largest component positive), so every solver gives the same layout.
+std::vector<Vec2> ClassicalMds(const std::vector<std::vector<double>>& full,
+                               MdsEigensolver solver = MdsEigensolver::kAuto);
 
 /// SMACOF on the measured links only (weights 1 on measured pairs, 0 elsewhere), from `start`.
 /// Returns the refined configuration; `stress` (optional) receives the final raw stress.
