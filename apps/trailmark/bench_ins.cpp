@@ -26,8 +26,14 @@ namespace trailmark::cli {
 
 namespace fs = std::filesystem;
 
-int BenchIns(const fs::path& mission_dir, int runs, const fs::path& json_out) {
+int BenchIns(const fs::path& mission_dir, int runs, const OptionValues& options,
+             const fs::path& json_out) {
   if (runs < 1) throw std::invalid_argument("bench ins: --runs must be >= 1");
+  ins::InsEstimatorOptions parsed;
+  std::string why;
+  if (!ins::InsEstimatorOptionTable().Apply(options, &parsed, &why) || !parsed.IsValid(&why)) {
+    throw std::invalid_argument("bench ins: " + why);
+  }
   const MissionDirectory mission(mission_dir);
   mission.Require("imu.csv", "bench ins");
   std::vector<ImuSample> imu;
@@ -46,7 +52,7 @@ int BenchIns(const fs::path& mission_dir, int runs, const fs::path& json_out) {
   std::size_t steps = 0;
   for (int r = 0; r < runs; ++r) {
     const auto t0 = Clock::now();
-    ins::MultiAgentIns ins(mission.info(), ins::InsOptions{});
+    ins::MultiAgentIns ins(mission.info(), parsed.ins);
     std::size_t n = 0;
     ins.on_step = [&](const Step&) { ++n; };
     for (const auto& s : imu) ins.Add(s);
@@ -70,20 +76,27 @@ int BenchIns(const fs::path& mission_dir, int runs, const fs::path& json_out) {
     return best;
   };
   std::size_t rows_default = 0, rows_every = 0;
-  const double default_s = end_to_end({}, &rows_default);
-  const double every_s = end_to_end({{"output_hz", "0"}}, &rows_every);
+  const double default_s = end_to_end(options, &rows_default);
+  OptionValues every = options;
+  every["output"] = "rate";
+  every["output_hz"] = "0";
+  const double every_s = end_to_end(every, &rows_every);
   std::error_code ignored;
   fs::remove_all(out, ignored);
 
   const double n = static_cast<double>(imu.size());
   const double duration_s = imu.back().t - imu.front().t;
-  const ins::InsEstimatorOptions defaults;
+  const ins::InsEstimatorOptions& defaults = parsed;
   fmt::print("{}: {} IMU samples ({:.0f} s), {} steps; best of {} runs\n", mission_dir.string(),
              imu.size(), duration_s, steps, runs);
   fmt::print("  core (in memory: detector + filter + steps)  {:>10.0f} samples/s  {:>8.2f} ms\n",
              n / core_s, core_s * 1e3);
-  fmt::print("  end to end, default output ({:.0f} Hz + steps, {} rows)  {:>10.0f} samples/s  "
-             "{:>8.2f} ms\n", defaults.output_hz, rows_default, n / default_s, default_s * 1e3);
+  const std::string output =
+      defaults.output == ins::InsOutput::kSteps ? std::string("step ends")
+      : defaults.output_hz > 0                  ? fmt::format("{:g} Hz + step ends", defaults.output_hz)
+                                                : std::string("every sample");
+  fmt::print("  end to end, output {} ({} rows)  {:>10.0f} samples/s  {:>8.2f} ms\n", output,
+             rows_default, n / default_s, default_s * 1e3);
   fmt::print("  end to end, every sample ({} rows)  {:>10.0f} samples/s  {:>8.2f} ms\n",
              rows_every, n / every_s, every_s * 1e3);
   if (!json_out.empty()) {
@@ -92,10 +105,11 @@ int BenchIns(const fs::path& mission_dir, int runs, const fs::path& json_out) {
     j["samples"] = imu.size();
     j["steps"] = steps;
     j["runs"] = runs;
+    j["options"] = options;
     j["core_samples_per_s"] = n / core_s;
     j["end_to_end_samples_per_s"] = n / default_s;
     j["end_to_end_rows"] = rows_default;
-    j["end_to_end_output_hz"] = defaults.output_hz;
+    j["end_to_end_output"] = output;
     j["end_to_end_every_sample_samples_per_s"] = n / every_s;
     j["end_to_end_every_sample_rows"] = rows_every;
     std::ofstream(json_out) << j.dump(2) << "\n";

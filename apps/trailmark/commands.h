@@ -65,7 +65,9 @@ int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
                     double covariance_period_s, const std::filesystem::path& json_out);
 /// `trailmark bench ins --mission DIR`: the INS core on the samples in memory and the whole
 /// `run --pipeline ins`, samples/s, best of `runs`.
-int BenchIns(const std::filesystem::path& mission_dir, int runs, const std::filesystem::path& json_out);
+int BenchIns(const std::filesystem::path& mission_dir, int runs,
+             const std::map<std::string, std::string>& options,
+             const std::filesystem::path& json_out);
 /// `trailmark bench load`: the live server under load on loopback (server/load_test.h).
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out);
 /// `trailmark serve`: replay a mission's online estimates into the incident server.

@@ -161,6 +161,9 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingDirectory);
   bench->add_option("--runs", bench_runs, "ins: runs of each measurement (the best is reported)")
       ->check(CLI::PositiveNumber);
+  std::vector<std::string> bench_options;
+  bench->add_option("--option", bench_options,
+                    "ins: an option of the ins pipeline key=value for both measurements (repeatable)");
   server::LoadTestOptions load;
   bench->add_option("--firefighters", load.firefighters, "load: firefighters sending at once");
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
@@ -353,7 +356,7 @@ int main(int argc, char** argv) {
       }
       if (bench_what == "ins") {
         if (bench_mission.empty()) throw std::invalid_argument("bench ins needs --mission DIR");
-        return cli::BenchIns(bench_mission, bench_runs, bench_json);
+        return cli::BenchIns(bench_mission, bench_runs, ParseKeyValues(bench_options), bench_json);
       }
       if (bench_what == "load") {
         load.work_dir = load_dir;

@@ -230,7 +230,7 @@ void ZuptIns::PropagateCovariance(const Eigen::Matrix3d& R, const Vec3& f_n, dou
   //   Phi_pv = dt I,  Phi_vtheta = B = -dt [f_n]x,  Phi_va = C = -dt R,  Phi_thetag = C.
   // First N = P Phi^T: only N's column blocks p, v, theta change (p += dt v, v += theta B^T +
   // a C^T, theta += g C^T, in this order, in place: contiguous 15x3 blocks of the column-major
-  // P). Then P = Phi N: in every column only the rows p, v, theta change, the same way. The
+  // P). Then P = Phi N: in each column only the rows p, v, theta change, the same way. The
   // result is symmetric to rounding; Process makes it exactly symmetric once per sample.
   const Eigen::Matrix3d B = -dt * Skew(f_n), Bt = B.transpose();
   const Eigen::Matrix3d C = -dt * R, Ct = C.transpose();
@@ -241,9 +241,9 @@ void ZuptIns::PropagateCovariance(const Eigen::Matrix3d& R, const Vec3& f_n, dou
     AddProduct(P_.middleCols<3>(kVel), P_.middleCols<3>(kAccelBias), Ct);
     AddProduct(P_.middleCols<3>(kAtt), P_.middleCols<3>(kGyroBias), Ct);
   }
-  // Without bias states their rows and columns stay zero: 9 columns suffice.
-  const int columns = biases ? kErrorStateSize : kAccelBias;
-  for (int j = 0; j < columns; ++j) {
+  // Phi's bias rows are the identity's: P's bias rows are N's, and by symmetry its bias columns
+  // their transpose. Only the columns p, v, theta need the left product.
+  for (int j = 0; j < kAccelBias; ++j) {
     auto n = P_.col(j);
     n.segment<3>(kPos) += dt * n.segment<3>(kVel);
     if (biases) {
@@ -253,6 +253,7 @@ void ZuptIns::PropagateCovariance(const Eigen::Matrix3d& R, const Vec3& f_n, dou
       n.segment<3>(kVel) += B * n.segment<3>(kAtt);
     }
   }
+  if (biases) P_.block<kAccelBias, 6>(0, kAccelBias) = P_.block<6, kAccelBias>(kAccelBias, 0).transpose();
 }
 
 template <int Offset>
@@ -272,16 +273,21 @@ void ZuptIns::Update3(const Vec3& innovation, double sigma) {
     return;
   }
   // P H^T is P's columns Offset..: K = P H^T S^-1, P -= K (P H^T)^T column by column (P's
-  // column j loses K times row j of P H^T), then made exactly symmetric.
+  // column j loses K times row j of P H^T), on and above the diagonal only, then mirrored.
   const Eigen::Matrix<double, kErrorStateSize, 3> PHt = P_.middleCols<3>(Offset);
   Eigen::Matrix<double, kErrorStateSize, 3> K = Eigen::Matrix<double, kErrorStateSize, 3>::Zero();
   AddProduct(K, PHt, S_inv);
   const ErrorVector dx = K.col(0) * innovation(0) + K.col(1) * innovation(1) + K.col(2) * innovation(2);
   const int columns = options_.estimate_biases ? kErrorStateSize : kAccelBias;
   for (int j = 0; j < columns; ++j) {
-    P_.col(j) -= K.col(0) * PHt(j, 0) + K.col(1) * PHt(j, 1) + K.col(2) * PHt(j, 2);
+    P_.col(j).head(j + 1) -= K.topRows(j + 1) * PHt.row(j).transpose();
   }
-  Inject(dx);  // (symmetric to rounding; Process makes P exactly symmetric)
+  MirrorUpper(columns);
+  Inject(dx);
+}
+
+void ZuptIns::MirrorUpper(int n) {
+  for (int j = 1; j < n; ++j) P_.row(j).head(j) = P_.col(j).head(j).transpose();
 }
 
 void ZuptIns::Inject(const ErrorVector& dx) {
@@ -355,12 +361,8 @@ void ZuptIns::Process(const Sample& s, bool stance) {
     UpdateZupt();
     if (options_.zaru) UpdateZaru(s.gyro_b);
   }
-  if (!options_.reference_arithmetic) {  // (the dense reference symmetrizes in each update)
-    const int n = options_.estimate_biases ? kErrorStateSize : kAccelBias;
-    for (int j = 1; j < n; ++j) {
-      for (int i = 0; i < j; ++i) P_(i, j) = P_(j, i) = 0.5 * (P_(i, j) + P_(j, i));
-    }
-  }
+  // The propagation leaves its p, v, theta block symmetric to rounding (an update mirrors all).
+  if (!options_.reference_arithmetic && !stance) MirrorUpper(kAccelBias);
   InsState state;
   state.t = s.t;
   state.position_n = p_;

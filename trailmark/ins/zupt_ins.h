@@ -136,6 +136,8 @@ class ZuptIns {
   template <int Offset>
   void Update3(const Vec3& innovation, double sigma);
   void Inject(const ErrorVector& dx);
+  /// P's upper triangle of its first n rows and columns copied into the lower.
+  void MirrorUpper(int n);
   void StanceBookkeeping(bool stance);
 
   InsOptions options_;
