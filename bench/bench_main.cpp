@@ -255,31 +255,8 @@ BENCHMARK(BM_ScaatEkfLabTrace)->Unit(benchmark::kMillisecond);
 
 // Shortest paths + MDS + SMACOF for n beacons on a 5 m-range trail-like layout (issue 4: 1,000
 // beacons < 1 s).
-void BM_BeaconMds(benchmark::State& state) {
-  const int n = static_cast<int>(state.range(0));
-  Random rng(7);
-  const double side = std::sqrt(n * 13.5);  // the lab's density: ~21 beacons in 15 x 9 m
-  std::vector<Vec2> p;
-  for (int i = 0; i < n; ++i) p.emplace_back(rng.Uniform(0, side), rng.Uniform(0, side));
-  beacons::RangeMatrix m(n, std::vector<std::optional<double>>(n));
-  for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n; ++j) {
-      const double d = (p[i] - p[j]).norm();
-      if (d < 8.0) m[i][j] = m[j][i] = d + rng.Normal(0, 0.1);
-    }
-  }
-  for (auto _ : state) {
-    std::vector<std::vector<double>> full;
-    beacons::FillShortestPaths(m, &full);
-    benchmark::DoNotOptimize(beacons::RefineSmacof(m, beacons::ClassicalMds(full)));
-  }
-}
-BENCHMARK(BM_BeaconMds)->Arg(21)->Arg(200)->Arg(1000)->Unit(benchmark::kMillisecond);
-
-// Classical MDS alone (double centring + the two leading eigenpairs) on 1,000 beacons'
-// shortest-path distances: arg 0 the dense eigensolver, 1 the partial one (issue 31: < 0.2 s).
-void BM_ClassicalMds(benchmark::State& state) {
-  const int n = 1000;
+/// n beacons at the lab's density (~21 in 15 x 9 m), ranges measured within 8 m (0.1 m noise).
+beacons::RangeMatrix BeaconLinks(int n) {
   Random rng(7);
   const double side = std::sqrt(n * 13.5);
   std::vector<Vec2> p;
@@ -291,6 +268,23 @@ void BM_ClassicalMds(benchmark::State& state) {
       if (d < 8.0) m[i][j] = m[j][i] = d + rng.Normal(0, 0.1);
     }
   }
+  return m;
+}
+
+void BM_BeaconMds(benchmark::State& state) {
+  const beacons::RangeMatrix m = BeaconLinks(static_cast<int>(state.range(0)));
+  for (auto _ : state) {
+    std::vector<std::vector<double>> full;
+    beacons::FillShortestPaths(m, &full);
+    benchmark::DoNotOptimize(beacons::RefineSmacof(m, beacons::ClassicalMds(full)));
+  }
+}
+BENCHMARK(BM_BeaconMds)->Arg(21)->Arg(200)->Arg(1000)->Unit(benchmark::kMillisecond);
+
+// Classical MDS alone (double centring + the two leading eigenpairs) on 1,000 beacons'
+// shortest-path distances: arg 0 the dense eigensolver, 1 the partial one (issue 31: < 0.2 s).
+void BM_ClassicalMds(benchmark::State& state) {
+  const beacons::RangeMatrix m = BeaconLinks(1000);
   std::vector<std::vector<double>> full;
   beacons::FillShortestPaths(m, &full);
   const auto solver = state.range(0) == 0 ? beacons::MdsEigensolver::kDense

@@ -39,6 +39,16 @@ double DefaultGamma(DetectorKind kind) {
   return 8.5e7;
 }
 
+namespace {
+struct DetectorNormalizers {
+  double inv_a, inv_g, g;  ///< 1 / sigma_a^2, 1 / sigma_g^2, gravity
+};
+DetectorNormalizers Normalizers(const DetectorOptions& o) {
+  return {1.0 / (o.sigma_a_mps2 * o.sigma_a_mps2), 1.0 / (o.sigma_g_radps * o.sigma_g_radps),
+          o.gravity_mps2};
+}
+}  // namespace
+
 ZuptDetector::ZuptDetector(DetectorOptions options)
     : options_(options), gamma_(options.gamma.value_or(DefaultGamma(options.kind))) {
   if (options_.window < 1) throw std::invalid_argument("ZuptDetector: window must be >= 1");
@@ -51,9 +61,7 @@ double ZuptDetector::Statistic(std::size_t begin, std::size_t end) const {
   Vec3 a_mean = Vec3::Zero();
   for (std::size_t k = begin; k < end; ++k) a_mean += At(k).first;
   a_mean /= n;
-  const double inv_a = 1.0 / (options_.sigma_a_mps2 * options_.sigma_a_mps2);
-  const double inv_g = 1.0 / (options_.sigma_g_radps * options_.sigma_g_radps);
-  const double g = options_.gravity_mps2;
+  const auto [inv_a, inv_g, g] = Normalizers(options_);
   double t = 0;
   switch (options_.kind) {
     case DetectorKind::kShoe:
@@ -87,9 +95,7 @@ double ZuptDetector::RunningStatistic() const {
 
 double ZuptDetector::FromSums(double n, const Vec3& sum_a, double sum_aa, double sum_norm_a,
                               double sum_ww) const {
-  const double inv_a = 1.0 / (options_.sigma_a_mps2 * options_.sigma_a_mps2);
-  const double inv_g = 1.0 / (options_.sigma_g_radps * options_.sigma_g_radps);
-  const double g = options_.gravity_mps2;
+  const auto [inv_a, inv_g, g] = Normalizers(options_);
   double t = 0;
   switch (options_.kind) {
     case DetectorKind::kShoe:
