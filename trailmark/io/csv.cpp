@@ -310,11 +310,17 @@ CsvWriter& CsvWriter::Add(double value) {
                                        rows_ + 1));
   }
   Separator();
-  // The shortest text that reads back to the same double (std::to_chars without a format).
-  char text[32];
-  const auto [end, error] = std::to_chars(text, text + sizeof text, value);
+  // The shortest text that reads back to the same double (std::to_chars), in fixed notation
+  // from 1e-5 to 1e16 (times, positions and sigmas read as written: 100000, 0.0001) and in
+  // scientific beyond.
+  char text[400];  // (fixed notation of 1e16 needs 17 digits, of 1e-5 a few more: far below)
+  const double magnitude = std::abs(value);
+  const bool fixed = magnitude == 0 || (magnitude >= 1e-5 && magnitude < 1e16);
+  const auto [end, error] =
+      fixed ? std::to_chars(text, text + sizeof text, value, std::chars_format::fixed)
+            : std::to_chars(text, text + sizeof text, value);
+  (void)error;  // (the buffer holds any double in either notation)
   row_.append(text, end);
-  (void)error;  // (32 characters hold any double)
   return *this;
 }
 
