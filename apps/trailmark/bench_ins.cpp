@@ -36,12 +36,8 @@ int BenchIns(const fs::path& mission_dir, int runs, const OptionValues& options,
   }
   const MissionDirectory mission(mission_dir);
   mission.Require("imu.csv", "bench ins");
-  std::vector<ImuSample> imu;
-  {
-    auto reader = mission.OpenStream<ImuSample>();
-    ImuSample s;
-    while (reader.Next(s)) imu.push_back(s);
-  }
+  const std::vector<ImuSample> imu =
+      ReadAll<ImuSample>(mission.Path("imu.csv").string(), &mission.registry());
   if (imu.empty()) throw InputError(mission.Path("imu.csv").string(), 0, "no IMU samples");
   using Clock = std::chrono::steady_clock;
   auto seconds = [](Clock::time_point a) {

@@ -160,7 +160,7 @@ int main(int argc, char** argv) {
   bench->add_option("--mission", bench_mission, "ins: the mission directory whose imu.csv is run")
       ->check(CLI::ExistingDirectory);
   bench->add_option("--runs", bench_runs, "ins: runs of each measurement (the best is reported)")
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1, 1000000));
   std::vector<std::string> bench_options;
   bench->add_option("--option", bench_options,
                     "ins: an option of the ins pipeline key=value for both measurements (repeatable)");

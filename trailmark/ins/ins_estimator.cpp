@@ -192,10 +192,13 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
   if (!options_.IsValid(&why)) throw std::invalid_argument("ins: " + why);
   ins_.on_state = [this](const std::string& id, const InsState& st) {
     if (sink_ == nullptr || options_.output != InsOutput::kRate) return;
-    Output& out = output_[id];
+    const auto written = written_.find(id);
     // At least 1/output_hz after the last one written, to a microsecond: the choice does not
     // depend on the clock's origin (a sample exactly on the period is taken in every frame).
-    if (options_.output_hz > 0 && st.t < out.written + 1.0 / options_.output_hz - 1e-6) return;
+    if (options_.output_hz > 0 && written != written_.end() &&
+        st.t < written->second + 1.0 / options_.output_hz - 1e-6) {
+      return;
+    }
     Write(id, st);
   };
   // A step is emitted when its stance has ended: the agent's latest state is the stance end.
@@ -206,9 +209,11 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
 }
 
 void InsEstimator::Write(const std::string& agent, const InsState& st) {
-  Output& out = output_[agent];
-  if (st.t <= out.written) return;  // (a step end the rate wrote already)
-  out.written = st.t;
+  auto [it, fresh] = written_.emplace(agent, st.t);
+  if (!fresh) {
+    if (st.t <= it->second) return;  // (a step end the rate wrote already)
+    it->second = st.t;
+  }
   const auto& c = st.position_cov;
   sink_->Add({st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)});
 }

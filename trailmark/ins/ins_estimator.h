@@ -94,10 +94,7 @@ class InsEstimator : public OnlineEstimator {
   MultiAgentIns ins_;
   void Write(const std::string& agent, const InsState& state);
   EstimateSink* sink_ = nullptr;
-  struct Output {
-    TimeS written = -1e300;  ///< the time of the last state written
-  };
-  std::map<std::string, Output> output_;
+  std::map<std::string, TimeS> written_;  ///< per agent: the time of the last state written
   std::size_t ignored_ = 0;
 };
 

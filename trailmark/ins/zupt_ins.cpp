@@ -55,12 +55,8 @@ ZuptIns::ZuptIns(InsOptions options) : options_(options), detector_(options.dete
 }
 
 void ZuptIns::PushDelayed(const Sample& s) {
-  if (delay_size_ == delay_.size()) {  // (only when the detector's window grew at alignment)
-    std::vector<Sample> grown(std::max<std::size_t>(2 * delay_.size(), 2));
-    for (std::size_t k = 0; k < delay_size_; ++k) grown[k] = delay_[(delay_head_ + k) % delay_.size()];
-    delay_ = std::move(grown);
-    delay_head_ = 0;
-  }
+  // The detector decides once it holds Delay() + 1 samples: the ring never holds more.
+  if (delay_size_ == delay_.size()) throw std::logic_error("ZuptIns: detector delay exceeded");
   delay_[(delay_head_ + delay_size_) % delay_.size()] = s;
   ++delay_size_;
 }
