@@ -10,7 +10,7 @@ if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
 PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcli11-dev nlohmann-json3-dev libfmt-dev libspdlog-dev
-  libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libboost-dev libspectra-dev libsqlite3-dev
+  libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libboost-dev libspectra-dev libceres-dev libsqlite3-dev
   libcpp-httplib-dev curl chromium
   libpaho-mqtt-dev libpaho-mqttpp-dev mosquitto mosquitto-clients openssl libssl-dev
   clang libclang-rt-14-dev

@@ -6,9 +6,12 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <map>
+#include <stdexcept>
 
 #include "trailmark/beacons/mds.h"
 #include "trailmark/geometry/rigid_fit.h"
+#include "trailmark/integrity/consistency.h"
 
 namespace trailmark::beacons {
 
@@ -17,15 +20,30 @@ bool BeaconMapOptions::IsValid(std::string* why) const {
     if (why) *why = "link_sigma_m and max_link_m must be > 0";
     return false;
   }
-  return true;
+  return least_squares.IsValid(why);
 }
 
 std::string BeaconMapSummary::BriefReport() const {
-  return fmt::format(
-      "beacon map: {} solves, {} component(s); {} from MDS, {} surveyed, {} from drop "
+  std::string text = fmt::format(
+      "beacon map: {} solves, {} component(s); {} from the map solve, {} surveyed, {} from drop "
       "estimates, {} unknown; anchoring rms {:.2f} m{}",
       solves, components, from_mds, from_survey, from_hint, unknown, anchor_rms_m,
       reflected ? " (layout flipped)" : "");
+  if (least_squares_parts > 0)
+    text += fmt::format("; least squares chi2/dof {:.2f}", chi2_per_dof);
+  if (track_inflated_solves > 0)
+    text += fmt::format("; dead-reckoning drift beyond its stated sigma in {} solve(s) (last: "
+                        "x{:.1f} in variance)",
+                        track_inflated_solves, track_inflation);
+  if (inflated_solves > 0)
+    text += fmt::format("; drop priors inflated in {} solve(s) (last x{:.1f} in variance: the "
+                        "dead reckoning drifted beyond its stated sigma)",
+                        inflated_solves, prior_inflation);
+  if (rejected_solves > 0)
+    text += fmt::format("; {} solve(s) rejected as inconsistent with the link noise, the "
+                        "beacons kept their drop priors (latest: {})",
+                        rejected_solves, rejected_why);
+  return text;
 }
 
 BeaconMap::BeaconMap(Options options) : options_(options) {
@@ -39,6 +57,8 @@ int BeaconMap::Add(const std::string& id) {
   surveyed_.emplace_back();
   hint_.emplace_back();
   solved_.emplace_back();
+  previous_.emplace_back();
+  hint_track_.emplace_back();
   neighbours_.emplace_back();
   for (auto& row : samples_) row.emplace_back();
   samples_.emplace_back(ids_.size());
@@ -59,6 +79,27 @@ void BeaconMap::SetSurveyed(int i, const Vec2& p, double sigma_m) {
 
 void BeaconMap::SetAnchorHint(int i, const Vec2& p, const Mat2& cov) {
   hint_[i] = BeaconPosition{p, 0.5 * (cov + cov.transpose())};
+  hint_track_[i] = TrackHint{};
+  dirty_ = true;
+}
+
+int BeaconMap::AddTrack(const Mat3& cov) {
+  tracks_.push_back(0.5 * (cov + cov.transpose()));
+  return static_cast<int>(tracks_.size()) - 1;
+}
+
+void BeaconMap::SetTrackHint(int i, int track, const Vec2& p, const Mat2& white_cov,
+                             const Eigen::Matrix<double, 2, 3>& along, int from,
+                             const Mat2& increment_cov) {
+  if (track < 0 || track >= static_cast<int>(tracks_.size()))
+    throw std::invalid_argument(fmt::format("beacon map: no track {}", track));
+  if (from >= static_cast<int>(ids_.size()) || from == i)
+    throw std::invalid_argument(fmt::format("beacon map: hint of {} from {}", i, from));
+  const Mat2 white = 0.5 * (white_cov + white_cov.transpose());
+  const Mat2 marginal = white + along * tracks_[track] * along.transpose();
+  hint_[i] = BeaconPosition{p, 0.5 * (marginal + marginal.transpose())};
+  hint_track_[i] = TrackHint{track, white, along, from,
+                             0.5 * (increment_cov + increment_cov.transpose())};
   dirty_ = true;
 }
 
@@ -89,10 +130,15 @@ void BeaconMap::Solve() {
   dirty_ = false;
   ++summary_.solves;
   const int n = static_cast<int>(ids_.size());
+  previous_ = solved_;
   std::fill(solved_.begin(), solved_.end(), std::nullopt);
   summary_.components = 0;
   summary_.anchor_rms_m = 0;
   summary_.reflected = false;
+  summary_.least_squares_parts = summary_.rejected_parts = 0;
+  summary_.chi2_per_dof = 0;
+  summary_.prior_inflation = 1;
+  summary_.track_inflation = 1;
   // Median range per measured pair (robust to a long NLOS sample).
   auto median = [](std::vector<double> v) {
     std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
@@ -108,53 +154,74 @@ void BeaconMap::Solve() {
         if (component[v] < 0) component[v] = start, members.push_back(v);
       }
     }
-    if (members.size() < 3) continue;
+    if (members.size() < 2) continue;
     const int m = static_cast<int>(members.size());
     RangeMatrix measured(m, std::vector<std::optional<double>>(m));
+    std::vector<std::size_t> counts(static_cast<std::size_t>(m) * m, 0);
     for (int a = 0; a < m; ++a) {
       for (int b = a + 1; b < m; ++b) {
         const int i = std::min(members[a], members[b]), j = std::max(members[a], members[b]);
-        if (!samples_[i][j].empty()) measured[a][b] = measured[b][a] = median(samples_[i][j]);
+        if (samples_[i][j].empty()) continue;
+        measured[a][b] = measured[b][a] = median(samples_[i][j]);
+        counts[a * m + b] = counts[b * m + a] = samples_[i][j].size();
       }
     }
-    std::vector<std::vector<double>> full;
-    FillShortestPaths(measured, &full);
-    std::vector<Vec2> layout = ClassicalMds(full);
-    if (options_.refine) layout = RefineSmacof(measured, layout);
-    // Anchors: surveyed beacons when two or more, else surveyed + drop estimates.
-    std::vector<Vec2> from, to;
-    int surveyed = 0;
-    for (int a = 0; a < m; ++a) surveyed += surveyed_[members[a]].has_value();
-    for (int a = 0; a < m; ++a) {
-      const auto& anchor = surveyed_[members[a]]
-                               ? surveyed_[members[a]]
-                               : (surveyed >= 3 ? std::nullopt : hint_[members[a]]);
-      if (anchor) from.push_back(layout[a]), to.push_back(anchor->position_n);
+    // The paper's layout, placed by Procrustes onto the anchors: surveyed beacons when two or
+    // more, else surveyed + drop estimates.
+    std::optional<std::vector<Vec2>> mds_n;
+    double mds_rms = 0;
+    bool mds_reflected = false;
+    if (m >= 3) {
+      std::vector<std::vector<double>> full;
+      FillShortestPaths(measured, &full);
+      std::vector<Vec2> layout = ClassicalMds(full);
+      if (options_.refine) layout = RefineSmacof(measured, layout);
+      std::vector<Vec2> from, to;
+      int surveyed = 0;
+      for (int a = 0; a < m; ++a) surveyed += surveyed_[members[a]].has_value();
+      for (int a = 0; a < m; ++a) {
+        const auto& anchor = surveyed_[members[a]]
+                                 ? surveyed_[members[a]]
+                                 : (surveyed >= 3 ? std::nullopt : hint_[members[a]]);
+        if (anchor) from.push_back(layout[a]), to.push_back(anchor->position_n);
+      }
+      if (from.size() >= 2) {
+        const RigidFit2 fit = FitRigid(from, to, from.size() >= 3);
+        double sq = 0;
+        for (std::size_t k = 0; k < from.size(); ++k)
+          sq += (fit.Apply(from[k]) - to[k]).squaredNorm();
+        mds_rms = std::sqrt(sq / from.size());
+        mds_reflected = fit.rotation.determinant() < 0;
+        for (Vec2& p : layout) p = fit.Apply(p);
+        mds_n = std::move(layout);
+      }
     }
-    if (from.size() < 2) continue;
-    const RigidFit2 fit = FitRigid(from, to, from.size() >= 3);
-    double sq = 0;
-    for (std::size_t k = 0; k < from.size(); ++k) sq += (fit.Apply(from[k]) - to[k]).squaredNorm();
-    const double rms = std::sqrt(sq / from.size());
+    if (options_.solver == MapSolver::kLeastSquares &&
+        SolveLeastSquares(members, measured, counts, mds_n)) {
+      ++summary_.components;
+      continue;
+    }
+    if (!mds_n) continue;
     ++summary_.components;
-    summary_.anchor_rms_m = std::max(summary_.anchor_rms_m, rms);
-    summary_.reflected = summary_.reflected || fit.rotation.determinant() < 0;
+    summary_.anchor_rms_m = std::max(summary_.anchor_rms_m, mds_rms);
+    summary_.reflected = summary_.reflected || mds_reflected;
     // Covariance: the information of each beacon's measured links (others held fixed), plus the
     // anchoring residual (the layout's placement in the navigation frame).
     for (int a = 0; a < m; ++a) {
-      const Vec2 p = fit.Apply(layout[a]);
+      const Vec2& p = (*mds_n)[a];
       Mat2 info = Mat2::Identity() * 1e-2;
       for (int b = 0; b < m; ++b) {
         if (!measured[a][b]) continue;
-        Vec2 u = p - fit.Apply(layout[b]);
+        Vec2 u = p - (*mds_n)[b];
         if (u.norm() < 1e-9) continue;
         u.normalize();
         info += u * u.transpose() / (options_.link_sigma_m * options_.link_sigma_m);
       }
-      const double anchor_var = std::max(rms * rms, 0.01);
+      const double anchor_var = std::max(mds_rms * mds_rms, 0.01);
       solved_[members[a]] = BeaconPosition{p, Mat2(info.inverse() + Mat2::Identity() * anchor_var)};
     }
   }
+  summary_.rejected_solves += summary_.rejected_parts > 0;
   summary_.from_mds = summary_.from_survey = summary_.from_hint = summary_.unknown = 0;
   for (int i = 0; i < n; ++i) {
     if (surveyed_[i] && !options_.mds_for_surveyed)
@@ -168,6 +235,138 @@ void BeaconMap::Solve() {
     else
       ++summary_.unknown;
   }
+}
+
+bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMatrix& measured,
+                                  const std::vector<std::size_t>& counts,
+                                  const std::optional<std::vector<Vec2>>& mds_start) {
+  const int m = static_cast<int>(members.size());
+  MapProblem problem;
+  problem.beacons = m;
+  Vec2 prior_mean = Vec2::Zero();
+  std::vector<const BeaconPosition*> prior(m, nullptr);
+  std::map<int, int> track_index;  // the map's track -> the problem's
+  std::vector<int> local(ids_.size(), -1);
+  for (int a = 0; a < m; ++a) local[members[a]] = a;
+  for (int a = 0; a < m; ++a) {
+    const int i = members[a];
+    prior[a] = surveyed_[i] ? &*surveyed_[i] : (hint_[i] ? &*hint_[i] : nullptr);
+    if (!prior[a]) continue;
+    prior_mean += prior[a]->position_n;
+    const TrackHint& h = hint_track_[i];
+    if (surveyed_[i] || h.track < 0) {
+      problem.priors.push_back({a, prior[a]->position_n, prior[a]->cov});
+      continue;
+    }
+    const auto [it, added] = track_index.emplace(h.track, static_cast<int>(problem.tracks.size()));
+    if (added) problem.tracks.push_back({tracks_[h.track]});
+    MapPrior q{a, prior[a]->position_n, h.white_cov, it->second, h.along};
+    // The displacement from the track's previous drop when that one is in this part too.
+    if (options_.relative_drop_priors && h.from >= 0 && local[h.from] >= 0 && !surveyed_[h.from] && hint_[h.from] &&
+        hint_track_[h.from].track == h.track) {
+      q.cov = h.increment_cov;
+      q.from = local[h.from];
+      q.from_position_n = hint_[h.from]->position_n;
+      q.from_along = hint_track_[h.from].along;
+    }
+    problem.priors.push_back(q);
+  }
+  if (problem.priors.size() < 2) return false;
+  prior_mean /= static_cast<double>(problem.priors.size());
+  for (int a = 0; a < m; ++a) {
+    for (int b = a + 1; b < m; ++b) {
+      if (!measured[a][b]) continue;
+      // The median of n samples: 1.2533 sigma / sqrt(n) for large n (the mean's for n <= 2).
+      const double k = static_cast<double>(counts[a * m + b]);
+      const double sigma = options_.link_sigma_m * (k >= 3 ? 1.2533 : 1.0) / std::sqrt(k);
+      problem.links.push_back({a, b, *measured[a][b], sigma});
+    }
+  }
+  // Start 0: the last solution, else the priors, else the MDS layout (the priors' mean when
+  // there is none); start 1: the MDS layout. The lower cost wins (the fold the priors favour).
+  std::vector<std::vector<Vec2>> starts(1, std::vector<Vec2>(m));
+  for (int a = 0; a < m; ++a) {
+    const int i = members[a];
+    starts[0][a] = previous_[i]  ? previous_[i]->position_n
+                   : prior[a]    ? prior[a]->position_n
+                   : mds_start   ? (*mds_start)[a]
+                                 : Vec2(prior_mean + Vec2(0.1 * a, 0.05 * a));
+  }
+  if (mds_start) starts.push_back(*mds_start);
+  MapSolution solution = SolveMapLeastSquares(problem, starts, options_.least_squares);
+  // A track whose shared errors came out beyond their stated sigma (eq. of a chi-square test
+  // with 3 dof): its dead reckoning drifts more than assumed a priori (another PDR, a
+  // magnetically disturbed heading). Its covariance is scaled to what was found, the map solved
+  // again from there (so the map follows the links, not the tighter prior).
+  if (solution.ok) {
+    const double limit = integrity::ChiSquareQuantile(3, 1 - options_.least_squares.false_alarm);
+    bool again = false;
+    for (std::size_t k = 0; k < problem.tracks.size(); ++k) {
+      const Vec3& e = solution.track_errors[k];
+      const double q = e.dot(problem.tracks[k].cov.ldlt().solve(e));
+      if (q > limit) {
+        const double f = std::min(q / 3.0, 100.0);
+        problem.tracks[k].cov *= f;
+        summary_.track_inflation = std::max(summary_.track_inflation, f);
+        again = true;
+      }
+    }
+    if (again) {
+      starts = {solution.position_n};
+      MapSolution next = SolveMapLeastSquares(problem, starts, options_.least_squares);
+      if (next.ok) {
+        next.start = solution.start;
+        solution = std::move(next);
+        ++summary_.track_inflated_solves;
+      }
+    }
+  }
+  // Inconsistent, but the links agree among themselves: the drop priors claim more than the
+  // dead reckoning has (its drift beyond its a-priori sigma). Their covariances are scaled by
+  // their own chi-square per residual and the map solved again; still inconsistent: rejected.
+  if (solution.ok && !solution.consistent) {
+    const int link_dof = static_cast<int>(problem.links.size()) - (2 * m - 3);
+    const bool links_ok =
+        link_dof <= 0 ||
+        solution.chi2_links <= integrity::ChiSquareQuantile(
+                                   link_dof, 1 - options_.least_squares.false_alarm);
+    const double f =
+        solution.chi2_priors / std::max(1.0, solution.prior_residuals - 3.0);
+    if (links_ok && f > 1) {
+      for (MapPrior& q : problem.priors) q.cov *= f;
+      for (MapTrack& t : problem.tracks) t.cov *= f;
+      starts = {solution.position_n};
+      MapSolution again = SolveMapLeastSquares(problem, starts, options_.least_squares);
+      if (again.ok) {
+        again.start = solution.start;
+        solution = std::move(again);
+        summary_.prior_inflation = std::max(summary_.prior_inflation, f);
+        ++summary_.inflated_solves;
+      }
+    }
+  }
+  if (!solution.ok) {
+    summary_.rejected_why = solution.why;
+    return false;
+  }
+  ++summary_.least_squares_parts;
+  summary_.fold_starts_won += solution.start == 1;
+  double sq = 0;
+  for (const MapPrior& q : problem.priors) sq += (solution.position_n[q.i] - q.position_n).squaredNorm();
+  summary_.anchor_rms_m =
+      std::max(summary_.anchor_rms_m, std::sqrt(sq / static_cast<double>(problem.priors.size())));
+  if (solution.dof > 0)
+    summary_.chi2_per_dof = std::max(summary_.chi2_per_dof, solution.chi2 / solution.dof);
+  if (!solution.consistent && options_.reject_inconsistent) {
+    ++summary_.rejected_parts;
+    summary_.rejected_why = fmt::format(
+        "{} beacon(s) from {}: chi-square {:.1f} > {:.1f} for {} degrees of freedom",
+        m, ids_[members[0]], solution.chi2, solution.chi2_threshold, solution.dof);
+    return true;  // the part keeps its priors (Position() falls back to them)
+  }
+  for (int a = 0; a < m; ++a)
+    solved_[members[a]] = BeaconPosition{solution.position_n[a], solution.cov[a]};
+  return true;
 }
 
 std::vector<int> WayOut(const std::vector<std::vector<int>>& neighbours,

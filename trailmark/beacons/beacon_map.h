@@ -1,27 +1,47 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-/// The beacon trail as a tracker needs it, built online: beacon-to-beacon ultrasound ranges
-/// (median per pair), positions from MDS with shortest-path completion and SMACOF refinement
-/// (beacons/mds.h), anchored by Procrustes onto what is known in the navigation frame —
-/// surveyed beacons, else the responder's own estimate where each beacon was dropped
-/// ("anchor hints"; sec. 5: "the base position and entry heading" in the paper's words).
-/// Per-beacon covariances from the information of its measured links plus the anchoring
-/// residual. Also the way back out (sec. 4): move towards the smallest id you can hear. No I/O.
+/// The beacon trail as a tracker needs it, built online from beacon-to-beacon ultrasound ranges
+/// (median per pair) and what is known in the navigation frame — surveyed beacons, and where the
+/// responder's dead reckoning dropped each beacon ("anchor hints"; sec. 5: "the base position
+/// and entry heading" in the paper's words). Two solvers:
+///  - least squares (default; issue 22, map_least_squares.h): links, surveys and drop positions
+///    in one robust problem, from the priors and from the MDS layout, the lower cost kept;
+///    marginal covariances; a solution whose residuals disagree with their noise is rejected
+///    (the beacons fall back to their drop priors, and the summary says so);
+///  - MDS (the paper's): shortest-path completion, classical MDS, SMACOF refinement
+///    (beacons/mds.h), anchored afterwards by Procrustes; per-beacon covariances from the
+///    information of its measured links plus the anchoring residual. Also the initializer of
+///    the least squares, and the answer where fewer than two beacons of a part have priors.
+/// Also the way back out (sec. 4): move towards the smallest id you can hear. No I/O.
 
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "trailmark/beacons/map_least_squares.h"
 #include "trailmark/beacons/scaat_ekf.h"
+#include "trailmark/beacons/mds.h"
 #include "trailmark/core/types.h"
 
 namespace trailmark::beacons {
 
+enum class MapSolver { kLeastSquares, kMds };
+
 struct BeaconMapOptions {
+  MapSolver solver = MapSolver::kLeastSquares;  ///< least squares (ours) or MDS (the paper's)
   bool refine = true;             ///< SMACOF after MDS (ours)
   bool mds_for_surveyed = false;  ///< surveyed beacons too from MDS (Fig. 8); survey only anchors
   double link_sigma_m = 0.10;     ///< static ultrasound range (Hazas et al. 2005: ~10 cm)
   double max_link_m = 8.0;        ///< beacon ranges longer than this are outliers
+  MapLeastSquaresOptions least_squares;
+  /// Least squares: a solution that fails its chi-square test is not used (the beacons keep
+  /// their drop priors); false: used anyway, only reported.
+  bool reject_inconsistent = true;
+  /// Least squares: a drop prior on the displacement from the same track's previous drop (the
+  /// dead reckoning's white errors independent between drops); false: on each drop's position.
+  /// Default false: measured on the lab trail, whose PDR turns are less accurate than the dead
+  /// reckoning's model says, the displacements rotate the map (docs/beacons.md).
+  bool relative_drop_priors = false;
   bool IsValid(std::string* why) const;
 };
 
@@ -29,8 +49,19 @@ struct BeaconMapSummary {
   std::size_t solves = 0;
   std::size_t components = 0;  ///< at the last solve (with >= 3 beacons)
   std::size_t from_mds = 0, from_survey = 0, from_hint = 0, unknown = 0;
-  double anchor_rms_m = 0;  ///< Procrustes residual at the last solve
+  double anchor_rms_m = 0;  ///< rms of the anchors' residuals at the last solve
   bool reflected = false;   ///< the MDS layout needed a flip
+  // Least squares, at the last solve (worst part):
+  std::size_t least_squares_parts = 0;  ///< parts solved by least squares
+  std::size_t rejected_parts = 0;       ///< of them, rejected as inconsistent
+  std::size_t rejected_solves = 0;      ///< solves (over the mission) with a part rejected
+  std::size_t fold_starts_won = 0;      ///< solves in which the MDS start beat the priors' start
+  double chi2_per_dof = 0;              ///< worst part
+  std::size_t inflated_solves = 0;      ///< solves whose drop priors were found too tight
+  std::size_t track_inflated_solves = 0;  ///< solves with a track's shared errors too tight
+  double track_inflation = 1;             ///< at the last solve: that variance scale (worst)
+  double prior_inflation = 1;           ///< at the last solve: their variance scale (worst)
+  std::string rejected_why;             ///< of the latest rejection
   std::string BriefReport() const;
 };
 
@@ -48,6 +79,16 @@ class BeaconMap {
   void SetSurveyed(int i, const Vec2& position_n, double sigma_m);
   /// Where the beacon is believed to be from outside the trail (e.g. the dropper's estimate).
   void SetAnchorHint(int i, const Vec2& position_n, const Mat2& cov);
+  /// A dead reckoning whose errors [heading offset, heading rate, scale] (covariance `cov`) are
+  /// shared by the hints it gives; returns its index.
+  int AddTrack(const Mat3& cov);
+  /// A hint from track `track`: position_n + along e + white noise of `white_cov` (along: see
+  /// MapPrior). Its marginal covariance is white_cov + along cov_e along^T.
+  /// `from` >= 0: the track's previous hint (beacon index), `increment_cov` the covariance of
+  /// the white errors between the two (the least squares then uses the displacement).
+  void SetTrackHint(int i, int track, const Vec2& position_n, const Mat2& white_cov,
+                    const Eigen::Matrix<double, 2, 3>& along, int from = -1,
+                    const Mat2& increment_cov = Mat2::Identity());
   bool HasAnchor(int i) const { return surveyed_[i].has_value() || hint_[i].has_value(); }
   /// A beacon-to-beacon range; returns false (and ignores it) when implausible.
   bool AddRange(int i, int j, double range_m);
@@ -64,9 +105,22 @@ class BeaconMap {
  private:
   Options options_;
   std::vector<std::string> ids_;
-  std::vector<std::optional<BeaconPosition>> surveyed_, hint_, solved_;
+  std::vector<std::optional<BeaconPosition>> surveyed_, hint_, solved_, previous_;
+  struct TrackHint {
+    int track = -1;
+    Mat2 white_cov = Mat2::Identity();
+    Eigen::Matrix<double, 2, 3> along = Eigen::Matrix<double, 2, 3>::Zero();
+    int from = -1;
+    Mat2 increment_cov = Mat2::Identity();
+  };
+  std::vector<TrackHint> hint_track_;  ///< track -1: the hint's cov is white
+  std::vector<Mat3> tracks_;
   std::vector<std::vector<int>> neighbours_;
   std::vector<std::vector<std::vector<double>>> samples_;  ///< [i][j], i < j
+  /// Solves one connected part by least squares; false when its priors do not fix it.
+  bool SolveLeastSquares(const std::vector<int>& members, const RangeMatrix& measured,
+                         const std::vector<std::size_t>& counts,
+                         const std::optional<std::vector<Vec2>>& mds_start);
   bool dirty_ = false;
   BeaconMapSummary summary_;
 };

@@ -61,14 +61,18 @@ bool ScaatEkfOptions::IsValid(std::string* why) const {
     return fail("measurement sigmas must be > 0");
   if (!(gate_sigma > 0) || !(gate_chi2_2dof > 0)) return fail("gates must be > 0");
   if (!(scale_min > 0) || !(scale_max > scale_min)) return fail("need 0 < scale_min < scale_max");
+  if (max_considered_beacons < 1) return fail("max_considered_beacons must be >= 1");
   return true;
 }
 
 std::string ScaatEkfSummary::BriefReport() const {
   return fmt::format(
       "SCAAT EKF: {} steps, {} range / {} bearing / {} position updates, {} gated, {} skipped, "
-      "{} refused by the integrity check",
-      steps, range_updates, bearing_updates, position_updates, gated, skipped, refused);
+      "{} refused by the integrity check{}",
+      steps, range_updates, bearing_updates, position_updates, gated, skipped, refused,
+      beacons_marginalized > 0
+          ? fmt::format("; {} considered beacon(s) marginalized out", beacons_marginalized)
+          : "");
 }
 
 ScaatEkf::ScaatEkf(const Vec2& position_n, const Mat2& position_cov, double psi_rad,
@@ -110,7 +114,7 @@ ScaatEkf StartFromInit(const InitResult& init, const Vec2& pdr_n, const ScaatEkf
   return ScaatEkf(x, P, options);
 }
 
-void ScaatEkf::PredictStep(const Vec2& d, const Mat2& delta_cov) {
+void ScaatEkf::PredictStep(const Vec2& d, const Mat2& delta_cov, double fraction) {
   const double psi = x_(kPsi), s = x_(kScale);
   const Mat2 R = Rotation(psi);
   // p <- p + s R(psi) d  (sec. 6: step heading corrected by psi, step length by scale)
@@ -119,7 +123,8 @@ void ScaatEkf::PredictStep(const Vec2& d, const Mat2& delta_cov) {
   F.block<2, 1>(0, kScale) = R * d;
   x_.head<2>() += s * R * d;
   const Mat2 G = s * R;
-  const double floor2 = options_.step_sigma_floor_m * options_.step_sigma_floor_m;
+  const double floor2 =
+      options_.step_sigma_floor_m * options_.step_sigma_floor_m * std::clamp(fraction, 0.0, 1.0);
   Cov Q = Cov::Zero();
   Q.topLeftCorner<2, 2>() = G * (delta_cov + Mat2::Identity() * floor2) * G.transpose();
   const double length = d.norm();
@@ -127,7 +132,9 @@ void ScaatEkf::PredictStep(const Vec2& d, const Mat2& delta_cov) {
       options_.heading_walk_rad_per_sqrt_m * options_.heading_walk_rad_per_sqrt_m * length;
   Q(kScale, kScale) = options_.scale_walk_per_sqrt_m * options_.scale_walk_per_sqrt_m * length;
   P_ = F * P_ * F.transpose() + Q;
-  ++summary_.steps;
+  if (!slots_.empty()) cross_ = F * cross_;  // the beacons do not move
+  step_fraction_ += fraction;  // a step split at measurements counts once
+  if (step_fraction_ >= 1.0 - 1e-9) ++summary_.steps, step_fraction_ = 0;
   Condition();
 }
 
@@ -160,12 +167,132 @@ UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
   x_ += K * y;
   const Cov IKH = Cov::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();  // Joseph form
+  if (!slots_.empty()) cross_ = IKH * cross_;
+  Condition();
+  return UpdateResult::kAccepted;
+}
+
+int ScaatEkf::AppendBeacon(int key) {
+  if (static_cast<int>(slots_.size()) >= options_.max_considered_beacons) {
+    // Marginalize out the least recently used beacon (exact: drop its rows and columns); the
+    // last slot moves into its place.
+    const int j = static_cast<int>(std::min_element(last_used_.begin(), last_used_.end()) -
+                                   last_used_.begin());
+    const int last = static_cast<int>(slots_.size()) - 1;
+    considered_.erase(slots_[j]);
+    if (j != last) {
+      cross_.middleCols<2>(2 * j) = cross_.middleCols<2>(2 * last);
+      beacons_.middleCols<2>(2 * j) = beacons_.middleCols<2>(2 * last);
+      beacons_.middleRows<2>(2 * j) = beacons_.middleRows<2>(2 * last);
+      slots_[j] = slots_[last];
+      last_used_[j] = last_used_[last];
+      considered_[slots_[j]] = j;
+    }
+    slots_.pop_back();
+    last_used_.pop_back();
+    cross_.conservativeResize(4, 2 * last);
+    beacons_.conservativeResize(2 * last, 2 * last);
+    ++summary_.beacons_marginalized;
+  }
+  const int n = static_cast<int>(slots_.size());
+  cross_.conservativeResize(4, 2 * n + 2);
+  beacons_.conservativeResize(2 * n + 2, 2 * n + 2);
+  cross_.rightCols<2>().setZero();
+  beacons_.rightCols<2>().setZero();
+  beacons_.bottomRows<2>().setZero();
+  slots_.push_back(key);
+  last_used_.push_back(++uses_);
+  considered_[key] = n;
+  return n;
+}
+
+int ScaatEkf::Consider(int key, const Mat2& beacon_cov) {
+  const Mat2 b = 0.5 * (beacon_cov + beacon_cov.transpose());
+  const auto it = considered_.find(key);
+  if (it == considered_.end()) {
+    const int j = AppendBeacon(key);
+    beacons_.block<2, 2>(2 * j, 2 * j) = b;
+    return j;
+  }
+  const int j = it->second;
+  last_used_[j] = ++uses_;
+  const Mat2 old = beacons_.block<2, 2>(2 * j, 2 * j);
+  if ((old - b).norm() > 1e-12 * (1 + b.norm())) {
+    // Symmetric square roots (not Cholesky factors, which depend on the frame's axes).
+    const Eigen::SelfAdjointEigenSolver<Mat2> eo(old), en(b);
+    if (eo.info() == Eigen::Success && en.info() == Eigen::Success &&
+        eo.eigenvalues().minCoeff() > 0 && en.eigenvalues().minCoeff() >= 0) {
+      const Mat2 T = eo.operatorInverseSqrt() * en.operatorSqrt();  // B_old^-1/2 B_new^1/2
+      cross_.middleCols<2>(2 * j) = cross_.middleCols<2>(2 * j) * T;
+      beacons_.middleCols<2>(2 * j) = beacons_.middleCols<2>(2 * j) * T;
+      beacons_.middleRows<2>(2 * j) = T.transpose() * beacons_.middleRows<2>(2 * j);
+    }
+    beacons_.block<2, 2>(2 * j, 2 * j) = b;  // exact (and the fallback: correlations kept)
+  }
+  return j;
+}
+
+void ScaatEkf::ConsiderDrop(int key, double drop_sigma_m) {
+  if (!options_.consider_beacons) return;
+  const auto it = considered_.find(key);
+  const int j = it != considered_.end() ? it->second : AppendBeacon(key);
+  if (it != considered_.end()) last_used_[j] = ++uses_;
+  // b = p + drop noise: cov(x, b) = P(:, p), cov(b, b_i) = cov(p, b_i), cov(b) = P_pp + drop^2.
+  const Eigen::Matrix<double, 4, 2> px = P_.leftCols<2>();
+  const Eigen::MatrixXd pb = cross_.topRows<2>();
+  cross_.middleCols<2>(2 * j) = px;
+  beacons_.middleRows<2>(2 * j) = pb;
+  beacons_.middleCols<2>(2 * j) = pb.transpose();
+  beacons_.block<2, 2>(2 * j, 2 * j) =
+      P_.topLeftCorner<2, 2>() + Mat2::Identity() * drop_sigma_m * drop_sigma_m;
+}
+
+Eigen::Matrix<double, 4, 2> ScaatEkf::BeaconCrossCovariance(int beacon_key) const {
+  const auto it = considered_.find(beacon_key);
+  return it == considered_.end() ? Cross::Zero() : Cross(cross_.middleCols<2>(2 * it->second));
+}
+
+UpdateResult ScaatEkf::UpdateConsider(double y, const Eigen::Matrix<double, 1, 4>& H,
+                                      const Eigen::RowVector2d& H_b, double r, int key,
+                                      const BeaconPosition& beacon, double gate,
+                                      const Admit& admit) {
+  const int j = Consider(key, beacon.cov);
+  // Schmidt-Kalman update (Schmidt 1966; Simon, Optimal State Estimation, sec. 7.5): the
+  // measurement h(x, b); the gain and covariance of x use cov(x, b), b itself is not updated.
+  const Cross C = cross_.middleCols<2>(2 * j);
+  const Mat2 B = beacons_.block<2, 2>(2 * j, 2 * j);
+  const Eigen::Vector4d PHt = P_ * H.transpose() + C * H_b.transpose();
+  const double S = (H * PHt)(0) + (H_b * C.transpose() * H.transpose())(0) +
+                   (H_b * B * H_b.transpose())(0) + r;
+  if (!(S > 0) || !std::isfinite(S)) {
+    ++summary_.skipped;
+    return UpdateResult::kSkipped;
+  }
+  last_nis_ = y * y / S;
+  if (!std::isfinite(last_nis_)) {
+    ++summary_.skipped;
+    return UpdateResult::kSkipped;
+  }
+  if (admit && !admit(last_nis_, 1)) {
+    ++summary_.refused;
+    return UpdateResult::kRefused;
+  }
+  if (last_nis_ > gate) {
+    ++summary_.gated;
+    return UpdateResult::kGated;
+  }
+  const Eigen::Vector4d K = PHt / S;
+  // cov(z, beacons) = H cross + H_b cov(b_j, beacons)
+  const Eigen::RowVectorXd zb = H * cross_ + H_b * beacons_.middleRows<2>(2 * j);
+  x_ += K * y;
+  P_ -= K * S * K.transpose();
+  cross_ -= K * zb;
   Condition();
   return UpdateResult::kAccepted;
 }
 
 UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m,
-                                   const Admit& admit) {
+                                   const Admit& admit, int beacon_key) {
   if (!std::isfinite(range_m) || range_m < 0) {
     ++summary_.skipped;
     return UpdateResult::kSkipped;
@@ -179,17 +306,23 @@ UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m,
   }
   Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
   H.head<2>() = Hp;
-  Eigen::Matrix<double, 1, 1> R;
-  R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();  // the beacon's uncertainty (H_b = -H_p)
-  Eigen::Matrix<double, 1, 1> y;
-  y(0) = range_m - predicted;
-  const UpdateResult r = Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma, admit);
+  const double gate = options_.gate_sigma * options_.gate_sigma;
+  UpdateResult r;
+  if (options_.consider_beacons && beacon_key >= 0) {
+    r = UpdateConsider(range_m - predicted, H, -Hp, s * s, beacon_key, beacon, gate, admit);
+  } else {
+    Eigen::Matrix<double, 1, 1> R;
+    R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();  // the beacon's uncertainty (H_b = -H_p)
+    Eigen::Matrix<double, 1, 1> y;
+    y(0) = range_m - predicted;
+    r = Update<1>(y, H, R, gate, admit);
+  }
   summary_.range_updates += r == UpdateResult::kAccepted;
   return r;
 }
 
 UpdateResult ScaatEkf::UpdateBearing(const BeaconPosition& beacon, double bearing_rad,
-                                     double sigma_rad, const Admit& admit) {
+                                     double sigma_rad, const Admit& admit, int beacon_key) {
   if (!std::isfinite(bearing_rad) ||
       (position() - beacon.position_n).norm() < options_.min_range_for_bearing_m) {
     ++summary_.skipped;
@@ -200,11 +333,18 @@ UpdateResult ScaatEkf::UpdateBearing(const BeaconPosition& beacon, double bearin
   const double predicted = UltrasoundBearing(position(), beacon.position_n, &Hp);
   Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
   H.head<2>() = Hp;
-  Eigen::Matrix<double, 1, 1> R;
-  R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();
-  Eigen::Matrix<double, 1, 1> y;
-  y(0) = WrapAngle(bearing_rad - predicted);
-  const UpdateResult r = Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma, admit);
+  const double gate = options_.gate_sigma * options_.gate_sigma;
+  UpdateResult r;
+  if (options_.consider_beacons && beacon_key >= 0) {
+    r = UpdateConsider(WrapAngle(bearing_rad - predicted), H, -Hp, s * s, beacon_key, beacon,
+                       gate, admit);
+  } else {
+    Eigen::Matrix<double, 1, 1> R;
+    R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();
+    Eigen::Matrix<double, 1, 1> y;
+    y(0) = WrapAngle(bearing_rad - predicted);
+    r = Update<1>(y, H, R, gate, admit);
+  }
   summary_.bearing_updates += r == UpdateResult::kAccepted;
   return r;
 }

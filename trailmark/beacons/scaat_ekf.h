@@ -30,6 +30,7 @@
 
 #include <Eigen/Core>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -65,6 +66,13 @@ struct ScaatEkfOptions {
   double gate_chi2_2dof = 11.83;            ///< position fixes (99.73 %)
   double min_range_for_bearing_m = 0.3;     ///< bearing of a node on top of the beacon: skip
   double scale_min = 0.5, scale_max = 1.5;  ///< physical bounds on the step-length correction
+  /// A beacon's position error is shared by all its measurements (issue 22): with a beacon key,
+  /// the filter keeps the cross-covariance between its state and each beacon it used (a
+  /// Schmidt-Kalman "consider" filter: the beacon is not estimated, its error is accounted for
+  /// once, not added as fresh white noise to every range). false: the white model (the paper's).
+  bool consider_beacons = true;
+  /// The considered beacons kept (the least recently used beyond this is marginalized out).
+  int max_considered_beacons = 64;
 
   bool IsValid(std::string* why) const;
 };
@@ -80,6 +88,7 @@ struct ScaatEkfSummary {
   std::size_t steps = 0;
   std::size_t range_updates = 0, bearing_updates = 0, position_updates = 0;
   std::size_t gated = 0, skipped = 0, refused = 0;
+  std::size_t beacons_marginalized = 0;  ///< considered beacons dropped beyond the cap
   std::string BriefReport() const;
 };
 
@@ -97,14 +106,17 @@ class ScaatEkf {
   /// Any state and covariance (e.g. from InitializeFromUltrasound).
   ScaatEkf(const State& x, const Cov& P, Options options = {});
 
-  /// One PDR step `delta_n` (PDR navigation frame) with its covariance.
-  void PredictStep(const Vec2& delta_n, const Mat2& delta_cov);
-  /// Scalar range update; sigma <= 0 uses the options' value.
+  /// One PDR step `delta_n` (PDR navigation frame) with its covariance; `fraction` < 1: that
+  /// share of a step (a step split at a measurement's instant: the per-step floor scales).
+  void PredictStep(const Vec2& delta_n, const Mat2& delta_cov, double fraction = 1.0);
+  /// Scalar range update; sigma <= 0 uses the options' value. `beacon_key` >= 0 names the
+  /// beacon (options.consider_beacons: its error is a consider state, see there); -1: white.
   UpdateResult UpdateRange(const BeaconPosition& beacon, double range_m, double sigma_m = 0,
-                           const Admit& admit = nullptr);
+                           const Admit& admit = nullptr, int beacon_key = -1);
   /// Scalar bearing update (from the beacon to the node, navigation frame).
   UpdateResult UpdateBearing(const BeaconPosition& beacon, double bearing_rad,
-                             double sigma_rad = 0, const Admit& admit = nullptr);
+                             double sigma_rad = 0, const Admit& admit = nullptr,
+                             int beacon_key = -1);
   /// The paper's update: range and bearing converted to a position fix.
   UpdateResult UpdatePosition(const BeaconPosition& beacon, double range_m, double bearing_rad,
                               double range_sigma_m = 0, double bearing_sigma_rad = 0,
@@ -122,21 +134,49 @@ class ScaatEkf {
   double scale() const { return x_(kScale); }
   /// Normalized innovation squared of the last processed update (accepted or gated).
   double last_nis() const { return last_nis_; }
+  /// The node dropped beacon `beacon_key` where it is, within `drop_sigma_m`: the beacon's error
+  /// is its own position error (cross-covariance P_x,p, covariance P_pp + drop^2), so ranging it
+  /// later says how far the node moved, not where it is (options.consider_beacons).
+  void ConsiderDrop(int beacon_key, double drop_sigma_m);
+  /// Cross-covariance of the state with a considered beacon's position (zero when unused).
+  Eigen::Matrix<double, 4, 2> BeaconCrossCovariance(int beacon_key) const;
+  std::size_t considered_beacons() const { return considered_.size(); }
   const ScaatEkfSummary& summary() const { return summary_; }
   const Options& options() const { return options_; }
 
  private:
+  using Cross = Eigen::Matrix<double, 4, 2>;
   // Joseph-form update with a measurement of dimension M.
   template <int M>
   UpdateResult Update(const Eigen::Matrix<double, M, 1>& innovation,
                       const Eigen::Matrix<double, M, 4>& H, const Eigen::Matrix<double, M, M>& R,
                       double gate, const Admit& admit = nullptr);
+  // Scalar update that depends on a considered beacon (H_b = dh / d beacon position).
+  UpdateResult UpdateConsider(double innovation, const Eigen::Matrix<double, 1, 4>& H,
+                              const Eigen::RowVector2d& H_b, double r, int beacon_key,
+                              const BeaconPosition& beacon, double gate, const Admit& admit);
+  // Column (of cross_, in pairs) of the considered beacon `key`, added when new (uncorrelated
+  // with the state, covariance `beacon_cov`); when the map's covariance of it changed, its rows
+  // and columns are rescaled to it with their correlations kept (a
+  // congruence with T = B_old^-1/2 B_new^1/2: the joint covariance stays positive semidefinite).
+  int Consider(int key, const Mat2& beacon_cov);
+  int AppendBeacon(int key);
   void Condition();
+
 
   Options options_;
   State x_ = State::Zero();
   Cov P_ = Cov::Identity();
+  // The considered beacons (Schmidt): cov(state, beacons) 4 x 2n and cov(beacons) 2n x 2n,
+  // the beacons in the order of slots_ (beacon key per pair of columns), at most
+  // options.max_considered_beacons (the least recently used is marginalized out).
+  Eigen::MatrixXd cross_, beacons_;
+  std::vector<int> slots_;
+  std::vector<std::size_t> last_used_;
+  std::size_t uses_ = 0;
+  std::map<int, int> considered_;  ///< key -> slot
   double last_nis_ = 0;
+  double step_fraction_ = 0;
   ScaatEkfSummary summary_;
 };
 

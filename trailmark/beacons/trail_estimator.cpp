@@ -16,8 +16,10 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
     return false;
   }
   if (!(drop_sigma_m > 0) || !(close_pass_m >= 0) || !(pdr_drift_per_m >= 0) ||
-      !(way_out_window_s >= 0)) {
-    if (why) *why = "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s >= 0";
+      !(way_out_window_s >= 0) || !(measurement_hold_s >= 0)) {
+    if (why)
+      *why = "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s, "
+             "measurement_hold_s >= 0";
     return false;
   }
   return ekf.IsValid(why) && map.IsValid(why) && integrity.IsValid(why);
@@ -30,6 +32,15 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Choice("beacons", [](O& o) -> bool& { return o.map.mds_for_surveyed; },
            std::vector<std::pair<std::string, bool>>{{"auto", false}, {"mds", true}},
            "auto: surveyed beacons at their survey; mds: every beacon from MDS (Fig. 8)");
+  t.Choice("map", [](O& o) -> MapSolver& { return o.map.solver; },
+           std::vector<std::pair<std::string, MapSolver>>{{"least-squares", MapSolver::kLeastSquares},
+                                                          {"mds", MapSolver::kMds}},
+           "least-squares: links, surveys and drop priors in one robust problem (ours); mds: "
+           "MDS + SMACOF placed by Procrustes (the paper's)");
+  t.Flag("reject_inconsistent_map", [](O& o) -> bool& { return o.map.reject_inconsistent; },
+         "a least-squares map failing its chi-square test is not used (drop priors instead)");
+  t.Flag("relative_drop_priors", [](O& o) -> bool& { return o.map.relative_drop_priors; },
+         "least squares: drop priors on the displacement between consecutive drops");
   t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
   t.Real("entry_track_m", &O::entry_track_m, "m", OptionBounds::NonNegative(),
          "PDR track compared with the entry heading (0: never)");
@@ -63,6 +74,14 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
     t.Choice("init", &O::init_from_ultrasound,
              std::vector<std::pair<std::string, bool>>{{"auto", false}, {"ultrasound", true}},
              "auto: the mission's start when given; ultrasound: always from ultrasound");
+    t.Choice("beacon_errors", [](O& o) -> bool& { return o.ekf.consider_beacons; },
+             std::vector<std::pair<std::string, bool>>{{"consider", true}, {"white", false}},
+             "consider: each beacon's map error shared by all its measurements (Schmidt); "
+             "white: added to every measurement as independent noise (the paper's)");
+    t.Real("measurement_hold_s", &O::measurement_hold_s, "s", OptionBounds::NonNegative(),
+           "a measurement waits this long for the step spanning its time (0: at once)");
+    t.Flag("extrapolate", &O::extrapolate,
+           "between steps, emit the position ahead of the last step by its velocity");
     t.Real("gate_sigma", [](O& o) -> double& { return o.ekf.gate_sigma; }, "",
            OptionBounds::Positive(), "EKF innovation gate, in sigmas");
     t.Real("heading_sigma_rad", [](O& o) -> double& { return o.ekf.initial_heading_sigma_rad; },
@@ -97,6 +116,21 @@ BeaconTrailEstimator::BeaconTrailEstimator(const MissionInfo& info, BeaconTrailO
         a.entry_heading_sigma_rad =
             n.start_heading_sigma_rad.value_or(options_.default_entry_heading_sigma_rad);
         const double s = n.start_sigma_m.value_or(options_.ekf.initial_position_sigma_m);
+        // The drop priors' dead reckoning: white errors in drop_dr, the shared ones a track of
+        // the map. With an entry heading the first metre fixes the PDR's heading to that sigma.
+        const PdrOptions& pdr = options_.drop_dead_reckoning;
+        const double heading_sigma =
+            a.entry_heading_rad
+                ? std::hypot(a.entry_heading_sigma_rad, options_.entry_track_heading_sigma_rad)
+                : n.start_heading_sigma_rad.value_or(pdr.start_heading_sigma_rad);
+        PdrOptions white = pdr;
+        white.heading_drift_sigma_rad_per_s = white.step_scale_sigma = 0;
+        a.drop_dr.emplace(*start, s, white, 0.0);
+        a.map_track = map_.AddTrack(Vec3(heading_sigma * heading_sigma,
+                                         pdr.heading_drift_sigma_rad_per_s *
+                                             pdr.heading_drift_sigma_rad_per_s,
+                                         pdr.step_scale_sigma * pdr.step_scale_sigma)
+                                        .asDiagonal());
         if (options_.tracker == Tracker::kScaat) {
           a.ekf.emplace(a.pdr_n, Mat2::Identity() * s * s, 0.0,
                         options_.ekf.initial_heading_sigma_rad, 1.0,
@@ -171,16 +205,39 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       const int i = Beacon(e->node);
       drop_rank_.emplace(e->node, static_cast<int>(drop_rank_.size()));
       auto it = agents_.find(e->agent);
+      if (it != agents_.end() && it->second.ekf) it->second.ekf->ConsiderDrop(i, options_.drop_sigma_m);
       if (it != agents_.end()) {
-        const auto [p, cov] = AgentEstimate(it->second);
-        if (p)
-          map_.SetAnchorHint(
-              i, *p, *cov + Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m);
+        const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
+        if (Agent& a = it->second; a.drop_dr) {
+          Eigen::Matrix<double, 2, 3> along;
+          along << Vec2(-a.sum_d_n.y(), a.sum_d_n.x()), a.sum_t_perp_n, a.sum_d_n;
+          const Mat2 white = a.drop_dr->covariance();
+          // Between two drops: the white errors accrued since the last (and both drops' scatter).
+          Mat2 increment = white - a.last_drop_white_cov + 2 * drop;
+          increment = 0.5 * (increment + increment.transpose());
+          map_.SetTrackHint(i, a.map_track, a.drop_dr->position_n().head<2>(), white + drop, along,
+                            a.last_drop != i ? a.last_drop : -1, increment);
+          a.last_drop = i;
+          a.last_drop_white_cov = white;
+        } else {
+          const auto [p, cov] = AgentEstimate(it->second);
+          if (p) map_.SetAnchorHint(i, *p, *cov + drop);
+        }
       }
     }
   } else if (const auto* step = std::get_if<Step>(&row)) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
+    if (a.drop_dr) {
+      Step rotated = *step;
+      const Vec2 d_n = Eigen::Rotation2Dd(a.drop_dr_rotation_rad) * d;
+      rotated.delta_n.head<2>() = d_n;
+      a.drop_dr->AddStep(rotated);
+      // Lever arms of the shared errors (DeadReckoning's model): heading offset, rate x time.
+      if (!a.first_step_t) a.first_step_t = step->t0;
+      a.sum_d_n += d_n;
+      a.sum_t_perp_n += (step->t1 - *a.first_step_t) * Vec2(-d_n.y(), d_n.x());
+    }
     a.pdr_n += d;
     // Dead-reckoning drift for the drop hints of the map-only mode.
     a.pdr_var_m2 += std::pow(options_.pdr_drift_per_m * d.norm(), 2) +
@@ -190,8 +247,15 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       Mat2 cov = Mat2::Zero();
       cov(0, 0) = v.x();
       cov(1, 1) = v.y();
-      a.ekf->PredictStep(d, cov);
+      PredictWithMeasurements(a, step->t0, step->t1, d, cov);
       FixEntryHeading(a, d);
+      a.step_t0 = step->t0;
+      a.step_t1 = step->t1;
+      // The step's velocity as the filter moved the node (updates within it excluded).
+      a.step_velocity_n = step->t1 > step->t0
+                              ? Vec2(a.ekf->scale() * (Eigen::Rotation2Dd(a.ekf->psi()) * d) /
+                                     (step->t1 - step->t0))
+                              : Vec2::Zero();
       Emit(step->t1, a, sink);
     } else {
       FixEntryHeading(a, d);
@@ -236,11 +300,52 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     Measure(it->second, t, beacon, range, b->bearing_rad, b->sigma_rad.value_or(0.0), sink);
   }
+  if (options_.measurement_hold_s > 0) ApplyStanding(t - options_.measurement_hold_s, t, sink);
   if (map_.dirty() && t - last_solve_ >= options_.mds_period_s) SolveAndEmit(t, sink);
+}
+
+void BeaconTrailEstimator::PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1, const Vec2& d,
+                                                   const Mat2& cov) {
+  std::stable_sort(a.deferred.begin(), a.deferred.end(),
+                   [](const Deferred& x, const Deferred& y) { return x.t < y.t; });
+  std::vector<Deferred> later;
+  double done = 0;  // fraction of the step predicted so far
+  for (const Deferred& m : a.deferred) {
+    if (m.t > t1) {
+      later.push_back(m);
+      continue;
+    }
+    // Before the step began the node stood where it is; within it, moved a share of d.
+    const double alpha = t1 > t0 ? std::clamp((m.t - t0) / (t1 - t0), 0.0, 1.0) : 1.0;
+    if (alpha > done) {
+      a.ekf->PredictStep((alpha - done) * d, (alpha - done) * cov, alpha - done);
+      done = alpha;
+    }
+    Apply(a, m);
+  }
+  if (done < 1) a.ekf->PredictStep((1 - done) * d, (1 - done) * cov, 1 - done);
+  a.deferred = std::move(later);
+}
+
+void BeaconTrailEstimator::ApplyStanding(TimeS before, TimeS now, EstimateSink& sink) {
+  for (auto& [id, a] : agents_) {
+    if (a.deferred.empty() || !a.ekf) continue;
+    bool accepted = false;
+    std::vector<Deferred> keep;
+    for (const Deferred& m : a.deferred) {
+      if (m.t < before)
+        accepted |= Apply(a, m);
+      else
+        keep.push_back(m);
+    }
+    a.deferred = std::move(keep);
+    if (accepted) Emit(now, a, sink);
+  }
 }
 
 void BeaconTrailEstimator::Finish(EstimateSink& sink) {
   FlushPending(sink);
+  ApplyStanding(std::numeric_limits<double>::infinity(), last_t_, sink);
   if (map_.dirty())
     SolveAndEmit(last_t_, sink);
   else
@@ -255,6 +360,7 @@ void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
   const double sigma = std::hypot(a.entry_heading_sigma_rad, options_.entry_track_heading_sigma_rad);
   const double psi =
       WrapAngle(*a.entry_heading_rad - std::atan2(a.first_track_n.y(), a.first_track_n.x()));
+  if (options_.tracker != Tracker::kNone) a.drop_dr_rotation_rad = psi;
   if (a.ekf) {
     entry_fixes_ += a.ekf->UpdateHeadingCorrection(psi, sigma) == UpdateResult::kAccepted;
   } else if (options_.tracker == Tracker::kNone) {
@@ -330,6 +436,26 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
     Emit(t, a, sink);
     return;
   }
+  const Deferred m{t, beacon, range, bearing, bearing_sigma};
+  if (options_.measurement_hold_s > 0) {
+    a.deferred.push_back(m);
+    if (options_.extrapolate) EmitAhead(t, a, sink);
+    return;
+  }
+  if (Apply(a, m)) Emit(t, a, sink);
+}
+
+bool BeaconTrailEstimator::Apply(Agent& a, const Deferred& m) {
+  const auto pos = map_.Position(m.beacon);
+  if (!pos) {
+    ++no_position_;
+    return false;
+  }
+  const TimeS t = m.t;
+  const int beacon = m.beacon;
+  const auto& range = m.range;
+  const auto& bearing = m.bearing;
+  const double bearing_sigma = m.bearing_sigma;
   bool accepted = false;
   // Integrity: each beacon's ranges and its bearings are sources of their own (a bearing's
   // outliers do not condemn the beacon's ranges).
@@ -344,13 +470,13 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
                                      bearing_sigma, admit(id)) == UpdateResult::kAccepted;
   } else {
     if (range)
-      accepted |= a.ekf->UpdateRange(*pos, range->range_m, range->sigma_m,
-                                     admit(id + " range")) == UpdateResult::kAccepted;
+      accepted |= a.ekf->UpdateRange(*pos, range->range_m, range->sigma_m, admit(id + " range"),
+                                     beacon) == UpdateResult::kAccepted;
     if (bearing)
-      accepted |= a.ekf->UpdateBearing(*pos, *bearing, bearing_sigma, admit(id + " bearing")) ==
-                  UpdateResult::kAccepted;
+      accepted |= a.ekf->UpdateBearing(*pos, *bearing, bearing_sigma, admit(id + " bearing"),
+                                       beacon) == UpdateResult::kAccepted;
   }
-  if (accepted) Emit(t, a, sink);
+  return accepted;
 }
 
 void BeaconTrailEstimator::SolveAndEmit(TimeS t, EstimateSink& sink) {
@@ -376,6 +502,17 @@ void BeaconTrailEstimator::Emit(TimeS t, Agent& a, EstimateSink& sink) {
   if (!p) return;
   a.t = t;
   sink.Add({t, a.id, Vec3(p->x(), p->y(), 0), (*c)(0, 0), (*c)(0, 1), (*c)(1, 1)});
+}
+
+void BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
+  if (!a.ekf || !std::isfinite(a.step_t1) || !(t > a.step_t1) || t <= a.t) return;
+  const double ahead_s = std::min(t - a.step_t1, a.step_t1 - a.step_t0);
+  const double speed = a.step_velocity_n.norm();
+  const Vec2 p = a.ekf->position() + a.step_velocity_n * ahead_s;
+  const double s = options_.extrapolation_speed_sigma * speed * ahead_s;
+  const Mat2 c = a.ekf->position_cov() + Mat2::Identity() * s * s;
+  a.t = t;
+  sink.Add({t, a.id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
 }
 
 std::optional<Estimate> BeaconTrailEstimator::Current(const std::string& node) const {

@@ -23,6 +23,7 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/integrity/consistency.h"
 
 namespace trailmark::beacons {
@@ -40,6 +41,10 @@ struct BeaconTrailOptions {
   bool init_from_ultrasound = false;  ///< ignore mission starts: initialize from ultrasound
   double mds_period_s = 2.0;          ///< s; the map is re-solved at most this often
   double drop_sigma_m = 0.3;   ///< m; where a dropped beacon lands around the dropper's estimate
+  /// The drop priors of agents with a start come from their own dead reckoning (rotated by
+  /// the entry-heading fix), with its covariance of shared errors (heading, drift rate, scale):
+  /// not from the tracker, whose estimate is built on the map (issue 22). Set a priori.
+  PdrOptions drop_dead_reckoning;
   double entry_track_m = 1.0;  ///< m; PDR track compared with the entry heading (0: never)
   double close_pass_m = 1.5;   ///< m; a beacon with no drop event is anchored at a range this short
   /// Dead-reckoning drift of the drop hints without a tracker: 1 sigma per metre (ours: 5 %).
@@ -48,6 +53,17 @@ struct BeaconTrailOptions {
   double entry_track_heading_sigma_rad = 0.05;
   double default_entry_heading_sigma_rad = 0.05;  ///< a start_heading without its sigma
   double way_out_window_s = 3.0;  ///< s; beacons heard this recently start the way out
+  /// s; SCAAT EKF: a measurement waits for the step that spans its time (steps arrive at their
+  /// end) and is applied where the foot was then, the step split at that instant; with no step
+  /// within this hold the node was standing and it is applied where the node stands. 0: each
+  /// measurement at the last step's position at once (the node's motion since then ignored).
+  double measurement_hold_s = 1.5;
+  /// With a hold: between steps, each measurement's arrival also emits the position ahead of the
+  /// last step end by the last step's velocity (at most one step's duration), its covariance
+  /// grown by `extrapolation_speed_sigma` x that speed x the time ahead per axis (walking on,
+  /// slowing, stopping): what is known online then. false: the last step's estimate only.
+  bool extrapolate = true;
+  double extrapolation_speed_sigma = 0.5;
   ScaatEkfOptions ekf;
   UltrasoundOnlyKfOptions us_kf;
   BeaconMapOptions map;
@@ -98,8 +114,18 @@ class BeaconTrailEstimator : public OnlineEstimator {
     int beacon;
     double range_m, sigma_m;
   };
+  struct Deferred {
+    TimeS t;
+    int beacon;
+    std::optional<PendingRange> range;
+    std::optional<double> bearing;
+    double bearing_sigma;
+  };
   struct Agent {
     std::string id;
+    std::vector<Deferred> deferred;  ///< measurements waiting for their step
+    TimeS step_t0 = 0, step_t1 = -std::numeric_limits<double>::infinity();  ///< the last step
+    Vec2 step_velocity_n = Vec2::Zero();  ///< of the last step, in the navigation frame
     Vec2 pdr_n = Vec2::Zero();  ///< dead reckoning (from the start, or from the init buffer)
     double pdr_var_m2 = 0.01;
     bool has_start = false;
@@ -118,6 +144,16 @@ class BeaconTrailEstimator : public OnlineEstimator {
     bool heading_fixed = false;
     Vec2 start_n = Vec2::Zero();
     double pdr_rotation_rad = 0;  ///< applied to the dead reckoning of the map-only mode
+    /// Dead reckoning for the drop priors (agents with a start), rotated by the entry fix: its
+    /// white errors (step noise, heading walk) here, its shared ones as the map's track
+    /// `map_track` with the lever arms below (MapPrior::along).
+    std::optional<DeadReckoning> drop_dr;
+    double drop_dr_rotation_rad = 0;
+    int map_track = -1;
+    std::optional<TimeS> first_step_t;
+    Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
+    int last_drop = -1;                      ///< beacon of the previous drop
+    Mat2 last_drop_white_cov = Mat2::Zero();  ///< drop_dr's covariance there
   };
 
   int Beacon(const std::string& id);
@@ -132,6 +168,13 @@ class BeaconTrailEstimator : public OnlineEstimator {
   void SolveAndEmit(TimeS t, EstimateSink& sink);
   void EmitBeacons(TimeS t, EstimateSink& sink);
   void Emit(TimeS t, Agent& a, EstimateSink& sink);
+  /// The position at `t` ahead of the last step by its velocity (options.extrapolate).
+  void EmitAhead(TimeS t, Agent& a, EstimateSink& sink);
+  bool Apply(Agent& a, const Deferred& m);
+  /// The step (t0, t1, d) with the measurements it spans applied at their instants.
+  void PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1, const Vec2& d, const Mat2& cov);
+  /// Measurements older than `before` that no step spans: applied where the node stands.
+  void ApplyStanding(TimeS before, TimeS now, EstimateSink& sink);
 
   BeaconTrailOptions options_;
   BeaconMap map_;

@@ -156,6 +156,114 @@ BeaconLayout Deploy(const FloorPlan& plan, const Route& route, const Walk& walk,
 
 std::string BeaconId(int j) { return fmt::format("b{:02d}", j + 1); }
 
+// A NLOS range is long: by U(min, max) (the paper's multipath), or with a long tail.
+double LongBy(const UltrasoundOptions& us, Random& rng) {
+  if (us.nlos_tail_mean_m > 0)
+    return std::min(us.nlos_min_m - us.nlos_tail_mean_m * std::log(1.0 - rng.Uniform()),
+                    us.nlos_max_m);
+  return rng.Uniform(us.nlos_min_m, us.nlos_max_m);
+}
+
+// Ultrasound pulses of the foot node, received by the beacons (range and bearing from the
+// beacon to the foot).
+void SimulateFootUltrasound(const FloorPlan& plan, const Walk& walk,
+                            const std::vector<Vec2>& beacons,
+                            const std::vector<TimeS>& beacon_since, const UltrasoundOptions& us,
+                            Random& us_rng, MissionData& m) {
+  auto position_at = [&](TimeS t) {
+    const auto it = std::lower_bound(walk.truth.begin(), walk.truth.end(), t,
+                                     [](const Walk::Sample& s, TimeS v) { return s.t < v; });
+    if (it == walk.truth.begin()) return it->position;
+    if (it == walk.truth.end()) return walk.truth.back().position;
+    const auto prev = std::prev(it);
+    const double a = (t - prev->t) / std::max(it->t - prev->t, 1e-9);
+    return Vec2(prev->position + a * (it->position - prev->position));
+  };
+  const int B = static_cast<int>(beacons.size());
+  for (TimeS t = walk.truth.front().t + 0.2; t <= walk.truth.back().t;
+       t += us.pulse_period_s + us_rng.Uniform(-us.period_jitter_s, us.period_jitter_s)) {
+    const TimeS tr = std::round(t * 1000) / 1000;
+    const Vec2 foot = position_at(tr);
+    for (int j = 0; j < B; ++j) {
+      if (beacon_since[j] > tr) continue;
+      const Vec2 rel = foot - beacons[j];
+      const double d = rel.norm();
+      if (d > us.max_range_m) continue;
+      const double true_bearing = std::atan2(rel.y(), rel.x());
+      double range, bearing;
+      if (UltrasoundLineOfSight(plan, beacons[j], foot, us.max_range_m)) {
+        const double p_detect =
+            us.detection_near -
+            (us.detection_near - us.detection_at_max_range) * d / us.max_range_m;
+        if (us_rng.Uniform() > p_detect) continue;
+        range = us_rng.Uniform() < us.nlos_probability ? d + LongBy(us, us_rng)
+                                                       : d + us_rng.Normal(0, us.range_sigma_m);
+        bearing = us_rng.Uniform() < us.bearing_outlier_probability
+                      ? us_rng.Uniform(-kPi, kPi)
+                      : true_bearing + us_rng.Normal(0, us.bearing_sigma_rad);
+      } else {
+        if (us_rng.Uniform() > us.corner_reflection_probability) continue;
+        range = d + LongBy(us, us_rng);
+        bearing = true_bearing + us_rng.Normal(0, 1.5 * us.bearing_sigma_rad);
+      }
+      if (range > us.max_range_m + us.nlos_max_m) continue;
+      bearing = std::remainder(bearing, 2 * kPi);
+      m.ranges.push_back({tr, BeaconId(j), "ff1", std::round(std::max(range, 0.02) * 1000) / 1000,
+                          us.range_sigma_m, "ultrasound"});
+      m.bearings.push_back(
+          {tr, BeaconId(j), "ff1", std::round(bearing * 1000) / 1000, us.bearing_sigma_rad});
+    }
+  }
+}
+
+// Beacon <-> beacon ranging at time t: the pairs in line of sight that `linked` allows (only
+// the pairs with beacon `only` when >= 0), a burst each.
+template <typename Linked>
+void SimulateBeaconRanging(const FloorPlan& plan, const std::vector<Vec2>& beacons,
+                           const std::vector<TimeS>& beacon_since, const UltrasoundOptions& us,
+                           TimeS t, int only, const Linked& linked, Random& us_rng,
+                           MissionData& m) {
+  const int B = static_cast<int>(beacons.size());
+  for (int i = 0; i < B; ++i) {
+    for (int j = i + 1; j < B; ++j) {
+      if (only >= 0 && i != only && j != only) continue;
+      if (beacon_since[i] > t || beacon_since[j] > t || !linked(i, j)) continue;
+      if (!UltrasoundLineOfSight(plan, beacons[i], beacons[j], us.max_range_m)) continue;
+      const double d = (beacons[i] - beacons[j]).norm();
+      for (int k = 0; k < us.beacon_ranging_burst; ++k) {
+        const double r = us_rng.Uniform() < us.static_outlier_probability
+                             ? d + LongBy(us, us_rng)
+                             : d + us_rng.Normal(0, us.static_range_sigma_m);
+        m.ranges.push_back({std::round((t + 0.05 * k) * 1000) / 1000, BeaconId(i), BeaconId(j),
+                            std::round(std::max(r, 0.02) * 1000) / 1000, us.static_range_sigma_m,
+                            "ultrasound"});
+      }
+    }
+  }
+}
+
+// PDR steps of ff1 (the IMU's heading starts off by a magnetometer error) and its truth.
+void AddPdrSteps(const Walk& walk, PdrErrorOptions pdr_options, double heading_sigma_rad,
+                 Random& pdr_rng, MissionData& m) {
+  pdr_options.initial_heading_error_rad = heading_sigma_rad * pdr_rng.Normal();
+  PdrErrorModel pdr(pdr_options, pdr_rng.Fork());
+  for (const auto& st : walk.steps) {
+    const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
+    const double var = pdr.ReportedVariance((st.to - st.from).norm());
+    m.steps.push_back({st.t0, st.t1, "ff1", Vec3(d.x(), d.y(), 0), Vec3(var, var, 1e-4)});
+  }
+  for (const auto& s : walk.truth)
+    m.truth.push_back({s.t, "ff1", Vec3(s.position.x(), s.position.y(), 0)});
+}
+
+void SortByTime(MissionData& m) {
+  auto by_time = [](const auto& a, const auto& b) { return a.t < b.t; };
+  std::stable_sort(m.ranges.begin(), m.ranges.end(), by_time);
+  std::stable_sort(m.bearings.begin(), m.bearings.end(), by_time);
+  std::stable_sort(m.events.begin(), m.events.end(), by_time);
+  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
+}
+
 }  // namespace
 
 BeaconLabOptions::BeaconLabOptions() {
@@ -279,99 +387,142 @@ SimulatedMission SimulateBeaconLab(const BeaconLabOptions& o, std::uint64_t seed
     if (!o.surveyed) m.events.push_back({layout.drop_time_s[j], "ff1", "drop", n.id});
   }
 
-  // PDR steps (the IMU's heading starts off by a magnetometer error).
-  PdrErrorOptions pdr_options = o.pdr;
-  pdr_options.initial_heading_error_rad = o.initial_heading_error_sigma_rad * pdr_rng.Normal();
-  PdrErrorModel pdr(pdr_options, pdr_rng.Fork());
-  for (const auto& st : walk.steps) {
-    const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
-    const double var = pdr.ReportedVariance((st.to - st.from).norm());
-    m.steps.push_back({st.t0, st.t1, "ff1", Vec3(d.x(), d.y(), 0), Vec3(var, var, 1e-4)});
-  }
-  for (const auto& s : walk.truth)
-    m.truth.push_back({s.t, "ff1", Vec3(s.position.x(), s.position.y(), 0)});
+  AddPdrSteps(walk, o.pdr, o.initial_heading_error_sigma_rad, pdr_rng, m);
   m.events.push_back({walk.truth.front().t, "ff1", "enter", ""});
   if (!o.surveyed) m.events.push_back({walk.truth.back().t, "ff1", "exit", ""});
 
-  // Ultrasound pulses of the foot node, received by the beacons (range and bearing from the
-  // beacon to the foot).
-  auto position_at = [&](TimeS t) {
-    const auto it = std::lower_bound(walk.truth.begin(), walk.truth.end(), t,
-                                     [](const Walk::Sample& s, TimeS v) { return s.t < v; });
-    if (it == walk.truth.begin()) return it->position;
-    if (it == walk.truth.end()) return walk.truth.back().position;
-    const auto prev = std::prev(it);
-    const double a = (t - prev->t) / std::max(it->t - prev->t, 1e-9);
-    return Vec2(prev->position + a * (it->position - prev->position));
-  };
-  auto long_by = [&]() { return us_rng.Uniform(us.nlos_min_m, us.nlos_max_m); };
-  for (TimeS t = walk.truth.front().t + 0.2; t <= walk.truth.back().t;
-       t += us.pulse_period_s + us_rng.Uniform(-us.period_jitter_s, us.period_jitter_s)) {
-    const TimeS tr = std::round(t * 1000) / 1000;
-    const Vec2 foot = position_at(tr);
-    for (int j = 0; j < B; ++j) {
-      if (beacon_since[j] > tr) continue;
-      const Vec2 rel = foot - layout.beacons[j];
-      const double d = rel.norm();
-      if (d > us.max_range_m) continue;
-      const double true_bearing = std::atan2(rel.y(), rel.x());
-      double range, bearing;
-      if (UltrasoundLineOfSight(sim.plan, layout.beacons[j], foot, us.max_range_m)) {
-        const double p_detect =
-            us.detection_near -
-            (us.detection_near - us.detection_at_max_range) * d / us.max_range_m;
-        if (us_rng.Uniform() > p_detect) continue;
-        range = us_rng.Uniform() < us.nlos_probability ? d + long_by()
-                                                       : d + us_rng.Normal(0, us.range_sigma_m);
-        bearing = us_rng.Uniform() < us.bearing_outlier_probability
-                      ? us_rng.Uniform(-kPi, kPi)
-                      : true_bearing + us_rng.Normal(0, us.bearing_sigma_rad);
-      } else {
-        if (us_rng.Uniform() > us.corner_reflection_probability) continue;
-        range = d + long_by();
-        bearing = true_bearing + us_rng.Normal(0, 1.5 * us.bearing_sigma_rad);
-      }
-      if (range > us.max_range_m + us.nlos_max_m) continue;
-      bearing = std::remainder(bearing, 2 * kPi);
-      m.ranges.push_back({tr, BeaconId(j), "ff1", std::round(std::max(range, 0.02) * 1000) / 1000,
-                          us.range_sigma_m, "ultrasound"});
-      m.bearings.push_back(
-          {tr, BeaconId(j), "ff1", std::round(bearing * 1000) / 1000, us.bearing_sigma_rad});
-    }
-  }
+  SimulateFootUltrasound(sim.plan, walk, layout.beacons, beacon_since, us, us_rng, m);
   // Beacon <-> beacon ranging: each new beacon ranges the others at its drop, then every pair
   // periodically (static nodes, line of sight).
-  auto range_pairs = [&](TimeS t, int only) {
-    for (int i = 0; i < B; ++i) {
-      for (int j = i + 1; j < B; ++j) {
-        if (only >= 0 && i != only && j != only) continue;
-        if (beacon_since[i] > t || beacon_since[j] > t) continue;
-        if (!UltrasoundLineOfSight(sim.plan, layout.beacons[i], layout.beacons[j], us.max_range_m))
-          continue;
-        const double d = (layout.beacons[i] - layout.beacons[j]).norm();
-        for (int k = 0; k < us.beacon_ranging_burst; ++k) {
-          const double r = us_rng.Uniform() < us.static_outlier_probability
-                               ? d + long_by()
-                               : d + us_rng.Normal(0, us.static_range_sigma_m);
-          m.ranges.push_back({std::round((t + 0.05 * k) * 1000) / 1000, BeaconId(i), BeaconId(j),
-                              std::round(std::max(r, 0.02) * 1000) / 1000, us.static_range_sigma_m,
-                              "ultrasound"});
-        }
-      }
-    }
-  };
+  const auto every_pair = [](int, int) { return true; };
   if (!o.surveyed) {
-    for (int j = 0; j < B; ++j) range_pairs(layout.drop_time_s[j] + 0.5, j);
+    for (int j = 0; j < B; ++j)
+      SimulateBeaconRanging(sim.plan, layout.beacons, beacon_since, us,
+                            layout.drop_time_s[j] + 0.5, j, every_pair, us_rng, m);
   }
   for (TimeS t = walk.truth.front().t + 0.1; t <= walk.truth.back().t;
        t += us.beacon_ranging_period_s) {
-    range_pairs(t, -1);
+    SimulateBeaconRanging(sim.plan, layout.beacons, beacon_since, us, t, -1, every_pair, us_rng,
+                          m);
   }
-  auto by_time = [](const auto& a, const auto& b) { return a.t < b.t; };
-  std::stable_sort(m.ranges.begin(), m.ranges.end(), by_time);
-  std::stable_sort(m.bearings.begin(), m.bearings.end(), by_time);
-  std::stable_sort(m.events.begin(), m.events.end(), by_time);
-  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
+  SortByTime(m);
+  return sim;
+}
+
+ShapedTrailOptions::ShapedTrailOptions() {
+  const BeaconLabOptions lab;
+  walker = lab.walker;
+  pdr = lab.pdr;
+  // NLOS ranges, always long, with a long tail; bearings with more outliers (issue 22).
+  ultrasound.nlos_probability = 0.08;
+  ultrasound.nlos_tail_mean_m = 1.0;
+  ultrasound.nlos_max_m = 6.0;
+  ultrasound.static_outlier_probability = 0.08;
+  ultrasound.bearing_outlier_probability = 0.15;
+}
+
+SimulatedMission SimulateShapedTrail(const ShapedTrailOptions& o, std::uint64_t seed) {
+  Random rng(seed * 7919 + 23);
+  Random shape_rng = rng.Fork(), walk_rng = rng.Fork(), deploy_rng = rng.Fork(),
+         pdr_rng = rng.Fork(), us_rng = rng.Fork();
+  const bool u_shape = o.shape == ShapedTrailOptions::Shape::kRandom
+                           ? shape_rng.Uniform() < 2.0 / 3
+                           : o.shape == ShapedTrailOptions::Shape::kU;
+  const double w = o.corridor_width_m, h = w / 2;
+  const double L = shape_rng.Uniform(o.min_leg_m, o.max_leg_m);
+  const double H = shape_rng.Uniform(o.min_across_m, o.max_across_m) + w;
+  // The corridor as one polygon (counter-clockwise), its entry on the west of the south leg.
+  std::vector<Vec2> outline =
+      u_shape ? std::vector<Vec2>{{0, 0}, {L, 0}, {L, H}, {0, H}, {0, H - w}, {L - w, H - w},
+                                  {L - w, w}, {0, w}}
+              : std::vector<Vec2>{{0, 0}, {L, 0}, {L, H}, {L - w, H}, {L - w, w}, {0, w}};
+  std::vector<Segment2> walls, doors;
+  for (std::size_t i = 0; i < outline.size(); ++i)
+    walls.push_back({outline[i], outline[(i + 1) % outline.size()]});
+  doors.push_back({{0, h - 0.6}, {0, h + 0.6}});
+  SimulatedMission sim;
+  sim.plan = FloorPlan(std::move(walls), std::move(doors), {{"trail", outline, 0}});
+  const UltrasoundOptions& us = o.ultrasound;
+
+  const Vec2 outside(-1.0, h);
+  Route deploy_route;
+  deploy_route.waypoints = {outside, {1.0, h}, {L - h, h}};
+  if (u_shape) {
+    deploy_route.waypoints.push_back({L - h, H - h});
+    deploy_route.waypoints.push_back({1.0, H - h});
+  } else {
+    deploy_route.waypoints.push_back({L - h, H - 1.0});
+  }
+  const Walk deploy_walk = WalkRoute(deploy_route, o.walker, 0.0, walk_rng);
+  const BeaconLayout layout =
+      Deploy(sim.plan, deploy_route, deploy_walk, o.deployment, us.max_range_m, deploy_rng);
+  const int B = static_cast<int>(layout.beacons.size());
+  // Back to the entry and out again along the trail (a search), then the retreat.
+  Route trace;
+  trace.waypoints.assign(deploy_route.waypoints.rbegin(), deploy_route.waypoints.rend() - 1);
+  trace.waypoints.insert(trace.waypoints.end(), deploy_route.waypoints.begin() + 2,
+                         deploy_route.waypoints.end());
+  Walk search = WalkRoute(trace, o.walker, deploy_walk.truth.back().t, walk_rng);
+  Route out;
+  out.waypoints.push_back(search.truth.back().position);
+  for (int j : RetreatTargets(sim.plan, layout.beacons, out.waypoints.back(), us.max_range_m))
+    out.waypoints.push_back(layout.beacons[j]);
+  out.waypoints.push_back(outside);
+  Walk retreat = WalkRoute(out, o.walker, search.truth.back().t + 1.0, walk_rng);
+  const Walk walk = Concatenate({deploy_walk, std::move(search), std::move(retreat)});
+  sim.walks.emplace_back("ff1", walk);
+
+  // Anchors: `anchors` beacons spread over the trail's second half and end, none at the entry.
+  std::vector<bool> anchor(B, false);
+  for (int k = 0; k < o.anchors && B > 1; ++k) {
+    const int j = std::clamp(static_cast<int>(std::lround((B - 1) * (k + 1.0) / o.anchors)), 1,
+                             B - 1);
+    anchor[j] = true;
+  }
+  MissionData& m = sim.data;
+  m.info.name = "beacon-neighbour-trail";
+  m.info.description = fmt::format(
+      "{}-shaped corridor ({:.1f} x {:.1f} m, {:.1f} m wide) with {} ultrasound beacons dropped by "
+      "the deployment rules, ranges between trail neighbours only, {} surveyed, NLOS {:.0f} % "
+      "with a long tail, bearing outliers {:.0f} % (issue 22); simulated, seed {}",
+      u_shape ? "U" : "L", L, H, w, B, o.anchors, 100 * us.nlos_probability,
+      100 * us.bearing_outlier_probability, seed);
+  const Vec2 start = walk.truth.front().position;
+  m.info.nodes.push_back(NodeInfo::Base("base", Vec3(outside.x(), outside.y(), 0)));
+  m.info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(start.x(), start.y(), 0), 0.1,
+                                         walk.truth.front().heading_rad, 0.05));
+  std::vector<TimeS> since = layout.drop_time_s;
+  for (int j = 0; j < B; ++j) {
+    NodeInfo n;
+    n.id = BeaconId(j);
+    if (anchor[j]) {  // pre-installed and surveyed: there from the start
+      n.kind = NodeKind::kLandmark;
+      n.position = Vec3(layout.beacons[j].x(), layout.beacons[j].y(), 0);
+      n.position_sigma_m = 0.05;
+      since[j] = -1e300;
+    } else {
+      n.kind = NodeKind::kCrumb;
+      m.events.push_back({layout.drop_time_s[j], "ff1", "drop", n.id});
+    }
+    m.info.nodes.push_back(n);
+    m.truth.push_back({anchor[j] ? walk.truth.front().t : layout.drop_time_s[j], n.id,
+                       Vec3(layout.beacons[j].x(), layout.beacons[j].y(), 0)});
+  }
+  AddPdrSteps(walk, o.pdr, o.initial_heading_error_sigma_rad, pdr_rng, m);
+  m.events.push_back({walk.truth.front().t, "ff1", "enter", ""});
+  m.events.push_back({walk.truth.back().t, "ff1", "exit", ""});
+  SimulateFootUltrasound(sim.plan, walk, layout.beacons, since, us, us_rng, m);
+  // Links between trail neighbours only (deployment order), at each drop and periodically.
+  const auto neighbours = [&](int i, int j) { return std::abs(i - j) <= o.neighbour_links; };
+  for (int j = 0; j < B; ++j) {
+    SimulateBeaconRanging(sim.plan, layout.beacons, since, us,
+                          std::max(layout.drop_time_s[j], 0.0) + 0.5, j, neighbours, us_rng, m);
+  }
+  for (TimeS t = walk.truth.front().t + 0.1; t <= walk.truth.back().t;
+       t += us.beacon_ranging_period_s) {
+    SimulateBeaconRanging(sim.plan, layout.beacons, since, us, t, -1, neighbours, us_rng, m);
+  }
+  SortByTime(m);
   return sim;
 }
 

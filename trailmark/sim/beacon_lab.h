@@ -27,6 +27,8 @@ struct UltrasoundOptions {
   /// ~0.9 m (paper: below 1 m).
   double nlos_probability = 0.10;
   double nlos_min_m = 0.2, nlos_max_m = 2.5;
+  /// > 0: NLOS excess min + Exp(mean), capped at max (a long tail) instead of U(min, max).
+  double nlos_tail_mean_m = 0;
   /// Bearing (angle of arrival from the spread of peak values): sigma such that the 90th
   /// percentile of |error| is 60 deg (sec. 3.B), plus uniform outliers.
   double bearing_sigma_rad = 0.57;
@@ -96,5 +98,29 @@ std::vector<int> RetreatTargets(const FloorPlan& plan, const std::vector<Vec2>& 
                                 const Vec2& position, double range_m);
 
 SimulatedMission SimulateBeaconLab(const BeaconLabOptions& options, std::uint64_t seed);
+
+/// A beacon trail laid out by someone else (issue 22): a U- or L-shaped corridor, beacons
+/// dropped by the deployment rules, ranges only between trail neighbours (each beacon with the
+/// `neighbour_links` deployed before it, line of sight allowed), `anchors` of them surveyed
+/// (landmarks with a position, none at the entry), NLOS ranges long with a long tail, bearings
+/// with uniform outliers. The firefighter lays the trail, walks back to the entry and out again,
+/// then retreats by the smallest-id rule. Shape and sizes are drawn from the seed.
+struct ShapedTrailOptions {
+  enum class Shape { kRandom, kU, kL };
+  Shape shape = Shape::kRandom;  ///< random: U two times in three
+  double corridor_width_m = 2.4;
+  double min_leg_m = 14, max_leg_m = 22;         ///< the long legs
+  double min_across_m = 6.5, max_across_m = 10;  ///< the U's legs apart / the L's short leg
+  int neighbour_links = 2;
+  int anchors = 3;
+  UltrasoundOptions ultrasound;
+  DeploymentOptions deployment;
+  WalkerOptions walker;
+  PdrErrorOptions pdr;
+  double initial_heading_error_sigma_rad = 0.14;
+  ShapedTrailOptions();
+};
+
+SimulatedMission SimulateShapedTrail(const ShapedTrailOptions& options, std::uint64_t seed);
 
 }  // namespace trailmark

@@ -181,7 +181,11 @@ std::vector<ScenarioInfo> Scenarios() {
           {"beacon-trail",
            "ultrasound-beacons paper: a firefighter drops ultrasound beacons by the deployment "
            "rules (entry, signal loss, turns), walks trace c, then retreats to the exit by the "
-           "smallest-id rule; beacon positions unknown (MDS)"}};
+           "smallest-id rule; beacon positions unknown (MDS)"},
+          {"beacon-neighbour-trail",
+           "a beacon trail laid out by someone else (issue 22): a U- or L-shaped corridor drawn "
+           "from the seed, ranges between trail neighbours only, 3 surveyed beacons away from "
+           "the entry, NLOS ranges with a long tail, 15 % bearing outliers"}};
 }
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
@@ -216,6 +220,7 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
     o.trace = LabTrace::kC;
     return SimulateBeaconLab(o, seed);
   }
+  if (name == "beacon-neighbour-trail") return SimulateShapedTrail({}, seed);
   std::string known;
   for (const auto& s : Scenarios()) known += (known.empty() ? "" : ", ") + s.name;
   throw std::invalid_argument("unknown scenario '" + name + "' (known: " + known + ")");

@@ -1,0 +1,360 @@
+// SPDX-License-Identifier: MIT
+#include "trailmark/beacons/map_least_squares.h"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <Eigen/Cholesky>
+#include <cmath>
+#include <memory>
+#include <numeric>
+#include <stdexcept>
+
+#include "trailmark/integrity/consistency.h"
+
+namespace trailmark::beacons {
+
+bool MapLeastSquaresOptions::IsValid(std::string* why) const {
+  if (!(link_huber_sigma > 0) || max_iterations < 1 || !(false_alarm > 0 && false_alarm < 1)) {
+    if (why) *why = "link_huber_sigma > 0, max_iterations >= 1, 0 < false_alarm < 1";
+    return false;
+  }
+  return true;
+}
+
+namespace {
+
+// (|p_i - p_j| - range) / sigma, analytic Jacobians (u / sigma, -u / sigma).
+class LinkCost final : public ceres::SizedCostFunction<1, 2, 2> {
+ public:
+  LinkCost(double range_m, double sigma_m) : range_m_(range_m), inv_sigma_(1.0 / sigma_m) {}
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const double dx = x[0][0] - x[1][0], dy = x[0][1] - x[1][1];
+    const double d = std::sqrt(dx * dx + dy * dy);
+    residual[0] = (d - range_m_) * inv_sigma_;
+    if (jacobians) {
+      // At coincident points the direction is undefined: any unit vector is a subgradient.
+      const double ux = d > 1e-12 ? dx / d : 1.0, uy = d > 1e-12 ? dy / d : 0.0;
+      if (jacobians[0]) jacobians[0][0] = ux * inv_sigma_, jacobians[0][1] = uy * inv_sigma_;
+      if (jacobians[1]) jacobians[1][0] = -ux * inv_sigma_, jacobians[1][1] = -uy * inv_sigma_;
+    }
+    return true;
+  }
+
+ private:
+  double range_m_, inv_sigma_;
+};
+
+// W (p - mu), W = L^-1 with L L^T = cov: the whitened prior.
+class PriorCost final : public ceres::SizedCostFunction<2, 2> {
+ public:
+  PriorCost(const Vec2& mu, const Mat2& cov) : mu_(mu) {
+    const Eigen::LLT<Mat2> llt(cov);
+    w_ = llt.matrixL().solve(Mat2::Identity());
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const Vec2 r = w_ * (Vec2(x[0][0], x[0][1]) - mu_);
+    residual[0] = r.x(), residual[1] = r.y();
+    if (jacobians && jacobians[0]) {
+      // Row-major 2 x 2.
+      jacobians[0][0] = w_(0, 0), jacobians[0][1] = w_(0, 1);
+      jacobians[0][2] = w_(1, 0), jacobians[0][3] = w_(1, 1);
+    }
+    return true;
+  }
+
+ private:
+  Vec2 mu_;
+  Mat2 w_;
+};
+
+// W (p - mu - A e): a drop prior correlated with the others of its track through e.
+class TrackPriorCost final : public ceres::SizedCostFunction<2, 2, 3> {
+ public:
+  TrackPriorCost(const Vec2& mu, const Mat2& cov, const Eigen::Matrix<double, 2, 3>& along)
+      : mu_(mu) {
+    const Eigen::LLT<Mat2> llt(cov);
+    w_ = llt.matrixL().solve(Mat2::Identity());
+    wa_ = w_ * along;
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const Eigen::Map<const Vec3> e(x[1]);
+    const Vec2 r = w_ * (Vec2(x[0][0], x[0][1]) - mu_) - wa_ * e;
+    residual[0] = r.x(), residual[1] = r.y();
+    if (jacobians) {
+      if (jacobians[0]) {
+        jacobians[0][0] = w_(0, 0), jacobians[0][1] = w_(0, 1);
+        jacobians[0][2] = w_(1, 0), jacobians[0][3] = w_(1, 1);
+      }
+      if (jacobians[1]) {
+        for (int r_ = 0; r_ < 2; ++r_)
+          for (int c = 0; c < 3; ++c) jacobians[1][3 * r_ + c] = -wa_(r_, c);
+      }
+    }
+    return true;
+  }
+
+ private:
+  Vec2 mu_;
+  Mat2 w_;
+  Eigen::Matrix<double, 2, 3> wa_;
+};
+
+// W ((p_i - p_j) - (mu_i - mu_j) - (A_i - A_j) e): a displacement between two drops of a track.
+class RelativeTrackPriorCost final : public ceres::SizedCostFunction<2, 2, 2, 3> {
+ public:
+  RelativeTrackPriorCost(const Vec2& delta, const Mat2& cov,
+                         const Eigen::Matrix<double, 2, 3>& along)
+      : delta_(delta) {
+    const Eigen::LLT<Mat2> llt(cov);
+    w_ = llt.matrixL().solve(Mat2::Identity());
+    wa_ = w_ * along;
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const Eigen::Map<const Vec3> e(x[2]);
+    const Vec2 d(x[0][0] - x[1][0], x[0][1] - x[1][1]);
+    const Vec2 r = w_ * (d - delta_) - wa_ * e;
+    residual[0] = r.x(), residual[1] = r.y();
+    if (jacobians) {
+      for (int b = 0; b < 2; ++b) {
+        if (!jacobians[b]) continue;
+        const double sign = b == 0 ? 1.0 : -1.0;
+        jacobians[b][0] = sign * w_(0, 0), jacobians[b][1] = sign * w_(0, 1);
+        jacobians[b][2] = sign * w_(1, 0), jacobians[b][3] = sign * w_(1, 1);
+      }
+      if (jacobians[2]) {
+        for (int r_ = 0; r_ < 2; ++r_)
+          for (int c = 0; c < 3; ++c) jacobians[2][3 * r_ + c] = -wa_(r_, c);
+      }
+    }
+    return true;
+  }
+
+ private:
+  Vec2 delta_;
+  Mat2 w_;
+  Eigen::Matrix<double, 2, 3> wa_;
+};
+
+// W e: the prior of a track's shared errors (zero mean).
+class TrackCost final : public ceres::SizedCostFunction<3, 3> {
+ public:
+  explicit TrackCost(const Mat3& cov) {
+    const Eigen::LLT<Mat3> llt(cov);
+    w_ = llt.matrixL().solve(Mat3::Identity());
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const Vec3 r = w_ * Eigen::Map<const Vec3>(x[0]);
+    for (int k = 0; k < 3; ++k) residual[k] = r[k];
+    if (jacobians && jacobians[0]) {
+      for (int r_ = 0; r_ < 3; ++r_)
+        for (int c = 0; c < 3; ++c) jacobians[0][3 * r_ + c] = w_(r_, c);
+    }
+    return true;
+  }
+
+ private:
+  Mat3 w_;
+};
+
+void Check(const MapProblem& p) {
+  const auto index_ok = [&](int i) { return i >= 0 && i < p.beacons; };
+  for (std::size_t k = 0; k < p.links.size(); ++k) {
+    const MapLink& l = p.links[k];
+    if (!index_ok(l.i) || !index_ok(l.j) || l.i == l.j)
+      throw std::invalid_argument(fmt::format("beacon map: link {} joins {} and {} (of {} beacons)",
+                                              k, l.i, l.j, p.beacons));
+    if (!std::isfinite(l.range_m) || l.range_m < 0 || !(l.sigma_m > 0) || !std::isfinite(l.sigma_m))
+      throw std::invalid_argument(fmt::format(
+          "beacon map: link {} has range {} m, sigma {} m (need a finite range >= 0, sigma > 0)", k,
+          l.range_m, l.sigma_m));
+  }
+  for (std::size_t k = 0; k < p.priors.size(); ++k) {
+    const MapPrior& q = p.priors[k];
+    if (!index_ok(q.i))
+      throw std::invalid_argument(fmt::format("beacon map: prior {} on beacon {} (of {})", k, q.i,
+                                              p.beacons));
+    const Eigen::LLT<Mat2> llt(0.5 * (q.cov + q.cov.transpose()));
+    if (!q.position_n.allFinite() || !q.cov.allFinite() || !q.along.allFinite() ||
+        llt.info() != Eigen::Success ||
+        std::abs(q.cov(0, 1) - q.cov(1, 0)) > 1e-9 * (1 + q.cov.norm()))
+      throw std::invalid_argument(fmt::format(
+          "beacon map: prior {} on beacon {} is not finite or not symmetric positive definite", k,
+          q.i));
+    if (q.from != -1 && (q.track < 0 || !index_ok(q.from) || q.from == q.i ||
+                         !q.from_position_n.allFinite() || !q.from_along.allFinite()))
+      throw std::invalid_argument(fmt::format(
+          "beacon map: prior {} on beacon {} is relative to {} (needs a track and another beacon)",
+          k, q.i, q.from));
+    if (q.track < -1 || q.track >= static_cast<int>(p.tracks.size()))
+      throw std::invalid_argument(fmt::format("beacon map: prior {} on track {} (of {})", k,
+                                              q.track, p.tracks.size()));
+  }
+  for (std::size_t k = 0; k < p.tracks.size(); ++k) {
+    const Mat3& c = p.tracks[k].cov;
+    if (!c.allFinite() || !c.isApprox(c.transpose(), 1e-9) ||
+        Eigen::LLT<Mat3>(c).info() != Eigen::Success)
+      throw std::invalid_argument(
+          fmt::format("beacon map: track {} covariance is not symmetric positive definite", k));
+  }
+}
+
+// The problem's residual blocks on x (2 per beacon, then 3 per track).
+void Build(const MapProblem& problem, const MapLeastSquaresOptions& options,
+           std::vector<double>& x, ceres::Problem& p) {
+  const int n = problem.beacons;
+  for (int i = 0; i < n; ++i) p.AddParameterBlock(&x[2 * i], 2);
+  double* tracks = x.data() + 2 * n;
+  for (std::size_t k = 0; k < problem.tracks.size(); ++k) {
+    p.AddParameterBlock(tracks + 3 * k, 3);
+    p.AddResidualBlock(new TrackCost(problem.tracks[k].cov), nullptr, tracks + 3 * k);
+  }
+  for (const MapLink& l : problem.links) {
+    p.AddResidualBlock(new LinkCost(l.range_m, l.sigma_m),
+                       new ceres::HuberLoss(options.link_huber_sigma), &x[2 * l.i], &x[2 * l.j]);
+  }
+  for (const MapPrior& q : problem.priors) {
+    const Mat2 cov = 0.5 * (q.cov + q.cov.transpose());
+    if (q.track >= 0 && q.from >= 0)
+      p.AddResidualBlock(new RelativeTrackPriorCost(q.position_n - q.from_position_n, cov,
+                                                    q.along - q.from_along),
+                         nullptr, &x[2 * q.i], &x[2 * q.from], tracks + 3 * q.track);
+    else if (q.track >= 0)
+      p.AddResidualBlock(new TrackPriorCost(q.position_n, cov, q.along), nullptr, &x[2 * q.i],
+                         tracks + 3 * q.track);
+    else
+      p.AddResidualBlock(new PriorCost(q.position_n, cov), nullptr, &x[2 * q.i]);
+  }
+}
+
+// True when every connected part of the link graph holds two beacons with priors (or is one
+// beacon with a prior): the problem's gauge (translation, rotation) is fixed.
+bool Anchored(const MapProblem& p, std::string* why) {
+  std::vector<int> parent(p.beacons);
+  std::iota(parent.begin(), parent.end(), 0);
+  const auto find = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (const MapLink& l : p.links) parent[find(l.i)] = find(l.j);
+  for (const MapPrior& q : p.priors)
+    if (q.from >= 0) parent[find(q.i)] = find(q.from);
+  std::vector<int> size(p.beacons, 0), with_prior(p.beacons, 0);
+  std::vector<bool> has_prior(p.beacons, false);
+  for (const MapPrior& q : p.priors) has_prior[q.i] = true;
+  for (int i = 0; i < p.beacons; ++i) {
+    ++size[find(i)];
+    with_prior[find(i)] += has_prior[i];
+  }
+  for (int r = 0; r < p.beacons; ++r) {
+    if (size[r] == 0) continue;
+    if (with_prior[r] >= 2 || (size[r] == 1 && with_prior[r] == 1)) continue;
+    if (why)
+      *why = fmt::format("not anchored: {} beacon(s) linked to beacon {} with {} prior(s) (need 2)",
+                         size[r], r, with_prior[r]);
+    return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+MapSolution SolveMapLeastSquares(const MapProblem& problem,
+                                 const std::vector<std::vector<Vec2>>& starts,
+                                 const MapLeastSquaresOptions& options) {
+  std::string why;
+  if (!options.IsValid(&why)) throw std::invalid_argument("beacon map: " + why);
+  Check(problem);
+  if (starts.empty()) throw std::invalid_argument("beacon map: no start");
+  for (const auto& s : starts) {
+    if (static_cast<int>(s.size()) != problem.beacons)
+      throw std::invalid_argument(fmt::format("beacon map: a start of {} positions for {} beacons",
+                                              s.size(), problem.beacons));
+    for (const Vec2& p : s)
+      if (!p.allFinite()) throw std::invalid_argument("beacon map: a start is not finite");
+  }
+  MapSolution best;
+  if (!Anchored(problem, &best.why)) return best;
+  const int n = problem.beacons;
+  const int residuals = static_cast<int>(problem.links.size() + 2 * problem.priors.size());
+  best.dof = residuals - 2 * n;
+
+  double best_cost = std::numeric_limits<double>::infinity();
+  std::vector<double> x;
+  for (std::size_t s = 0; s < starts.size(); ++s) {
+    std::vector<double> xs(2 * n + 3 * problem.tracks.size(), 0.0);
+    for (int i = 0; i < n; ++i) xs[2 * i] = starts[s][i].x(), xs[2 * i + 1] = starts[s][i].y();
+    ceres::Problem p;
+    Build(problem, options, xs, p);
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    so.max_num_iterations = options.max_iterations;
+    so.num_threads = 1;
+    // Converged to round-off (not Ceres' 1e-6 defaults): the map must not depend on the frame.
+    so.function_tolerance = 1e-14;
+    so.gradient_tolerance = 1e-14;
+    so.parameter_tolerance = 1e-12;
+    so.logging_type = ceres::SILENT;
+    so.minimizer_progress_to_stdout = false;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &p, &summary);
+    const double chi2 = 2 * summary.final_cost;
+    best.start_chi2.push_back(chi2);
+    if (!summary.IsSolutionUsable() || !std::isfinite(chi2)) continue;
+    if (chi2 < best_cost) {
+      best_cost = chi2;
+      best.start = static_cast<int>(s);
+      best.iterations = static_cast<int>(summary.iterations.size());
+      x = std::move(xs);
+    }
+  }
+  if (x.empty()) {
+    best.why = "the solver found no usable solution from any start";
+    return best;
+  }
+  best.chi2 = best_cost;
+  best.position_n.resize(n);
+  for (int i = 0; i < n; ++i) best.position_n[i] = Vec2(x[2 * i], x[2 * i + 1]);
+  for (std::size_t k = 0; k < problem.tracks.size(); ++k)
+    best.track_errors.push_back(Vec3(x[2 * n + 3 * k], x[2 * n + 3 * k + 1], x[2 * n + 3 * k + 2]));
+  // The two parts of chi2: links (Huber rho of the squared whitened residual) and priors.
+  const double d2 = options.link_huber_sigma * options.link_huber_sigma;
+  for (const MapLink& l : problem.links) {
+    const double r = ((best.position_n[l.i] - best.position_n[l.j]).norm() - l.range_m) / l.sigma_m;
+    const double r2 = r * r;
+    best.chi2_links += r2 <= d2 ? r2 : 2 * options.link_huber_sigma * std::abs(r) - d2;
+  }
+  best.chi2_priors = best.chi2 - best.chi2_links;
+  best.prior_residuals = static_cast<int>(2 * problem.priors.size() + 3 * problem.tracks.size());
+  if (best.dof > 0) {
+    best.chi2_threshold = integrity::ChiSquareQuantile(best.dof, 1 - options.false_alarm);
+    best.consistent = best.chi2 <= best.chi2_threshold;
+  }
+  if (options.covariances) {
+    // Marginals at the solution: the problem rebuilt around x (the solver's copy is gone).
+    ceres::Problem p;
+    Build(problem, options, x, p);
+    ceres::Covariance::Options co;
+    co.algorithm_type = ceres::SPARSE_QR;
+    co.num_threads = 1;
+    ceres::Covariance covariance(co);
+    std::vector<std::pair<const double*, const double*>> blocks;
+    for (int i = 0; i < n; ++i) blocks.emplace_back(&x[2 * i], &x[2 * i]);
+    if (!covariance.Compute(blocks, &p)) {
+      best.why = "the map's covariance is rank deficient";
+      return best;
+    }
+    best.cov.resize(n);
+    for (int i = 0; i < n; ++i) {
+      double c[4];
+      covariance.GetCovarianceBlock(&x[2 * i], &x[2 * i], c);
+      Mat2 m;
+      m << c[0], c[1], c[2], c[3];
+      best.cov[i] = 0.5 * (m + m.transpose());
+    }
+  }
+  best.ok = true;
+  return best;
+}
+
+}  // namespace trailmark::beacons

@@ -1,0 +1,96 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// The beacon map as one sparse nonlinear least-squares problem (issue 22; beyond the paper,
+/// whose map is MDS of the completed distance matrix): every beacon-to-beacon range as a
+/// residual under a robust loss, every surveyed beacon and every drop position as a Gaussian
+/// prior on its beacon, solved by Levenberg-Marquardt (Ceres) from one or several starts, the
+/// lowest cost kept (a chain of triangles folds either way; the priors say which). Marginal
+/// covariances of each beacon from the Jacobian at the solution, and the test of the solution's
+/// residuals against their stated noise (a map that disagrees with its noise is not to be
+/// used). No I/O.
+
+#include <string>
+#include <vector>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark::beacons {
+
+struct MapLink {
+  int i = 0, j = 0;       ///< beacon indices, i != j
+  double range_m = 0;     ///< the pair's measured distance (e.g. the median of its samples)
+  double sigma_m = 0.1;   ///< of `range_m` (for a median of n: 1.2533 sigma / sqrt(n))
+};
+
+/// The errors a dead reckoning shares between all the positions it gives (ins/dead_reckoning.h):
+/// e = [heading offset rad, heading rate rad/s, step scale], zero mean, covariance `cov`. Drop
+/// priors of one track are correlated through e: its states are estimated with the map.
+struct MapTrack {
+  Mat3 cov = Mat3::Identity();  ///< symmetric positive definite
+};
+
+/// A Gaussian prior on a beacon: position_n + along e (its track's shared errors, when `track`
+/// >= 0) + white noise of covariance `cov`.
+struct MapPrior {
+  int i = 0;
+  Vec2 position_n = Vec2::Zero();
+  Mat2 cov = Mat2::Identity();  ///< symmetric positive definite
+  int track = -1;
+  /// d position / d e at this prior: [perp(sum d), sum (t - t0) perp(d), sum d] over the
+  /// track's steps up to the drop (perp(x, y) = (-y, x)).
+  Eigen::Matrix<double, 2, 3> along = Eigen::Matrix<double, 2, 3>::Zero();
+  /// >= 0: the prior is on the displacement from beacon `from` (the same track's previous
+  /// drop, whose position_n and along are `from_position_n`, `from_along`): the dead
+  /// reckoning's white errors are independent between drops, not at each drop. `cov` is then
+  /// the covariance of that displacement.
+  int from = -1;
+  Vec2 from_position_n = Vec2::Zero();
+  Eigen::Matrix<double, 2, 3> from_along = Eigen::Matrix<double, 2, 3>::Zero();
+};
+
+struct MapProblem {
+  int beacons = 0;
+  std::vector<MapLink> links;
+  std::vector<MapPrior> priors;
+  std::vector<MapTrack> tracks;
+};
+
+struct MapLeastSquaresOptions {
+  /// Huber loss on each link's whitened residual beyond this many sigmas (a pair whose every
+  /// sample was long, NLOS, pulls linearly, not quadratically).
+  double link_huber_sigma = 2.0;
+  int max_iterations = 100;
+  /// The solution's robust chi-square is tested against its degrees of freedom at this false
+  /// alarm rate (a map that disagrees with its noise: wrong fold, a moved anchor).
+  double false_alarm = 1e-3;
+  bool covariances = true;
+  bool IsValid(std::string* why) const;
+};
+
+struct MapSolution {
+  bool ok = false;                   ///< solved and covariances (when asked) computed
+  std::string why;                   ///< when not ok
+  std::vector<Vec2> position_n;      ///< per beacon
+  std::vector<Mat2> cov;             ///< per beacon (marginal), when options.covariances
+  double chi2 = 0;                   ///< 2 x the final robust cost (whitened residuals)
+  double chi2_links = 0;             ///< the links' part of chi2 (robust)
+  double chi2_priors = 0;            ///< the priors' part (surveys, drops, tracks' errors)
+  int prior_residuals = 0;           ///< scalar residuals of the priors (2 each, 3 per track)
+  int dof = 0;                       ///< scalar residuals - 2 x beacons
+  double chi2_threshold = 0;         ///< the chi-square quantile at 1 - false_alarm (dof > 0)
+  bool consistent = true;            ///< chi2 <= chi2_threshold (or dof <= 0)
+  int start = 0;                     ///< index of the start that won
+  int iterations = 0;
+  std::vector<double> start_chi2;    ///< per start
+  std::vector<Vec3> track_errors;    ///< the estimated e of each track
+};
+
+/// Solves `problem` from each of `starts` (each a position per beacon) and keeps the lowest
+/// cost. Throws std::invalid_argument for indices out of range, non-finite values, sigmas <= 0,
+/// a prior covariance that is not positive definite, or a start of the wrong size. The gauge
+/// must be fixed by the priors (two beacons with priors in every connected part): otherwise the
+/// solution is not ok ("not anchored").
+MapSolution SolveMapLeastSquares(const MapProblem& problem, const std::vector<std::vector<Vec2>>& starts,
+                                 const MapLeastSquaresOptions& options = {});
+
+}  // namespace trailmark::beacons
