@@ -24,6 +24,14 @@ bool MapLeastSquaresOptions::IsValid(std::string* why) const {
 
 namespace {
 
+// A fixed-size matrix into Ceres' row-major Jacobian block.
+template <int R, int C>
+void WriteRowMajor(const Eigen::Matrix<double, R, C>& m, double* out) {
+  using RowMajor = Eigen::Matrix<double, R, C, (C > 1 ? Eigen::RowMajor : Eigen::ColMajor)>;
+  Eigen::Map<RowMajor> block(out);
+  block = m;
+}
+
 // (|p_i - p_j| - range) / sigma, analytic Jacobians (u / sigma, -u / sigma).
 class LinkCost final : public ceres::SizedCostFunction<1, 2, 2> {
  public:
@@ -55,11 +63,7 @@ class PriorCost final : public ceres::SizedCostFunction<2, 2> {
   bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
     const Vec2 r = w_ * (Vec2(x[0][0], x[0][1]) - mu_);
     residual[0] = r.x(), residual[1] = r.y();
-    if (jacobians && jacobians[0]) {
-      // Row-major 2 x 2.
-      jacobians[0][0] = w_(0, 0), jacobians[0][1] = w_(0, 1);
-      jacobians[0][2] = w_(1, 0), jacobians[0][3] = w_(1, 1);
-    }
+    if (jacobians && jacobians[0]) WriteRowMajor(w_, jacobians[0]);
     return true;
   }
 
@@ -82,14 +86,8 @@ class TrackPriorCost final : public ceres::SizedCostFunction<2, 2, 3> {
     const Vec2 r = w_ * (Vec2(x[0][0], x[0][1]) - mu_) - wa_ * e;
     residual[0] = r.x(), residual[1] = r.y();
     if (jacobians) {
-      if (jacobians[0]) {
-        jacobians[0][0] = w_(0, 0), jacobians[0][1] = w_(0, 1);
-        jacobians[0][2] = w_(1, 0), jacobians[0][3] = w_(1, 1);
-      }
-      if (jacobians[1]) {
-        for (int r_ = 0; r_ < 2; ++r_)
-          for (int c = 0; c < 3; ++c) jacobians[1][3 * r_ + c] = -wa_(r_, c);
-      }
+      if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
+      if (jacobians[1]) WriteRowMajor(Eigen::Matrix<double, 2, 3>(-wa_), jacobians[1]);
     }
     return true;
   }
@@ -116,16 +114,9 @@ class RelativeTrackPriorCost final : public ceres::SizedCostFunction<2, 2, 2, 3>
     const Vec2 r = w_ * (d - delta_) - wa_ * e;
     residual[0] = r.x(), residual[1] = r.y();
     if (jacobians) {
-      for (int b = 0; b < 2; ++b) {
-        if (!jacobians[b]) continue;
-        const double sign = b == 0 ? 1.0 : -1.0;
-        jacobians[b][0] = sign * w_(0, 0), jacobians[b][1] = sign * w_(0, 1);
-        jacobians[b][2] = sign * w_(1, 0), jacobians[b][3] = sign * w_(1, 1);
-      }
-      if (jacobians[2]) {
-        for (int r_ = 0; r_ < 2; ++r_)
-          for (int c = 0; c < 3; ++c) jacobians[2][3 * r_ + c] = -wa_(r_, c);
-      }
+      if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
+      if (jacobians[1]) WriteRowMajor(Mat2(-w_), jacobians[1]);
+      if (jacobians[2]) WriteRowMajor(Eigen::Matrix<double, 2, 3>(-wa_), jacobians[2]);
     }
     return true;
   }
@@ -146,10 +137,7 @@ class TrackCost final : public ceres::SizedCostFunction<3, 3> {
   bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
     const Vec3 r = w_ * Eigen::Map<const Vec3>(x[0]);
     for (int k = 0; k < 3; ++k) residual[k] = r[k];
-    if (jacobians && jacobians[0]) {
-      for (int r_ = 0; r_ < 3; ++r_)
-        for (int c = 0; c < 3; ++c) jacobians[0][3 * r_ + c] = w_(r_, c);
-    }
+    if (jacobians && jacobians[0]) WriteRowMajor(w_, jacobians[0]);
     return true;
   }
 

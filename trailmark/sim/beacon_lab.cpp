@@ -247,13 +247,7 @@ void AddPdrSteps(const Walk& walk, PdrErrorOptions pdr_options, double heading_s
                  Random& pdr_rng, MissionData& m) {
   pdr_options.initial_heading_error_rad = heading_sigma_rad * pdr_rng.Normal();
   PdrErrorModel pdr(pdr_options, pdr_rng.Fork());
-  for (const auto& st : walk.steps) {
-    const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
-    const double var = pdr.ReportedVariance((st.to - st.from).norm());
-    m.steps.push_back({st.t0, st.t1, "ff1", Vec3(d.x(), d.y(), 0), Vec3(var, var, 1e-4)});
-  }
-  for (const auto& s : walk.truth)
-    m.truth.push_back({s.t, "ff1", Vec3(s.position.x(), s.position.y(), 0)});
+  AppendPdrWalk(pdr, walk, "ff1", m);
 }
 
 void SortByTime(MissionData& m) {

@@ -162,13 +162,7 @@ SimulatedMission SimulateSearch(const FloorPlan& world, FloorPlan map, const Vec
   m.info.floorplan = "floorplan.geojson";
   m.info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(entry.x(), entry.y(), 0), 0.2, heading, 0.05));
   PdrErrorModel pdr(o.pdr, pdr_rng);
-  for (const auto& st : walk.steps) {
-    const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
-    const double var = pdr.ReportedVariance((st.to - st.from).norm());
-    m.steps.push_back({st.t0, st.t1, "ff1", Vec3(d.x(), d.y(), 0), Vec3(var, var, 1e-4)});
-  }
-  for (const auto& s : walk.truth)
-    m.truth.push_back({s.t, "ff1", Vec3(s.position.x(), s.position.y(), 0)});
+  AppendPdrWalk(pdr, walk, "ff1", m);
   m.events.push_back({0.0, "ff1", "enter", ""});
   for (const auto& st : walk.stops) {
     if (st.t_stop > o.duration_s) break;

@@ -40,4 +40,14 @@ double PdrErrorModel::ReportedVariance(double step_length_m) const {
          0.5 * scale_term * scale_term;
 }
 
+void AppendPdrWalk(PdrErrorModel& pdr, const Walk& walk, const std::string& agent, MissionData& m) {
+  for (const auto& st : walk.steps) {
+    const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
+    const double var = pdr.ReportedVariance((st.to - st.from).norm());
+    m.steps.push_back({st.t0, st.t1, agent, Vec3(d.x(), d.y(), 0), Vec3(var, var, 1e-4)});
+  }
+  for (const auto& s : walk.truth)
+    m.truth.push_back({s.t, agent, Vec3(s.position.x(), s.position.y(), 0)});
+}
+
 }  // namespace trailmark

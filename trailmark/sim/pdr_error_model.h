@@ -10,9 +10,12 @@
 /// after the 400 m walk) in order of magnitude; they are the simulator's, not a fitted model.
 
 #include <optional>
+#include <string>
 
 #include "trailmark/core/random.h"
+#include "trailmark/core/mission.h"
 #include "trailmark/core/types.h"
+#include "trailmark/sim/walker.h"
 
 namespace trailmark {
 
@@ -63,5 +66,9 @@ class PdrErrorModel {
   double turn_scale_;
   std::optional<double> last_true_heading_rad_;
 };
+
+/// The steps of `walk` as `pdr` measures them (with their reported variance) and its truth,
+/// appended to `m` for `agent`.
+void AppendPdrWalk(PdrErrorModel& pdr, const Walk& walk, const std::string& agent, MissionData& m);
 
 }  // namespace trailmark
