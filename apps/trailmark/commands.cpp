@@ -146,16 +146,21 @@ Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
   const Metrics metrics = Evaluate(mission.info(), truth, estimates);
   WriteMetricsJson(metrics_out, metrics);
   if (print) {
-    fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>6}\n", "node",
-               "kind", "samples", "mean m", "median", "p95 m", "max m", "final m", "dist m",
-               "mean %dist", "in95 %");
+    // in95 %: truth inside the ellipse of the estimate in force at each truth instant; own %: at
+    // each estimate's own instant (metrics.h).
+    fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>6} {:>6}\n",
+               "node", "kind", "samples", "mean m", "median", "p95 m", "max m", "final m",
+               "dist m", "mean %dist", "in95 %", "own %");
     auto row = [](const NodeMetrics& m) {
       fmt::print(
-          "{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9} {:>6.0f}\n",
+          "{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9} {:>6.0f} "
+          "{:>6}\n",
           m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m,
           m.stats.p95_m, m.stats.max_m, m.stats.final_m, m.distance_m,
           m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-",
-          100.0 * m.stats.in95);
+          100.0 * m.stats.in95,
+          m.at_estimates.samples > 0 ? fmt::format("{:.0f}", 100.0 * m.at_estimates.in95)
+                                     : std::string("-"));
     };
     for (const auto& m : metrics.nodes) row(m);
     row(metrics.agents);

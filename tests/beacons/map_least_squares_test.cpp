@@ -84,6 +84,30 @@ TEST(MapLeastSquares, MarginalCovariancesAreHonestOverMonteCarlo) {
   EXPECT_NEAR(nees / n, 2.0, 0.3);
 }
 
+TEST(MapLeastSquares, MarginalsEqualCeresCovarianceWithTracksAndTheRobustLossActive) {
+  // Our sparse-Cholesky marginals against ceres::Covariance (SPARSE_QR) on a problem with a
+  // track's shared errors, drop priors on it and one NLOS link far into the Huber loss.
+  Random rng(21);
+  const auto truth = UTrail();
+  MapProblem p = Problem(truth, 0.1, 0.0, rng);
+  p.links[5].range_m += 1.5;  // NLOS
+  p.tracks.push_back({Vec3(0.05 * 0.05, 1e-6, 0.03 * 0.03).asDiagonal()});
+  for (auto& q : p.priors) {
+    if (q.i == 4 || q.i == 12) continue;
+    q.track = 0;
+    q.along << -truth[q.i].y(), 0.5 * q.i, truth[q.i].x(), truth[q.i].x(), 0.1 * q.i, truth[q.i].y();
+  }
+  MapLeastSquaresOptions ours, reference;
+  reference.reference_covariance = true;
+  const MapSolution a = SolveMapLeastSquares(p, {truth}, ours);
+  const MapSolution b = SolveMapLeastSquares(p, {truth}, reference);
+  ASSERT_TRUE(a.ok) << a.why;
+  ASSERT_TRUE(b.ok) << b.why;
+  ASSERT_EQ(a.cov.size(), truth.size());
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    EXPECT_LT((a.cov[i] - b.cov[i]).norm(), 1e-9 * (1 + b.cov[i].norm())) << i;
+}
+
 TEST(MapLeastSquares, AMovedSurveyIsInconsistent) {
   Random rng(7);
   const auto truth = UTrail();

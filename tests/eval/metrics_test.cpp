@@ -51,6 +51,30 @@ TEST(Evaluate, AgentOnlineSemanticsHandComputed) {
   EXPECT_EQ(m.agents.stats.samples, 4u);
 }
 
+TEST(Evaluate, EllipsesAreAlsoCheckedAtEachEstimatesOwnInstant) {
+  // Truth along x at 1 m/s, samples at t = 0..4. Estimates exact at their own time (t = 1.5 and
+  // t = 3.25: between truth samples) with a 0.1 m sigma, and one after the truth ends.
+  std::vector<TruthSample> truth;
+  for (int t = 0; t <= 4; ++t) truth.push_back({double(t), "ff1", Vec3(t, 0, 0)});
+  std::vector<Estimate> est{{1.5, "ff1", Vec3(1.5, 0, 0), 0.01, 0, 0.01},
+                            {3.25, "ff1", Vec3(3.25, 0.3, 0), 0.01, 0, 0.01},
+                            {9.0, "ff1", Vec3(9, 0, 0), 0.01, 0, 0.01}};
+  const Metrics m = Evaluate(Info(), truth, est);
+  const NodeMetrics& n = m.nodes[0];
+  // Held to the truth instants t = 2, 3 the first row is 0.5 and 1.5 m off: outside its ellipse.
+  EXPECT_EQ(n.stats.samples, 3u);
+  EXPECT_NEAR(n.stats.in95, 0.0, 1e-12);
+  // At their own instants: 0 m (NEES 0) and 0.3 m (NEES 9 > 5.99); t = 9 is past the truth.
+  ASSERT_EQ(n.at_estimates.samples, 2u);
+  EXPECT_NEAR(n.series_at_estimates[0].error_m, 0.0, 1e-12);
+  EXPECT_NEAR(n.series_at_estimates[1].error_m, 0.3, 1e-12);
+  EXPECT_NEAR(n.series_at_estimates[1].nees, 9.0, 1e-9);
+  EXPECT_NEAR(n.at_estimates.in95, 0.5, 1e-12);
+  EXPECT_NEAR(n.at_estimates.mean_nees, 4.5, 1e-9);
+  EXPECT_EQ(m.agents.at_estimates.samples, 2u);
+  EXPECT_NEAR(m.agents.at_estimates.in95, 0.5, 1e-12);
+}
+
 TEST(Evaluate, StaticNodesAtEstimatesAndEndAgainstTruthInForce) {
   // Crumb c1 dropped at (5,0) at t=1, kicked to (6,0) at t=3. Mission ends at t=4 (agent truth).
   std::vector<TruthSample> truth{{0, "ff1", Vec3(0, 0, 0)}, {1, "c1", Vec3(5, 0, 0)},

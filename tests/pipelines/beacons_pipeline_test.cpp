@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <fstream>
 
 #include "pipelines/run_named.h"
@@ -128,6 +129,34 @@ TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClose
             ekf.summary.numbers.at("beacons"));
   EXPECT_LT(ekf.metrics.agents.stats.mean_m,
             0.5 * pdr.metrics.agents.stats.mean_m);  // 0.57 vs 2.92 m
+}
+
+TEST(BeaconsPipeline, HoldsOnANeighbourOnlyTrailWithImplausibleLinks) {
+  // A trail laid out by someone else (issue 22): neighbour-only links, NLOS long tails, 15 %
+  // bearing outliers; seed 2 of the development seeds (the reported ones are 101-124). Two
+  // beacon links of 0 m and 1e6 m are added: counted and reported, never a NaN.
+  const SimulatedMission sim = SimulateShapedTrail({}, 2);
+  MissionData data = sim.data;
+  const std::size_t k = data.ranges.size() / 2;
+  const TimeS t = data.ranges[k].t;
+  data.ranges.insert(data.ranges.begin() + static_cast<long>(k) + 1,
+                     {{t, "b02", "b03", 0.0, 0.1, "ultrasound"},
+                      {t, "b02", "b04", 1e6, 0.1, "ultrasound"}});
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const Outcome ours = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
+  const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
+  EXPECT_GE(ours.summary.numbers.at("implausible_beacon_links"), 2.0);
+  EXPECT_TRUE(std::any_of(ours.summary.notes.begin(), ours.summary.notes.end(), [](const std::string& n) {
+    return n.find("implausible") != std::string::npos;
+  }));
+  // The issue's targets (median <= 0.6 m, p75 <= 0.9 m; in95 >= 85 % at the estimates' own
+  // instants) and better than dead reckoning.
+  EXPECT_LE(ours.metrics.agents.stats.median_m, 0.6);
+  EXPECT_LE(ours.metrics.agents.stats.p75_m, 0.9);
+  EXPECT_LT(ours.metrics.agents.stats.p75_m, pdr.metrics.agents.stats.p75_m);
+  EXPECT_GE(ours.metrics.agents.at_estimates.in95, 0.85);
 }
 
 TEST(BeaconsPipeline, BadInputIsReportedClearly) {

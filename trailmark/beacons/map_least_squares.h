@@ -64,6 +64,9 @@ struct MapLeastSquaresOptions {
   /// alarm rate (a map that disagrees with its noise: wrong fold, a moved anchor).
   double false_alarm = 1e-3;
   bool covariances = true;
+  /// The marginals by ceres::Covariance (SPARSE_QR) instead of our sparse Cholesky: the
+  /// reference the tests compare with (slower: 0.9 s against 0.1 s at 1,000 beacons).
+  bool reference_covariance = false;
   bool IsValid(std::string* why) const;
 };
 

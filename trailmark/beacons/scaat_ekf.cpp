@@ -62,14 +62,22 @@ bool ScaatEkfOptions::IsValid(std::string* why) const {
   if (!(gate_sigma > 0) || !(gate_chi2_2dof > 0)) return fail("gates must be > 0");
   if (!(scale_min > 0) || !(scale_max > scale_min)) return fail("need 0 < scale_min < scale_max");
   if (max_considered_beacons < 1) return fail("max_considered_beacons must be >= 1");
+  if (!(range_outlier_probability >= 0 && range_outlier_probability < 1) ||
+      !(bearing_outlier_probability >= 0 && bearing_outlier_probability < 1)) {
+    return fail("outlier probabilities must be in [0, 1)");
+  }
+  if (!(range_outlier_span_m > 0)) return fail("range_outlier_span_m must be > 0");
+  if (!(min_inlier_probability >= 0 && min_inlier_probability < 1))
+    return fail("min_inlier_probability must be in [0, 1)");
   return true;
 }
 
 std::string ScaatEkfSummary::BriefReport() const {
   return fmt::format(
-      "SCAAT EKF: {} steps, {} range / {} bearing / {} position updates, {} gated, {} skipped, "
-      "{} refused by the integrity check{}",
-      steps, range_updates, bearing_updates, position_updates, gated, skipped, refused,
+      "SCAAT EKF: {} steps, {} range / {} bearing / {} position updates ({} down-weighted as "
+      "likely outliers), {} gated, {} skipped, {} refused by the integrity check{}",
+      steps, range_updates, bearing_updates, position_updates, down_weighted, gated, skipped,
+      refused,
       beacons_marginalized > 0
           ? fmt::format("; {} considered beacon(s) marginalized out", beacons_marginalized)
           : "");
@@ -138,11 +146,22 @@ void ScaatEkf::PredictStep(const Vec2& d, const Mat2& delta_cov, double fraction
   Condition();
 }
 
+double ScaatEkf::InlierProbability(double y, double S, double outlier_density,
+                                   double outlier_probability) const {
+  if (!(outlier_density > 0) || !(outlier_probability > 0)) return 1.0;
+  // (1 - p) N(y; 0, S) / ((1 - p) N(y; 0, S) + p c), computed in logs (a far outlier underflows)
+  const double log_in = std::log1p(-outlier_probability) - 0.5 * y * y / S -
+                        0.5 * std::log(2 * std::numbers::pi * S);
+  const double log_out = std::log(outlier_probability * outlier_density);
+  return 1.0 / (1.0 + std::exp(std::min(log_out - log_in, 700.0)));
+}
+
 template <int M>
 UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
                               const Eigen::Matrix<double, M, 4>& H,
                               const Eigen::Matrix<double, M, M>& R, double gate,
-                              const Admit& admit) {
+                              const Admit& admit, double outlier_density,
+                              double outlier_probability) {
   const Eigen::Matrix<double, M, M> S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) {
@@ -158,16 +177,23 @@ UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
     ++summary_.refused;
     return UpdateResult::kRefused;
   }
-  if (last_nis_ > gate) {
+  const bool mixture = M == 1 && outlier_density > 0;
+  const double w =
+      mixture ? InlierProbability(y(0), S(0, 0), outlier_density, outlier_probability) : 1.0;
+  if (mixture ? w < options_.min_inlier_probability : last_nis_ > gate) {
     ++summary_.gated;
     return UpdateResult::kGated;
   }
   const Eigen::Matrix<double, 4, M> K =
       ldlt.solve(H * P_).transpose();  // P H^T S^-1 (S, P symmetric)
-  x_ += K * y;
+  const Eigen::Vector4d dx = K * y;
   const Cov IKH = Cov::Identity() - K * H;
-  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();  // Joseph form
-  if (!slots_.empty()) cross_ = IKH * cross_;
+  const Cov P_updated = IKH * P_ * IKH.transpose() + K * R * K.transpose();  // Joseph form
+  // Mixture: w N(x + dx, P_updated) + (1 - w) N(x, P), collapsed to its two moments.
+  x_ += w * dx;
+  P_ = w * P_updated + (1 - w) * P_ + w * (1 - w) * dx * dx.transpose();
+  if (!slots_.empty()) cross_ -= w * (K * H * cross_);
+  summary_.down_weighted += w < 0.5;
   Condition();
   return UpdateResult::kAccepted;
 }
@@ -255,7 +281,8 @@ Eigen::Matrix<double, 4, 2> ScaatEkf::BeaconCrossCovariance(int beacon_key) cons
 UpdateResult ScaatEkf::UpdateConsider(double y, const Eigen::Matrix<double, 1, 4>& H,
                                       const Eigen::RowVector2d& H_b, double r, int key,
                                       const BeaconPosition& beacon, double gate,
-                                      const Admit& admit) {
+                                      const Admit& admit, double outlier_density,
+                                      double outlier_probability) {
   const int j = Consider(key, beacon.cov);
   // Schmidt-Kalman update (Schmidt 1966; Simon, Optimal State Estimation, sec. 7.5): the
   // measurement h(x, b); the gain and covariance of x use cov(x, b), b itself is not updated.
@@ -277,16 +304,22 @@ UpdateResult ScaatEkf::UpdateConsider(double y, const Eigen::Matrix<double, 1, 4
     ++summary_.refused;
     return UpdateResult::kRefused;
   }
-  if (last_nis_ > gate) {
+  const bool mixture = outlier_density > 0;
+  const double w = mixture ? InlierProbability(y, S, outlier_density, outlier_probability) : 1.0;
+  if (mixture ? w < options_.min_inlier_probability : last_nis_ > gate) {
     ++summary_.gated;
     return UpdateResult::kGated;
   }
   const Eigen::Vector4d K = PHt / S;
   // cov(z, beacons) = H cross + H_b cov(b_j, beacons)
   const Eigen::RowVectorXd zb = H * cross_ + H_b * beacons_.middleRows<2>(2 * j);
-  x_ += K * y;
-  P_ -= K * S * K.transpose();
-  cross_ -= K * zb;
+  // Mixture (w = 1 without one): w N(x + K y, P - K S K^T) + (1 - w) N(x, P), collapsed; the
+  // beacons are not updated in either hypothesis, so their cross-covariance mixes linearly.
+  const Eigen::Vector4d dx = K * y;
+  x_ += w * dx;
+  P_ += -w * K * S * K.transpose() + w * (1 - w) * dx * dx.transpose();
+  cross_ -= w * K * zb;
+  summary_.down_weighted += w < 0.5;
   Condition();
   return UpdateResult::kAccepted;
 }
@@ -307,15 +340,18 @@ UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m,
   Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
   H.head<2>() = Hp;
   const double gate = options_.gate_sigma * options_.gate_sigma;
+  const double range_density =
+      options_.mixture_updates ? 1.0 / options_.range_outlier_span_m : 0.0;  // uniform outliers
   UpdateResult r;
   if (options_.consider_beacons && beacon_key >= 0) {
-    r = UpdateConsider(range_m - predicted, H, -Hp, s * s, beacon_key, beacon, gate, admit);
+    r = UpdateConsider(range_m - predicted, H, -Hp, s * s, beacon_key, beacon, gate, admit,
+                       range_density, options_.range_outlier_probability);
   } else {
     Eigen::Matrix<double, 1, 1> R;
     R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();  // the beacon's uncertainty (H_b = -H_p)
     Eigen::Matrix<double, 1, 1> y;
     y(0) = range_m - predicted;
-    r = Update<1>(y, H, R, gate, admit);
+    r = Update<1>(y, H, R, gate, admit, range_density, options_.range_outlier_probability);
   }
   summary_.range_updates += r == UpdateResult::kAccepted;
   return r;
@@ -334,16 +370,18 @@ UpdateResult ScaatEkf::UpdateBearing(const BeaconPosition& beacon, double bearin
   Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
   H.head<2>() = Hp;
   const double gate = options_.gate_sigma * options_.gate_sigma;
+  const double bearing_density =
+      options_.mixture_updates ? 0.5 / std::numbers::pi : 0.0;  // uniform on the circle
   UpdateResult r;
   if (options_.consider_beacons && beacon_key >= 0) {
     r = UpdateConsider(WrapAngle(bearing_rad - predicted), H, -Hp, s * s, beacon_key, beacon,
-                       gate, admit);
+                       gate, admit, bearing_density, options_.bearing_outlier_probability);
   } else {
     Eigen::Matrix<double, 1, 1> R;
     R(0, 0) = s * s + Hp * beacon.cov * Hp.transpose();
     Eigen::Matrix<double, 1, 1> y;
     y(0) = WrapAngle(bearing_rad - predicted);
-    r = Update<1>(y, H, R, gate, admit);
+    r = Update<1>(y, H, R, gate, admit, bearing_density, options_.bearing_outlier_probability);
   }
   summary_.bearing_updates += r == UpdateResult::kAccepted;
   return r;

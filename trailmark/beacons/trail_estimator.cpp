@@ -82,8 +82,18 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
            "a measurement waits this long for the step spanning its time (0: at once)");
     t.Flag("extrapolate", &O::extrapolate,
            "between steps, emit the position ahead of the last step by its velocity");
+    t.Choice("outliers", [](O& o) -> bool& { return o.ekf.mixture_updates; },
+             std::vector<std::pair<std::string, bool>>{{"mixture", true}, {"gate", false}},
+             "mixture: ranges and bearings weighed by their inlier probability under a "
+             "Gaussian + uniform-outlier mixture (ours); gate: cut at gate_sigma");
+    t.Real("range_outlier_probability",
+           [](O& o) -> double& { return o.ekf.range_outlier_probability; }, "",
+           OptionBounds::Between(0, 0.99), "mixture: prior share of outlier ranges");
+    t.Real("bearing_outlier_probability",
+           [](O& o) -> double& { return o.ekf.bearing_outlier_probability; }, "",
+           OptionBounds::Between(0, 0.99), "mixture: prior share of outlier bearings");
     t.Real("gate_sigma", [](O& o) -> double& { return o.ekf.gate_sigma; }, "",
-           OptionBounds::Positive(), "EKF innovation gate, in sigmas");
+           OptionBounds::Positive(), "EKF innovation gate, in sigmas (outliers=gate)");
     t.Real("heading_sigma_rad", [](O& o) -> double& { return o.ekf.initial_heading_sigma_rad; },
            "rad", OptionBounds::Positive(), "initial sigma of the PDR heading correction");
     t.Real("heading_walk_rad_per_sqrt_m",
@@ -562,6 +572,12 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
         "{} beacon(s) could not be placed in the navigation frame: the layout needs two surveyed "
         "beacons, or drop events with steps (the dropper's position), in its connected part",
         ms.unknown));
+  }
+  if (implausible_links_ > 0) {
+    summary.notes.push_back(fmt::format(
+        "{} beacon-to-beacon range(s) not used as implausible (not above 0 m, or beyond the "
+        "map's max_link_m of {:.1f} m)",
+        implausible_links_, options_.map.max_link_m));
   }
   if (no_position_ > 0) {
     summary.notes.push_back(fmt::format(

@@ -73,6 +73,21 @@ ErrorStatistics ComputeStatistics(const std::vector<ErrorSample>& series) {
   return s;
 }
 
+EllipseCheck ComputeEllipseCheck(const std::vector<ErrorSample>& at_estimates) {
+  EllipseCheck c;
+  c.samples = at_estimates.size();
+  if (at_estimates.empty()) return c;
+  std::size_t inside = 0, finite = 0;
+  double sum = 0;
+  for (const auto& x : at_estimates) {
+    inside += x.nees <= kChi2Dof2P95;
+    if (std::isfinite(x.nees)) sum += x.nees, ++finite;
+  }
+  c.in95 = static_cast<double>(inside) / static_cast<double>(c.samples);
+  c.mean_nees = finite > 0 ? sum / static_cast<double>(finite) : 0.0;
+  return c;
+}
+
 Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
                  const std::vector<Estimate>& estimates) {
   std::map<std::string, std::vector<const TruthSample*>> truth_by_id;
@@ -121,6 +136,19 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
         }
         m.series.push_back(Sample(s->t, *es[k - 1], s->position_n));
       }
+      // Each estimate at its own instant, the truth interpolated between its samples.
+      std::size_t j = 0;  // tr[j]->t <= e->t < tr[j + 1]->t
+      for (const Estimate* e : es) {
+        if (tr.empty() || e->t < tr.front()->t || e->t > tr.back()->t) continue;
+        while (j + 1 < tr.size() && tr[j + 1]->t <= e->t) ++j;
+        Vec3 truth_n = tr[j]->position_n;
+        if (j + 1 < tr.size() && tr[j + 1]->t > tr[j]->t) {
+          const double a = (e->t - tr[j]->t) / (tr[j + 1]->t - tr[j]->t);
+          truth_n += a * (tr[j + 1]->position_n - tr[j]->position_n);
+        }
+        m.series_at_estimates.push_back(Sample(e->t, *e, truth_n));
+      }
+      m.at_estimates = ComputeEllipseCheck(m.series_at_estimates);
     } else {
       std::size_t j = 0;  // tr[j] is the truth in force
       auto truth_at = [&](TimeS t) {
@@ -137,6 +165,9 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
     FinishPercentages(m);
     if (m.kind == NodeKind::kAgent) {
       out.agents.series.insert(out.agents.series.end(), m.series.begin(), m.series.end());
+      out.agents.series_at_estimates.insert(out.agents.series_at_estimates.end(),
+                                            m.series_at_estimates.begin(),
+                                            m.series_at_estimates.end());
       out.agents.distance_m += m.distance_m;
       out.agents.uncovered += m.uncovered;
       if (m.mean_pct_of_distance) {
@@ -155,6 +186,7 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
                      [](const auto& a, const auto& b) { return a.t < b.t; });
     pooled->stats = ComputeStatistics(pooled->series);
   }
+  out.agents.at_estimates = ComputeEllipseCheck(out.agents.series_at_estimates);
   // Final error of the pool: mean of the nodes' final errors.
   for (auto [pooled, kind_is_agent] : {std::pair{&out.agents, true},
                                        std::pair{&out.static_nodes, false}}) {

@@ -5,7 +5,11 @@
 ///
 /// Online semantics: at an evaluation instant t the estimate in force is the latest row of that
 /// node with time <= t; instants before a node's first estimate are counted as `uncovered` and
-/// not scored. Agents are scored at every truth sample. Static nodes (crumbs, landmarks, base)
+/// not scored. Agents are scored at every truth sample. Their ellipses are also checked at each
+/// estimate's own instant (`at_estimates`): an estimate row claims where the node is at its time
+/// t (spec: "the estimate of node id at time t"), so its 95 % ellipse is tested against the truth
+/// at t, linearly interpolated between the truth samples around t; held to a later truth instant
+/// it also carries the motion since t, which no ellipse of time t claims to cover. Static nodes (crumbs, landmarks, base)
 /// are scored at each of their estimate rows and at the end of the mission, against the truth
 /// in force then (a kicked crumb has a second truth row).
 
@@ -43,6 +47,14 @@ struct ErrorStatistics {
   double mean_nees = 0;
 };
 
+/// The ellipse check at the estimates' own instants (agents; see the file comment).
+struct EllipseCheck {
+  std::size_t samples = 0;  ///< estimate rows within the node's truth span
+  double in95 = 0;          ///< share with NEES <= 5.991 (0.95 when honest)
+  double mean_nees = 0;     ///< over the finite NEES (2 when honest)
+};
+EllipseCheck ComputeEllipseCheck(const std::vector<ErrorSample>& at_estimates);
+
 struct NodeMetrics {
   std::string id;
   NodeKind kind = NodeKind::kAgent;
@@ -52,6 +64,9 @@ struct NodeMetrics {
   std::optional<double> mean_pct_of_distance;  ///< mean error / distance x 100
   std::optional<double> max_pct_of_distance;   ///< max error / distance x 100
   std::vector<ErrorSample> series;
+  /// Agents: every estimate row scored at its own time against interpolated truth.
+  std::vector<ErrorSample> series_at_estimates;
+  EllipseCheck at_estimates;
 };
 
 struct Metrics {

@@ -22,6 +22,12 @@ nlohmann::json NodeJson(const NodeMetrics& m, std::size_t max_series) {
   j["final_m"] = m.stats.final_m;
   j["in95"] = m.stats.in95;  // share of truth inside the estimate's own 95 % ellipse
   j["mean_nees"] = m.stats.mean_nees;
+  if (m.kind == NodeKind::kAgent) {
+    // The same check at each estimate's own instant (truth interpolated): no lag of a held row.
+    j["in95_at_estimates"] = m.at_estimates.in95;
+    j["mean_nees_at_estimates"] = m.at_estimates.mean_nees;
+    j["estimates_scored"] = m.at_estimates.samples;
+  }
   j["distance_m"] = m.distance_m;
   j["mean_pct_of_distance"] = m.mean_pct_of_distance ? nlohmann::json(*m.mean_pct_of_distance)
                                                      : nlohmann::json(nullptr);

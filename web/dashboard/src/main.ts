@@ -179,6 +179,10 @@ function render(): void {
 // release swallows the click. Each entry is a button, so the keyboard reaches it (Tab, Enter).
 const listEntries = new Map<string, HTMLButtonElement>();
 
+/** One list entry per firefighter, made once: its name, ellipse and badge elements are kept and
+ *  only their text changes, so the element under the pointer is never replaced between a
+ *  mousedown and its mouseup (Chromium drops the click when the pressed node left the page —
+ *  a live message arrives every few milliseconds). */
 function listEntry(id: string): HTMLButtonElement {
   let entry = listEntries.get(id);
   if (!entry) {
@@ -187,9 +191,19 @@ function listEntry(id: string): HTMLButtonElement {
     entry.className = 'node';
     entry.dataset.id = id;
     entry.onclick = () => select(id);
+    const name = document.createElement('span');
+    name.className = 'pos';
+    const detail = document.createElement('small');
+    const badges = document.createElement('span');
+    badges.className = 'badges';
+    entry.append(name, detail, badges);
     listEntries.set(id, entry);
   }
   return entry;
+}
+
+function setText(el: Element, text: string): void {
+  if (el.textContent !== text) el.textContent = text;
 }
 
 function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): void {
@@ -202,20 +216,22 @@ function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): voi
     const entry = listEntry(n.id);
     entry.classList.toggle('sel', n.id === selected);
     entry.setAttribute('aria-pressed', String(n.id === selected));
-    const name = document.createElement('span');
-    name.className = 'pos';
-    name.textContent = `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`;
-    const detail = document.createElement('small');
-    detail.textContent = ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m`;
-    const badges = alerts
-      .filter((x) => x.id === n.id)
-      .map((a) => {
-        const badge = document.createElement('span');
-        badge.className = `badge ${a.kind}`;
-        badge.textContent = ALERT_LABEL[a.kind] ?? a.kind;
-        return badge;
-      });
-    entry.replaceChildren(name, detail, ...badges);
+    const [name, detail, badgeBox] = Array.from(entry.children) as HTMLElement[];
+    setText(name, `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`);
+    setText(detail, ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m`);
+    const mine = alerts.filter((x) => x.id === n.id);
+    const badgeKey = mine.map((a) => a.kind).join('|');
+    if (badgeBox.dataset.key !== badgeKey) {
+      badgeBox.dataset.key = badgeKey;
+      badgeBox.replaceChildren(
+        ...mine.map((a) => {
+          const badge = document.createElement('span');
+          badge.className = `badge ${a.kind}`;
+          badge.textContent = ALERT_LABEL[a.kind] ?? a.kind;
+          return badge;
+        }),
+      );
+    }
     if (list.children[index] !== entry) list.insertBefore(entry, list.children[index] ?? null);
   });
   // The alert log is a live region: rewritten only when the alerts change, so a screen reader
