@@ -159,6 +159,34 @@ TEST(BeaconsPipeline, HoldsOnANeighbourOnlyTrailWithImplausibleLinks) {
   EXPECT_GE(ours.metrics.agents.at_estimates.in95, 0.85);
 }
 
+TEST(BeaconsPipeline, AMapThatDisagreesWithItsNoiseIsNotUsedAndSaysSo) {
+  // One of the trail's surveyed beacons written 4 m from where it is: the least-squares map
+  // fails its chi-square test, the beacons fall back to their surveys and drop priors, and an
+  // integrity note (a live alert) says so; the responder stays better than dead reckoning.
+  const SimulatedMission sim = SimulateShapedTrail({}, 3);
+  MissionData data = sim.data;
+  int moved = 0;
+  for (NodeInfo& n : data.info.nodes) {
+    if (n.kind == NodeKind::kLandmark && n.position && moved == 0) {
+      n.position->x() += 4.0;
+      ++moved;
+    }
+  }
+  ASSERT_EQ(moved, 1);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const Outcome ours = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
+  const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
+  const auto fallback = std::find_if(ours.summary.integrity.begin(), ours.summary.integrity.end(),
+                                     [](const IntegrityNote& n) {
+                                       return n.source == "beacon map" && n.action == "fallback";
+                                     });
+  ASSERT_NE(fallback, ours.summary.integrity.end());
+  EXPECT_NE(fallback->message.find("chi-square"), std::string::npos) << fallback->message;
+  EXPECT_LT(ours.metrics.agents.stats.p75_m, pdr.metrics.agents.stats.p75_m);
+}
+
 TEST(BeaconsPipeline, BadInputIsReportedClearly) {
   const SimulatedMission sim = SimulateBeaconLab({}, 1);
   testing::TempDir dir;

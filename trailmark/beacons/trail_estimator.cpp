@@ -492,6 +492,19 @@ bool BeaconTrailEstimator::Apply(Agent& a, const Deferred& m) {
 void BeaconTrailEstimator::SolveAndEmit(TimeS t, EstimateSink& sink) {
   map_.Solve();
   last_solve_ = t;
+  // A map that disagrees with its noise is not used: say so once, and when it agrees again.
+  const auto& ms = map_.summary();
+  if (const bool rejected = ms.rejected_parts > 0; rejected != map_rejected_) {
+    map_rejected_ = rejected;
+    map_notes_.push_back(
+        {t, "beacon map", "", rejected ? "fallback" : "resumed",
+         rejected ? fmt::format("beacon map not used from t {:.1f} s: {}; its beacons are placed "
+                                "at their surveys and drop priors, the trackers use those",
+                                t, ms.rejected_why)
+                  : fmt::format("beacon map used again from t {:.1f} s: its residuals agree with "
+                                "their noise (chi-square per degree of freedom {:.2f})",
+                                t, ms.chi2_per_dof)});
+  }
   EmitBeacons(t, sink);
 }
 
@@ -594,6 +607,7 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["beacons_anchored_by_close_pass"] = static_cast<double>(close_pass_anchors_);
   num["implausible_beacon_links"] = static_cast<double>(implausible_links_);
   num["rows_ignored"] = static_cast<double>(rows_ignored_);
+  summary.integrity.insert(summary.integrity.end(), map_notes_.begin(), map_notes_.end());
   if (options_.tracker == Tracker::kNone) return summary;
   num["measurements_without_beacon_position"] = static_cast<double>(no_position_);
   beacon_integrity_.Report(summary);

@@ -188,6 +188,10 @@ class BeaconTrailEstimator : public OnlineEstimator {
   TimeS last_solve_ = -std::numeric_limits<double>::infinity();
   std::size_t implausible_links_ = 0, no_position_ = 0;
   integrity::ConsistencyMonitor beacon_integrity_;
+  /// Whether the last map solve rejected a part (issue 22: the fallback to drop priors and
+  /// surveys is an integrity note, raised live as an alert), and those notes.
+  bool map_rejected_ = false;
+  std::vector<IntegrityNote> map_notes_;
   std::map<std::string, std::size_t> ignored_;
   std::size_t rows_ignored_ = 0, close_pass_anchors_ = 0, entry_fixes_ = 0;
 };
