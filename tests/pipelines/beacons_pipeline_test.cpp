@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <fstream>
+#include <numbers>
 
 #include "pipelines/run_named.h"
 #include "test_util.h"
@@ -185,6 +187,64 @@ TEST(BeaconsPipeline, AMapThatDisagreesWithItsNoiseIsNotUsedAndSaysSo) {
   ASSERT_NE(fallback, ours.summary.integrity.end());
   EXPECT_NE(fallback->message.find("chi-square"), std::string::npos) << fallback->message;
   EXPECT_LT(ours.metrics.agents.stats.p75_m, pdr.metrics.agents.stats.p75_m);
+}
+
+// The neighbour trail of seed `seed` without its start heading, its PDR steps rotated by
+// `angle_rad` (a foot unit whose yaw starts anywhere).
+MissionData RotatedPdrWithoutHeading(const SimulatedMission& sim, double angle_rad) {
+  MissionData data = sim.data;
+  for (NodeInfo& n : data.info.nodes) {
+    n.start_heading_rad.reset();
+    n.start_heading_sigma_rad.reset();
+  }
+  const Eigen::Rotation2Dd r(angle_rad);
+  for (Step& st : data.steps) st.delta_n.head<2>() = r * Vec2(st.delta_n.head<2>());
+  return data;
+}
+
+TEST(BeaconsPipeline, EstimatesTheEntryHeadingWhenNoneIsGiven) {
+  // Without start_heading the PDR's rotation into the navigation frame is estimated from the
+  // first ultrasound measurements (issue 22): the same walk with its PDR frame turned by 40 or
+  // by 130 degrees gives the same estimates, headings 90 degrees apart, within the targets.
+  const SimulatedMission sim = SimulateShapedTrail({}, 2);
+  std::vector<std::vector<Estimate>> runs;
+  std::vector<double> headings;
+  for (const double deg : {40.0, 130.0}) {
+    testing::TempDir dir;
+    WriteMissionDirectory(dir.path(), RotatedPdrWithoutHeading(sim, deg * std::numbers::pi / 180),
+                          &sim.plan);
+    const MissionDirectory mission(dir.path());
+    VectorSink sink;
+    const EstimatorSummary summary = RunBatch(RequirePipeline("beacons-ekf"), {mission, {}}, sink);
+    ASSERT_TRUE(summary.numbers.count("ff1.estimated_heading_rad")) << summary.BriefReport();
+    headings.push_back(summary.numbers.at("ff1.estimated_heading_rad"));
+    runs.push_back(sink.TakeSortedByTime());
+    const Metrics m = Evaluate(sim.data.info, sim.data.truth, runs.back());
+    EXPECT_LE(m.agents.stats.median_m, 0.6) << deg;
+    EXPECT_LE(m.agents.stats.p75_m, 0.9) << deg;
+    EXPECT_GE(m.agents.at_estimates.in95, 0.85) << deg;
+  }
+  EXPECT_NEAR(WrapAngle(headings[0] - headings[1]), std::numbers::pi / 2, 1e-6);
+  // No estimate within the fallback distance (1 m here): the PDR's frame is taken after all,
+  // and the summary says so.
+  {
+    testing::TempDir dir;
+    WriteMissionDirectory(dir.path(), RotatedPdrWithoutHeading(sim, 0.0), &sim.plan);
+    const MissionDirectory mission(dir.path());
+    const Outcome assumed = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data,
+                                  {{"entry_heading_fallback_m", "1"}});
+    const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
+    EXPECT_TRUE(std::any_of(assumed.summary.notes.begin(), assumed.summary.notes.end(),
+                            [](const std::string& n) {
+                              return n.find("taken as the navigation frame") != std::string::npos;
+                            }));
+    EXPECT_LT(assumed.metrics.agents.stats.p75_m, pdr.metrics.agents.stats.p75_m);
+  }
+  ASSERT_EQ(runs[0].size(), runs[1].size());
+  for (std::size_t k = 0; k < runs[0].size(); ++k) {
+    ASSERT_EQ(runs[0][k].id, runs[1][k].id);
+    EXPECT_LT((runs[0][k].position_n - runs[1][k].position_n).norm(), 1e-6) << runs[0][k].id;
+  }
 }
 
 TEST(BeaconsPipeline, BadInputIsReportedClearly) {

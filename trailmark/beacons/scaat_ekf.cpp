@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <stdexcept>
 
 namespace trailmark::beacons {
 namespace {
@@ -500,7 +501,8 @@ struct Solved {
 };
 
 // Robust Gauss-Newton (IRLS with Huber weights) from `theta`.
-Solved SolveFrom(const std::vector<InitMeasurement>& ms, Eigen::Vector3d theta, double k) {
+Solved SolveFrom(const std::vector<InitMeasurement>& ms, Eigen::Vector3d theta, double k,
+                 const std::optional<OriginPrior>& origin) {
   Solved out;
   for (int it = 0; it < 30; ++it) {
     Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
@@ -519,6 +521,17 @@ Solved SolveFrom(const std::vector<InitMeasurement>& ms, Eigen::Vector3d theta, 
       A += w * J.transpose() * J;
       g += w * J.transpose() * e;
     };
+    if (origin) {  // (o - mu) / sigma per axis, no robust loss
+      const double w = 1.0 / origin->sigma_m;
+      for (int axis = 0; axis < 2; ++axis) {
+        const double e = (theta(axis) - origin->position_n(axis)) * w;
+        Eigen::RowVector3d J = Eigen::RowVector3d::Zero();
+        J(axis) = w;
+        cost += 0.5 * e * e;
+        A += J.transpose() * J;
+        g += J.transpose() * e;
+      }
+    }
     for (const auto& m : ms) {
       const Vec2 p = theta.head<2>() + R * m.pdr_n;
       Eigen::RowVector2d Hp;
@@ -544,7 +557,11 @@ Solved SolveFrom(const std::vector<InitMeasurement>& ms, Eigen::Vector3d theta, 
 
 }  // namespace
 
-InitResult InitializeFromUltrasound(const std::vector<InitMeasurement>& ms, const InitOptions& o) {
+InitResult InitializeFromUltrasound(const std::vector<InitMeasurement>& ms, const InitOptions& o,
+                                    const std::optional<OriginPrior>& origin) {
+  if (origin && (!origin->position_n.allFinite() || !(origin->sigma_m > 0)))
+    throw std::invalid_argument("InitializeFromUltrasound: the origin prior needs a finite "
+                                "position and a sigma > 0");
   InitResult result;
   if (static_cast<int>(ms.size()) < o.min_measurements) {
     result.why = fmt::format("{} of {} measurements", ms.size(), o.min_measurements);
@@ -576,8 +593,9 @@ InitResult InitializeFromUltrasound(const std::vector<InitMeasurement>& ms, cons
                                      : m.beacon_n;
       sum += fix - R * m.pdr_n;
     }
+    const Vec2 guess = origin ? origin->position_n : Vec2(sum / static_cast<double>(ms.size()));
     solutions.push_back(
-        SolveFrom(ms, Eigen::Vector3d(sum.x() / ms.size(), sum.y() / ms.size(), psi), o.huber_k));
+        SolveFrom(ms, Eigen::Vector3d(guess.x(), guess.y(), psi), o.huber_k, origin));
   }
   std::sort(solutions.begin(), solutions.end(),
             [](const Solved& a, const Solved& b) { return a.cost < b.cost; });

@@ -279,7 +279,16 @@ struct InitResult {
 /// heading correction and their covariance propagated; scale from the options' prior).
 ScaatEkf StartFromInit(const InitResult& init, const Vec2& pdr_n, const ScaatEkfOptions& options);
 
+/// Where the PDR track's origin is known to be (a start without a heading: only the rotation
+/// from the PDR frame to the navigation frame is unknown).
+struct OriginPrior {
+  Vec2 position_n = Vec2::Zero();
+  double sigma_m = 0.1;  ///< > 0
+};
+
+/// `origin`: a Gaussian prior on the origin (the grid's starts are placed there).
 InitResult InitializeFromUltrasound(const std::vector<InitMeasurement>& measurements,
-                                    const InitOptions& options = {});
+                                    const InitOptions& options = {},
+                                    const std::optional<OriginPrior>& origin = std::nullopt);
 
 }  // namespace trailmark::beacons

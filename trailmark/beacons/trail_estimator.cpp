@@ -3,9 +3,11 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <stdexcept>
 
 namespace trailmark::beacons {
@@ -16,16 +18,27 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
     return false;
   }
   if (!(drop_sigma_m > 0) || !(close_pass_m >= 0) || !(pdr_drift_per_m >= 0) ||
-      !(way_out_window_s >= 0) || !(measurement_hold_s >= 0)) {
+      !(way_out_window_s >= 0) || !(measurement_hold_s >= 0) ||
+      !(entry_heading_fallback_m >= 0)) {
     if (why)
       *why = "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s, "
-             "measurement_hold_s >= 0";
+             "measurement_hold_s, entry_heading_fallback_m >= 0";
     return false;
   }
   return ekf.IsValid(why) && map.IsValid(why) && integrity.IsValid(why);
 }
 
 namespace {
+
+// A surveyed crumb or landmark (a node that can be a beacon; not the base, which stays at the
+// entry) more than 2 m from `start_n`: with the start it fixes the navigation frame's heading
+// for an agent's PDR.
+bool HasSurveyedNodeAwayFrom(const MissionInfo& info, const Vec2& start_n) {
+  return std::any_of(info.nodes.begin(), info.nodes.end(), [&](const NodeInfo& n) {
+    return (n.kind == NodeKind::kCrumb || n.kind == NodeKind::kLandmark) && n.position &&
+           (n.position->head<2>() - start_n).norm() > 2.0;
+  });
+}
 
 void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   using O = BeaconTrailOptions;
@@ -44,6 +57,12 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
   t.Real("entry_track_m", &O::entry_track_m, "m", OptionBounds::NonNegative(),
          "PDR track compared with the entry heading (0: never)");
+  t.Flag("estimate_entry_heading", &O::estimate_entry_heading,
+         "no start_heading: estimate the PDR's heading from the first ultrasound measurements "
+         "(false: take the PDR's frame as the navigation frame within 5 deg)");
+  t.Real("entry_heading_fallback_m", &O::entry_heading_fallback_m, "m",
+         OptionBounds::NonNegative(),
+         "walked without a heading estimate: the PDR's frame is then taken after all");
   t.Real("mds_period_s", &O::mds_period_s, "s", OptionBounds::NonNegative(),
          "the beacon map is re-solved at most this often");
 }
@@ -126,25 +145,24 @@ BeaconTrailEstimator::BeaconTrailEstimator(const MissionInfo& info, BeaconTrailO
         a.entry_heading_sigma_rad =
             n.start_heading_sigma_rad.value_or(options_.default_entry_heading_sigma_rad);
         const double s = n.start_sigma_m.value_or(options_.ekf.initial_position_sigma_m);
-        // The drop priors' dead reckoning: white errors in drop_dr, the shared ones a track of
-        // the map. With an entry heading the first metre fixes the PDR's heading to that sigma.
-        const PdrOptions& pdr = options_.drop_dead_reckoning;
-        const double heading_sigma =
-            a.entry_heading_rad
-                ? std::hypot(a.entry_heading_sigma_rad, options_.entry_track_heading_sigma_rad)
-                : n.start_heading_sigma_rad.value_or(pdr.start_heading_sigma_rad);
-        PdrOptions white = pdr;
-        white.heading_drift_sigma_rad_per_s = white.step_scale_sigma = 0;
-        a.drop_dr.emplace(*start, s, white, 0.0);
-        a.map_track = map_.AddTrack(Vec3(heading_sigma * heading_sigma,
-                                         pdr.heading_drift_sigma_rad_per_s *
-                                             pdr.heading_drift_sigma_rad_per_s,
-                                         pdr.step_scale_sigma * pdr.step_scale_sigma)
-                                        .asDiagonal());
-        if (options_.tracker == Tracker::kScaat) {
-          a.ekf.emplace(a.pdr_n, Mat2::Identity() * s * s, 0.0,
-                        options_.ekf.initial_heading_sigma_rad, 1.0,
-                        options_.ekf.initial_scale_sigma, options_.ekf);
+        a.start_sigma_m = s;
+        // No start heading: the PDR's rotation into the navigation frame is estimated from the
+        // first ultrasound measurements (the start as a prior); until then no drop prior.
+        a.heading_unknown = !n.start_heading_rad && options_.estimate_entry_heading &&
+                            HasSurveyedNodeAwayFrom(info, start->head<2>());
+        if (!a.heading_unknown) {
+          // With an entry heading the first metre fixes the PDR's heading to that sigma.
+          const double heading_sigma =
+              a.entry_heading_rad
+                  ? std::hypot(a.entry_heading_sigma_rad, options_.entry_track_heading_sigma_rad)
+                  : n.start_heading_sigma_rad.value_or(
+                        options_.drop_dead_reckoning.start_heading_sigma_rad);
+          StartDropDeadReckoning(a, heading_sigma);
+          if (options_.tracker == Tracker::kScaat) {
+            a.ekf.emplace(a.pdr_n, Mat2::Identity() * s * s, 0.0,
+                          options_.ekf.initial_heading_sigma_rad, 1.0,
+                          options_.ekf.initial_scale_sigma, options_.ekf);
+          }
         }
       }
       agents_[n.id] = std::move(a);
@@ -164,6 +182,121 @@ int BeaconTrailEstimator::Beacon(const std::string& id) {
   const auto s = surveyed_.find(id);
   if (s != surveyed_.end()) map_.SetSurveyed(i, s->second.first, s->second.second);
   return i;
+}
+
+void BeaconTrailEstimator::StartDropDeadReckoning(Agent& a, double heading_sigma_rad) {
+  // The drop priors' dead reckoning: white errors in drop_dr, the shared ones (heading offset,
+  // drift rate, scale) a track of the map.
+  const PdrOptions& pdr = options_.drop_dead_reckoning;
+  PdrOptions white = pdr;
+  white.heading_drift_sigma_rad_per_s = white.step_scale_sigma = 0;
+  a.drop_dr.emplace(Vec3(a.start_n.x(), a.start_n.y(), 0), a.start_sigma_m, white, 0.0);
+  a.map_track = map_.AddTrack(Vec3(heading_sigma_rad * heading_sigma_rad,
+                                   pdr.heading_drift_sigma_rad_per_s *
+                                       pdr.heading_drift_sigma_rad_per_s,
+                                   pdr.step_scale_sigma * pdr.step_scale_sigma)
+                                  .asDiagonal());
+}
+
+void BeaconTrailEstimator::AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d) {
+  Step rotated = step;
+  const Vec2 d_n = Eigen::Rotation2Dd(a.drop_dr_rotation_rad) * d;
+  rotated.delta_n.head<2>() = d_n;
+  a.drop_dr->AddStep(rotated);
+  // Lever arms of the shared errors (DeadReckoning's model): heading offset, rate x time.
+  if (!a.first_step_t) a.first_step_t = step.t0;
+  a.sum_d_n += d_n;
+  a.sum_t_perp_n += (step.t1 - *a.first_step_t) * Vec2(-d_n.y(), d_n.x());
+}
+
+void BeaconTrailEstimator::HintDrop(Agent& a, int i) {
+  const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
+  Eigen::Matrix<double, 2, 3> along;
+  along << Vec2(-a.sum_d_n.y(), a.sum_d_n.x()), a.sum_t_perp_n, a.sum_d_n;
+  const Mat2 white = a.drop_dr->covariance();
+  // Between two drops: the white errors accrued since the last (and both drops' scatter).
+  Mat2 increment = white - a.last_drop_white_cov + 2 * drop;
+  increment = 0.5 * (increment + increment.transpose());
+  map_.SetTrackHint(i, a.map_track, a.drop_dr->position_n().head<2>(), white + drop, along,
+                    a.last_drop != i ? a.last_drop : -1, increment);
+  a.last_drop = i;
+  a.last_drop_white_cov = white;
+}
+
+void BeaconTrailEstimator::TryEstimateHeading(Agent& a, TimeS t, const BeaconPosition& beacon,
+                                              const std::optional<PendingRange>& range,
+                                              std::optional<double> bearing,
+                                              double bearing_sigma, EstimateSink& sink) {
+  if (!range) return;
+  InitMeasurement m;
+  m.pdr_n = a.pdr_n - a.start_n;  // the track from the start, in the PDR's frame
+  m.beacon_n = beacon.position_n;
+  m.range_m = range->range_m;
+  // The beacon's own uncertainty widens its measurements (its largest axis, conservatively).
+  const double beacon_sigma_m =
+      std::sqrt(std::max(Eigen::SelfAdjointEigenSolver<Mat2>(beacon.cov).eigenvalues().maxCoeff(), 0.0));
+  m.range_sigma_m =
+      std::hypot(range->sigma_m > 0 ? range->sigma_m : options_.ekf.range_sigma_m, beacon_sigma_m);
+  m.bearing_rad = bearing;
+  m.bearing_sigma_rad =
+      std::hypot(bearing_sigma > 0 ? bearing_sigma : options_.ekf.bearing_sigma_rad,
+                 beacon_sigma_m / std::max(range->range_m, 0.5));
+  a.init_buffer.push_back(m);
+  InitResult init = InitializeFromUltrasound(a.init_buffer, options_.init,
+                                             OriginPrior{a.start_n, a.start_sigma_m});
+  if (!init.ok) {
+    a.init_why = init.why;
+    return;
+  }
+  // Its covariance scaled by the residuals' reduced chi-square where above 1, and the PDR's
+  // direction noise over the track added to the heading (as to a given start heading: the
+  // PDR's heading then is no better known than its track's direction).
+  init.cov *= std::max(1.0, init.rms_normalized * init.rms_normalized);
+  init.cov(2, 2) += options_.entry_track_heading_sigma_rad * options_.entry_track_heading_sigma_rad;
+  FixHeading(a, t, init.psi_rad, std::sqrt(std::max(init.cov(2, 2), 0.0)), init, sink);
+}
+
+void BeaconTrailEstimator::FixHeading(Agent& a, TimeS t, double psi_rad, double sigma_rad,
+                                      const std::optional<InitResult>& init, EstimateSink& sink) {
+  a.heading_fixed = true;
+  a.heading_assumed = !init;
+  a.initialized_at = t;
+  a.estimated_heading_rad = psi_rad;
+  a.estimated_heading_sigma_rad = sigma_rad;
+  a.init_buffer.clear();
+  // The drop priors from here on, and those of the drops made so far (their steps replayed).
+  a.drop_dr_rotation_rad = psi_rad;
+  StartDropDeadReckoning(a, sigma_rad);
+  std::size_t k = 0;
+  for (const auto& [t_drop, beacon_index] : a.drops_before_fix) {
+    for (; k < a.steps_before_fix.size() && a.steps_before_fix[k].t1 <= t_drop; ++k)
+      AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
+    HintDrop(a, beacon_index);
+  }
+  for (; k < a.steps_before_fix.size(); ++k)
+    AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
+  a.steps_before_fix.clear();
+  a.drops_before_fix.clear();
+  const Vec2 track_n = a.pdr_n - a.start_n;  // in the PDR's frame
+  const Vec2 position_n = a.start_n + Eigen::Rotation2Dd(psi_rad) * track_n;
+  if (options_.tracker == Tracker::kScaat) {
+    if (init) {
+      a.ekf.emplace(StartFromInit(*init, track_n, options_.ekf));
+    } else {
+      const Mat2 lever = Vec2(-track_n.y(), track_n.x()) * Vec2(-track_n.y(), track_n.x()).transpose();
+      // Assumed: as an agent with a start heading starts (the filter's heading prior), the
+      // dead reckoning's own uncertainty and the heading's lever arm in the position.
+      const double psi_sigma = std::max(sigma_rad, options_.ekf.initial_heading_sigma_rad);
+      a.ekf.emplace(position_n, a.drop_dr->covariance() + lever * psi_sigma * psi_sigma, 0.0,
+                    psi_sigma, 1.0, options_.ekf.initial_scale_sigma, options_.ekf);
+    }
+    Emit(t, a, sink);
+  } else if (options_.tracker == Tracker::kNone) {
+    // The map-only mode rotates the steps themselves (FixEntryHeading's convention).
+    a.pdr_rotation_rad = psi_rad;
+    a.drop_dr_rotation_rad = 0;
+  }
+  a.pdr_n = position_n;
 }
 
 std::vector<int> BeaconTrailEstimator::Ranks() const {
@@ -191,6 +324,12 @@ std::pair<std::optional<Vec2>, std::optional<Mat2>> BeaconTrailEstimator::AgentE
     const Agent& a) const {
   if (a.ekf) return {a.ekf->position(), a.ekf->position_cov()};
   if (a.us_kf) return {a.us_kf->position(), a.us_kf->position_cov()};
+  if (a.heading_unknown && !a.heading_fixed) {
+    // Somewhere within the distance walked from the start: all that is known before the
+    // PDR's heading is.
+    const double r = std::hypot(a.start_sigma_m, a.walked_m);
+    return {a.start_n, Mat2::Identity() * r * r};
+  }
   if (a.has_start) return {a.pdr_n, Mat2::Identity() * a.pdr_var_m2};
   return {std::nullopt, std::nullopt};
 }
@@ -218,17 +357,14 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       if (it != agents_.end() && it->second.ekf) it->second.ekf->ConsiderDrop(i, options_.drop_sigma_m);
       if (it != agents_.end()) {
         const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
-        if (Agent& a = it->second; a.drop_dr) {
-          Eigen::Matrix<double, 2, 3> along;
-          along << Vec2(-a.sum_d_n.y(), a.sum_d_n.x()), a.sum_t_perp_n, a.sum_d_n;
-          const Mat2 white = a.drop_dr->covariance();
-          // Between two drops: the white errors accrued since the last (and both drops' scatter).
-          Mat2 increment = white - a.last_drop_white_cov + 2 * drop;
-          increment = 0.5 * (increment + increment.transpose());
-          map_.SetTrackHint(i, a.map_track, a.drop_dr->position_n().head<2>(), white + drop, along,
-                            a.last_drop != i ? a.last_drop : -1, increment);
-          a.last_drop = i;
-          a.last_drop_white_cov = white;
+        if (Agent& a = it->second; a.heading_unknown && !a.heading_fixed) {
+          // Where it lies depends on the heading still unknown; a drop at the start does not.
+          if (a.walked_m == 0)
+            map_.SetAnchorHint(i, a.start_n, Mat2::Identity() * a.start_sigma_m * a.start_sigma_m + drop);
+          else
+            a.drops_before_fix.emplace_back(e->t, i);
+        } else if (a.drop_dr) {
+          HintDrop(a, i);
         } else {
           const auto [p, cov] = AgentEstimate(it->second);
           if (p) map_.SetAnchorHint(i, *p, *cov + drop);
@@ -238,15 +374,13 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   } else if (const auto* step = std::get_if<Step>(&row)) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
-    if (a.drop_dr) {
-      Step rotated = *step;
-      const Vec2 d_n = Eigen::Rotation2Dd(a.drop_dr_rotation_rad) * d;
-      rotated.delta_n.head<2>() = d_n;
-      a.drop_dr->AddStep(rotated);
-      // Lever arms of the shared errors (DeadReckoning's model): heading offset, rate x time.
-      if (!a.first_step_t) a.first_step_t = step->t0;
-      a.sum_d_n += d_n;
-      a.sum_t_perp_n += (step->t1 - *a.first_step_t) * Vec2(-d_n.y(), d_n.x());
+    if (a.heading_unknown && !a.heading_fixed) a.steps_before_fix.push_back(*step);
+    if (a.drop_dr) AdvanceDropDeadReckoning(a, *step, d);
+    a.walked_m += d.norm();
+    if (a.heading_unknown && !a.heading_fixed &&
+        a.walked_m > options_.entry_heading_fallback_m) {
+      FixHeading(a, step->t1, 0.0, options_.drop_dead_reckoning.start_heading_sigma_rad,
+                 std::nullopt, sink);
     }
     a.pdr_n += d;
     // Dead-reckoning drift for the drop hints of the map-only mode.
@@ -285,7 +419,9 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     const int beacon = Beacon(a_agent ? r->b : r->a);
     agents_[agent].heard[beacon] = t;
     // A beacon without drop event or survey: anchored where an agent first passes close by.
-    if (!map_.HasAnchor(beacon) && r->range_m <= options_.close_pass_m) {
+    const Agent& passer = agents_[agent];
+    if (!map_.HasAnchor(beacon) && r->range_m <= options_.close_pass_m &&
+        !(passer.heading_unknown && !passer.heading_fixed)) {
       const auto [p, cov] = AgentEstimate(agents_[agent]);
       if (p) {
         map_.SetAnchorHint(beacon, *p, *cov + Mat2::Identity() * (r->range_m * r->range_m + 0.1));
@@ -392,12 +528,14 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
                                    const std::optional<PendingRange>& range,
                                    std::optional<double> bearing, double bearing_sigma,
                                    EstimateSink& sink) {
-  if (options_.tracker == Tracker::kNone) return;
+  const bool estimating_heading = a.heading_unknown && !a.heading_fixed;
+  if (options_.tracker == Tracker::kNone && !estimating_heading) return;
   const auto pos = map_.Position(beacon);
   if (!pos) {
     ++no_position_;
     return;
   }
+  if (estimating_heading) return TryEstimateHeading(a, t, *pos, range, bearing, bearing_sigma, sink);
   if (options_.tracker == Tracker::kUltrasoundOnly && !(range && bearing)) {
     return Ignore("ranges or bearings without their pair (the ultrasound-only filter needs both)");
   }
@@ -608,6 +746,29 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["implausible_beacon_links"] = static_cast<double>(implausible_links_);
   num["rows_ignored"] = static_cast<double>(rows_ignored_);
   summary.integrity.insert(summary.integrity.end(), map_notes_.begin(), map_notes_.end());
+  for (const auto& [id, a] : agents_) {
+    if (!a.heading_unknown) continue;
+    if (a.heading_fixed && a.heading_assumed) {
+      summary.notes.push_back(fmt::format(
+          "{}: no start_heading, and none estimated within {:.0f} m walked: its PDR's frame "
+          "taken as the navigation frame (within {:.1f} deg) from t = {:.2f} s",
+          id, options_.entry_heading_fallback_m,
+          options_.drop_dead_reckoning.start_heading_sigma_rad * 180 / std::numbers::pi,
+          a.initialized_at));
+    } else if (a.heading_fixed) {
+      summary.notes.push_back(fmt::format(
+          "{}: no start_heading; the PDR's heading in the navigation frame estimated from "
+          "ultrasound at t = {:.2f} s: {:.1f} +- {:.1f} deg",
+          id, a.initialized_at, a.estimated_heading_rad * 180 / std::numbers::pi,
+          a.estimated_heading_sigma_rad * 180 / std::numbers::pi));
+      num[id + ".estimated_heading_rad"] = a.estimated_heading_rad;
+    } else {
+      summary.notes.push_back(fmt::format(
+          "{}: no start_heading, and its PDR's heading could not be estimated ({}): its "
+          "position is the start within the distance walked, its drops have no prior",
+          id, a.init_why.empty() ? "no ultrasound measurement of a placed beacon" : a.init_why));
+    }
+  }
   if (options_.tracker == Tracker::kNone) return summary;
   num["measurements_without_beacon_position"] = static_cast<double>(no_position_);
   beacon_integrity_.Report(summary);

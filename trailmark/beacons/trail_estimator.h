@@ -46,6 +46,17 @@ struct BeaconTrailOptions {
   /// not from the tracker, whose estimate is built on the map (issue 22). Set a priori.
   PdrOptions drop_dead_reckoning;
   double entry_track_m = 1.0;  ///< m; PDR track compared with the entry heading (0: never)
+  /// An agent with a start but no start_heading: the rotation of its PDR into the navigation
+  /// frame is estimated from its first ultrasound measurements of placed beacons, the start as
+  /// a prior (issue 22; the spec: a pipeline estimates what is absent or says so); until then
+  /// its position is the start within the distance walked, its drops wait for their priors.
+  /// false: its PDR frame is taken as the navigation frame within
+  /// drop_dead_reckoning.start_heading_sigma_rad.
+  bool estimate_entry_heading = true;
+  /// m walked without a heading estimate (no surveyed beacon heard): then the PDR's frame is
+  /// taken as the navigation frame after all, and the summary says so. Estimated only where
+  /// mission.json surveys a node more than 2 m from the start (else taken at once).
+  double entry_heading_fallback_m = 30.0;
   double close_pass_m = 1.5;   ///< m; a beacon with no drop event is anchored at a range this short
   /// Dead-reckoning drift of the drop hints without a tracker: 1 sigma per metre (ours: 5 %).
   double pdr_drift_per_m = 0.05;
@@ -151,12 +162,33 @@ class BeaconTrailEstimator : public OnlineEstimator {
     double drop_dr_rotation_rad = 0;
     int map_track = -1;
     std::optional<TimeS> first_step_t;
+    // No start_heading (options.estimate_entry_heading): the PDR's rotation into the
+    // navigation frame, estimated from the first ultrasound measurements with the start as a
+    // prior (heading_fixed once done); the steps and drops until then, replayed for the drop
+    // priors.
+    bool heading_unknown = false;
+    double start_sigma_m = 0.1;
+    double walked_m = 0;
+    std::vector<Step> steps_before_fix;
+    std::vector<std::pair<TimeS, int>> drops_before_fix;
+    double estimated_heading_rad = 0, estimated_heading_sigma_rad = 0;
+    bool heading_assumed = false;  ///< fixed by the fallback, not estimated
     Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
     int last_drop = -1;                      ///< beacon of the previous drop
     Mat2 last_drop_white_cov = Mat2::Zero();  ///< drop_dr's covariance there
   };
 
   int Beacon(const std::string& id);
+  void StartDropDeadReckoning(Agent& a, double heading_sigma_rad);
+  void AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d);
+  void HintDrop(Agent& a, int beacon);
+  void TryEstimateHeading(Agent& a, TimeS t, const BeaconPosition& beacon,
+                          const std::optional<PendingRange>& range, std::optional<double> bearing,
+                          double bearing_sigma, EstimateSink& sink);
+  /// The PDR's heading in the navigation frame is `psi_rad` (sigma): estimated (`init`) or
+  /// assumed (the fallback); the drop priors replayed, the tracker started.
+  void FixHeading(Agent& a, TimeS t, double psi_rad, double sigma_rad,
+                  const std::optional<InitResult>& init, EstimateSink& sink);
   std::vector<int> Ranks() const;
   std::vector<std::vector<int>> Neighbours() const;
   std::pair<std::optional<Vec2>, std::optional<Mat2>> AgentEstimate(const Agent& a) const;
