@@ -285,7 +285,8 @@ BENCHMARK(BM_BeaconMds)->Arg(21)->Arg(200)->Arg(1000)->Unit(benchmark::kMillisec
 // The least-squares beacon map (issue 22: 1,000 beacons with 20,000 links in < 1 s): 1,000
 // beacons uniform on a 66 x 66 m floor, every pair within 8 m linked (0.1 m noise: ~20,000
 // links), a drop prior of 1 m on each beacon and three surveys; solved from the priors with
-// marginal covariances (arg 1) or without (arg 0). Counters: links, mean error (m).
+// marginal covariances (arg 1: ours, sparse LDL^T + Takahashi; arg 2: ceres::Covariance, the
+// tests' reference) or without (arg 0). Counters: links, mean error (m).
 void BM_BeaconMapLeastSquares(benchmark::State& state) {
   Random rng(11);
   const int n = 1000;
@@ -309,7 +310,8 @@ void BM_BeaconMapLeastSquares(benchmark::State& state) {
   double error = 0;
   for (auto _ : state) {
     beacons::MapLeastSquaresOptions options;
-    options.covariances = state.range(0) == 1;
+    options.covariances = state.range(0) >= 1;
+    options.reference_covariance = state.range(0) == 2;
     const beacons::MapSolution s = beacons::SolveMapLeastSquares(problem, {start}, options);
     if (!s.ok) state.SkipWithError(s.why.c_str());
     error = 0;
@@ -319,7 +321,7 @@ void BM_BeaconMapLeastSquares(benchmark::State& state) {
   state.counters["links"] = static_cast<double>(problem.links.size());
   state.counters["mean_error_m"] = error;
 }
-BENCHMARK(BM_BeaconMapLeastSquares)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->Iterations(3);
+BENCHMARK(BM_BeaconMapLeastSquares)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->Iterations(3);
 
 // Classical MDS alone (double centring + the two leading eigenpairs) on 1,000 beacons'
 // shortest-path distances: arg 0 the dense eigensolver, 1 the partial one (issue 31: < 0.2 s).
