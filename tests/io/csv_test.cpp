@@ -261,6 +261,56 @@ TEST(CsvReader, BarometerRowsAreCheckedLikeEveryStream) {
               HasSubstr("pressure_hpa"));
 }
 
+TEST(CsvReader, ImplausibleVariancesRangesAndAnglesAreRefusedWithTheirLine) {
+  // Issue 30, item 3: a step variance of 1e300 gave positions of 1e125 m.
+  TempDir dir;
+  const std::string steps = "t0,t1,agent,dx,dy,dz,sxx,syy,szz\n";
+  EXPECT_EQ(ErrorOf<Step>(dir.File("s0.csv", steps + "0,1,ff1,0.7,0,0,0.01,0.01,0.001\n")), "");
+  EXPECT_THAT(ErrorOf<Step>(dir.File("s1.csv", steps + "0,1,ff1,0.7,0,0,1e300,0.01,0\n")),
+              AllOf(HasSubstr("s1.csv:2:"), HasSubstr("'sxx'"), HasSubstr("not plausible")));
+  const std::string ranges = "t,a,b,range,sigma,kind\n";
+  EXPECT_EQ(ErrorOf<RangeMeasurement>(dir.File("r0.csv", ranges + "0,b1,b2,3.2,0.1,uwb\n")), "");
+  EXPECT_THAT(ErrorOf<RangeMeasurement>(dir.File("r1.csv", ranges + "0,b1,b2,1e6,0.1,uwb\n")),
+              AllOf(HasSubstr("r1.csv:2:"), HasSubstr("'range'")));
+  EXPECT_THAT(ErrorOf<RangeMeasurement>(dir.File("r2.csv", ranges + "0,b1,b2,3,1e308,uwb\n")),
+              AllOf(HasSubstr("r2.csv:2:"), HasSubstr("'sigma'")));
+  const std::string bearings = "t,a,b,bearing,sigma\n";
+  EXPECT_EQ(ErrorOf<BearingMeasurement>(dir.File("b0.csv", bearings + "0,b1,ff1,-2.5,0.3\n")), "");
+  EXPECT_THAT(ErrorOf<BearingMeasurement>(dir.File("b1.csv", bearings + "0,b1,ff1,1e9,0.3\n")),
+              AllOf(HasSubstr("b1.csv:2:"), HasSubstr("'bearing'")));
+}
+
+TEST(CsvReader, ADevicesStrayTimeIsRefusedNotIntegrated) {
+  // Issue 30, item 3: one IMU row at t = -1e9 put every INS estimate 1e18 m away.
+  TempDir dir;
+  const std::string header = "t,agent,ax,ay,az,gx,gy,gz\n";
+  const std::string row = ",ff1,0,0,9.8,0,0,0\n";
+  EXPECT_EQ(ErrorOf<ImuSample>(dir.File("i0.csv", header + "0" + row + "0.01" + row)), "");
+  EXPECT_THAT(ErrorOf<ImuSample>(dir.File("i1.csv", header + "-1e9" + row + "0" + row + "0.01" + row)),
+              AllOf(HasSubstr("i1.csv:3:"), HasSubstr("line 2"), HasSubstr("stray time")));
+  // Another device's first row may come much later (it was switched on): only a device's own
+  // rows are compared.
+  EXPECT_EQ(ErrorOf<ImuSample>(dir.File("i2.csv", header + "0" + row + "5000,ff2,0,0,9.8,0,0,0\n")),
+            "");
+}
+
+TEST(CsvReader, EventNamesAreTheSpecsTrimmedAndOthersAreRefused) {
+  // Issue 30, item 4: 'Stop' and 'explode' were accepted and changed results; ' stop' was
+  // silently ignored.
+  TempDir dir;
+  const std::string header = "t,agent,event,node\n";
+  EXPECT_EQ(ErrorOf<MissionEvent>(dir.File("e0.csv", header + "0,ff1, stop ,\n1,ff1,go,\n2,ff1,drop, c1\n")),
+            "");
+  RowReader<MissionEvent> reader((dir.path() / "e0.csv").string());
+  MissionEvent e;
+  ASSERT_TRUE(reader.Next(e));
+  EXPECT_EQ(e.event, "stop");
+  EXPECT_THAT(ErrorOf<MissionEvent>(dir.File("e1.csv", header + "0,ff1,Stop,\n")),
+              AllOf(HasSubstr("e1.csv:2:"), HasSubstr("'stop'?")));
+  EXPECT_THAT(ErrorOf<MissionEvent>(dir.File("e2.csv", header + "0,ff1,explode,\n")),
+              AllOf(HasSubstr("e2.csv:2:"), HasSubstr("drop, wake, enter, exit, stop, go")));
+}
+
 TEST(CsvWriter, RefusesNonFiniteNumbers) {
   TempDir dir;
   RowWriter<Estimate> w((dir.path() / "estimates.csv").string());

@@ -136,14 +136,15 @@ TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClose
 TEST(BeaconsPipeline, HoldsOnANeighbourOnlyTrailWithImplausibleLinks) {
   // A trail laid out by someone else (issue 22): neighbour-only links, NLOS long tails, 15 %
   // bearing outliers; seed 2 of the development seeds (the reported ones are 101-124). Two
-  // beacon links of 0 m and 1e6 m are added: counted and reported, never a NaN.
+  // beacon links of 0 m and 5 km are added: counted and reported, never a NaN (1e6 m is
+  // refused by the reader, below).
   const SimulatedMission sim = SimulateShapedTrail({}, 2);
   MissionData data = sim.data;
   const std::size_t k = data.ranges.size() / 2;
   const TimeS t = data.ranges[k].t;
   data.ranges.insert(data.ranges.begin() + static_cast<long>(k) + 1,
                      {{t, "b02", "b03", 0.0, 0.1, "ultrasound"},
-                      {t, "b02", "b04", 1e6, 0.1, "ultrasound"}});
+                      {t, "b02", "b04", 5e3, 0.1, "ultrasound"}});
   testing::TempDir dir;
   WriteMissionDirectory(dir.path(), data, &sim.plan);
   const MissionDirectory mission(dir.path());
@@ -159,6 +160,20 @@ TEST(BeaconsPipeline, HoldsOnANeighbourOnlyTrailWithImplausibleLinks) {
   EXPECT_LE(ours.metrics.agents.stats.p75_m, 0.9);
   EXPECT_LT(ours.metrics.agents.stats.p75_m, pdr.metrics.agents.stats.p75_m);
   EXPECT_GE(ours.metrics.agents.at_estimates.in95, 0.85);
+  // A range of 1e6 m is not data: the reader names the file and line.
+  {
+    std::ofstream f(dir.path() / "ranges.csv", std::ios::app);
+    f << "1e4,b02,b04,1e6,0.1,ultrasound\n";
+  }
+  const MissionDirectory again(dir.path());
+  VectorSink sink;
+  try {
+    RunNamed("beacons-ekf", again, {}, sink);
+    ADD_FAILURE() << "no error";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("ranges.csv:"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("'range'"), std::string::npos) << e.what();
+  }
 }
 
 TEST(BeaconsPipeline, AMapThatDisagreesWithItsNoiseIsNotUsedAndSaysSo) {

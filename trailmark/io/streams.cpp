@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/io/streams.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -30,6 +32,29 @@ constexpr double kMaxAccelMps2 = 1e4;        // ~1,000 g: beyond every accelerom
 constexpr double kMaxGyroRadps = 200.0;      // beyond any MEMS range (2000 deg/s = 35 rad/s)
 constexpr double kMinPressureHpa = 300.0;    // above the summit of Everest (~330 hPa)
 constexpr double kMaxPressureHpa = 1100.0;   // below the deepest mine's air (~1080 hPa)
+constexpr double kMaxStepVarianceM2 = kMaxStepLengthM * kMaxStepLengthM;  // a step's own scale
+constexpr double kMaxRangeM = 1e5;           // 100 km: beyond any ranging radio or ultrasound
+constexpr double kMaxRangeSigmaM = 1e4;      // a range known to 10 km says nothing
+constexpr double kMaxAbsAngleRad = 1e3;      // as mission.json's headings
+constexpr double kMaxAngleSigmaRad = 100.0;  // beyond a full turn many times: not radians
+constexpr double kMaxDeviceGapS = 86400.0;   // one device's rows a day apart: a stray time
+
+// The events of the spec (mission-format.md, events.csv).
+constexpr std::string_view kEventNames[] = {"drop", "wake", "enter", "exit", "stop", "go"};
+
+std::string_view TrimCell(std::string_view v) {
+  const auto first = v.find_first_not_of(" \t");
+  if (first == std::string_view::npos) return {};
+  return v.substr(first, v.find_last_not_of(" \t") - first + 1);
+}
+
+void CheckAtMost(const CsvReader& c, const char* what, double value, double max,
+                 const char* unit) {
+  if (!(value <= max)) {
+    c.Fail(fmt::format("column '{}': {:g} is not plausible (at most {:g} {})", what, value, max,
+                       unit));
+  }
+}
 
 void CheckTime(const CsvReader& c, double t) {
   if (std::abs(t) > kMaxAbsTimeS) {
@@ -87,6 +112,9 @@ struct Layout<Step> {
     const auto szz = c.OptionalDouble(k[8]);
     if (sxx && syy) {
       if (*sxx < 0 || *syy < 0 || (szz && *szz < 0)) c.Fail("negative variance");
+      CheckAtMost(c, "sxx", *sxx, kMaxStepVarianceM2, "m^2");
+      CheckAtMost(c, "syy", *syy, kMaxStepVarianceM2, "m^2");
+      if (szz) CheckAtMost(c, "szz", *szz, kMaxStepVarianceM2, "m^2");
       r.variance_m2 = Vec3(*sxx, *syy, szz.value_or(0.0));
     } else {
       r.variance_m2.reset();
@@ -136,8 +164,10 @@ struct Layout<RangeMeasurement> {
     r.b.assign(c.NodeId(k[2]));
     r.range_m = c.Double(k[3]);
     if (r.range_m < 0) c.Fail(fmt::format("column 'range': negative range {}", r.range_m));
+    CheckAtMost(c, "range", r.range_m, kMaxRangeM, "m");
     r.sigma_m = c.OptionalDouble(k[4]);
     if (r.sigma_m && *r.sigma_m <= 0) c.Fail("column 'sigma': must be positive");
+    if (r.sigma_m) CheckAtMost(c, "sigma", *r.sigma_m, kMaxRangeSigmaM, "m");
     r.kind = k[5] >= 0 ? std::string(c.Field(k[5])) : std::string();
   }
   static std::vector<std::string_view> Ids(const RangeMeasurement& r) { return {r.a, r.b}; }
@@ -156,8 +186,10 @@ struct Layout<BearingMeasurement> {
     r.a.assign(c.NodeId(k[1]));
     r.b.assign(c.NodeId(k[2]));
     r.bearing_rad = c.Double(k[3]);
+    CheckAtMost(c, "bearing", std::abs(r.bearing_rad), kMaxAbsAngleRad, "rad in magnitude");
     r.sigma_rad = c.OptionalDouble(k[4]);
     if (r.sigma_rad && *r.sigma_rad <= 0) c.Fail("column 'sigma': must be positive");
+    if (r.sigma_rad) CheckAtMost(c, "sigma", *r.sigma_rad, kMaxAngleSigmaRad, "rad");
   }
   static std::vector<std::string_view> Ids(const BearingMeasurement& r) { return {r.a, r.b}; }
   static void Format(CsvWriter& w, const BearingMeasurement& r) {
@@ -173,10 +205,20 @@ struct Layout<MissionEvent> {
   static void Parse(const CsvReader& c, const std::vector<int>& k, MissionEvent& r) {
     r.t = c.Double(k[0]);
     r.agent.assign(c.NodeId(k[1]));
-    r.event.assign(c.Field(k[2]));
+    r.event.assign(TrimCell(c.Field(k[2])));
     if (r.event.empty()) c.Fail("column 'event': empty");
+    if (std::find(std::begin(kEventNames), std::end(kEventNames), r.event) ==
+        std::end(kEventNames)) {
+      std::string lower = r.event;
+      for (char& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+      const bool case_only = std::find(std::begin(kEventNames), std::end(kEventNames), lower) !=
+                             std::end(kEventNames);
+      c.Fail(fmt::format("column 'event': '{}' is not an event of the mission format ({}){}",
+                         r.event, "drop, wake, enter, exit, stop, go",
+                         case_only ? fmt::format("; names are lowercase: '{}'?", lower) : ""));
+    }
     r.node.clear();
-    if (k[3] >= 0 && !c.Field(k[3]).empty()) r.node.assign(c.NodeId(k[3]));
+    if (k[3] >= 0 && !TrimCell(c.Field(k[3])).empty()) r.node.assign(c.NodeId(k[3]));
     if (r.event == "drop" && r.node.empty()) c.Fail("a 'drop' event needs the dropped node id");
   }
   static std::vector<std::string_view> Ids(const MissionEvent& r) {
@@ -289,6 +331,23 @@ bool RowReader<Row>::Next(Row& row) {
   }
   last_t_ = t;
   last_t_line_ = csv_.line();
+  // One device's rows: a jump of more than a day is a stray time (a clock reset, a unit slip),
+  // not a pause of an incident; refused with both lines, never integrated over.
+  const std::string_view device = Layout<Row>::Ids(row).front();
+  auto it = last_device_ != device_.end() && last_device_->first == device ? last_device_
+                                                                          : device_.find(device);
+  if (it == device_.end()) {
+    last_device_ =
+        device_.emplace(std::string(device), std::pair<double, std::size_t>{t, csv_.line()}).first;
+  } else {
+    last_device_ = it;
+    if (t - it->second.first > kMaxDeviceGapS) {
+      csv_.Fail(fmt::format("'{}' jumps from t = {} (line {}) to t = {}: more than {:g} s between "
+                            "one device's rows is a stray time, not data",
+                            device, it->second.first, it->second.second, t, kMaxDeviceGapS));
+    }
+    it->second = {t, csv_.line()};
+  }
   if (registry_ != nullptr) {
     for (std::string_view id : Layout<Row>::Ids(row)) {
       if (!registry_->Contains(id)) {

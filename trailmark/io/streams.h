@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <functional>
 #include <set>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -57,6 +58,9 @@ class RowReader {
   double last_t_ = -std::numeric_limits<double>::infinity();
   std::size_t last_t_line_ = 0;
   std::size_t rows_ = 0;
+  /// Per device (the row's first id): its latest time and line.
+  std::map<std::string, std::pair<double, std::size_t>, std::less<>> device_;
+  decltype(device_)::iterator last_device_ = device_.end();  ///< the previous row's device
 };
 
 template <class Row>
