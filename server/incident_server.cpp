@@ -103,6 +103,16 @@ std::vector<std::pair<std::string, std::string>> AgentJson(const IncidentState& 
 
 }  // namespace
 
+bool SameSecret(std::string_view given, std::string_view secret) {
+  // Every byte of the secret is compared, whatever the given text; lengths last.
+  unsigned char diff = 0;
+  for (std::size_t i = 0; i < secret.size(); ++i) {
+    const unsigned char g = i < given.size() ? static_cast<unsigned char>(given[i]) : 0;
+    diff |= static_cast<unsigned char>(g ^ static_cast<unsigned char>(secret[i]));
+  }
+  return (diff == 0) & (given.size() == secret.size());
+}
+
 IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> estimates,
                                ServerOptions options,
                                std::vector<std::pair<TimeS, std::string>> heard,
@@ -240,9 +250,9 @@ void IncidentServer::Start() {
   // dashboard and its event stream may also take it as ?token=, the link a commander opens).
   auto authorized = [this](const httplib::Request& req, bool query_token_too) {
     ++stats_.requests;
-    const bool ok = req.get_header_value("Authorization") == "Bearer " + options_.token ||
+    const bool ok = SameSecret(req.get_header_value("Authorization"), "Bearer " + options_.token) ||
                     (query_token_too && req.has_param("token") &&
-                     req.get_param_value("token") == options_.token);
+                     SameSecret(req.get_param_value("token"), options_.token));
     if (!ok) ++stats_.unauthorized;
     return ok;
   };
@@ -317,12 +327,40 @@ void IncidentServer::Start() {
         });
   });
   if (live_) {
+    // The token is checked on the headers, before a byte of the body is read (a stranger's
+    // 200 MB is not read to be refused), and the size limit holds for chunked bodies too
+    // (cpp-httplib checks Content-Length only): the body is read here, counted as it comes.
     svr.Post(R"(/api/ingest/([a-z]+\.csv))", [this, authorized, refuse, json](
                                                  const httplib::Request& req,
-                                                 httplib::Response& res) {
-      if (!authorized(req, false)) return refuse(res);
+                                                 httplib::Response& res,
+                                                 const httplib::ContentReader& content_reader) {
+      if (!authorized(req, false)) {
+        res.set_header("Connection", "close");  // its unread body is not a next request
+        return refuse(res);
+      }
+      std::string body;
+      bool too_large = false;
+      const bool read = content_reader([&](const char* data, std::size_t n) {
+        if (body.size() + n > options_.max_request_bytes) {
+          too_large = true;
+          return false;
+        }
+        body.append(data, n);
+        return true;
+      });
+      if (too_large || !read) {
+        res.status = too_large ? 413 : 400;
+        res.set_header("Connection", "close");
+        const std::string why =
+            too_large ? "request body too large (at most " +
+                            std::to_string(options_.max_request_bytes) + " bytes)"
+                      : "request body could not be read";
+        Reject(req.method + " " + req.path + ": " + why);
+        json(res, {{"error", why}});
+        return;
+      }
       try {
-        json(res, Ingest(req.matches[1], req.body));
+        json(res, Ingest(req.matches[1], body));
       } catch (const std::invalid_argument& e) {
         res.status = 400;
         json(res, {{"error", e.what()}});

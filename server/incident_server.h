@@ -74,6 +74,10 @@ struct ServerStats {
       estimated_rows{0}, estimator_refusals{0}, commits{0}, events_sent{0};
 };
 
+/// Whether `given` equals `secret`, in time that depends on the secret's length only (not on
+/// where the first difference is): a token is not guessable byte by byte from response times.
+bool SameSecret(std::string_view given, std::string_view secret);
+
 class IncidentServer {
  public:
   /// `estimates` in non-decreasing time (a pipeline's online output); `heard`: (time, node) of
