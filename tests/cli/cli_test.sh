@@ -47,6 +47,12 @@ head -1 "$dir/run/estimates.csv" | matches "^t,id,x,y,z,sxx,sxy,syy$" || fail "e
 test -s "$dir/run/metrics.json" || fail "metrics.json"
 grep -q '"mean_pct_of_distance"' "$dir/run/metrics.json" || fail "metrics keys"
 grep -q '"in95"' "$dir/run/metrics.json" || fail "metrics in95"
+grep -q '"in95_at_estimates"' "$dir/run/metrics.json" || fail "metrics in95 at the estimates"
+# A run that produces no estimate says so (issue 30: it exited 0 without a word).
+mkdir -p "$dir/nosteps" && cp "$dir/m/mission.json" "$dir/nosteps/"
+head -1 "$dir/m/steps.csv" > "$dir/nosteps/steps.csv"
+"$TM" run --pipeline pdr "$dir/nosteps" --out "$dir/nostepsrun" 2> "$dir/nosteps.err" > /dev/null
+grep -q "wrote no estimates" "$dir/nosteps.err" || fail "no warning for a run without estimates"
 # A variant: written with what was drawn, valid; bad --vary / --family named.
 "$TM" simulate office-loop-1lap --seed 2 --vary 4 --out "$dir/var" | matches "rotation_deg" || fail "simulate --vary"
 grep -q '"family": "all"' "$dir/var/variation.json" || fail "variation.json"
