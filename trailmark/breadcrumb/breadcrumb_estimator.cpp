@@ -146,6 +146,13 @@ void BreadcrumbEstimator::EmitAgent(const std::string& id, EstimateSink& sink) {
 }
 
 void BreadcrumbEstimator::EmitStatic(TimeS t, bool all, EstimateSink& sink) {
+  if (all) {
+    // Declared known nodes no measurement named: their survey, as the network would give it.
+    for (const auto& [id, d] : loc_->DeclaredOnly()) {
+      const double v = d.sigma_m * d.sigma_m;
+      Emit({t, id, Vec3(d.position_n.x(), d.position_n.y(), 0.0), v, 0.0, v}, sink);
+    }
+  }
   for (const auto& id : loc_->StaticNodes()) {
     auto e = loc_->Estimate(id);
     if (!e) continue;

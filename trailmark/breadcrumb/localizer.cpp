@@ -69,19 +69,26 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
 
 void BreadcrumbLocalizer::AddKnownNode(const std::string& id, const Vec2& position_n,
                                        double sigma_m) {
-  StaticNode node;
-  node.id = id;
-  node.known = true;
-  node.index = gen_.AddNode(position_n);
-  const double s = std::max(sigma_m, 1e-3);
-  gen_.AddPrior(node.index, position_n, Mat2::Identity() * s * s);
-  node.cached_cov = Mat2::Identity() * s * s;
-  static_[id] = node;
-  static_order_.push_back(id);
+  if (static_.count(id) || agents_.count(id)) return;
+  declared_known_[id] = {position_n, std::max(sigma_m, 1e-3)};
 }
 
 void BreadcrumbLocalizer::AddUnknownNode(const std::string& id) {
   if (static_.count(id) || agents_.count(id)) return;
+  if (const auto d = declared_known_.find(id); d != declared_known_.end()) {
+    // A declared known node named by its first measurement: into the network with its prior.
+    StaticNode node;
+    node.id = id;
+    node.known = true;
+    node.index = gen_.AddNode(d->second.position_n);
+    const double s = d->second.sigma_m;
+    gen_.AddPrior(node.index, d->second.position_n, Mat2::Identity() * s * s);
+    node.cached_cov = Mat2::Identity() * s * s;
+    static_[id] = node;
+    static_order_.push_back(id);
+    declared_known_.erase(d);
+    return;
+  }
   StaticNode node;
   node.id = id;
   static_[id] = node;
@@ -499,6 +506,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
   const Mat2 cov_here = a.cached_cov + Diag(offset_var);
 
   if (p.kind == Kind::kDrop) {
+    if (declared_known_.count(p.other)) AddUnknownNode(p.other);  // into the network first
     StaticNode& node = static_[p.other];
     node.id = p.other;
     if (node.index >= 0) gen_.DeleteNode(node.index);  // picked up and dropped again

@@ -165,8 +165,15 @@ class BreadcrumbLocalizer {
  public:
   explicit BreadcrumbLocalizer(LocalizerOptions options = {});
 
-  /// Base stations and surveyed landmarks.
+  /// Base stations and surveyed landmarks. Declared only: a node enters the network when a
+  /// measurement first names it (issue 30: the cost follows the nodes used, not the declared).
   void AddKnownNode(const std::string& id, const Vec2& position_n, double sigma_m);
+  struct DeclaredNode {
+    Vec2 position_n = Vec2::Zero();
+    double sigma_m = 0;  ///< as used (at least 1 mm)
+  };
+  /// Known nodes declared and never named by a measurement (not in the network).
+  const std::map<std::string, DeclaredNode>& DeclaredOnly() const { return declared_known_; }
   /// A static node whose position is unknown (initialized from ranges).
   void AddUnknownNode(const std::string& id);
   /// An agent; `start` empty when unknown; heading sigma for the heading/scale node (empty:
@@ -293,6 +300,7 @@ class BreadcrumbLocalizer {
   std::map<std::string, Agent> agents_;
   std::map<std::string, StaticNode> static_;
   std::vector<std::string> static_order_;
+  std::map<std::string, DeclaredNode> declared_known_;
   std::map<std::pair<std::string, std::string>, Link> links_;
   std::map<std::pair<std::string, std::string>, radio::EncounterDetector> encounter_;
   std::vector<std::pair<TimeS, std::string>> moved_;
