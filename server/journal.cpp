@@ -1,15 +1,19 @@
 // SPDX-License-Identifier: MIT
 #include "server/journal.h"
 
+#include "trailmark/io/streams.h"
+
 #include <fcntl.h>
 #include <sqlite3.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <optional>
 #include <stdexcept>
@@ -236,6 +240,12 @@ void Journal::Exec(const char* sql) const {
   }
 }
 
+double Journal::LatestTime() const {
+  double latest = -std::numeric_limits<double>::infinity();
+  for (const auto& [key, t] : last_t_) latest = std::max(latest, t);
+  return latest;
+}
+
 std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const Batch*>& batches) {
   std::lock_guard<std::mutex> lock(mutex_);
   if (mode_ != Open::kNormal) throw std::runtime_error(file_.string() + ": opened to salvage only");
@@ -262,6 +272,22 @@ std::vector<Journal::AppendResult> Journal::AppendGroup(const std::vector<const 
       std::vector<bool> repeat(batch.rows.size(), false);
       for (std::size_t i = 0; i < batch.rows.size() && r.error.empty(); ++i) {
         const auto it = last_t_.find(std::make_pair(batch.stream, batch.node[i]));
+        // A stray time (issue 30): more than a day after the device's last row, or a new
+        // device's first row more than a day from the incident's latest: refused, so it
+        // neither moves the incident's clock nor locks the device out of its own time.
+        const double reference =
+            it != last_t_.end() ? it->second : LatestTime();
+        const double jump = it != last_t_.end() ? batch.t[i] - reference
+                                                : std::abs(batch.t[i] - reference);
+        if (std::isfinite(reference) && jump > kMaxDeviceTimeGapS) {
+          const std::size_t line = i < batch.lines.size() ? batch.lines[i] : i + 2;
+          r.error = "request body:" + std::to_string(line) + ": t=" + std::to_string(batch.t[i]) +
+                    " of '" + batch.node[i] + "' is more than a day from " +
+                    (it != last_t_.end() ? "its last accepted row" : "the incident's latest row") +
+                    " in " + batch.stream + " (t=" + std::to_string(reference) +
+                    "): a stray time, not data";
+          break;
+        }
         if (it == last_t_.end() || batch.t[i] >= it->second) continue;
         bind(p.exists, 1, batch.stream);
         bind(p.exists, 2, batch.rows[i]);

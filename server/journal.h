@@ -95,6 +95,8 @@ class Journal {
   mutable std::mutex mutex_;  ///< one connection, used by the committer and the exporters
   /// Time of the last accepted row per (stream, node).
   std::map<std::pair<std::string, std::string>, double> last_t_;
+  /// The latest accepted time of any (stream, node); -inf when none (a new device's check).
+  double LatestTime() const;
   std::size_t commits_ = 0;
   struct Prepared;  ///< the append's statements, prepared once (normal mode)
   std::unique_ptr<Prepared> prepared_;

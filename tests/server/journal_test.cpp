@@ -82,6 +82,23 @@ TEST(Journal, RowsOutOfTimeOrderAreRefusedAndNothingOfTheBatchIsKept) {
   EXPECT_EQ(j.Append(Steps("ff3", {-1})).accepted, 1u);
 }
 
+TEST(Journal, AStrayTimeIsRefusedAndTheDeviceIsNotLockedOut) {
+  // Issue 30: a row at t = 9.9e9 accepted live moved the incident's clock and made every later
+  // row of its device "out of order".
+  testing::TempDir dir;
+  Journal j(dir.path() / "incident.db");
+  EXPECT_EQ(j.Append(Steps("ff1", {5, 6})).accepted, 2u);
+  const auto stray = j.Append(Steps("ff1", {9.9e9}));
+  EXPECT_THAT(stray.error, ::testing::AllOf(::testing::HasSubstr("'ff1'"),
+                                          ::testing::HasSubstr("more than a day")));
+  EXPECT_EQ(stray.accepted, 0u);
+  EXPECT_EQ(j.Append(Steps("ff1", {7})).accepted, 1u);  // not locked out
+  // A new device's first row far from the incident's time, either way.
+  EXPECT_THAT(j.Append(Steps("ff2", {9.9e9})).error, ::testing::HasSubstr("incident's latest"));
+  EXPECT_THAT(j.Append(Steps("ff2", {-1e9})).error, ::testing::HasSubstr("incident's latest"));
+  EXPECT_EQ(j.Append(Steps("ff2", {3})).accepted, 1u);
+}
+
 // A transaction that fails part-way (here a trigger of another connection aborts the insert of
 // one row, as a full disk would fail a write) journals nothing of its group and forgets the
 // times it had raised: the same rows are accepted when sent again, and a node it had seen

@@ -37,7 +37,7 @@ constexpr double kMaxRangeM = 1e5;           // 100 km: beyond any ranging radio
 constexpr double kMaxRangeSigmaM = 1e4;      // a range known to 10 km says nothing
 constexpr double kMaxAbsAngleRad = 1e3;      // as mission.json's headings
 constexpr double kMaxAngleSigmaRad = 100.0;  // beyond a full turn many times: not radians
-constexpr double kMaxDeviceGapS = 86400.0;   // one device's rows a day apart: a stray time
+constexpr double kMaxDeviceGapS = kMaxDeviceTimeGapS;  // one device's rows a day apart
 
 // The events of the spec (mission-format.md, events.csv).
 constexpr std::string_view kEventNames[] = {"drop", "wake", "enter", "exit", "stop", "go"};

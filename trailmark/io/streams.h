@@ -33,6 +33,10 @@ class NodeRegistry {
 };
 
 /// Column layout and parsing of one row kind (specialised in streams.cpp).
+/// One device's rows more than this apart (s) are a stray time (a clock reset, a unit slip),
+/// not a pause of an incident: refused by the readers and by the live journal (issue 30).
+inline constexpr double kMaxDeviceTimeGapS = 86400.0;
+
 template <class Row>
 struct StreamTraits;
 
