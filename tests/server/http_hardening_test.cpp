@@ -123,6 +123,21 @@ TEST_F(LiveServerFixture, AChunkedBodyBeyondTheLimitIsRefused) {
   EXPECT_EQ(server_->stats().ingested_rows.load(), 0u);
 }
 
+TEST_F(LiveServerFixture, APathOutOfTheDashboardIsNotServed) {
+  // Path traversal (issue 30's must-hold): raw, so no client normalizes the dots away. The
+  // dashboard's files are compiled in (no file system behind the routes): a regression test for
+  // whoever mounts a directory later.
+  for (const char* path : {"/../../../../etc/passwd", "/%2e%2e/%2e%2e/%2e%2e/etc/passwd",
+                           "/assets/../../../../etc/passwd"}) {
+    Connection c(server_->port());
+    ASSERT_TRUE(c.connected());
+    ASSERT_TRUE(c.Send(std::string("GET ") + path + " HTTP/1.1\r\nHost: x\r\n\r\n"));
+    const std::string reply = c.Receive(std::chrono::milliseconds(3000));
+    EXPECT_TRUE(reply.find(" 404 ") != std::string::npos || reply.find(" 400 ") != std::string::npos)
+        << path << ": " << reply.substr(0, 120);
+  }
+}
+
 TEST(SameSecret, ComparesWholeSecretsOnly) {
   EXPECT_TRUE(SameSecret("Bearer abc", "Bearer abc"));
   EXPECT_FALSE(SameSecret("Bearer abd", "Bearer abc"));
