@@ -194,6 +194,31 @@ TEST(Journal, AZeroedPageIsRefusedAndSalvageWritesWhatIsReadable) {
   EXPECT_THROW(salvage.Append(Steps("ff1", {5000})), std::runtime_error);
 }
 
+TEST(Journal, AColumnReadAsNullIsAnErrorNotAnEmptyRow) {
+  // A damaged row can read as NULL; the schema's NOT NULL is taken away by hand (writable
+  // schema) to make one. Reading it fails loudly, naming the column, instead of exporting "".
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  Fill(file, 2);
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open(file.c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db,
+                         "PRAGMA writable_schema = ON; UPDATE sqlite_master SET sql = "
+                         "replace(sql, 'row TEXT NOT NULL', 'row TEXT') WHERE name = 'rows'; "
+                         "PRAGMA writable_schema = OFF;",
+                         nullptr, nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  ASSERT_EQ(sqlite3_open(file.c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "UPDATE rows SET row = NULL WHERE seq = 3", nullptr, nullptr, nullptr),
+            SQLITE_OK);
+  sqlite3_close(db);
+  Journal j(file);
+  EXPECT_THAT([&] { j.ForEach([](const std::string&, const std::string&, const std::string&) {}); },
+              ::testing::ThrowsMessage<std::runtime_error>(
+                  ::testing::HasSubstr("a row without its column 2")));
+}
+
 TEST(Journal, FlippedBytesAreRefused) {
   testing::TempDir dir;
   const auto file = dir.path() / "incident.db";
