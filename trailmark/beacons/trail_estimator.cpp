@@ -324,7 +324,7 @@ std::pair<std::optional<Vec2>, std::optional<Mat2>> BeaconTrailEstimator::AgentE
     const Agent& a) const {
   if (a.ekf) return {a.ekf->position(), a.ekf->position_cov()};
   if (a.us_kf) return {a.us_kf->position(), a.us_kf->position_cov()};
-  if (a.heading_unknown && !a.heading_fixed) {
+  if (a.AwaitingHeading()) {
     // Somewhere within the distance walked from the start: all that is known before the
     // PDR's heading is.
     const double r = std::hypot(a.start_sigma_m, a.walked_m);
@@ -357,7 +357,7 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       if (it != agents_.end() && it->second.ekf) it->second.ekf->ConsiderDrop(i, options_.drop_sigma_m);
       if (it != agents_.end()) {
         const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
-        if (Agent& a = it->second; a.heading_unknown && !a.heading_fixed) {
+        if (Agent& a = it->second; a.AwaitingHeading()) {
           // Where it lies depends on the heading still unknown; a drop at the start does not.
           if (a.walked_m == 0)
             map_.SetAnchorHint(i, a.start_n, Mat2::Identity() * a.start_sigma_m * a.start_sigma_m + drop);
@@ -374,10 +374,10 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   } else if (const auto* step = std::get_if<Step>(&row)) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
-    if (a.heading_unknown && !a.heading_fixed) a.steps_before_fix.push_back(*step);
+    if (a.AwaitingHeading()) a.steps_before_fix.push_back(*step);
     if (a.drop_dr) AdvanceDropDeadReckoning(a, *step, d);
     a.walked_m += d.norm();
-    if (a.heading_unknown && !a.heading_fixed &&
+    if (a.AwaitingHeading() &&
         a.walked_m > options_.entry_heading_fallback_m) {
       FixHeading(a, step->t1, 0.0, options_.drop_dead_reckoning.start_heading_sigma_rad,
                  std::nullopt, sink);
@@ -421,8 +421,8 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     // A beacon without drop event or survey: anchored where an agent first passes close by.
     const Agent& passer = agents_[agent];
     if (!map_.HasAnchor(beacon) && r->range_m <= options_.close_pass_m &&
-        !(passer.heading_unknown && !passer.heading_fixed)) {
-      const auto [p, cov] = AgentEstimate(agents_[agent]);
+        !passer.AwaitingHeading()) {
+      const auto [p, cov] = AgentEstimate(passer);
       if (p) {
         map_.SetAnchorHint(beacon, *p, *cov + Mat2::Identity() * (r->range_m * r->range_m + 0.1));
         ++close_pass_anchors_;
@@ -528,7 +528,7 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
                                    const std::optional<PendingRange>& range,
                                    std::optional<double> bearing, double bearing_sigma,
                                    EstimateSink& sink) {
-  const bool estimating_heading = a.heading_unknown && !a.heading_fixed;
+  const bool estimating_heading = a.AwaitingHeading();
   if (options_.tracker == Tracker::kNone && !estimating_heading) return;
   const auto pos = map_.Position(beacon);
   if (!pos) {

@@ -173,6 +173,8 @@ class BeaconTrailEstimator : public OnlineEstimator {
     std::vector<std::pair<TimeS, int>> drops_before_fix;
     double estimated_heading_rad = 0, estimated_heading_sigma_rad = 0;
     bool heading_assumed = false;  ///< fixed by the fallback, not estimated
+    /// No start heading and none estimated or assumed yet.
+    bool AwaitingHeading() const { return heading_unknown && !heading_fixed; }
     Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
     int last_drop = -1;                      ///< beacon of the previous drop
     Mat2 last_drop_white_cov = Mat2::Zero();  ///< drop_dr's covariance there
