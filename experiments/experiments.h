@@ -79,4 +79,8 @@ int ReproduceRobustness(int variants, const std::filesystem::path& out, int firs
 /// with it trusted (integrity.exclude=false, integrity.streams=false).
 int ReproduceIntegrity(int seeds, const std::filesystem::path& out, int first_seed = 1);
 
+/// The multi-floor building (issue 26): ins and pdr with and without the barometer on seeds
+/// first_seed .. first_seed + seeds - 1: the right floor, VE95, the IPIN score.
+int ReproduceFloors(int seeds, const std::filesystem::path& out, int first_seed = 1);
+
 }  // namespace trailmark::experiments

@@ -206,6 +206,12 @@ const std::vector<Reproduction>& Reproductions() {
        [](const ReproductionArgs& a) {
          return ReproduceIntegrity(a.seeds, a.out / "integrity", a.first_seed);
        }},
+      {"floors",
+       "the multi-floor building: ins and pdr with and without the barometer, the right floor",
+       true, false,
+       [](const ReproductionArgs& a) {
+         return ReproduceFloors(a.seeds, a.out / "floors", a.first_seed);
+       }},
   };
   return table;
 }

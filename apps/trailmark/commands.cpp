@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <numbers>
+#include <set>
 #include <sstream>
 
 #include "progress.h"
@@ -15,6 +17,7 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/ins/height.h"
 #include "trailmark/report/html_report.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
@@ -73,7 +76,11 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
         "scenario");
   SimulatedMission sim =
       scenario == "search" ? SimulateSearchOnFile(search, seed) : SimulateScenario(scenario, seed);
+  if (!sim.levels.empty() && vary.k) {
+    throw std::invalid_argument("--vary does not draw variants of the multi-floor scenario yet");
+  }
   if (imu.rate_hz > 0) {
+    sim.data.imu.clear();  // a scenario's own foot IMU gives way to the one asked for
     ImuSimOptions o;
     o.rate_hz = imu.rate_hz;
     o.grade = ImuGrade::ByName(imu.grade);
@@ -107,8 +114,10 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
       << "\n";
     if (!j) throw std::runtime_error((out / "variation.json").string() + ": write failed");
     for (const auto& [key, value] : v.Describe()) fmt::print("  {:<26} {}\n", key, value);
-  } else {
+  } else if (sim.levels.empty()) {
     WriteMissionDirectory(out, sim.data, &sim.plan);
+  } else {
+    WriteMissionDirectory(out, sim.data, sim.levels);  // every level in one file
   }
   const auto& d = sim.data;
   std::size_t crumbs = 0;
@@ -165,6 +174,18 @@ Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
     for (const auto& m : metrics.nodes) row(m);
     row(metrics.agents);
     if (metrics.static_nodes.stats.samples > 0) row(metrics.static_nodes);
+    if (metrics.floors) {
+      const FloorMetrics& f = *metrics.floors;
+      std::string by_agent;
+      for (const auto& [id, rate] : f.hit_rate_by_agent) {
+        by_agent += fmt::format("{}{} {:.1f} %", by_agent.empty() ? "" : ", ", id, 100 * rate);
+      }
+      fmt::print(
+          "floors: right floor {:.1f} % ({}), CE95 {:.2f} m, VE95 {:.2f} m, SE95 {:.2f} m, "
+          "vertical mean {:.2f} m, IPIN score {:.2f} m\n",
+          100 * f.floor_hit_rate, by_agent, f.ce95_m, f.ve95_m, f.se95_m, f.vertical_mean_m,
+          f.ipin_score_m);
+    }
     fmt::print("metrics written to {}\n", metrics_out.string());
   }
   return metrics;
@@ -298,6 +319,37 @@ void Validate(const fs::path& mission_dir) {
   ValidateStream<MissionEvent>(mission, [](const MissionEvent& r) { return r.t; });
   ValidateStream<BaroSample>(mission, [](const BaroSample& r) { return r.t; });
   ValidateStream<TruthSample>(mission, [](const TruthSample& r) { return r.t; });
+  // The 1.1 additions: the building's levels, each barometer's range, the truth's levels.
+  if (!mission.info().floors.empty()) {
+    std::string list;
+    for (const FloorLevel& f : mission.info().floors) {
+      list += fmt::format("{}{} at {:.2f} m", list.empty() ? "" : ", ", f.level, f.elevation_m);
+    }
+    fmt::print("{:<14} {} levels: {}\n", "floors", mission.info().floors.size(), list);
+  }
+  if (mission.HasStream<BaroSample>()) {
+    std::map<std::string, std::pair<double, double>> range;
+    auto reader = mission.OpenStream<BaroSample>();
+    for (BaroSample b; reader.Next(b);) {
+      auto [it, fresh] = range.emplace(b.agent, std::pair{b.pressure_hpa, b.pressure_hpa});
+      it->second.first = std::min(it->second.first, b.pressure_hpa);
+      it->second.second = std::max(it->second.second, b.pressure_hpa);
+    }
+    for (const auto& [agent, r] : range) {
+      fmt::print("{:<14} {}: {:.2f} .. {:.2f} hPa ({:.1f} m of pressure altitude)\n", "barometer",
+                 agent, r.first, r.second, PressureAltitudeM(r.first) - PressureAltitudeM(r.second));
+    }
+  }
+  if (mission.HasStream<TruthSample>()) {
+    std::set<int> truth_levels;
+    auto reader = mission.OpenStream<TruthSample>();
+    for (TruthSample s; reader.Next(s);) {
+      if (s.floor) truth_levels.insert(*s.floor);
+    }
+    if (!truth_levels.empty()) {
+      fmt::print("{:<14} levels in truth: {}\n", "truth.csv", fmt::join(truth_levels, ", "));
+    }
+  }
   std::vector<int> levels;
   if (const auto plan = mission.LoadFloorPlan(std::nullopt, &levels)) {
     if (levels.size() > 1) {

@@ -192,7 +192,7 @@ int main(int argc, char** argv) {
   std::string reproduce_out = "out/reproduce";
   auto* reproduce = app.add_subcommand(
       "reproduce", "a paper's experiment on simulated equivalents, side by side with the paper");
-  reproduce->add_option("name", reproduce_name, "breadcrumb | ins | landmarks | beacons | mapmatch | robustness")
+  reproduce->add_option("name", reproduce_name, "breadcrumb | ins | landmarks | beacons | mapmatch | robustness | integrity | floors")
       ->required();
   reproduce->add_option("--seeds", reproduce_seeds, "number of simulated runs (seeds 1..N)")
       ->check(CLI::Range(1, 1000));

@@ -255,3 +255,75 @@ TEST(FloorPlanGeoJson, BadGeometryIsNamed) {
 
 }  // namespace
 }  // namespace trailmark
+
+namespace trailmark {
+namespace {
+
+TEST(MissionJson, FloorsOfTheSpecRoundTripSortedAndBadOnesAreNamed) {
+  const MissionInfo info = ParseMissionInfo(
+      R"({"floors": [{"level": 0, "elevation_m": 0.0}, {"level": 1, "elevation_m": 3.5},
+                     {"level": -1, "elevation_m": -3.2}]})",
+      "mission.json");
+  ASSERT_EQ(info.floors.size(), 3u);
+  EXPECT_EQ(info.floors.front().level, -1);  // sorted by elevation
+  EXPECT_EQ(info.floors.back().level, 1);
+  const MissionInfo again = ParseMissionInfo(MissionInfoToJson(info), "again");
+  ASSERT_EQ(again.floors.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(again.floors[i].level, info.floors[i].level);
+    EXPECT_EQ(again.floors[i].elevation_m, info.floors[i].elevation_m);
+  }
+  EXPECT_TRUE(ParseMissionInfo("{}", "m").floors.empty());
+  EXPECT_THAT(ErrorOfMission(R"({"floors": [{"level": 0, "elevation_m": 0}, {"level": 0, "elevation_m": 3}]})"),
+              AllOf(HasSubstr("/floors/1/level"), HasSubstr("listed twice")));
+  EXPECT_THAT(ErrorOfMission(R"({"floors": [{"level": 0, "elevation_m": 3}, {"level": 1, "elevation_m": 0}]})"),
+              HasSubstr("a higher level must lie higher"));
+  EXPECT_THAT(ErrorOfMission(R"({"floors": [{"level": 0.5, "elevation_m": 0}]})"),
+              AllOf(HasSubstr("/floors/0/level"), HasSubstr("integer")));
+  EXPECT_THAT(ErrorOfMission(R"({"floors": [{"level": 2}]})"), HasSubstr("elevation_m"));
+  EXPECT_THAT(ErrorOfMission(R"({"floors": {"level": 2}})"), HasSubstr("expected an array"));
+}
+
+TEST(Streams, FloorAndVerticalVarianceColumnsOfVersion1Point1) {
+  TempDir dir;
+  // Truth with levels; a level that is not an integer is refused with its line.
+  const std::string truth = dir.File("truth.csv", "t,id,x,y,z,floor\n0,a,1,2,3.5,1\n1,a,1,2,0,\n");
+  const auto rows = ReadAll<TruthSample>(truth);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].floor, 1);
+  EXPECT_FALSE(rows[1].floor.has_value());
+  const std::string bad = dir.File("t2.csv", "t,id,x,y,z,floor\n0,a,1,2,3.5,1.5\n");
+  try {
+    ReadAll<TruthSample>(bad);
+    FAIL() << "a level of 1.5 was accepted";
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("t2.csv:2"), HasSubstr("not a level")));
+  }
+  // Estimates: szz and floor written only when some row has them, read back the same.
+  std::vector<Estimate> est{{0, "a", Vec3(1, 2, 3.4), 1, 0, 1, 0.04, 1}, {1, "a", Vec3(1, 2, 0), 1, 0, 1}};
+  const auto lines = FormatAll(est);
+  EXPECT_EQ(lines.front(), "t,id,x,y,z,sxx,sxy,syy,szz,floor");
+  EXPECT_EQ(lines.back(), "1,a,1,2,0,1,0,1,,");
+  const std::string path = (dir.path() / "estimates.csv").string();
+  WriteAll(path, est);
+  const auto back = ReadAll<Estimate>(path);
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_EQ(back[0].szz, 0.04);
+  EXPECT_EQ(back[0].floor, 1);
+  EXPECT_FALSE(back[1].szz.has_value());
+  est.pop_back();
+  est[0].szz.reset();
+  est[0].floor.reset();
+  EXPECT_EQ(FormatAll(est).front(), "t,id,x,y,z,sxx,sxy,syy");  // 1.0 columns
+  // Barometer in Pa instead of hPa: refused with its line.
+  const std::string pa = dir.File("baro.csv", "t,agent,pressure_hpa\n0,a,1013.2\n0.2,a,101320\n");
+  try {
+    ReadAll<BaroSample>(pa);
+    FAIL() << "101320 hPa was accepted";
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("baro.csv:3"), HasSubstr("Pa or kPa")));
+  }
+}
+
+}  // namespace
+}  // namespace trailmark

@@ -73,6 +73,7 @@ struct TruthSample {
   TimeS t = 0;
   std::string id;
   Vec3 position_n = Vec3::Zero();
+  std::optional<int> floor{};  ///< the level the node is on (1.1); empty: derived from z
 };
 
 /// estimates.csv: the online estimate of a node with its horizontal covariance.
@@ -83,6 +84,8 @@ struct Estimate {
   double sxx = 0;
   double sxy = 0;
   double syy = 0;
+  std::optional<double> szz{};  ///< vertical variance, m^2 (1.1); empty: no height estimate
+  std::optional<int> floor{};  ///< the level the estimator believes (1.1); empty: from z
 };
 
 }  // namespace trailmark

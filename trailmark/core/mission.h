@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "trailmark/core/types.h"
@@ -52,6 +53,26 @@ struct RadioCalibration {
   double shadowing_sigma_db = 4.0;
 };
 
+/// One level of the building (spec 1.1, "Floors"): the elevation of its floor surface in the
+/// navigation frame's z.
+struct FloorLevel {
+  int level = 0;
+  double elevation_m = 0;
+};
+
+/// Spec 1.1: a person's z is on the level with the highest elevation at or below z + 1.0 m;
+/// below every level, the lowest. Without levels, storeys of kDefaultStoreyM with level 0 at
+/// z = 0. `floors` sorted by elevation (MissionInfo keeps them so).
+inline constexpr double kFloorTolerance_m = 1.0;
+inline constexpr double kDefaultStoreyM = 3.0;
+int LevelAt(const std::vector<FloorLevel>& floors, double z_m);
+/// The z interval [lower, upper) of heights that LevelAt maps to `level` (infinite at the ends;
+/// empty, lower == upper, for a level not in `floors`).
+std::pair<double, double> LevelHeightInterval(const std::vector<FloorLevel>& floors, int level);
+/// The elevation of `level`'s floor surface (default storeys without floors); nullopt for a
+/// level not in `floors`.
+std::optional<double> LevelElevation(const std::vector<FloorLevel>& floors, int level);
+
 struct MissionInfo {
   std::string format = "trailmark-mission/1";
   std::string name;
@@ -59,6 +80,8 @@ struct MissionInfo {
   std::vector<NodeInfo> nodes;
   std::optional<RadioCalibration> radio;
   std::optional<std::string> floorplan;  ///< path relative to the mission directory
+  /// The building's levels (1.1), sorted by elevation; empty: 3 m storeys, level 0 at z = 0.
+  std::vector<FloorLevel> floors;
 
   const NodeInfo* Find(const std::string& id) const;
   /// The single base node, or nullptr when there is none or more than one.

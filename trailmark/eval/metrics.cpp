@@ -115,6 +115,13 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
   out.static_nodes.id = "static";
   out.static_nodes.kind = NodeKind::kCrumb;
   std::vector<double> agent_mean_pct, agent_max_pct;
+  // Floors: horizontal, vertical, level difference at each scored agent instant.
+  const bool floors = !info.floors.empty() ||
+                      std::any_of(truth.begin(), truth.end(),
+                                  [](const TruthSample& s) { return s.floor.has_value(); });
+  std::vector<double> h_err, v_err, s_err, ipin;
+  std::size_t hits = 0;
+  FloorMetrics floor_metrics;
 
   for (const auto& id : order) {
     NodeMetrics m;
@@ -128,6 +135,7 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
         m.distance_m += HorizontalError(tr[i]->position_n, tr[i - 1]->position_n);
       }
       std::size_t k = 0;  // es[k-1] is the latest estimate with t <= truth t
+      std::size_t agent_hits = 0, agent_samples = 0;
       for (const TruthSample* s : tr) {
         while (k < es.size() && es[k]->t <= s->t) ++k;
         if (k == 0) {
@@ -135,6 +143,24 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
           continue;
         }
         m.series.push_back(Sample(s->t, *es[k - 1], s->position_n));
+        if (floors) {
+          const Estimate& e = *es[k - 1];
+          const int true_level = s->floor.value_or(LevelAt(info.floors, s->position_n.z()));
+          const int level = e.floor.value_or(LevelAt(info.floors, e.position_n.z()));
+          const double h = m.series.back().error_m;
+          const double v = std::abs(e.position_n.z() - s->position_n.z());
+          h_err.push_back(h);
+          v_err.push_back(v);
+          s_err.push_back(std::hypot(h, v));
+          ipin.push_back(h + 15.0 * std::abs(level - true_level));
+          agent_hits += level == true_level;
+          ++agent_samples;
+        }
+      }
+      if (floors && agent_samples > 0) {
+        hits += agent_hits;
+        floor_metrics.hit_rate_by_agent[id] =
+            static_cast<double>(agent_hits) / static_cast<double>(agent_samples);
       }
       // Each estimate at its own instant, the truth interpolated between its samples.
       std::size_t j = 0;  // tr[j]->t <= e->t < tr[j + 1]->t
@@ -187,6 +213,21 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
     pooled->stats = ComputeStatistics(pooled->series);
   }
   out.agents.at_estimates = ComputeEllipseCheck(out.agents.series_at_estimates);
+  if (floors) {
+    FloorMetrics& f = floor_metrics;
+    f.samples = h_err.size();
+    if (f.samples > 0) {
+      f.floor_hit_rate = static_cast<double>(hits) / static_cast<double>(f.samples);
+      double sum = 0;
+      for (const double v : v_err) sum += v;
+      f.vertical_mean_m = sum / static_cast<double>(f.samples);
+      f.ce95_m = Percentile(h_err, 95);
+      f.ve95_m = Percentile(v_err, 95);
+      f.se95_m = Percentile(s_err, 95);
+      f.ipin_score_m = Percentile(ipin, 75);
+    }
+    out.floors = f;
+  }
   // Final error of the pool: mean of the nodes' final errors.
   for (auto [pooled, kind_is_agent] : {std::pair{&out.agents, true},
                                        std::pair{&out.static_nodes, false}}) {

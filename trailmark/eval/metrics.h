@@ -13,6 +13,7 @@
 /// are scored at each of their estimate rows and at the end of the mission, against the truth
 /// in force then (a kicked crumb has a second truth row).
 
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -69,6 +70,21 @@ struct NodeMetrics {
   EllipseCheck at_estimates;
 };
 
+/// Floors and height (issue 26; spec 1.1), agents at every truth instant with an estimate in
+/// force. Levels from the `floor` columns, else from z by the spec's rule (MissionInfo::floors).
+/// Figures of ISO/IEC 18305 (CE95, VE95, SE95, floor detection probability) and the IPIN
+/// competition's score (the 75th percentile of horizontal error + 15 m per floor wrong).
+struct FloorMetrics {
+  std::size_t samples = 0;
+  double floor_hit_rate = 0;         ///< share of instants on the right level
+  double ce95_m = 0;                 ///< horizontal error, 95th percentile
+  double ve95_m = 0;                 ///< vertical error |dz|, 95th percentile
+  double vertical_mean_m = 0;
+  double se95_m = 0;                 ///< spherical (3-D) error, 95th percentile
+  double ipin_score_m = 0;           ///< p75 of (horizontal + 15 m x |floor difference|)
+  std::map<std::string, double> hit_rate_by_agent;
+};
+
 struct Metrics {
   std::vector<NodeMetrics> nodes;  ///< every node with truth, in order of first truth row
   /// All agent instants pooled; distance summed; percentages are the mean over agents.
@@ -76,6 +92,8 @@ struct Metrics {
   /// All static-node instants pooled (crumbs and landmarks; the base is skipped when exact).
   NodeMetrics static_nodes;
   std::size_t estimates_without_truth = 0;  ///< rows for ids that have no truth
+  /// Present where the mission is about floors: it lists them or its truth has levels.
+  std::optional<FloorMetrics> floors;
 };
 
 /// Linear-interpolation percentile (numpy's default) of unsorted values; q in [0, 100].

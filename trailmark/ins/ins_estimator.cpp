@@ -162,7 +162,7 @@ EstimatorSummary MultiAgentIns::Summary() const {
 }
 
 bool InsEstimatorOptions::IsValid(std::string* why) const {
-  if (!ins.IsValid(why)) return false;
+  if (!ins.IsValid(why) || !height.IsValid(why)) return false;
   if (!(output_hz >= 0) || !std::isfinite(output_hz)) {
     if (why) *why = "output_hz must be >= 0 and finite";
     return false;
@@ -181,13 +181,14 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
              "(every step end only)");
     t.Real("output_hz", &InsEstimatorOptions::output_hz, "Hz", OptionBounds::NonNegative(),
            "output=rate: estimates per agent per second, step ends besides (0: every sample)");
+    t.Include("height.", &InsEstimatorOptions::height, HeightOptionTable());
     return t;
   }();
   return table;
 }
 
 InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
-    : options_(options), ins_(std::move(info), options.ins) {
+    : options_(options), ins_(info, options.ins), height_(std::move(info), options.height) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("ins: " + why);
   ins_.on_state = [this](const std::string& id, const InsState& st) {
@@ -203,6 +204,7 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
   };
   // A step is emitted when its stance has ended: the agent's latest state is the stance end.
   ins_.on_step = [this](const Step& step) {
+    height_.Add(step);
     if (sink_ == nullptr) return;
     if (const auto st = ins_.State(step.agent); st && st->t == step.t1) Write(step.agent, *st);
   };
@@ -215,13 +217,19 @@ void InsEstimator::Write(const std::string& agent, const InsState& st) {
     it->second = st.t;
   }
   const auto& c = st.position_cov;
-  sink_->Add({st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)});
+  Estimate e{st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)};
+  height_.Annotate(e);
+  sink_->Add(e);
 }
 
 void InsEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   const auto* imu = std::get_if<ImuSample>(&row);
   if (imu == nullptr) {
-    ++ignored_;
+    if (std::holds_alternative<BaroSample>(row)) {
+      height_.Add(row);
+    } else {
+      ++ignored_;
+    }
     return;
   }
   sink_ = &sink;
@@ -240,11 +248,14 @@ std::optional<Estimate> InsEstimator::Current(const std::string& node) const {
   const auto st = ins_.State(node);
   if (!st) return std::nullopt;
   const auto& c = st->position_cov;
-  return Estimate{st->t, node, st->position_n, c(0, 0), c(0, 1), c(1, 1)};
+  Estimate e{st->t, node, st->position_n, c(0, 0), c(0, 1), c(1, 1)};
+  height_.Annotate(e);
+  return e;
 }
 
 EstimatorSummary InsEstimator::Summary() const {
   EstimatorSummary s = ins_.Summary();
+  height_.AddToSummary(s);
   s.numbers["rows_ignored"] = static_cast<double>(ignored_);
   return s;
 }

@@ -15,6 +15,7 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/ins/height.h"
 #include "trailmark/ins/zupt_ins.h"
 
 namespace trailmark::ins {
@@ -74,6 +75,8 @@ struct InsEstimatorOptions {
   /// ~10 cm between two (swing ~5 m/s), a tenth of the INS's error after a minute's walk, and a
   /// 820 Hz IMU writes 16x fewer rows than samples. Step ends are written whatever the rate.
   double output_hz = 50;
+  /// The height channel (`height.` keys): z, szz and floor from the steps and baro.csv.
+  HeightOptions height;
   bool IsValid(std::string* why) const;
 };
 const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable();
@@ -92,6 +95,7 @@ class InsEstimator : public OnlineEstimator {
  private:
   InsEstimatorOptions options_;
   MultiAgentIns ins_;
+  HeightChannel height_;
   void Write(const std::string& agent, const InsState& state);
   EstimateSink* sink_ = nullptr;
   std::map<std::string, TimeS> written_;  ///< per agent: the time of the last state written

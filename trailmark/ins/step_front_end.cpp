@@ -8,7 +8,7 @@
 namespace trailmark {
 
 bool StepFrontEndOptions::IsValid(std::string* why) const {
-  if (!ins.IsValid(why)) return false;
+  if (!ins.IsValid(why) || !height.IsValid(why)) return false;
   if (!(reorder_s >= 0)) {
     if (why) *why = "reorder_s must be >= 0";
     return false;
@@ -20,6 +20,7 @@ const OptionTable<StepFrontEndOptions>& StepSourceOptionTable() {
   static const OptionTable<StepFrontEndOptions> table = [] {
     OptionTable<StepFrontEndOptions> t;
     t.Include("ins.", &StepFrontEndOptions::ins, ins::InsOptionTable());
+    t.Include("height.", &StepFrontEndOptions::height, HeightOptionTable());
     return t;
   }();
   return table;
@@ -42,7 +43,8 @@ StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrd
       order_(order),
       feed_(feed),
       inner_(std::move(inner)),
-      ins_(std::move(info), options.ins) {
+      ins_(info, options.ins),
+      height_(std::move(info), options.height) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument(why);
   ins_.on_step = [this](const Step& step) {
@@ -63,9 +65,15 @@ bool StepFrontEnd::UseSource(const std::string& agent, bool imu) {
   return false;
 }
 
+void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
+  height_.Add(row);
+  HeightAnnotatingSink annotated(height_, sink);
+  inner_->Add(row, annotated);
+}
+
 void StepFrontEnd::Deliver(const MissionRow& row, EstimateSink& sink) {
   if (order_ == RowOrder::kPerAgent) {
-    inner_->Add(row, sink);
+    Pass(row, sink);
   } else {
     buffer_.Push(row);
   }
@@ -77,7 +85,7 @@ void StepFrontEnd::Release(EstimateSink& sink) {
   if (const auto b = ins_.EarliestNextStepEndOfActive(live ? until : -1e300)) {
     until = std::min(until, *b);
   }
-  buffer_.ReleaseBefore(until, [&](const MissionRow& r) { inner_->Add(r, sink); });
+  buffer_.ReleaseBefore(until, [&](const MissionRow& r) { Pass(r, sink); });
 }
 
 void StepFrontEnd::Add(const MissionRow& row, EstimateSink& sink) {
@@ -96,12 +104,15 @@ void StepFrontEnd::Add(const MissionRow& row, EstimateSink& sink) {
 void StepFrontEnd::Finish(EstimateSink& sink) {
   sink_ = &sink;
   ins_.Finish();
-  buffer_.ReleaseAll([&](const MissionRow& r) { inner_->Add(r, sink); });
-  inner_->Finish(sink);
+  buffer_.ReleaseAll([&](const MissionRow& r) { Pass(r, sink); });
+  HeightAnnotatingSink annotated(height_, sink);
+  inner_->Finish(annotated);
 }
 
 std::optional<Estimate> StepFrontEnd::Current(const std::string& node) const {
-  return inner_->Current(node);
+  std::optional<Estimate> e = inner_->Current(node);
+  if (e) height_.Annotate(*e);
+  return e;
 }
 
 EstimatorSummary StepFrontEnd::Summary() const {
@@ -119,6 +130,7 @@ EstimatorSummary StepFrontEnd::Summary() const {
     s.notes.push_back(
         fmt::format("steps from imu.csv through the ZUPT INS ({} steps)", ins_steps_));
   }
+  height_.AddToSummary(s);
   s.numbers["rows_ignored"] += static_cast<double>(ignored_);
   if (order_ == RowOrder::kGlobal) {
     s.numbers["rows_late"] = static_cast<double>(buffer_.late());

@@ -10,7 +10,8 @@
 ///    past it; in a live feed also `reorder_s` behind the newest row, since devices deliver
 ///    their own rows in order but not in step with each other. Steps of an agent's INS are put
 ///    in their place by their end time t1, as if read from steps.csv.
-/// The inner estimator sees steps, never IMU samples. No I/O.
+/// The inner estimator sees steps, never IMU samples. Every row it gets also feeds the agents'
+/// height channel (ins/height.h), which sets z, szz and floor of what it estimates. No I/O.
 
 #include <memory>
 #include <string>
@@ -19,6 +20,7 @@
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
 #include "trailmark/core/time_order_buffer.h"
+#include "trailmark/ins/height.h"
 #include "trailmark/ins/ins_estimator.h"
 
 namespace trailmark {
@@ -28,6 +30,8 @@ struct StepFrontEndOptions {
   /// Live feed, global order: how long (s) a row waits behind the newest row for older rows of
   /// other devices (ours: 1 s covers a batch of 0.1-1 s per device; estimates lag by it).
   double reorder_s = 1.0;
+  /// Every agent's height channel (`height.` keys): z, szz and floor of the estimates.
+  HeightOptions height;
   bool IsValid(std::string* why) const;
 };
 /// The `ins.` keys (the INS options with the prefix).
@@ -57,6 +61,8 @@ class StepFrontEnd : public OnlineEstimator {
 
  private:
   void Deliver(const MissionRow& row, EstimateSink& sink);
+  /// The row to the height channel and the inner estimator, its estimates annotated.
+  void Pass(const MissionRow& row, EstimateSink& sink);
   void Release(EstimateSink& sink);
   bool UseSource(const std::string& agent, bool imu);
 
@@ -66,6 +72,7 @@ class StepFrontEnd : public OnlineEstimator {
   Feed feed_;
   std::unique_ptr<OnlineEstimator> inner_;
   ins::MultiAgentIns ins_;
+  HeightChannel height_;
   EstimateSink* sink_ = nullptr;
   TimeOrderBuffer buffer_;
   std::map<std::string, bool> source_is_imu_;

@@ -54,6 +54,17 @@ std::string MetricsToJson(const Metrics& metrics, std::size_t max_series) {
   for (const auto& m : metrics.nodes) nodes.push_back(NodeJson(m, max_series));
   root["nodes"] = nodes;
   root["estimates_without_truth"] = metrics.estimates_without_truth;
+  if (metrics.floors) {
+    const FloorMetrics& f = *metrics.floors;
+    root["floors"] = {{"samples", f.samples},
+                      {"floor_hit_rate", f.floor_hit_rate},
+                      {"ce95_m", f.ce95_m},
+                      {"ve95_m", f.ve95_m},
+                      {"vertical_mean_m", f.vertical_mean_m},
+                      {"se95_m", f.se95_m},
+                      {"ipin_score_m", f.ipin_score_m},
+                      {"hit_rate_by_agent", f.hit_rate_by_agent}};
+  }
   return root.dump(1) + "\n";
 }
 

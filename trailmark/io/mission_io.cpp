@@ -169,6 +169,45 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
                       *info.floorplan));
     }
   }
+  if (root.contains("floors") && !root["floors"].is_null()) {
+    // Spec 1.1 "Floors": each level once, a finite elevation; kept sorted by elevation, which
+    // must rise with the level (a level above another cannot lie below it).
+    const json& floors = root["floors"];
+    if (!floors.is_array()) Bad(source, "/floors", "expected an array of {level, elevation_m}");
+    std::set<int> levels;
+    for (std::size_t i = 0; i < floors.size(); ++i) {
+      const std::string where = fmt::format("/floors/{}", i);
+      const json& f = floors[i];
+      if (!f.is_object()) Bad(source, where, "expected an object {level, elevation_m}");
+      if (!f.contains("level") || !f["level"].is_number_integer()) {
+        Bad(source, where + "/level", "expected an integer level");
+      }
+      const auto level = f["level"].get<std::int64_t>();
+      if (std::abs(level) > 1000) Bad(source, where + "/level", "not a plausible level");
+      const auto elevation = OptNumber(f, "elevation_m", source, where);
+      if (!elevation) Bad(source, where, "missing key 'elevation_m'");
+      if (std::abs(*elevation) > 1e4) {
+        Bad(source, where + "/elevation_m",
+            fmt::format("{:g} m is not a plausible elevation", *elevation));
+      }
+      if (!levels.insert(static_cast<int>(level)).second) {
+        Bad(source, where + "/level", fmt::format("level {} listed twice", level));
+      }
+      info.floors.push_back({static_cast<int>(level), *elevation});
+    }
+    std::sort(info.floors.begin(), info.floors.end(),
+              [](const FloorLevel& a, const FloorLevel& b) { return a.elevation_m < b.elevation_m; });
+    for (std::size_t i = 1; i < info.floors.size(); ++i) {
+      const FloorLevel& lo = info.floors[i - 1];
+      const FloorLevel& hi = info.floors[i];
+      if (!(hi.level > lo.level) || !(hi.elevation_m > lo.elevation_m)) {
+        Bad(source, "/floors",
+            fmt::format("level {} at {:g} m and level {} at {:g} m: a higher level must lie "
+                        "higher",
+                        lo.level, lo.elevation_m, hi.level, hi.elevation_m));
+      }
+    }
+  }
   return info;
 }
 
@@ -202,6 +241,13 @@ std::string MissionInfoToJson(const MissionInfo& info) {
                      {"shadowing_sigma_db", info.radio->shadowing_sigma_db}};
   }
   if (info.floorplan) root["floorplan"] = *info.floorplan;
+  if (!info.floors.empty()) {
+    json floors = json::array();
+    for (const FloorLevel& f : info.floors) {
+      floors.push_back({{"level", f.level}, {"elevation_m", f.elevation_m}});
+    }
+    root["floors"] = floors;
+  }
   return root.dump(2) + "\n";
 }
 
@@ -458,6 +504,17 @@ void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& 
     out << FloorPlanToGeoJson(*plan, style.polyline_walls);
     if (!out) throw std::runtime_error((dir / *info.floorplan).string() + ": write failed");
   }
+}
+
+void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
+                           const std::vector<std::pair<int, FloorPlan>>& levels) {
+  MissionData with_plan = data;
+  if (!with_plan.info.floorplan) with_plan.info.floorplan = "floorplan.geojson";
+  WriteMissionDirectory(dir, with_plan, nullptr);
+  const std::filesystem::path path = dir / *with_plan.info.floorplan;
+  std::ofstream out(path, std::ios::binary);
+  out << FloorPlanToGeoJson(levels);
+  if (!out) throw std::runtime_error(path.string() + ": write failed");
 }
 
 MissionData ReadMissionData(const MissionDirectory& mission) {

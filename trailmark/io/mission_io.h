@@ -53,6 +53,11 @@ std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& flo
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
                            const FloorPlan* plan = nullptr, const MissionWriteStyle& style = {});
 
+/// The same, with a multi-floor plan: every level's plan in one file (each feature with its
+/// `level`), named by data.info.floorplan (default floorplan.geojson).
+void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
+                           const std::vector<std::pair<int, FloorPlan>>& levels);
+
 /// The same CSV text drawn another way the spec allows: comment lines, the columns in another
 /// order, an extra (quoted) column. Cells are taken as written by CsvWriter (no quotes).
 std::string RestyleCsv(const std::string& text, const MissionWriteStyle& style,

@@ -250,27 +250,45 @@ struct Layout<BaroSample> {
   }
 };
 
+/// A level in a `floor` cell: an integer (spec 1.1).
+std::optional<int> OptionalLevel(const CsvReader& c, int col) {
+  const std::optional<double> v = c.OptionalDouble(col);
+  if (!v) return std::nullopt;
+  if (std::floor(*v) != *v || std::abs(*v) > 1000) {
+    c.Fail(fmt::format("column 'floor': {:g} is not a level (an integer)", *v));
+  }
+  return static_cast<int>(*v);
+}
+
+void AddLevel(CsvWriter& w, const std::optional<int>& level) {
+  w.Add(level ? std::optional<double>(*level) : std::nullopt);
+}
+
 template <>
 struct Layout<TruthSample> {
   static constexpr ColumnSpec kColumns[] = {
-      {"t", true}, {"id", true}, {"x", true}, {"y", true}, {"z", false}};
+      {"t", true}, {"id", true}, {"x", true}, {"y", true}, {"z", false}, {"floor", false}};
+  static constexpr std::size_t kFloorColumns = 1;  ///< the trailing 1.1 columns
   static double Time(const TruthSample& r) { return r.t; }
   static void Parse(const CsvReader& c, const std::vector<int>& k, TruthSample& r) {
     r.t = c.Double(k[0]);
     r.id.assign(c.NodeId(k[1]));
     r.position_n = Vec3(c.Double(k[2]), c.Double(k[3]), c.OptionalDouble(k[4]).value_or(0.0));
+    r.floor = OptionalLevel(c, k[5]);
   }
   static std::vector<std::string_view> Ids(const TruthSample& r) { return {r.id}; }
   static void Format(CsvWriter& w, const TruthSample& r) {
     w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
   }
+  static void FormatFloor(CsvWriter& w, const TruthSample& r) { AddLevel(w, r.floor); }
 };
 
 template <>
 struct Layout<Estimate> {
-  static constexpr ColumnSpec kColumns[] = {{"t", true},    {"id", true},    {"x", true},
-                                            {"y", true},    {"z", false},    {"sxx", false},
-                                            {"sxy", false}, {"syy", false}};
+  static constexpr ColumnSpec kColumns[] = {
+      {"t", true},     {"id", true},      {"x", true},   {"y", true},   {"z", false},
+      {"sxx", false},  {"sxy", false},    {"syy", false}, {"szz", false}, {"floor", false}};
+  static constexpr std::size_t kFloorColumns = 2;
   static double Time(const Estimate& r) { return r.t; }
   static void Parse(const CsvReader& c, const std::vector<int>& k, Estimate& r) {
     r.t = c.Double(k[0]);
@@ -279,19 +297,35 @@ struct Layout<Estimate> {
     r.sxx = c.OptionalDouble(k[5]).value_or(0.0);
     r.sxy = c.OptionalDouble(k[6]).value_or(0.0);
     r.syy = c.OptionalDouble(k[7]).value_or(0.0);
-    if (r.sxx < 0 || r.syy < 0) c.Fail("negative variance");
+    r.szz = c.OptionalDouble(k[8]);
+    r.floor = OptionalLevel(c, k[9]);
+    if (r.sxx < 0 || r.syy < 0 || (r.szz && *r.szz < 0)) c.Fail("negative variance");
   }
   static std::vector<std::string_view> Ids(const Estimate& r) { return {r.id}; }
   static void Format(CsvWriter& w, const Estimate& r) {
     w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
     w.Add(r.sxx).Add(r.sxy).Add(r.syy);
   }
+  static void FormatFloor(CsvWriter& w, const Estimate& r) {
+    w.Add(r.szz);
+    AddLevel(w, r.floor);
+  }
 };
 
 template <class Row>
-std::vector<std::string> Header() {
+constexpr std::size_t FloorColumns() {
+  if constexpr (requires { Layout<Row>::kFloorColumns; }) {
+    return Layout<Row>::kFloorColumns;
+  } else {
+    return 0;
+  }
+}
+
+template <class Row>
+std::vector<std::string> Header(bool floor_columns) {
   std::vector<std::string> h;
   for (const auto& c : Layout<Row>::kColumns) h.emplace_back(c.name);
+  if (!floor_columns) h.resize(h.size() - FloorColumns<Row>());
   return h;
 }
 
@@ -362,15 +396,21 @@ bool RowReader<Row>::Next(Row& row) {
 }
 
 template <class Row>
-RowWriter<Row>::RowWriter(std::string path) : csv_(std::move(path), Header<Row>()) {}
+RowWriter<Row>::RowWriter(std::string path, bool floor_columns)
+    : floor_columns_(floor_columns && FloorColumns<Row>() > 0),
+      csv_(std::move(path), Header<Row>(floor_columns_)) {}
 
 template <class Row>
-RowWriter<Row>::RowWriter(std::string name, std::vector<std::string>* lines)
-    : csv_(std::move(name), Header<Row>(), lines) {}
+RowWriter<Row>::RowWriter(std::string name, std::vector<std::string>* lines, bool floor_columns)
+    : floor_columns_(floor_columns && FloorColumns<Row>() > 0),
+      csv_(std::move(name), Header<Row>(floor_columns_), lines) {}
 
 template <class Row>
 void RowWriter<Row>::Write(const Row& row) {
   Layout<Row>::Format(csv_, row);
+  if constexpr (FloorColumns<Row>() > 0) {
+    if (floor_columns_) Layout<Row>::FormatFloor(csv_, row);
+  }
   csv_.EndRow();
 }
 

@@ -67,17 +67,33 @@ class RowReader {
   decltype(device_)::iterator last_device_ = device_.end();  ///< the previous row's device
 };
 
+/// Whether rows need the 1.1 columns (truth: `floor`; estimates: `szz,floor`): some row has them.
+inline bool NeedsFloorColumns(const std::vector<TruthSample>& rows) {
+  return std::any_of(rows.begin(), rows.end(), [](const TruthSample& r) { return r.floor.has_value(); });
+}
+inline bool NeedsFloorColumns(const std::vector<Estimate>& rows) {
+  return std::any_of(rows.begin(), rows.end(),
+                     [](const Estimate& r) { return r.szz.has_value() || r.floor.has_value(); });
+}
+template <class Row>
+bool NeedsFloorColumns(const std::vector<Row>&) {
+  return false;
+}
+
 template <class Row>
 class RowWriter {
  public:
-  explicit RowWriter(std::string path);
+  /// `floor_columns`: also the 1.1 columns of truth (`floor`) and estimates (`szz,floor`),
+  /// empty cells where a row has none; other streams have none.
+  explicit RowWriter(std::string path, bool floor_columns = false);
   /// Canonical lines (header first, no newlines) into `lines` instead of a file.
-  RowWriter(std::string name, std::vector<std::string>* lines);
+  RowWriter(std::string name, std::vector<std::string>* lines, bool floor_columns = false);
   void Write(const Row& row);
   void Close() { csv_.Close(); }
   std::size_t rows() const { return csv_.rows(); }
 
  private:
+  bool floor_columns_;
   CsvWriter csv_;
 };
 
@@ -115,14 +131,14 @@ std::vector<Row> ParseAll(const std::string& name, std::string_view content,
 template <class Row>
 std::vector<std::string> FormatAll(const std::vector<Row>& rows) {
   std::vector<std::string> lines;
-  RowWriter<Row> writer("(memory)", &lines);
+  RowWriter<Row> writer("(memory)", &lines, NeedsFloorColumns(rows));
   for (const auto& r : rows) writer.Write(r);
   return lines;
 }
 
 template <class Row>
 void WriteAll(const std::string& path, const std::vector<Row>& rows) {
-  RowWriter<Row> writer(path);
+  RowWriter<Row> writer(path, NeedsFloorColumns(rows));
   for (const auto& r : rows) writer.Write(r);
   writer.Close();
 }

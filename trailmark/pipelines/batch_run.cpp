@@ -159,7 +159,7 @@ namespace {
 
 class CsvEstimateSink : public EstimateSink {
  public:
-  explicit CsvEstimateSink(const std::string& path) : writer_(path) {}
+  CsvEstimateSink(const std::string& path, bool floor_columns) : writer_(path, floor_columns) {}
   // estimates.csv is in non-decreasing time (spec). An estimate is known when it is written:
   // a row stamped earlier than one already written (e.g. an agent's start, emitted with its
   // first step, after another agent's rows) is stamped with the latest time instead.
@@ -191,7 +191,11 @@ class CsvEstimateSink : public EstimateSink {
 RunResult RunPipeline(const PipelineSpec& pipeline, const PipelineContext& context,
                       const std::filesystem::path& out_dir) {
   std::filesystem::create_directories(out_dir);
-  CsvEstimateSink sink((out_dir / "estimates.csv").string());
+  // The 1.1 columns (szz, floor) where the mission is about floors: it lists them or has a
+  // barometer. A single-floor mission's estimates.csv keeps the 1.0 columns.
+  const bool floors = !context.mission.info().floors.empty() ||
+                      PresentStreams(context.mission).Has(Stream::kBaro);
+  CsvEstimateSink sink((out_dir / "estimates.csv").string(), floors);
   const auto t0 = std::chrono::steady_clock::now();
   RunResult result;
   result.pipeline = pipeline.name;

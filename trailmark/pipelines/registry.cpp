@@ -133,7 +133,7 @@ std::vector<PipelineSpec> BuildRegistry() {
     s.name = "pdr";
     s.description = "dead reckoning of PDR steps from each agent's start (baseline)";
     s.needs = {kStepStreams};
-    s.uses = kStepStreams;
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kBaro};
     s.steps_based = true;
     s.baseline = true;
     s.serve_rank = 6;
@@ -150,7 +150,8 @@ std::vector<PipelineSpec> BuildRegistry() {
         "breadcrumb paper: incremental generalized-electrical-network estimator over PDR "
         "steps, RSSI/ranges between agents and dropped crumbs (IV)";
     s.needs = {kStepStreams};
-    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kRanges, Stream::kEvents};
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kRanges, Stream::kEvents,
+              Stream::kBaro};
     s.steps_based = true;
     s.serve_rank = 1;
     out.push_back(Make<breadcrumb::BreadcrumbEstimatorOptions>(
@@ -166,7 +167,7 @@ std::vector<PipelineSpec> BuildRegistry() {
         "zero-velocity-aided INS of raw foot IMU samples (ZUPT/ZARU error-state KF; detectors "
         "shoe, are, mv, mag, adaptive)";
     s.needs = {{Stream::kImu}};
-    s.uses = {Stream::kImu};
+    s.uses = {Stream::kImu, Stream::kBaro};
     s.serve_rank = 5;
     s.report_options = {{"output_hz", "10"}};  // the truth's rate: keeps reports small
     out.push_back(Make<ins::InsEstimatorOptions>(
@@ -184,7 +185,7 @@ std::vector<PipelineSpec> BuildRegistry() {
             : "radio-landmarks paper: stop-and-go localization of landmarks and stops, dead "
               "reckoning re-anchored at each stop (sec. 5.3, 6.2)";
     s.needs = {kStepStreams, {Stream::kRssi}};
-    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kEvents};
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kEvents, Stream::kBaro};
     s.min_landmarks = 3;
     s.steps_based = true;
     if (ukf) s.serve_rank = 3;
@@ -207,7 +208,7 @@ std::vector<PipelineSpec> BuildRegistry() {
                 "completion and SMACOF refinement, anchored online (sec. 5)";
     s.needs = track ? std::vector<StreamSet>{kStepStreams, {Stream::kRanges}}
                     : std::vector<StreamSet>{{Stream::kRanges}};
-    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRanges, Stream::kEvents};
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kRanges, Stream::kEvents, Stream::kBaro};
     if (track) s.uses.Add(Stream::kBearings);
     s.steps_based = true;
     if (track) s.serve_rank = 2;
@@ -227,7 +228,7 @@ std::vector<PipelineSpec> BuildRegistry() {
         "map-aided search paper: particle filter on odometry and the floor plan with pseudo "
         "observations from directional-search patterns (ICP); no initial position needed";
     s.needs = {kStepStreams};
-    s.uses = kStepStreams;
+    s.uses = {Stream::kSteps, Stream::kImu, Stream::kBaro};
     s.needs_floor_plan = true;
     s.steps_based = true;
     s.raises_map_alerts = true;

@@ -114,11 +114,15 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   const double pitch = o.motion == FootMotion::kCrawl ? 0.3 * o.pitch_amplitude_rad
                                                       : o.pitch_amplitude_rad;
   const double climb = o.motion == FootMotion::kStairs ? 2 * o.riser_m : 0.0;
-  Vec3 foot(walk.steps.front().from.x(), walk.steps.front().from.y(), 0.0);
+  // The foot's height: the walk's own (stairs along the route) plus, in the stairs motion, two
+  // risers per stride.
+  Vec3 foot(walk.steps.front().from.x(), walk.steps.front().from.y(), walk.steps.front().z0);
+  double climbed = 0;
   const Vec2 first_dir = walk.steps.front().to - walk.steps.front().from;
   double yaw = std::atan2(first_dir.y(), first_dir.x());
   auto add_stride = [&](const TrueStep& s, double rise_m) {
-    const Vec3 to(s.to.x(), s.to.y(), foot.z() + rise_m);
+    climbed += rise_m;
+    const Vec3 to(s.to.x(), s.to.y(), s.z1 + climbed);
     const Vec2 d = (to - foot).head<2>();
     const double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
     const double swing_s = s.t1 - s.t0;

@@ -22,6 +22,9 @@ struct SimulatedMission {
   FloorPlan plan;
   /// The true walk of every agent (for sensor simulations made afterwards, e.g. a foot IMU).
   std::vector<std::pair<std::string, Walk>> walks;
+  /// A multi-floor building: every level's plan (`plan` is then the ground floor's); empty for
+  /// a single floor.
+  std::vector<std::pair<int, FloorPlan>> levels;
 };
 
 /// Breadcrumb dispenser (breadcrumb paper sec. III; Liu et al. MobiSys'10): drop a crumb when

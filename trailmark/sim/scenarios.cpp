@@ -4,6 +4,7 @@
 #include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/landmark_corridor.h"
+#include "trailmark/sim/multi_floor.h"
 
 #include <algorithm>
 #include <cmath>
@@ -185,7 +186,12 @@ std::vector<ScenarioInfo> Scenarios() {
           {"beacon-neighbour-trail",
            "a beacon trail laid out by someone else (issue 22): a U- or L-shaped corridor drawn "
            "from the seed, ranges between trail neighbours only, 3 surveyed beacons away from "
-           "the entry, NLOS ranges with a long tail, 15 % bearing outliers"}};
+           "the entry, NLOS ranges with a long tail, 15 % bearing outliers"},
+          {"multi-floor",
+           "floors (issue 26): a basement, a ground floor and two upper floors joined by a "
+           "stairwell, storey heights drawn per seed; ff1 searches the upper floors, ff2 the "
+           "ground floor and the basement; phone PDR steps without height, a foot IMU on the "
+           "stairs, a barometer each (offset, weather, a ventilation fan, spikes)"}};
 }
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
@@ -221,6 +227,7 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
     return SimulateBeaconLab(o, seed);
   }
   if (name == "beacon-neighbour-trail") return SimulateShapedTrail({}, seed);
+  if (name == "multi-floor") return SimulateMultiFloor({}, seed);
   std::string known;
   for (const auto& s : Scenarios()) known += (known.empty() ? "" : ", ") + s.name;
   throw std::invalid_argument("unknown scenario '" + name + "' (known: " + known + ")");

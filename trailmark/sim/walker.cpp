@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <stdexcept>
 
 namespace trailmark {
 
@@ -22,6 +23,20 @@ Vec2 Route::PointAt(double s) const {
     s -= seg;
   }
   return waypoints.back();
+}
+
+double Route::ZAt(double s) const {
+  if (waypoint_z.empty() || waypoints.empty()) return 0.0;
+  if (waypoint_z.size() != waypoints.size()) {
+    throw std::invalid_argument("Route: waypoint_z must have one height per waypoint");
+  }
+  if (s <= 0) return waypoint_z.front();
+  for (std::size_t i = 1; i < waypoints.size(); ++i) {
+    const double seg = (waypoints[i] - waypoints[i - 1]).norm();
+    if (s <= seg && seg > 0) return waypoint_z[i - 1] + (waypoint_z[i] - waypoint_z[i - 1]) * (s / seg);
+    s -= seg;
+  }
+  return waypoint_z.back();
 }
 
 Walk WalkRoute(const Route& route, const WalkerOptions& o, TimeS t_start, Random& rng) {
@@ -44,11 +59,15 @@ Walk WalkRoute(const Route& route, const WalkerOptions& o, TimeS t_start, Random
       continue;
     }
     double len = o.step_length_m * std::max(0.5, 1.0 + o.step_length_jitter * rng.Normal());
+    // Stairs ahead (a rise of more than 0.2 m per metre): one tread per step, slower.
+    const bool stairs = std::abs(route.ZAt(s + 0.05) - route.ZAt(s)) > 0.2 * 0.05;
+    if (stairs) len = o.stairs_step_length_m;
     if (next_stop < stops.size()) len = std::min(len, stops[next_stop].at_distance_m - s);
     len = std::min(len, total - s);
     if (len <= 1e-9) len = std::min(o.step_length_m, total - s);
-    const double dt = len / o.speed_mps;
-    walk.steps.push_back({t, t + dt, route.PointAt(s), route.PointAt(s + len)});
+    const double dt = len / (stairs ? o.stairs_speed_mps : o.speed_mps);
+    walk.steps.push_back({t, t + dt, route.PointAt(s), route.PointAt(s + len), route.ZAt(s),
+                          route.ZAt(s + len)});
     s += len;
     t += dt;
     knots.emplace_back(t, s);
@@ -73,7 +92,7 @@ Walk WalkRoute(const Route& route, const WalkerOptions& o, TimeS t_start, Random
     const Vec2 p = route.PointAt(si);
     const Vec2 ahead = route.PointAt(si + 0.3) - p;
     if (ahead.norm() > 1e-6) last_heading = std::atan2(ahead.y(), ahead.x());
-    walk.truth.push_back({ti, p, last_heading});
+    walk.truth.push_back({ti, p, last_heading, route.ZAt(si)});
   }
   return walk;
 }

@@ -19,15 +19,21 @@ struct Route {
     double duration_s = 0;
   };
   std::vector<Stop> stops;
+  /// The height (m, z of the feet) at each waypoint, linear between them; empty: 0 everywhere.
+  /// A stretch rising more than 0.2 m per metre is walked as stairs (WalkerOptions).
+  std::vector<double> waypoint_z;
   double Length() const;
   /// Point at distance s along the polyline (clamped to its ends).
   Vec2 PointAt(double distance_m) const;
+  /// Height at distance s along the polyline (clamped to its ends).
+  double ZAt(double distance_m) const;
 };
 
 /// One true step: foot displacement between two consecutive stances.
 struct TrueStep {
   TimeS t0 = 0, t1 = 0;
   Vec2 from = Vec2::Zero(), to = Vec2::Zero();
+  double z0 = 0, z1 = 0;  ///< height of the feet before and after
 };
 
 struct WalkerOptions {
@@ -37,6 +43,10 @@ struct WalkerOptions {
   double step_length_m = 0.7;
   double step_length_jitter = 0.05;  ///< relative per-step variation (1 sigma)
   double truth_rate_hz = 10.0;
+  /// On stairs: one riser per step, a tread of 0.28-0.30 m (building codes), climbed at about
+  /// 1.5 steps per second (Fujiyama & Tyler 2010: 0.4-0.5 m/s horizontally).
+  double stairs_step_length_m = 0.3;
+  double stairs_speed_mps = 0.45;
 };
 
 struct Walk {
@@ -45,6 +55,7 @@ struct Walk {
     TimeS t;
     Vec2 position;
     double heading_rad;
+    double z = 0;  ///< height of the feet
   };
   std::vector<Sample> truth;  ///< at truth_rate_hz, including stops
   struct StopInterval {

@@ -1,0 +1,78 @@
+// SPDX-License-Identifier: MIT
+// `trailmark reproduce floors` (issue 26): the multi-floor building, `ins` (foot IMU) and `pdr`
+// (phone steps without height) with and without the barometer; the right floor, vertical error
+// and the IPIN score per seed, against the must-hold (right floor >= 95 %).
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "experiments/experiments.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark::experiments {
+
+namespace fs = std::filesystem;
+
+int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
+  struct Arm {
+    std::string label, pipeline;
+    OptionValues options;
+  };
+  const std::vector<Arm> arms{
+      {"ins (foot IMU) + baro", "ins", {}},
+      {"ins, no baro", "ins", {{"height.use_baro", "false"}}},
+      {"pdr (phone steps) + baro", "pdr", {}},
+      {"pdr, no baro", "pdr", {{"height.use_baro", "false"}}},
+  };
+  struct Figures {
+    std::vector<double> hit, ve95, ipin, ce95, worst_agent;
+  };
+  std::vector<Figures> figures(arms.size());
+  std::string text = fmt::format(
+      "Multi-floor building (simulate multi-floor): basement, ground floor, two upper floors, a "
+      "stairwell; storey heights, searches, weather, device offsets and the fan drawn per seed; "
+      "seeds {}..{}.\n\n",
+      first_seed, first_seed + seeds - 1);
+  text += "| seed | arm | right floor % (worst agent) | VE95 m | vertical mean m | CE95 m | IPIN score m |\n";
+  text += "|---|---|---|---|---|---|---|\n";
+  for (int k = 0; k < seeds; ++k) {
+    const int seed = first_seed + k;
+    const fs::path dir = out / fmt::format("seed-{}", seed);
+    const SimulatedMission sim = SimulateScenario("multi-floor", static_cast<std::uint64_t>(seed));
+    WriteMissionDirectory(dir / "mission", sim.data, sim.levels);
+    for (std::size_t a = 0; a < arms.size(); ++a) {
+      double wall = 0;
+      const Metrics m = RunAndEvaluate(arms[a].pipeline, dir / "mission",
+                                       dir / fmt::format("run-{}", a), &wall, arms[a].options);
+      if (!m.floors) throw std::runtime_error("multi-floor mission without floor metrics");
+      const FloorMetrics& f = *m.floors;
+      double worst = 1.0;
+      for (const auto& [id, rate] : f.hit_rate_by_agent) worst = std::min(worst, rate);
+      Figures& g = figures[a];
+      g.hit.push_back(f.floor_hit_rate);
+      g.ve95.push_back(f.ve95_m);
+      g.ipin.push_back(f.ipin_score_m);
+      g.ce95.push_back(f.ce95_m);
+      g.worst_agent.push_back(worst);
+      text += fmt::format("| {} | {} | {:.1f} ({:.1f}) | {:.2f} | {:.2f} | {:.2f} | {:.2f} |\n", seed,
+                          arms[a].label, 100 * f.floor_hit_rate, 100 * worst, f.ve95_m,
+                          f.vertical_mean_m, f.ce95_m, f.ipin_score_m);
+    }
+  }
+  text += "\nSummary over the seeds (must hold: right floor >= 95 % for ins and for pdr with the "
+          "barometer):\n\n";
+  text += "| arm | right floor % mean | min | worst agent min | VE95 m mean | IPIN score m mean |\n";
+  text += "|---|---|---|---|---|---|\n";
+  for (std::size_t a = 0; a < arms.size(); ++a) {
+    const Figures& g = figures[a];
+    text += fmt::format("| {} | {:.1f} | {:.1f} | {:.1f} | {:.2f} | {:.2f} |\n", arms[a].label,
+                        100 * Mean(g.hit), 100 * *std::min_element(g.hit.begin(), g.hit.end()),
+                        100 * *std::min_element(g.worst_agent.begin(), g.worst_agent.end()),
+                        Mean(g.ve95), Mean(g.ipin));
+  }
+  return WriteReproduction(out, "Floors (issue 26)", text);
+}
+
+}  // namespace trailmark::experiments

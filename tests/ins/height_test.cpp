@@ -1,0 +1,244 @@
+// SPDX-License-Identifier: MIT
+// The height channel (issue 26): the spec's floor rule, the filter against a textbook Kalman
+// filter, the persistence of step heights, and the barometer's faults (jump, spike, stuck).
+#include "trailmark/ins/height.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <cmath>
+
+#include "trailmark/core/random.h"
+#include "trailmark/sim/multi_floor.h"
+
+namespace trailmark {
+namespace {
+
+const std::vector<FloorLevel> kSpecFloors{{-1, -3.2}, {0, 0.0}, {1, 3.5}};  // spec's example
+
+TEST(Floors, LevelAtFollowsTheSpecsRule) {
+  EXPECT_EQ(LevelAt(kSpecFloors, 0.0), 0);
+  EXPECT_EQ(LevelAt(kSpecFloors, 2.4), 0);   // 3.4 < 3.5
+  EXPECT_EQ(LevelAt(kSpecFloors, 2.5), 1);   // at or below z + 1
+  EXPECT_EQ(LevelAt(kSpecFloors, 1.0 + 3.5), 1);
+  EXPECT_EQ(LevelAt(kSpecFloors, -1.0), 0);  // level 0's elevation 0 is at or below -1 + 1
+  EXPECT_EQ(LevelAt(kSpecFloors, -1.01), -1);
+  EXPECT_EQ(LevelAt(kSpecFloors, -30.0), -1);  // below every level: the lowest
+  // Without floors: 3 m storeys, level 0 at z = 0.
+  EXPECT_EQ(LevelAt({}, 1.9), 0);
+  EXPECT_EQ(LevelAt({}, 2.0), 1);
+  EXPECT_EQ(LevelAt({}, -1.01), -1);
+  EXPECT_EQ(LevelAt({}, 5.1), 2);
+  const auto [lo, hi] = LevelHeightInterval(kSpecFloors, 0);
+  EXPECT_DOUBLE_EQ(lo, -1.0);
+  EXPECT_DOUBLE_EQ(hi, 2.5);
+  EXPECT_TRUE(std::isinf(LevelHeightInterval(kSpecFloors, -1).first));
+  EXPECT_TRUE(std::isinf(LevelHeightInterval(kSpecFloors, 1).second));
+}
+
+TEST(Floors, PressureAltitudeInvertsTheStandardAtmosphere) {
+  for (const double z : {-50.0, 0.0, 12.3, 300.0, 2000.0}) {
+    EXPECT_NEAR(PressureAltitudeM(StandardPressureHpa(z)), z, 1e-3) << z;
+  }
+  // About 8.3 m per hPa near sea level.
+  EXPECT_NEAR(PressureAltitudeM(1012.25) - PressureAltitudeM(1013.25), 8.32, 0.05);
+}
+
+Step FlatStep(TimeS t, double dz, double szz) {
+  return {t - 0.6, t, "a", Vec3(0.7, 0, dz), Vec3(1e-3, 1e-3, szz)};
+}
+
+BaroSample Reading(TimeS t, double height_m) {
+  return {t, "a", StandardPressureHpa(height_m)};
+}
+
+TEST(HeightFilter, EqualsATextbookKalmanFilterOnStepsOfUnknownHeightAndReadings) {
+  HeightOptions o;
+  o.gate_chi2 = 1e9;  // no gating: the reference has none
+  HeightFilter f(0.0, 0.05, o);
+  // Reference: x = [h, b], the same model written out.
+  Eigen::Vector2d x(0.0, 0.0);
+  Eigen::Matrix2d P = Eigen::Matrix2d::Zero();
+  P(0, 0) = 0.05 * 0.05;
+  const double R = o.baro_sigma_m * o.baro_sigma_m;
+  Random rng(7);
+  bool referenced = false;
+  TimeS last_t = 0;
+  for (int k = 0; k < 300; ++k) {
+    const TimeS t = 0.5 * k;
+    if (k % 2 == 0) {
+      f.AddStep(FlatStep(t, 0.0, 1.0));  // a phone step: height unknown
+      P(0, 0) += o.unknown_step_sigma_m * o.unknown_step_sigma_m;
+    }
+    const double y_true = 0.01 * k + rng.Normal(0, 0.3);
+    f.AddBaro(Reading(t, y_true));
+    const double y = PressureAltitudeM(StandardPressureHpa(y_true));
+    if (!referenced) {
+      x(1) = y - x(0);
+      P(1, 1) = P(0, 0) + R;
+      P(0, 1) = P(1, 0) = -P(0, 0);
+      referenced = true;
+    } else {
+      P(1, 1) += o.baro_drift_m_per_sqrt_s * o.baro_drift_m_per_sqrt_s * (t - last_t);
+      const Eigen::RowVector2d H(1, 1);
+      const double S = (H * P * H.transpose())(0, 0) + R;
+      const Eigen::Vector2d K = P * H.transpose() / S;
+      x += K * (y - H * x);
+      P = (Eigen::Matrix2d::Identity() - K * H) * P;
+    }
+    last_t = t;
+    ASSERT_NEAR(f.height_m(), x(0), 1e-9) << k;
+    ASSERT_NEAR(f.height_variance_m2(), P(0, 0), 1e-9) << k;
+    ASSERT_NEAR(f.baro_offset()->first, x(1), 1e-9) << k;
+  }
+}
+
+TEST(HeightFilter, StepHeightsCountOnlyWhenTheyPersist) {
+  Random rng(3);
+  HeightFilter f(0.0, 0.05);
+  double raw = 0;
+  // A level walk: the INS's vertical noise (2 cm a step) would drift ~0.3 m in 200 steps.
+  for (int k = 0; k < 200; ++k) {
+    const double dz = rng.Normal(0, 0.02);
+    raw += dz;
+    f.AddStep(FlatStep(k * 0.6, dz, 4e-4));
+  }
+  EXPECT_NEAR(f.height_m(), 0.0, 1e-12);
+  EXPECT_EQ(f.Counters().at("stairs_steps"), 0);
+  // A flight of 20 risers of 0.17 m: all of it counts, the first steps included.
+  for (int k = 0; k < 20; ++k) f.AddStep(FlatStep(200 * 0.6 + k * 0.6, 0.17, 4e-4));
+  for (int k = 0; k < 10; ++k) f.AddStep(FlatStep(220 * 0.6 + k * 0.6, 0.0, 4e-4));
+  // The whole flight counts, its first steps too, with the last level window's noise (6 steps
+  // of 2 cm: 3 sigma 0.15 m).
+  EXPECT_NEAR(f.height_m(), 3.4, 0.15);
+  EXPECT_EQ(f.Level(kSpecFloors).first, 1);
+  EXPECT_GT(f.Level(kSpecFloors).second, 0.99);
+}
+
+TEST(HeightFilter, APressureJumpWhileStandingMovesTheOffsetNotTheFloor) {
+  HeightFilter f(0.0, 0.05);
+  Random rng(11);
+  std::vector<IntegrityNote> notes;
+  // 60 s on a level floor, steps saying so; at t = 30 the fan adds 0.3 hPa (-2.5 m).
+  for (int k = 0; k < 300; ++k) {
+    const TimeS t = 0.2 * k;
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 4e-4));
+    BaroSample r = Reading(t, rng.Normal(0, 0.3));
+    if (t >= 30) r.pressure_hpa += 0.3;
+    f.AddBaro(r);
+    ASSERT_EQ(f.Level(kSpecFloors).first, 0) << t;
+  }
+  EXPECT_NEAR(f.height_m(), 0.0, 0.3);
+  EXPECT_EQ(f.Counters().at("baro_jumps"), 1);
+  notes = f.TakeNotes("a");
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].message.find("jumped"), std::string::npos);
+  // The offset took it: about +2.5 m of barometric height less.
+  EXPECT_NEAR(f.baro_offset()->first, -2.5, 0.4);
+}
+
+TEST(HeightFilter, AFansPressureRiseIsNotAFloorChangeForAPhone) {
+  // Steps that do not measure height: the filter follows the barometer closely. A fan raises
+  // the pressure by 0.3 hPa (-2.5 m) within a second: faster than anyone climbs.
+  HeightFilter f(0.0, 0.05);
+  Random rng(17);
+  for (int k = 0; k < 300; ++k) {
+    const TimeS t = 0.2 * k;
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
+    BaroSample r = Reading(t, rng.Normal(0, 0.3));
+    r.pressure_hpa += 0.3 * std::clamp(t - 30.0, 0.0, 1.0);
+    f.AddBaro(r);
+    ASSERT_EQ(f.Level(kSpecFloors).first, 0) << t;
+  }
+  EXPECT_NEAR(f.height_m(), 0.0, 0.5);
+  EXPECT_EQ(f.Counters().at("baro_jumps"), 1);
+  EXPECT_NEAR(f.baro_offset()->first, -2.5, 0.5);
+  // The same rise over 10 s is a descent of stairs to these sensors: it moves the height
+  // (docs/floors.md: a slow pressure change is not observable without steps that measure
+  // height, a map or a reference barometer).
+  HeightFilter slow(0.0, 0.05);
+  for (int k = 0; k < 300; ++k) {
+    const TimeS t = 0.2 * k;
+    if (k % 3 == 0) slow.AddStep(FlatStep(t, 0.0, 1.0));
+    BaroSample r = Reading(t, rng.Normal(0, 0.3));
+    r.pressure_hpa += 0.3 * std::clamp((t - 30.0) / 10.0, 0.0, 1.0);
+    slow.AddBaro(r);
+  }
+  EXPECT_LT(slow.height_m(), -1.5);
+}
+
+TEST(HeightFilter, ASpikeIsSkippedAndAStuckSensorIsNamed) {
+  HeightFilter f(0.0, 0.05);
+  Random rng(5);
+  for (int k = 0; k < 50; ++k) f.AddBaro(Reading(0.2 * k, rng.Normal(0, 0.3)));
+  const double before = f.height_m();
+  BaroSample spike = Reading(10.0, 0.0);
+  spike.pressure_hpa -= 2.0;  // +16 m for one reading
+  EXPECT_EQ(f.AddBaro(spike), HeightFilter::BaroUse::kRejected);
+  EXPECT_EQ(f.AddBaro(Reading(10.2, 0.0)), HeightFilter::BaroUse::kUsed);
+  EXPECT_NEAR(f.height_m(), before, 0.1);
+  // Stuck: the same value for 30 s.
+  const BaroSample same = Reading(11.0, 0.1);
+  std::size_t stuck = 0;
+  for (int k = 0; k < 150; ++k) {
+    BaroSample r = same;
+    r.t = 11.0 + 0.2 * k;
+    stuck += f.AddBaro(r) == HeightFilter::BaroUse::kStuck;
+  }
+  EXPECT_GT(stuck, 90u);
+  const auto notes = f.TakeNotes("a");
+  ASSERT_FALSE(notes.empty());
+  EXPECT_NE(notes.back().message.find("stuck"), std::string::npos);
+  EXPECT_EQ(notes.back().action, "excluded");
+}
+
+TEST(HeightFilter, TheBarometerCarriesAPhonesStepsUpTheStairs) {
+  // Steps without height; the barometer climbs 3.5 m over 10 s (a flight and a half).
+  HeightFilter f(0.0, 0.05);
+  Random rng(9);
+  for (int k = 0; k < 400; ++k) {
+    const TimeS t = 0.2 * k;
+    const double z = std::clamp((t - 20.0) * 0.35, 0.0, 3.5);
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
+    f.AddBaro(Reading(t, z + rng.Normal(0, 0.3)));
+  }
+  // Within its own 3 sigma, on level 1.
+  EXPECT_LE(std::abs(f.height_m() - 3.5), 3 * std::sqrt(f.height_variance_m2()));
+  EXPECT_EQ(f.Level(kSpecFloors).first, 1);
+}
+
+TEST(HeightFilter, StepsThatMeasureHeightWinOverASlowBarometerDivergence) {
+  // Steps measure a level floor (small szz, dz 0) while the barometer rises at walking pace:
+  // with steps that see stairs (a foot INS) the barometer is re-referenced, named; the same
+  // readings with steps that do not measure height move the height (kHeightChange).
+  HeightFilter f(0.0, 0.05);
+  HeightFilter phone(0.0, 0.05);
+  Random rng(13);
+  for (int k = 0; k < 400; ++k) {
+    const TimeS t = 0.2 * k;
+    const double z = std::clamp((t - 20.0) * 0.3, 0.0, 3.5);
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 4e-4));
+    if (k % 3 == 0) phone.AddStep(FlatStep(t, 0.0, 1.0));
+    const BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
+    f.AddBaro(r);
+    phone.AddBaro(r);
+  }
+  EXPECT_NEAR(f.height_m(), 0.0, 0.3);
+  EXPECT_EQ(f.Level(kSpecFloors).first, 0);
+  EXPECT_GE(f.Counters().at("baro_jumps"), 1);
+  const auto notes = f.TakeNotes("a");
+  ASSERT_FALSE(notes.empty());
+  EXPECT_NE(notes.front().message.find("steps' height"), std::string::npos);
+  EXPECT_LE(std::abs(phone.height_m() - 3.5), 3 * std::sqrt(phone.height_variance_m2()));
+  EXPECT_EQ(phone.Level(kSpecFloors).first, 1);
+}
+
+TEST(HeightFilter, RefusesBadOptions) {
+  HeightOptions o;
+  o.baro_sigma_m = 0;
+  EXPECT_THROW(HeightFilter(0, 0.1, o), std::invalid_argument);
+  EXPECT_THROW(HeightFilter(std::nan(""), 0.1), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace trailmark

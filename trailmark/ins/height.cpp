@@ -1,0 +1,463 @@
+// SPDX-License-Identifier: MIT
+#include "trailmark/ins/height.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+namespace trailmark {
+
+double PressureAltitudeM(double pressure_hpa) {
+  // ICAO standard atmosphere, troposphere: h = T0/L (1 - (p/p0)^(R L / g)).
+  return 44330.77 * (1.0 - std::pow(pressure_hpa / 1013.25, 0.190263));
+}
+
+bool HeightOptions::IsValid(std::string* why) const {
+  auto fail = [&](const char* what) {
+    if (why) *why = what;
+    return false;
+  };
+  if (!(stairs_min_rise_m > 0)) return fail("height.stairs_min_rise_m must be > 0");
+  if (stairs_window_steps < 1) return fail("height.stairs_window_steps must be >= 1");
+  if (!(flat_step_sigma_m >= 0) || !(unknown_step_sigma_m >= 0) || !(baro_sigma_m > 0) ||
+      !(baro_drift_m_per_sqrt_s >= 0)) {
+    return fail("height: sigmas must be >= 0 (baro_sigma_m > 0)");
+  }
+  if (!(unknown_step_szz_m2 > 0)) return fail("height.unknown_step_szz_m2 must be > 0");
+  if (!(gate_chi2 > 0)) return fail("height.gate_chi2 must be > 0");
+  if (!(jump_persist_s >= 0) || !(stuck_after_s > 0) || !(max_vertical_speed_mps > 0)) {
+    return fail("height: jump_persist_s >= 0, stuck_after_s > 0, max_vertical_speed_mps > 0");
+  }
+  return true;
+}
+
+const OptionTable<HeightOptions>& HeightOptionTable() {
+  static const OptionTable<HeightOptions> table = [] {
+    OptionTable<HeightOptions> t;
+    t.Real("stairs_min_rise_m", &HeightOptions::stairs_min_rise_m, "m", OptionBounds::Positive(),
+           "a step height change counts once the steps' dz reach this (stairs)");
+    t.Integer("stairs_window_steps", &HeightOptions::stairs_window_steps,
+              OptionBounds::Between(1, 1000),
+              "... within this many steps; less is a level floor (the INS's vertical noise)");
+    t.Real("flat_step_sigma_m", &HeightOptions::flat_step_sigma_m, "m",
+           OptionBounds::NonNegative(), "height noise per level step, 1 sigma");
+    t.Real("unknown_step_szz_m2", &HeightOptions::unknown_step_szz_m2, "m^2",
+           OptionBounds::Positive(), "a step with szz above this does not know its height");
+    t.Real("unknown_step_sigma_m", &HeightOptions::unknown_step_sigma_m, "m",
+           OptionBounds::NonNegative(), "height random walk per such step, 1 sigma");
+    t.Real("baro_sigma_m", &HeightOptions::baro_sigma_m, "m", OptionBounds::Positive(),
+           "barometer reading noise as height, 1 sigma");
+    t.Real("baro_drift_m_per_sqrt_s", &HeightOptions::baro_drift_m_per_sqrt_s, "m/sqrt(s)",
+           OptionBounds::NonNegative(), "barometer offset random walk (weather)");
+    t.Real("gate_chi2", &HeightOptions::gate_chi2, "", OptionBounds::Positive(),
+           "barometer innovation gate (chi-square, 1 dof)");
+    t.Real("jump_persist_s", &HeightOptions::jump_persist_s, "s", OptionBounds::NonNegative(),
+           "rejected readings agreeing this long are a pressure jump or a height change");
+    t.Real("max_vertical_speed_mps", &HeightOptions::max_vertical_speed_mps, "m/s",
+           OptionBounds::Positive(), "a faster change is the air (a door), not the agent");
+    t.Real("stuck_after_s", &HeightOptions::stuck_after_s, "s", OptionBounds::Positive(),
+           "the same reading this long is a stuck barometer");
+    t.Flag("use_baro", &HeightOptions::use_baro, "use baro.csv (off: step heights only)");
+    return t;
+  }();
+  return table;
+}
+
+HeightFilter::HeightFilter(double start_z_m, double start_sigma_m, const HeightOptions& options)
+    : options_(options) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument(why);
+  if (!std::isfinite(start_z_m) || !(start_sigma_m >= 0)) {
+    throw std::invalid_argument("HeightFilter: start height and sigma must be finite");
+  }
+  x_ << start_z_m, 0.0;
+  P_ << start_sigma_m * start_sigma_m, 0.0, 0.0, 0.0;
+}
+
+void HeightFilter::Predict(double q_h_m2) { P_(0, 0) += q_h_m2; }
+
+void HeightFilter::DriftTo(TimeS t) {
+  if (last_baro_t_ && t > *last_baro_t_) {
+    const double q = options_.baro_drift_m_per_sqrt_s;
+    P_(1, 1) += q * q * (t - *last_baro_t_);
+  }
+  if (!last_baro_t_ || t > *last_baro_t_) last_baro_t_ = t;
+}
+
+void HeightFilter::AddStep(const Step& step) {
+  ++steps_;
+  const double dz = step.delta_n.z();
+  const double szz = step.variance_m2 ? step.variance_m2->z() : 0.02 * 0.02;
+  if (!std::isfinite(dz) || !std::isfinite(szz)) return;
+  steps_know_height_ = szz <= options_.unknown_step_szz_m2;
+  if (!steps_know_height_) {
+    // The step does not know its height: a random walk (the barometer carries the height).
+    Predict(options_.unknown_step_sigma_m * options_.unknown_step_sigma_m);
+    return;
+  }
+  if (climbing_steps_left_ > 0) {
+    // On a flight of stairs: each step's dz counts at once.
+    x_[0] += dz;
+    committed_since_agreement_ += dz;
+    Predict(szz);
+    ++stairs_steps_;
+    if (std::abs(dz) >= options_.stairs_min_rise_m / 3) {
+      climbing_steps_left_ = options_.stairs_window_steps;
+    } else {
+      --climbing_steps_left_;
+    }
+    return;
+  }
+  pending_.push_back({dz, szz});
+  pending_dz_ += dz;
+  if (std::abs(pending_dz_) >= options_.stairs_min_rise_m) {
+    // A height change that persists: commit the window's steps, the flight has begun.
+    x_[0] += pending_dz_;
+    committed_since_agreement_ += pending_dz_;
+    double var = 0;
+    for (const auto& [d, v] : pending_) var += v;
+    Predict(var);
+    stairs_steps_ += pending_.size();
+    pending_.clear();
+    pending_dz_ = 0;
+    climbing_steps_left_ = options_.stairs_window_steps;
+    return;
+  }
+  if (static_cast<int>(pending_.size()) > options_.stairs_window_steps) {
+    // The oldest step's dz did not persist: a level floor, its dz is the INS's noise.
+    pending_dz_ -= pending_.front().first;
+    pending_.pop_front();
+    Predict(options_.flat_step_sigma_m * options_.flat_step_sigma_m);
+  }
+}
+
+bool HeightFilter::LevelShift(TimeS t, double y) {
+  // Where the steps do not measure height, the filter follows the barometer closely and a fast
+  // change of the air would pass the gate as a climb. The median of the last second against
+  // the second before: a change faster than a person climbs (beyond 3 sigma of the two
+  // medians) is the air's. The readings of the next second settle it: then h goes back to
+  // where it was before the change and the offset takes the change.
+  if (shift_) {
+    shift_->settling.push_back(y);
+    if (t - shift_->since < kShiftWindowS) return true;  // settling: not used
+    std::vector<double> v = std::move(shift_->settling);
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    const double settled = v[v.size() / 2];
+    const double change = settled - shift_->before_m;
+    x_[0] = shift_->h_m;
+    x_[1] = settled - x_[0];
+    P_(1, 1) += options_.baro_sigma_m * options_.baro_sigma_m / static_cast<double>(v.size());
+    P_(0, 1) = P_(1, 0) = 0.0;
+    shift_.reset();
+    recent_.clear();
+    rejected_run_.clear();
+    Agree(t);
+    last_accepted_ = {t, y};
+    ++jumps_;
+    notes_.push_back({t, "", "", "repeats",
+                      fmt::format("barometer changed by {:+.2f} m ({:+.2f} hPa) within seconds, "
+                                  "faster than a person climbs: taken as a pressure change (a "
+                                  "door, ventilation), re-referenced",
+                                  change, -change / 8.3)});
+    return true;
+  }
+  recent_.push_back({t, y, x_[0]});
+  while (!recent_.empty() && recent_.front().t < t - 2 * kShiftWindowS) recent_.pop_front();
+  // Medians: a lone spike moves neither.
+  std::vector<double> fresh, older;
+  for (const auto& r : recent_) (r.t > t - kShiftWindowS ? fresh : older).push_back(r.y);
+  if (fresh.size() < 4 || older.size() < 4) return false;
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  const double before = median(older);
+  const double d = median(fresh) - before;
+  // The median's standard error is 1.25 sigma / sqrt(n) for Gaussian noise.
+  const double sigma_d = 1.25 * options_.baro_sigma_m *
+                         std::sqrt(1.0 / static_cast<double>(fresh.size()) +
+                                   1.0 / static_cast<double>(older.size()));
+  if (std::abs(d) <= options_.max_vertical_speed_mps * kShiftWindowS + 3 * sigma_d) return false;
+  shift_ = Shift{t, before, recent_.front().h_m, {}};
+  for (const auto& r : recent_) {
+    if (r.t > t - kShiftWindowS) shift_->settling.push_back(r.y);
+  }
+  return true;
+}
+
+void HeightFilter::Agree(TimeS t) {
+  agreed_ = Agreement{t, x_[0], x_[1], P_(0, 0) + P_(1, 1) + 2 * P_(0, 1)};
+  committed_since_agreement_ = 0;
+}
+
+std::optional<std::pair<double, double>> HeightFilter::baro_offset() const {
+  if (!referenced_) return std::nullopt;
+  return std::pair{x_[1], P_(1, 1)};
+}
+
+HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
+  if (!options_.use_baro) return BaroUse::kOff;
+  const TimeS t = sample.t;
+  const double p = sample.pressure_hpa;
+  if (!std::isfinite(p) || !std::isfinite(t)) return BaroUse::kRejected;
+  // A stuck sensor repeats one value exactly (a live one's noise changes its last digits).
+  if (repeated_since_ && p == repeated_value_) {
+    if (t - *repeated_since_ >= options_.stuck_after_s) {
+      if (!stuck_) {
+        stuck_ = true;
+        notes_.push_back({t, "", "", "excluded",
+                          fmt::format("barometer stuck at {:.2f} hPa for {:.0f} s: its readings "
+                                      "are skipped until it changes",
+                                      p, t - *repeated_since_)});
+      }
+      ++stuck_readings_;
+      return BaroUse::kStuck;
+    }
+  } else {
+    if (stuck_) {
+      stuck_ = false;
+      notes_.push_back({t, "", "", "readmitted", "barometer reads again (its value changed)"});
+      // Its offset is unknown after the gap: re-referenced at the next reading.
+      referenced_ = false;
+    }
+    repeated_value_ = p;
+    repeated_since_ = t;
+  }
+  const double y = PressureAltitudeM(p);
+  const double r2 = options_.baro_sigma_m * options_.baro_sigma_m;
+  DriftTo(t);
+  if (!referenced_) {
+    // b = H(p) - h: the reading defines the offset; cov(h, b) = -P_hh.
+    x_[1] = y - x_[0];
+    P_(1, 1) = P_(0, 0) + r2;
+    P_(0, 1) = P_(1, 0) = -P_(0, 0);
+    referenced_ = true;
+    Agree(t);
+    last_accepted_ = {t, y};
+    rejected_run_.clear();
+    return BaroUse::kReference;
+  }
+  if (!steps_know_height_ && LevelShift(t, y)) return BaroUse::kJump;
+  const Eigen::RowVector2d H(1.0, 1.0);
+  auto update = [&](double residual) {
+    const double S = (H * P_ * H.transpose())(0, 0) + r2;
+    const Eigen::Vector2d K = P_ * H.transpose() / S;
+    x_ += K * residual;
+    // Joseph form keeps P symmetric positive definite.
+    const Eigen::Matrix2d I_KH = Eigen::Matrix2d::Identity() - K * H;
+    P_ = I_KH * P_ * I_KH.transpose() + K * r2 * K.transpose();
+    P_ = 0.5 * (P_ + P_.transpose());
+  };
+  const double residual = y - (x_[0] + x_[1]);
+  const double S = (H * P_ * H.transpose())(0, 0) + r2;
+  if (residual * residual / S <= options_.gate_chi2) {
+    update(residual);
+    // Where the reading agrees with the state (1 sigma), the offset is as good as it gets: a
+    // height change the steps miss later is measured from here.
+    if (residual * residual <= S) Agree(t);
+    last_accepted_ = {t, y};
+    rejected_run_.clear();
+    ++used_;
+    return BaroUse::kUsed;
+  }
+  ++rejected_;
+  // Readings of a run agree with each other (within 3 sigma of their mean, plus a climb).
+  rejected_run_.emplace_back(t, y);
+  {
+    double mean = 0;
+    for (const auto& [ti, yi] : rejected_run_) mean += yi;
+    mean /= static_cast<double>(rejected_run_.size());
+    const double span = rejected_run_.back().first - rejected_run_.front().first;
+    const double allowed = 3 * options_.baro_sigma_m + options_.max_vertical_speed_mps * span;
+    while (rejected_run_.size() > 1 && std::abs(rejected_run_.front().second - mean) > allowed) {
+      rejected_run_.erase(rejected_run_.begin());  // an earlier lone outlier
+    }
+  }
+  const double span = rejected_run_.back().first - rejected_run_.front().first;
+  if (span < options_.jump_persist_s) return BaroUse::kRejected;
+  const std::size_t run_size = rejected_run_.size();
+  double mean = 0;
+  for (const auto& [ti, yi] : rejected_run_) mean += yi;
+  mean /= static_cast<double>(rejected_run_.size());
+  const TimeS t_first = rejected_run_.front().first;
+  rejected_run_.clear();
+  last_accepted_ = {t, y};
+  // What the height's own change since the readings last agreed does not explain, and how
+  // fast it came: faster than a person climbs is the air (a door, a fan), not the agent. The
+  // height expected now is the agreed one plus what the steps committed since.
+  const double expected_h = agreed_->h_m + committed_since_agreement_;
+  const double excess = mean - (expected_h + agreed_->offset_m);
+  const double dt = std::max(t_first - agreed_->t, 1e-3);
+  const double margin =
+      3 * std::sqrt(r2 / static_cast<double>(run_size) + agreed_->innovation_var_m2);
+  const bool sudden = std::abs(excess) - margin > options_.max_vertical_speed_mps * dt;
+  if (sudden || steps_know_height_) {
+    // The offset takes it. Where the steps measure height (a foot INS sees stairs), a slower
+    // disagreement is also the air's: the steps win, and the note says so.
+    // What the readings moved h by since they agreed goes back (steps of unknown height let
+    // them), and the offset takes the change.
+    x_[0] = expected_h;
+    x_[1] = mean - x_[0];
+    P_(1, 1) += r2;
+    Agree(t);
+    ++jumps_;
+    notes_.push_back(
+        {t, "", "", "repeats",
+         sudden ? fmt::format("barometer jumped by {:+.2f} m ({:+.2f} hPa) in {:.1f} s, faster "
+                              "than a person climbs: taken as a pressure change (a door, "
+                              "ventilation), re-referenced",
+                              excess, -excess / 8.3, dt)
+                : fmt::format("barometer disagrees with the steps' height by {:+.2f} m for {:.1f} "
+                              "s: the steps measure height, the barometer is re-referenced",
+                              excess, dt)});
+    return BaroUse::kJump;
+  }
+  // A height change the steps could not see (they do not measure height), slower than a jump of
+  // the air, faster than the weather: the agent moved. The offset takes back what it absorbed
+  // since the readings last agreed, and h takes the whole change.
+  x_[0] = expected_h;
+  x_[1] = agreed_->offset_m;
+  P_(0, 0) += excess * excess;
+  update(y - (x_[0] + x_[1]));
+  Agree(t);
+  ++height_changes_;
+  return BaroUse::kHeightChange;
+}
+
+namespace {
+double NormalCdf(double z) { return 0.5 * std::erfc(-z / std::sqrt(2.0)); }
+}  // namespace
+
+std::pair<int, double> HeightFilter::Level(const std::vector<FloorLevel>& floors) const {
+  const double h = x_[0];
+  const double sigma = std::sqrt(std::max(P_(0, 0), 1e-8));
+  auto probability = [&](int level) {
+    const auto [lo, hi] = LevelHeightInterval(floors, level);
+    if (!(hi > lo)) return 0.0;
+    const double upper = std::isinf(hi) ? 1.0 : NormalCdf((hi - h) / sigma);
+    const double lower = std::isinf(lo) ? 0.0 : NormalCdf((lo - h) / sigma);
+    return std::max(0.0, upper - lower);
+  };
+  std::vector<int> candidates;
+  if (floors.empty()) {
+    const int at = LevelAt(floors, h);
+    for (int l = at - 2; l <= at + 2; ++l) candidates.push_back(l);
+  } else {
+    for (const FloorLevel& f : floors) candidates.push_back(f.level);
+  }
+  int best = LevelAt(floors, h);
+  double best_p = -1;
+  for (int l : candidates) {
+    const double pl = probability(l);
+    if (pl > best_p) best = l, best_p = pl;
+  }
+  return {best, std::max(best_p, 0.0)};
+}
+
+std::map<std::string, double> HeightFilter::Counters() const {
+  return {{"steps", static_cast<double>(steps_)},
+          {"stairs_steps", static_cast<double>(stairs_steps_)},
+          {"baro_used", static_cast<double>(used_)},
+          {"baro_rejected", static_cast<double>(rejected_)},
+          {"baro_jumps", static_cast<double>(jumps_)},
+          {"baro_height_changes", static_cast<double>(height_changes_)},
+          {"baro_stuck", static_cast<double>(stuck_readings_)}};
+}
+
+std::vector<IntegrityNote> HeightFilter::TakeNotes(const std::string& agent) {
+  std::vector<IntegrityNote> out;
+  out.swap(notes_);
+  for (auto& n : out) {
+    n.source = "barometer " + agent;
+    n.node = agent;
+  }
+  return out;
+}
+
+namespace {
+// The start's height: known to a few centimetres at the entrance (its level is given).
+constexpr double kStartSigmaM = 0.05;
+}  // namespace
+
+HeightChannel::HeightChannel(MissionInfo info, HeightOptions options)
+    : info_(std::move(info)), options_(options) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument(why);
+}
+
+HeightFilter& HeightChannel::FilterOf(const std::string& agent) {
+  auto it = filters_.find(agent);
+  if (it != filters_.end()) return it->second;
+  double z = 0;
+  if (const NodeInfo* node = info_.Find(agent)) {
+    if (const auto start = info_.AgentStart(*node)) z = start->z();
+  }
+  return filters_.emplace(agent, HeightFilter(z, kStartSigmaM, options_)).first->second;
+}
+
+const HeightFilter* HeightChannel::Filter(const std::string& agent) const {
+  const auto it = filters_.find(agent);
+  return it == filters_.end() ? nullptr : &it->second;
+}
+
+namespace {
+bool IsAgent(const MissionInfo& info, const std::string& id) {
+  const NodeInfo* node = info.Find(id);
+  return node != nullptr && node->kind == NodeKind::kAgent;
+}
+}  // namespace
+
+void HeightChannel::Add(const MissionRow& row) {
+  if (const auto* step = std::get_if<Step>(&row)) {
+    if (IsAgent(info_, step->agent)) FilterOf(step->agent).AddStep(*step);
+  } else if (const auto* baro = std::get_if<BaroSample>(&row)) {
+    if (!IsAgent(info_, baro->agent)) return;
+    HeightFilter& f = FilterOf(baro->agent);
+    f.AddBaro(*baro);
+    for (auto& n : f.TakeNotes(baro->agent)) notes_.push_back(std::move(n));
+  } else if (const auto* event = std::get_if<MissionEvent>(&row)) {
+    if (event->event != "drop" || event->node.empty() || !IsAgent(info_, event->agent)) return;
+    const HeightFilter& f = FilterOf(event->agent);
+    dropped_[event->node] = {f.height_m(), f.height_variance_m2(), f.Level(info_.floors).first};
+  }
+}
+
+void HeightChannel::Annotate(Estimate& e) const {
+  if (const auto it = filters_.find(e.id); it != filters_.end()) {
+    e.position_n.z() = it->second.height_m();
+    e.szz = it->second.height_variance_m2();
+    e.floor = it->second.Level(info_.floors).first;
+    return;
+  }
+  if (const auto it = dropped_.find(e.id); it != dropped_.end()) {
+    e.position_n.z() = it->second.z_m;
+    e.szz = it->second.szz_m2;
+    e.floor = it->second.level;
+    return;
+  }
+  if (IsAgent(info_, e.id)) {  // no step nor reading yet: at its start's height
+    const auto start = info_.AgentStart(*info_.Find(e.id));
+    const double z = start ? start->z() : 0.0;
+    e.position_n.z() = z;
+    e.szz = kStartSigmaM * kStartSigmaM;
+    e.floor = LevelAt(info_.floors, z);
+  }
+}
+
+void HeightChannel::AddToSummary(EstimatorSummary& summary) const {
+  for (const auto& [agent, f] : filters_) {
+    for (const auto& [key, value] : f.Counters()) {
+      summary.numbers["height." + agent + "." + key] = value;
+    }
+    const auto [level, p] = f.Level(info_.floors);
+    summary.numbers["height." + agent + ".final_level"] = level;
+    summary.numbers["height." + agent + ".final_level_probability"] = p;
+    summary.numbers["height." + agent + ".final_z_m"] = f.height_m();
+  }
+  summary.integrity.insert(summary.integrity.end(), notes_.begin(), notes_.end());
+}
+
+}  // namespace trailmark

@@ -1,0 +1,253 @@
+// SPDX-License-Identifier: MIT
+#include "trailmark/sim/multi_floor.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numbers>
+#include <string>
+
+namespace trailmark {
+
+namespace {
+
+// The block: 24 x 12 m; a corridor y in [5, 7] from x = 0 to 20 with three rooms on each side;
+// the stairwell x in [20, 24], open to the corridor; flights along y at x = 21 (down the page)
+// and x = 23 (up the page), the half landing at y < 1.5.
+constexpr double kWidth = 24, kDepth = 12, kCorridorLo = 5, kCorridorHi = 7, kStairX = 20;
+constexpr double kRoomCentres[] = {3.0, 9.0, 16.0};
+const Vec2 kOutside(2.5, -4.0);  // the street, in front of the entrance
+
+struct RouteBuilder {
+  Route route;
+  void To(double x, double y, double z) {
+    route.waypoints.emplace_back(x, y);
+    route.waypoint_z.push_back(z);
+  }
+  void Stop(double seconds) { route.stops.push_back({route.Length(), seconds}); }
+  /// From the corridor in front of the stairwell at elevation z_from to the one at z_to.
+  void Stairs(double z_from, double z_to) {
+    const double mid = 0.5 * (z_from + z_to);
+    if (z_to > z_from) {
+      To(21.0, 6.0, z_from);
+      To(21.0, 4.5, z_from);
+      To(21.0, 1.5, mid);
+      To(21.5, 0.8, mid);
+      To(22.5, 0.8, mid);
+      To(23.0, 1.5, mid);
+      To(23.0, 4.5, z_to);
+      To(23.0, 6.0, z_to);
+      To(21.0, 6.0, z_to);
+    } else {  // the same flights walked the other way
+      To(21.0, 6.0, z_from);
+      To(23.0, 6.0, z_from);
+      To(23.0, 4.5, z_from);
+      To(23.0, 1.5, mid);
+      To(22.5, 0.8, mid);
+      To(21.5, 0.8, mid);
+      To(21.0, 1.5, mid);
+      To(21.0, 4.5, z_to);
+      To(21.0, 6.0, z_to);
+    }
+  }
+  /// A search of a level from the stairwell: every room, west along the corridor and back.
+  void Search(double z, Random& rng, bool north_first) {
+    To(19.5, 6.0, z);
+    for (int i = 2; i >= 0; --i) {
+      const double c = kRoomCentres[i] + rng.Uniform(-0.3, 0.3);
+      for (const bool north : {north_first, !north_first}) {
+        const double door_y = north ? kCorridorHi : kCorridorLo;
+        const double inside = north ? 9.5 : 2.5;
+        To(c, 6.0, z);
+        To(c, door_y, z);
+        To(c + rng.Uniform(-1.5, 1.5), inside + rng.Uniform(-0.8, 0.8), z);
+        if (rng.Uniform() < 0.4) Stop(rng.Uniform(5, 20));  // a casualty check, a search
+        To(c + rng.Uniform(-1.5, 1.5), inside + rng.Uniform(-0.8, 0.8), z);
+        To(c, door_y, z);
+        To(c, 6.0, z);
+      }
+    }
+    To(19.5, 6.0, z);
+    To(21.0, 6.0, z);
+  }
+  void Enter() {
+    To(kOutside.x(), kOutside.y(), 0);
+    To(2.5, 0.0, 0);
+    To(3.0, 2.5, 0);
+    To(3.0, kCorridorLo, 0);
+    To(3.0, 6.0, 0);
+  }
+  void Leave() {
+    To(3.0, 6.0, 0);
+    To(3.0, kCorridorLo, 0);
+    To(3.0, 2.5, 0);
+    To(2.5, 0.0, 0);
+    To(kOutside.x(), kOutside.y(), 0);
+  }
+};
+
+bool Inside(const Vec2& p) { return p.x() > 0 && p.x() < kWidth && p.y() > 0 && p.y() < kDepth; }
+
+/// The walk's truth at time t (linear between samples).
+Walk::Sample TruthAt(const Walk& walk, TimeS t) {
+  const auto& s = walk.truth;
+  auto it = std::lower_bound(s.begin(), s.end(), t,
+                             [](const Walk::Sample& a, TimeS v) { return a.t < v; });
+  if (it == s.begin()) return s.front();
+  if (it == s.end()) return s.back();
+  const Walk::Sample& b = *it;
+  const Walk::Sample& a = *(it - 1);
+  const double f = (t - a.t) / std::max(b.t - a.t, 1e-9);
+  Walk::Sample out = a;
+  out.t = t;
+  out.position = a.position + f * (b.position - a.position);
+  out.z = a.z + f * (b.z - a.z);
+  return out;
+}
+
+}  // namespace
+
+MultiFloorOptions::MultiFloorOptions() {
+  imu.rate_hz = 100.0;
+  imu.grade = ImuGrade::Industrial();
+  pdr.turn_min_step_m = 0.2;  // short shuffles are not turns (pdr_error_model.h)
+}
+
+FloorPlan BuildMultiFloorLevel(int level) {
+  std::vector<Segment2> walls, doors;
+  std::vector<Room> rooms;
+  AddRectangle(walls, {0, 0}, {kWidth, kDepth});
+  walls.push_back({{0, kCorridorLo}, {kStairX, kCorridorLo}});
+  walls.push_back({{0, kCorridorHi}, {kStairX, kCorridorHi}});
+  for (const double x : {6.0, 12.0}) {
+    walls.push_back({{x, 0}, {x, kCorridorLo}});
+    walls.push_back({{x, kCorridorHi}, {x, kDepth}});
+  }
+  walls.push_back({{kStairX, 0}, {kStairX, kCorridorLo}});
+  walls.push_back({{kStairX, kCorridorHi}, {kStairX, kDepth}});
+  walls.push_back({{22.0, 1.5}, {22.0, 4.5}});  // between the two flights
+  for (const double c : kRoomCentres) {
+    doors.push_back({{c - 0.45, kCorridorLo}, {c + 0.45, kCorridorLo}});
+    doors.push_back({{c - 0.45, kCorridorHi}, {c + 0.45, kCorridorHi}});
+  }
+  if (level == 0) doors.push_back({{2.0, 0.0}, {3.0, 0.0}});  // the entrance
+  rooms.push_back({"corridor", {{0, kCorridorLo}, {kStairX, kCorridorLo}, {kStairX, kCorridorHi},
+                                {0, kCorridorHi}},
+                   level});
+  rooms.push_back({"stairwell", {{kStairX, 0}, {kWidth, 0}, {kWidth, kDepth}, {kStairX, kDepth}},
+                   level});
+  return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
+}
+
+double StandardPressureHpa(double z_m, double p0_hpa) {
+  return p0_hpa * std::pow(1.0 - 2.25577e-5 * z_m, 5.25588);
+}
+
+SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t seed) {
+  Random rng(seed);
+  // Storeys of another height in every building: 3.0-4.2 m, the basement 2.8-3.8 m.
+  const double e1 = rng.Uniform(3.0, 4.2);
+  const double e2 = e1 + rng.Uniform(3.0, 4.2);
+  const double em1 = -rng.Uniform(2.8, 3.8);
+  const std::vector<FloorLevel> floors{{-1, em1}, {0, 0.0}, {1, e1}, {2, e2}};
+
+  // ff1 searches the two upper floors, ff2 the ground floor and the basement.
+  RouteBuilder a;
+  a.Enter();
+  a.To(19.5, 6.0, 0);
+  a.To(21.0, 6.0, 0);
+  a.Stairs(0, e1);
+  a.Search(e1, rng, rng.Uniform() < 0.5);
+  a.Stairs(e1, e2);
+  a.Search(e2, rng, rng.Uniform() < 0.5);
+  a.Stairs(e2, e1);
+  a.Stairs(e1, 0);
+  a.To(19.5, 6.0, 0);
+  a.Leave();
+  RouteBuilder b;
+  b.Enter();
+  b.Search(0, rng, rng.Uniform() < 0.5);
+  b.Stairs(0, em1);
+  b.Search(em1, rng, rng.Uniform() < 0.5);
+  b.Stairs(em1, 0);
+  b.To(19.5, 6.0, 0);
+  b.Leave();
+
+  SimulatedMission out;
+  SimulatedMission& sim = out;
+  MissionData& m = sim.data;
+  m.info.name = "multi-floor";
+  m.info.floors = floors;
+  m.info.floorplan = "floorplan.geojson";
+  const std::vector<std::pair<std::string, Route>> agents{{"ff1", a.route}, {"ff2", b.route}};
+  const double start_heading = std::numbers::pi / 2;  // facing the entrance (north)
+  for (const auto& [id, route] : agents) {
+    m.info.nodes.push_back(
+        NodeInfo::Agent(id, Vec3(kOutside.x(), kOutside.y(), 0.0), 0.3, start_heading, 0.05));
+  }
+  for (const int level : {-1, 0, 1, 2}) out.levels.emplace_back(level, BuildMultiFloorLevel(level));
+  sim.plan = out.levels[1].second;
+
+  // Weather shared by both, device offsets per barometer; the fan starts 1-4 min in.
+  const double weather_rate_hpa_per_s = rng.Normal(0, o.baro.weather_drift_hpa_per_h) / 3600.0;
+  const double ppv_start_s = rng.Uniform(60, 240);
+  const double site_elevation_m = rng.Uniform(0, 300);
+  for (std::size_t i = 0; i < agents.size(); ++i) {
+    const auto& [id, route] = agents[i];
+    const TimeS t_start = i * 20.0;
+    Random walk_rng = rng.Fork();
+    const Walk walk = WalkRoute(route, o.walker, t_start, walk_rng);
+    sim.walks.emplace_back(id, walk);
+    // Truth: feet height and level.
+    for (const auto& s : walk.truth) {
+      m.truth.push_back({s.t, id, Vec3(s.position.x(), s.position.y(), s.z), LevelAt(floors, s.z)});
+    }
+    // A phone's PDR: horizontal steps with its errors; it does not measure height.
+    PdrErrorModel pdr(o.pdr, rng.Fork());
+    for (const auto& st : walk.steps) {
+      const Vec2 d = pdr.Apply(st.to - st.from, st.t1 - st.t0);
+      const double var = pdr.ReportedVariance((st.to - st.from).norm());
+      m.steps.push_back({st.t0, st.t1, id, Vec3(d.x(), d.y(), 0.0), Vec3(var, var, 1.0)});
+    }
+    // The barometer.
+    Random baro_rng = rng.Fork();
+    const double offset_hpa = baro_rng.Normal(0, o.baro.device_offset_hpa);
+    const double period = 1.0 / o.baro.rate_hz;
+    const TimeS t_end = walk.truth.back().t;
+    for (TimeS t = walk.truth.front().t; t <= t_end + 1e-9; t += period) {
+      const Walk::Sample s = TruthAt(walk, t);
+      double p = StandardPressureHpa(site_elevation_m + s.z,
+                                     o.baro.sea_level_hpa + weather_rate_hpa_per_s * t);
+      if (Inside(s.position) && t > ppv_start_s) {
+        p += o.baro.ppv_overpressure_hpa * std::min(1.0, (t - ppv_start_s) / std::max(o.baro.ppv_rise_s, 1e-3));
+      }
+      p += offset_hpa + baro_rng.Normal(0, o.baro.noise_hpa);
+      if (baro_rng.Uniform() < o.baro.spike_probability) p += baro_rng.Uniform(-2.0, 2.0);
+      p = std::round(p / o.baro.resolution_hpa) * o.baro.resolution_hpa;
+      m.baro.push_back({t, id, p});
+    }
+    if (o.foot_imu) {
+      const SimulatedImu imu = SimulateFootImu(walk, id, o.imu, rng.Fork());
+      m.imu.insert(m.imu.end(), imu.samples.begin(), imu.samples.end());
+    }
+  }
+  auto by_time = [](const auto& x, const auto& y) { return x.t < y.t; };
+  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
+  std::stable_sort(m.baro.begin(), m.baro.end(), by_time);
+  std::stable_sort(m.imu.begin(), m.imu.end(), by_time);
+  std::stable_sort(m.steps.begin(), m.steps.end(),
+                   [](const Step& x, const Step& y) { return x.t1 < y.t1; });
+  m.info.description = fmt::format(
+      "Multi-storey block (issue 26): basement at {:.2f} m, ground floor 0, level 1 at {:.2f} m, "
+      "level 2 at {:.2f} m, a switchback stairwell; ff1 searches levels 1 and 2, ff2 the ground "
+      "floor and the basement; phone PDR steps (no height), a foot IMU at {:g} Hz, a barometer "
+      "each at {:g} Hz (offset, weather {:+.2f} hPa/h, a ventilation fan from t = {:.0f} s); "
+      "simulated, seed {}",
+      em1, e1, e2, o.imu.rate_hz, o.baro.rate_hz, weather_rate_hpa_per_s * 3600, ppv_start_s,
+      seed);
+  return out;
+}
+
+}  // namespace trailmark

@@ -1,0 +1,61 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// A multi-storey building for the floors issue (issue 26): a basement, a ground floor and two
+/// upper floors of an office block, a switchback stairwell joining them, and two firefighters
+/// who walk in from the street — one searches the two upper floors, the other the basement and
+/// the ground floor — with a phone-class PDR (steps that do not measure height), a foot IMU that
+/// climbs the stairs, and a barometer each (noise, device offset, weather drift, the building's
+/// overpressure from a ventilation fan, rare spikes). Storey heights, room visits, stops and
+/// the weather are drawn per seed. No I/O.
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+#include "trailmark/sim/imu_sim.h"
+#include "trailmark/sim/mission_sim.h"
+#include "trailmark/sim/pdr_error_model.h"
+#include "trailmark/sim/walker.h"
+
+namespace trailmark {
+
+/// A barometer as a phone or a boot sensor has it.
+struct BaroSimOptions {
+  double rate_hz = 5.0;
+  /// White noise, hPa rms (Bosch BMP390: 0.02-0.03 hPa rms; phones' sensors of the 0.1 hPa
+  /// relative-accuracy class).
+  double noise_hpa = 0.04;
+  double resolution_hpa = 0.01;       ///< the value as the sensor reports it
+  double device_offset_hpa = 1.0;     ///< 1 sigma per device (absolute accuracy +-1 hPa)
+  /// Weather: a drift rate per mission, 1 sigma (0.5 hPa/h: a front passing; storms 1-2).
+  double weather_drift_hpa_per_h = 0.5;
+  /// Positive-pressure ventilation: the fan raises the inside pressure by this much (20-50 Pa
+  /// of a PPV fan), started at a random time; walking through the door crosses it.
+  double ppv_overpressure_hpa = 0.3;
+  /// ... over this rise time once the fan runs (s). A slow rise (several seconds) is a descent
+  /// of stairs to a barometer and steps that do not measure height: see docs/floors.md.
+  double ppv_rise_s = 1.0;
+  double spike_probability = 0.002;   ///< per reading: a reading off by up to +-2 hPa
+  double sea_level_hpa = 1013.25;
+};
+
+struct MultiFloorOptions {
+  WalkerOptions walker;
+  PdrErrorOptions pdr;
+  BaroSimOptions baro;
+  ImuSimOptions imu;          ///< the foot IMU (100 Hz, industrial grade by default)
+  bool foot_imu = true;
+  MultiFloorOptions();
+};
+
+/// The building's plan on one level (the entrance door on level 0 only).
+FloorPlan BuildMultiFloorLevel(int level);
+
+/// Pressure (hPa) at height z (m above the sea-level reference) in the standard atmosphere:
+/// p0 (1 - 2.25577e-5 z)^5.25588, the inverse of PressureAltitudeM.
+double StandardPressureHpa(double z_m, double p0_hpa = 1013.25);
+
+/// The mission with every level's plan in `levels` (`plan`: the ground floor).
+SimulatedMission SimulateMultiFloor(const MultiFloorOptions& options, std::uint64_t seed);
+
+}  // namespace trailmark
