@@ -221,6 +221,12 @@ std::string IncidentState::ToJsonText() const {
       out += "\":";
       AppendNumber(out, value);
     }
+    // Height (issue 26): the level and the vertical variance where the estimator gives them.
+    if (e.floor) out += ",\"floor\":" + std::to_string(*e.floor);
+    if (e.szz) {
+      out += ",\"szz\":";
+      AppendNumber(out, *e.szz);
+    }
     out += '}';
   }
   out += "],\"t\":";

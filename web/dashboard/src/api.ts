@@ -12,6 +12,10 @@ export interface NodeState {
   sxx: number;
   sxy: number;
   syy: number;
+  /** The level the estimator believes (mission format 1.1); absent when it gives none. */
+  floor?: number;
+  /** Vertical variance, m². */
+  szz?: number;
 }
 
 export interface Alert {

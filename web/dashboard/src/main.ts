@@ -218,7 +218,8 @@ function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): voi
     entry.setAttribute('aria-pressed', String(n.id === selected));
     const [name, detail, badgeBox] = Array.from(entry.children) as HTMLElement[];
     setText(name, `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`);
-    setText(detail, ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m`);
+    const level = n.floor === undefined ? '' : `, floor ${n.floor}`;
+    setText(detail, ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m${level}`);
     const mine = alerts.filter((x) => x.id === n.id);
     const badgeKey = mine.map((a) => a.kind).join('|');
     if (badgeBox.dataset.key !== badgeKey) {
