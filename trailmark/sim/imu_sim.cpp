@@ -103,6 +103,7 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   // foot does and a MEMS gyro measures; the heading left over is caught up by the next strides.
   constexpr double kFullSwingS = 0.35;
   constexpr double kMaxSwingYawRate = 8.0;  // rad/s, mean over the swing
+  constexpr double kMaxMeanSwingSpeed = 4.0;  // m/s: a walking stride's swing averages 2-3 m/s
   struct Stride {
     double t0, t1;
     Vec3 from, to;
@@ -125,10 +126,18 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
     const Vec3 to(s.to.x(), s.to.y(), s.z1 + climbed);
     const Vec2 d = (to - foot).head<2>();
     const double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
-    const double swing_s = s.t1 - s.t0;
+    // A step cut short before a stop can last milliseconds while this foot's stride spans the
+    // step before it too: the swing then starts earlier, in this foot's rest, so that its mean
+    // speed stays a foot's (the g-forces of a real stride, not thousands of g).
+    double t0 = s.t0;
+    const double min_swing_s = (to - foot).norm() / kMaxMeanSwingSpeed;
+    if (s.t1 - t0 < min_swing_s) {
+      t0 = std::max(s.t1 - min_swing_s, strides.empty() ? s.t0 - min_swing_s : strides.back().t1);
+    }
+    const double swing_s = s.t1 - t0;
     const double max_turn = kMaxSwingYawRate * swing_s;
     const double turn = std::clamp(WrapAngle(yaw_to - yaw), -max_turn, max_turn);
-    strides.push_back({s.t0, s.t1, foot, to, yaw, yaw + turn,
+    strides.push_back({t0, s.t1, foot, to, yaw, yaw + turn,
                        std::clamp(swing_s / kFullSwingS, 0.0, 1.0)});
     foot = to;
     yaw = strides.back().yaw_to;
