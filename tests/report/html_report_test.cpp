@@ -34,6 +34,27 @@ TEST(HtmlReport, IsSelfContained) {
   EXPECT_NE(html.find("Chart.js v4"), std::string::npos);      // library embedded
   EXPECT_EQ(html.find("src=\"http"), std::string::npos);       // nothing fetched
   EXPECT_EQ(html.find("https://cdn"), std::string::npos);
+  EXPECT_EQ(html.find("<h2>Floors</h2>"), std::string::npos);  // a single-floor mission
+}
+
+TEST(HtmlReport, FloorsTableWhereTheMissionIsAboutFloors) {
+  ReportInput in;
+  in.info.name = "two floors";
+  in.info.floors = {{0, 0.0}, {1, 3.5}};
+  in.info.nodes.push_back({.id = "ff1", .kind = NodeKind::kAgent});
+  in.truth = {{0, "ff1", Vec3(0, 0, 0), 0}, {1, "ff1", Vec3(0, 0, 3.5), 1}};
+  ReportRun run;
+  run.pipeline = "pdr";
+  // On level 0 throughout: right half of the time, one wrong floor at t = 1.
+  run.estimates = {{0, "ff1", Vec3(0, 0, 0), 1, 0, 1, 0.01, 0}};
+  run.metrics = Evaluate(in.info, in.truth, run.estimates);
+  ASSERT_TRUE(run.metrics.floors);
+  EXPECT_DOUBLE_EQ(run.metrics.floors->floor_hit_rate, 0.5);
+  EXPECT_DOUBLE_EQ(run.metrics.floors->ve95_m, 0.95 * 3.5);  // numpy's linear percentile
+  in.runs.push_back(run);
+  const std::string html = BuildHtmlReport(in);
+  EXPECT_NE(html.find("<h2>Floors</h2>"), std::string::npos);
+  EXPECT_NE(html.find("<td>pdr</td><td>50.0</td>"), std::string::npos);
 }
 
 TEST(HtmlReport, LineBreaksAreNullPointsNotNullEntries) {

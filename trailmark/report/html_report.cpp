@@ -230,6 +230,25 @@ td:first-child,th:first-child{text-align:left}.sw{display:inline-block;width:10p
           "<th>p95 m</th><th>max m</th><th>RMSE m</th><th>final m</th><th>mean % dist</th>"
           "<th>max % dist</th><th>crumbs mean m</th><th>run time s</th></tr>\n";
   html += table + "</table>\n";
+  // Floors (issue 26): where the mission is about floors.
+  std::string floors;
+  for (const auto& run : in.runs) {
+    if (!run.metrics.floors) continue;
+    const FloorMetrics& f = *run.metrics.floors;
+    floors += fmt::format(
+        "<tr><td>{}</td><td>{:.1f}</td><td>{:.2f}</td><td>{:.2f}</td><td>{:.2f}</td><td>{:.2f}</td>"
+        "<td>{:.2f}</td></tr>\n",
+        Escape(run.pipeline), 100 * f.floor_hit_rate, f.ce95_m, f.ve95_m, f.se95_m,
+        f.vertical_mean_m, f.ipin_score_m);
+  }
+  if (!floors.empty()) {
+    html += "<h2>Floors</h2><p class=note>Right floor: share of instants on the true level. CE95, "
+            "VE95, SE95: 95th percentiles of the horizontal, vertical and 3-D errors (ISO/IEC "
+            "18305). IPIN score: 75th percentile of horizontal error + 15 m per wrong floor.</p>\n";
+    html += "<table><tr><th>pipeline</th><th>right floor %</th><th>CE95 m</th><th>VE95 m</th>"
+            "<th>SE95 m</th><th>vertical mean m</th><th>IPIN score m</th></tr>\n";
+    html += floors + "</table>\n";
+  }
   html += "<h2>Trajectories</h2><p class=note>Black: truth. Dashed: 95% ellipses of the final "
           "estimates. Click a legend entry to hide it.</p>\n";
   html += "<div><canvas id=map></canvas></div>\n";
