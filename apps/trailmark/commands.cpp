@@ -408,6 +408,7 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
     }
   }
   std::vector<std::string> reports{(out / "report.html").string()};
+  std::vector<std::string> floor_lines;
   for (const std::string& extra : extras) {
     const fs::path mdir = out / "missions" / extra;
     Simulate(extra, seed, mdir);
@@ -418,7 +419,30 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
     run_all(extra, mdir, out / "runs" / extra, out / ("report-" + extra + ".html"));
     reports.push_back((out / ("report-" + extra + ".html")).string());
   }
+  {
+    // Floors (issue 26): the multi-floor building with the foot INS and the phone's steps and
+    // barometer; the report has the Floors table.
+    const std::string extra = "multi-floor";
+    const fs::path mdir = out / "missions" / extra;
+    Simulate(extra, seed, mdir);
+    done.erase("pdr");
+    done.erase("ins");
+    for (const auto& p : Pipelines()) {
+      if (p.name != "pdr" && p.name != "ins") done.insert(p.name);
+    }
+    const std::size_t first = rows.size();
+    run_all(extra, mdir, out / "runs" / extra, out / ("report-" + extra + ".html"));
+    reports.push_back((out / ("report-" + extra + ".html")).string());
+    for (std::size_t i = first; i < rows.size(); ++i) {
+      if (const auto& f = rows[i].second.floors) {
+        floor_lines.push_back(fmt::format(
+            "{:<18} {:<18} right floor {:.1f} %, VE95 {:.2f} m, IPIN score {:.2f} m", extra,
+            rows[i].first.pipeline, 100 * f->floor_hit_rate, f->ve95_m, f->ipin_score_m));
+      }
+    }
+  }
   PrintSummaryTable(rows, missions);
+  for (const auto& line : floor_lines) fmt::print("{}\n", line);
   for (const auto& p : Pipelines()) {
     if (!done.count(p.name) && !p.baseline)
       fmt::print("not run (no mission with its inputs): {}\n", p.name);
