@@ -252,6 +252,32 @@ TEST(Journal, ALostWriteAheadLogIsDetectedAtOpen) {
   j.Append(Steps("ff1", {5}));
 }
 
+TEST(Journal, ATruncatedWriteAheadLogIsDetectedAtOpen) {
+  // kill -9 with the second commit's frames cut half-way in the write-ahead log (a disk that
+  // lost the file's tail): SQLite recovers the first commit only; the acknowledged high-water
+  // mark says two.
+  testing::TempDir dir;
+  const auto file = dir.path() / "incident.db";
+  const auto wal = dir.path() / "incident.db-wal";
+  const auto copy = dir.path() / "copy.db";
+  {
+    Journal j(file);
+    j.Append(Steps("ff1", {1, 2}));
+    const auto after_first = std::filesystem::file_size(wal);
+    j.Append(Steps("ff1", {3, 4}));
+    const auto after_second = std::filesystem::file_size(wal);
+    ASSERT_GT(after_second, after_first);
+    std::filesystem::copy_file(file, copy);
+    std::filesystem::copy_file(wal, dir.path() / "copy.db-wal");
+    std::filesystem::copy_file(dir.path() / "incident.db.acked", dir.path() / "copy.db.acked");
+    std::filesystem::resize_file(dir.path() / "copy.db-wal",
+                                 after_first + (after_second - after_first) / 2);
+  }
+  const std::string why = OpenError(copy);
+  EXPECT_THAT(why, ::testing::HasSubstr("(2 rows) but 2 commits (4 rows) were acknowledged"));
+  EXPECT_THAT(why, ::testing::HasSubstr("write-ahead log"));
+}
+
 TEST(Journal, AnEmptyOrMissingJournalIsNotANewIncident) {
   testing::TempDir dir;
   const auto file = dir.path() / "incident.db";
