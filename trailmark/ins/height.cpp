@@ -155,7 +155,6 @@ bool HeightFilter::LevelShift(TimeS t, double y) {
     recent_.clear();
     rejected_run_.clear();
     Agree(t);
-    last_accepted_ = {t, y};
     ++jumps_;
     notes_.push_back({t, "", "", "repeats",
                       fmt::format("barometer changed by {:+.2f} m ({:+.2f} hPa) within seconds, "
@@ -236,7 +235,6 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
     P_(0, 1) = P_(1, 0) = -P_(0, 0);
     referenced_ = true;
     Agree(t);
-    last_accepted_ = {t, y};
     rejected_run_.clear();
     return BaroUse::kReference;
   }
@@ -258,7 +256,6 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
     // Where the reading agrees with the state (1 sigma), the offset is as good as it gets: a
     // height change the steps miss later is measured from here.
     if (residual * residual <= S) Agree(t);
-    last_accepted_ = {t, y};
     rejected_run_.clear();
     ++used_;
     return BaroUse::kUsed;
@@ -284,7 +281,6 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
   mean /= static_cast<double>(rejected_run_.size());
   const TimeS t_first = rejected_run_.front().first;
   rejected_run_.clear();
-  last_accepted_ = {t, y};
   // What the height's own change since the readings last agreed does not explain, and how
   // fast it came: faster than a person climbs is the air (a door, a fan), not the agent. The
   // height expected now is the agreed one plus what the steps committed since.

@@ -113,7 +113,6 @@ class HeightFilter {
   double pending_dz_ = 0;
   int climbing_steps_left_ = 0;
   // Barometer screening.
-  std::optional<std::pair<TimeS, double>> last_accepted_;  ///< time, barometric height
   struct Agreement {
     TimeS t;
     double h_m, offset_m;

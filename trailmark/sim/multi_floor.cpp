@@ -27,29 +27,24 @@ struct RouteBuilder {
     route.waypoint_z.push_back(z);
   }
   void Stop(double seconds) { route.stops.push_back({route.Length(), seconds}); }
-  /// From the corridor in front of the stairwell at elevation z_from to the one at z_to.
+  /// From the corridor in front of the stairwell at elevation z_from to the one at z_to: the
+  /// flight at x = 21 to the half landing, the flight at x = 23 up from it (walked backwards on
+  /// the way down). Each point: x, y and its height as 0 (bottom), 1 (half landing) or 2 (top).
   void Stairs(double z_from, double z_to) {
-    const double mid = 0.5 * (z_from + z_to);
-    if (z_to > z_from) {
-      To(21.0, 6.0, z_from);
-      To(21.0, 4.5, z_from);
-      To(21.0, 1.5, mid);
-      To(21.5, 0.8, mid);
-      To(22.5, 0.8, mid);
-      To(23.0, 1.5, mid);
-      To(23.0, 4.5, z_to);
-      To(23.0, 6.0, z_to);
-      To(21.0, 6.0, z_to);
-    } else {  // the same flights walked the other way
-      To(21.0, 6.0, z_from);
-      To(23.0, 6.0, z_from);
-      To(23.0, 4.5, z_from);
-      To(23.0, 1.5, mid);
-      To(22.5, 0.8, mid);
-      To(21.5, 0.8, mid);
-      To(21.0, 1.5, mid);
-      To(21.0, 4.5, z_to);
-      To(21.0, 6.0, z_to);
+    struct Point {
+      double x, y;
+      int height;
+    };
+    static constexpr Point kUp[] = {{21.0, 6.0, 0}, {21.0, 4.5, 0}, {21.0, 1.5, 1},
+                                    {21.5, 0.8, 1}, {22.5, 0.8, 1}, {23.0, 1.5, 1},
+                                    {23.0, 4.5, 2}, {23.0, 6.0, 2}, {21.0, 6.0, 2}};
+    const bool up = z_to > z_from;
+    const double bottom = up ? z_from : z_to, top = up ? z_to : z_from;
+    const double z_of[] = {bottom, 0.5 * (z_from + z_to), top};
+    const std::size_t n = std::size(kUp);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Point& p = kUp[up ? i : n - 1 - i];
+      To(p.x, p.y, z_of[p.height]);
     }
   }
   /// A search of a level from the stairwell: every room, west along the corridor and back.
