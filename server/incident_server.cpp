@@ -134,7 +134,8 @@ IncidentServer::IncidentServer(const MissionInfo& info, std::vector<Estimate> es
     live_ = std::make_unique<Live>();
     // The estimator first: bad options fail before the journal is touched.
     live_->estimator = pipeline.make(
-        {info_, options_.floor_plan ? &*options_.floor_plan : nullptr, "the floor plan"},
+        {info_, options_.floor_plan ? &*options_.floor_plan : nullptr, "the floor plan",
+         options_.floor_levels.empty() ? nullptr : &options_.floor_levels},
         options_.pipeline_options, Feed::kLive);
     live_->journal = std::make_unique<Journal>(options_.journal_file);
     live_->work = std::filesystem::path(options_.journal_file.string() + ".work");
@@ -385,7 +386,22 @@ void IncidentServer::Start() {
                          {"y", n.position->y()}});
       }
     }
-    json(res, {{"walls", walls}, {"nodes", known}});
+    nlohmann::json body{{"walls", walls}, {"nodes", known}};
+    if (!options_.floor_levels.empty()) {
+      // The dashboard's floor selector: every level's solid walls; "walls" is the default
+      // level's (the one a single-floor client draws).
+      nlohmann::json levels = nlohmann::json::array();
+      std::vector<int> numbers;
+      for (const auto& [level, plan] : options_.floor_levels) {
+        numbers.push_back(level);
+        nlohmann::json lw = nlohmann::json::array();
+        for (const auto& w : plan.solid_walls()) lw.push_back({w.a.x(), w.a.y(), w.b.x(), w.b.y()});
+        levels.push_back({{"level", level}, {"walls", lw}});
+      }
+      body["levels"] = levels;
+      body["level"] = DefaultFloorPlanLevel(numbers);
+    }
+    json(res, body);
   });
   // The dashboard: index.html needs the token; its scripts and styles are public code.
   svr.Get("/", [authorized, refuse](const httplib::Request& req, httplib::Response& res) {

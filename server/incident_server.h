@@ -9,7 +9,10 @@
 ///   GET /api/history (bearer token)                  -> trails and alert log for the timeline
 ///   GET /?token=TOKEN                                -> the dashboard (web/, built with Vite)
 ///   GET /api/health                                  -> {"ok": true} (no token)
-///   GET /api/floorplan (bearer token)                -> {"walls": [[x0, y0, x1, y1], ...]}
+///   GET /api/floorplan (bearer token)                -> {"walls": [[x0, y0, x1, y1], ...],
+///                                                        "nodes": [...], and with several levels
+///                                                        "level": the walls' level, "levels":
+///                                                        [{"level": L, "walls": [...]}, ...]}
 ///   GET /api/stats (bearer token)                    -> counters and the latest rejection reasons
 ///   POST /api/ingest/<stream> (bearer token; live mode) -> rows journaled, then acknowledged
 /// Binds to 127.0.0.1 unless told otherwise. Every request without the right token is refused
@@ -48,6 +51,9 @@ struct ServerOptions {
   std::map<std::string, std::string> pipeline_options;
   /// The floor the pipeline works on (those that need a floor plan).
   std::optional<FloorPlan> floor_plan;
+  /// Every level of a multi-level plan (empty for one level): a pipeline that follows the
+  /// floors (mapmatch) uses them, and the dashboard's floor selector draws each.
+  LevelPlans floor_levels;
   MqttOptions mqtt;  ///< live mode: also ingest from an MQTT broker when `mqtt.uri` is set
   /// HTTPS when both are set: the certificate chain and private key files (PEM).
   std::string tls_cert_file, tls_key_file;

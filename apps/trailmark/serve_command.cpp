@@ -33,11 +33,13 @@ std::string RandomToken() {
 std::atomic<bool>& StopFlag() { return g_stop; }
 
 // The floor the incident is tracked and drawn on: a floor-plan pipeline's `level` option when
-// given (a level the plan lacks is an error naming its levels), else the plan's default floor.
+// given (a level the plan lacks is an error naming its levels), else the plan's default floor;
+// `levels` gets every level of a multi-level plan (the floor selector, mapmatch's levels).
 std::optional<FloorPlan> ServedFloorPlan(const MissionDirectory& mission,
                                          const PipelineSpec& pipeline,
-                                         const std::map<std::string, std::string>& options) {
-  return LoadPipelineFloor(pipeline, mission, options);
+                                         const std::map<std::string, std::string>& options,
+                                         LevelPlans* levels) {
+  return LoadPipelineFloor(pipeline, mission, options, nullptr, levels);
 }
 
 }  // namespace
@@ -73,7 +75,7 @@ int ServeLive(const ServeOptions& o) {
         "note: mission.json names the floor plan '{}', which {} does not hold: the "
         "dashboard shows no walls\n",
         *mission.info().floorplan, o.live.string());
-  } else if (auto plan = ServedFloorPlan(mission, spec, so.pipeline_options)) {
+  } else if (auto plan = ServedFloorPlan(mission, spec, so.pipeline_options, &so.floor_levels)) {
     walls = plan->solid_walls();
     so.floor_plan = std::move(*plan);
   }
@@ -159,7 +161,9 @@ int Serve(const ServeOptions& o) {
   std::stable_sort(heard.begin(), heard.end(),
                    [](const auto& a, const auto& b) { return a.first < b.first; });
   std::vector<Segment2> walls;
-  if (const auto plan = ServedFloorPlan(mission, *p, o.options)) walls = plan->solid_walls();
+  if (const auto plan = ServedFloorPlan(mission, *p, o.options, &so.floor_levels)) {
+    walls = plan->solid_walls();
+  }
   server::IncidentServer srv(mission.info(), std::move(sink.rows), so, std::move(heard),
                              std::move(walls));
   srv.SetIntegrityNotes(summary.integrity);

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: MIT
 # Browser test of the dashboard: a replayed two-firefighter mission (371 s at 10x, so the replay
-# outlasts a slow Chromium start on a loaded machine), Debian's Chromium headless.
+# outlasts a slow Chromium start on a loaded machine), Debian's Chromium headless; then the
+# floor selector on the multi-floor building.
 set -euo pipefail
 TM="$1"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -15,4 +16,13 @@ for _ in $(seq 100); do grep -q "listening on" "$dir/serve.log" && break; sleep 
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
 [ -n "$port" ] || { cat "$dir/serve.log"; echo "FAIL: serve did not start"; exit 1; }
 node "$here/dashboard.mjs" "http://127.0.0.1:$port" br0wser 2 "${SCREENSHOT:-$dir/dashboard.png}"
-echo "browser: 1 passed, 0 failed"
+kill $pid; wait $pid 2>/dev/null || true
+# The floor selector: the multi-floor building, replayed at 20x.
+"$TM" simulate multi-floor --seed 3 --out "$dir/f" > /dev/null
+"$TM" serve --replay "$dir/f" --pipeline pdr --speed 20 --port 0 --token br0wser > "$dir/serve2.log" 2>&1 &
+pid=$!
+for _ in $(seq 100); do grep -q "listening on" "$dir/serve2.log" && break; sleep 0.1; done
+port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve2.log")
+[ -n "$port" ] || { cat "$dir/serve2.log"; echo "FAIL: serve did not start"; exit 1; }
+node "$here/floors.mjs" "http://127.0.0.1:$port" br0wser "$dir/floors.png"
+echo "browser: 2 passed, 0 failed"

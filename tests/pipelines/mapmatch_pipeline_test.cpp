@@ -160,8 +160,9 @@ TEST(MapMatchPipeline, BadFloorPlansAndOptionsAreReportedClearly) {
 
 TEST(MapMatchPipeline, AMultiFloorPlanIsMatchedOnOneFloor) {
   // House 1 on level 0 and, on level 1, walls every metre across it (the floor above, cut into
-  // offices): merged into one plan every step would cross a wall. Not told which floor, the
-  // filter uses level 0 and gives exactly the single-floor result.
+  // offices), walls that enclose nothing: merged into one plan every step would cross a wall.
+  // Not told which floor, the filter follows the levels; level 1 cannot be matched on and is
+  // left out (noted), and the filter gives exactly the single-floor result.
   HouseSearchOptions o;
   o.duration_s = 60;
   const SimulatedMission sim = SimulateHouseSearch(o, 3);
@@ -187,9 +188,13 @@ TEST(MapMatchPipeline, AMultiFloorPlanIsMatchedOnOneFloor) {
   for (std::size_t k = 0; k < a.rows.size(); ++k) {
     ASSERT_EQ(a.rows[k].position_n, b.rows[k].position_n) << k;
   }
-  bool noted = false;
-  for (const auto& n : s.notes) noted |= n.find("2 levels (0, 1)") != std::string::npos;
+  bool noted = false, left_out = false;
+  for (const auto& n : s.notes) {
+    noted |= n.find("2 levels (0, 1)") != std::string::npos;
+    left_out |= n.find("level 1 left out") != std::string::npos;
+  }
   EXPECT_TRUE(noted);
+  EXPECT_TRUE(left_out);
   // Asked for a floor the plan does not have, or not a whole number: named.
   const MissionDirectory mission(multi.path());
   try {

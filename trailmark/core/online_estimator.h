@@ -114,9 +114,30 @@ struct EstimatorSummary {
   std::string BriefReport() const;
 };
 
+/// Where a node is vertically: its level, how probable that level is, its z and variance.
+struct LevelBelief {
+  int level = 0;
+  double probability = 1.0;
+  double z_m = 0.0;
+  double szz_m2 = 0.0;
+};
+
+/// What is known of every node's level when a row reaches an estimator: the agents' height
+/// channel (ins/height.h), which sees every row before the estimator does.
+class LevelSource {
+ public:
+  virtual ~LevelSource() = default;
+  /// nullopt for a node it knows nothing of (not an agent, not dropped by one).
+  virtual std::optional<LevelBelief> NodeLevel(const std::string& node) const = 0;
+};
+
 class OnlineEstimator {
  public:
   virtual ~OnlineEstimator() = default;
+  /// The nodes' levels, for estimators that use floors (map matching changes the level of its
+  /// plan, radio estimators gate packets through floors); `levels` outlives the estimator.
+  /// Wrappers pass it on. Default: not used.
+  virtual void UseLevels(const LevelSource* /*levels*/) {}
   /// One row. Each node's rows of one stream come in non-decreasing time; an estimator that
   /// needs all rows in global time order says so in its documentation (the pipeline registry
   /// then feeds it through a StepFrontEnd that restores the order). Rows of streams the

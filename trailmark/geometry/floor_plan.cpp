@@ -2,6 +2,7 @@
 #include "trailmark/geometry/floor_plan.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 
 namespace trailmark {
@@ -61,6 +62,12 @@ Box2 FloorPlan::Bounds() const {
     for (const auto& p : r.ring) box.Extend(p);
   }
   return box;
+}
+
+bool IsStairwell(const Room& room) {
+  std::string lower = room.name;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return lower.find("stair") != std::string::npos;
 }
 
 void AddRectangle(std::vector<Segment2>& walls, const Vec2& lo, const Vec2& hi) {

@@ -4,6 +4,7 @@
 /// spatial index over the solid wall pieces. No I/O (io/floor_plan_geojson reads the file).
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "trailmark/geometry/segment_index.h"
@@ -51,6 +52,13 @@ class FloorPlan {
   std::vector<Room> rooms_;
   SegmentIndex index_;
 };
+
+/// The plans of a multi-level building: (level, that level's plan), by level.
+using LevelPlans = std::vector<std::pair<int, FloorPlan>>;
+
+/// Whether a room connects levels: a stairwell or staircase (its name contains "stair", any
+/// case). Map matching moves a belief between levels only there.
+bool IsStairwell(const Room& room);
 
 /// Appends the four walls of the axis-aligned rectangle [lo, hi] (for simulated floor plans).
 void AddRectangle(std::vector<Segment2>& walls, const Vec2& lo, const Vec2& hi);

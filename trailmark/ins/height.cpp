@@ -421,25 +421,27 @@ void HeightChannel::Add(const MissionRow& row) {
   }
 }
 
-void HeightChannel::Annotate(Estimate& e) const {
-  if (const auto it = filters_.find(e.id); it != filters_.end()) {
-    e.position_n.z() = it->second.height_m();
-    e.szz = it->second.height_variance_m2();
-    e.floor = it->second.Level(info_.floors).first;
-    return;
+std::optional<LevelBelief> HeightChannel::NodeLevel(const std::string& node) const {
+  if (const auto it = filters_.find(node); it != filters_.end()) {
+    const auto [level, p] = it->second.Level(info_.floors);
+    return LevelBelief{level, p, it->second.height_m(), it->second.height_variance_m2()};
   }
-  if (const auto it = dropped_.find(e.id); it != dropped_.end()) {
-    e.position_n.z() = it->second.z_m;
-    e.szz = it->second.szz_m2;
-    e.floor = it->second.level;
-    return;
+  if (const auto it = dropped_.find(node); it != dropped_.end()) {
+    return LevelBelief{it->second.level, 1.0, it->second.z_m, it->second.szz_m2};
   }
-  if (IsAgent(info_, e.id)) {  // no step nor reading yet: at its start's height
-    const auto start = info_.AgentStart(*info_.Find(e.id));
+  if (IsAgent(info_, node)) {  // no step nor reading yet: at its start's height
+    const auto start = info_.AgentStart(*info_.Find(node));
     const double z = start ? start->z() : 0.0;
-    e.position_n.z() = z;
-    e.szz = kStartSigmaM * kStartSigmaM;
-    e.floor = LevelAt(info_.floors, z);
+    return LevelBelief{LevelAt(info_.floors, z), 1.0, z, kStartSigmaM * kStartSigmaM};
+  }
+  return std::nullopt;
+}
+
+void HeightChannel::Annotate(Estimate& e) const {
+  if (const auto b = NodeLevel(e.id)) {
+    e.position_n.z() = b->z_m;
+    e.szz = b->szz_m2;
+    if (!e.floor) e.floor = b->level;  // an estimator's own level (map matching) stands
   }
 }
 

@@ -148,13 +148,17 @@ class HeightFilter {
 /// Every agent's height filter, created at its first row from its start (mission.json; else
 /// z = 0), and the height of every crumb at its drop. Annotates estimates: agents get z, szz
 /// and floor from their filter; a dropped node its dropper's at the drop.
-class HeightChannel {
+class HeightChannel : public LevelSource {
  public:
   HeightChannel(MissionInfo info, HeightOptions options);
   /// Steps, barometer readings and drop events; other rows are ignored.
   void Add(const MissionRow& row);
-  /// Sets z, szz and floor of an agent's or a dropped node's estimate (others unchanged).
+  /// Sets z, szz and floor of an agent's or a dropped node's estimate (others unchanged; a
+  /// floor the estimator set is kept).
   void Annotate(Estimate& estimate) const;
+  /// An agent's level (its filter's, or its start's before its first row) or a dropped
+  /// node's (its dropper's at the drop, probability 1).
+  std::optional<LevelBelief> NodeLevel(const std::string& node) const override;
   /// Per agent: counters, the final level; integrity notes of the barometers.
   void AddToSummary(EstimatorSummary& summary) const;
   const HeightFilter* Filter(const std::string& agent) const;

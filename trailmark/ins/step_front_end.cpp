@@ -47,6 +47,7 @@ StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrd
       height_(std::move(info), options.height) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument(why);
+  inner_->UseLevels(&height_);
   ins_.on_step = [this](const Step& step) {
     ++ins_steps_;
     Deliver(step, *sink_);

@@ -160,6 +160,7 @@ class StreamCheck : public OnlineEstimator {
   StreamCheck(StreamCheckOptions options, std::unique_ptr<OnlineEstimator> inner);
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override { inner_->Finish(sink); }
+  void UseLevels(const LevelSource* levels) override { inner_->UseLevels(levels); }
   std::optional<Estimate> Current(const std::string& node) const override {
     return inner_->Current(node);
   }

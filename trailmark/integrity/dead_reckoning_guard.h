@@ -66,6 +66,7 @@ class DeadReckoningGuard : public OnlineEstimator {
   /// agents are checked against the shadow before they reach `sink`.
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override;
+  void UseLevels(const LevelSource* levels) override { inner_->UseLevels(levels); }
   /// The estimate the guard would emit for the node now.
   std::optional<Estimate> Current(const std::string& node) const override;
   /// The inner summary, and: integrity.disagreements (times an estimate left the region),

@@ -17,9 +17,11 @@ bool MapMatchEstimatorOptions::IsValid(std::string* why) const {
   if (!filter.IsValid(why) || !sequences.grid.IsValid(why) || !comparison.IsValid(why))
     return false;
   if (!(compare_every_m > 0) || !(variance_alarm_m2 > 0) || !(variance_alarm_min_s >= 0) ||
-      map_error_wall_alarms < 1 || !(walking_direction_m > 0)) {
+      map_error_wall_alarms < 1 || !(walking_direction_m > 0) ||
+      !(stairwell_veto_variance_m2 >= 0)) {
     if (why)
-      *why = "compare_every_m and variance_alarm_m2 must be > 0, variance_alarm_min_s >= 0";
+      *why = "compare_every_m and variance_alarm_m2 must be > 0, variance_alarm_min_s >= 0, "
+             "stairwell_veto_variance_m2 >= 0";
     return false;
   }
   return true;
@@ -104,6 +106,8 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
          "spacing of the compared points");
     real("icp_trim", [](O& o) -> double& { return o.comparison.icp.trim_fraction; }, "", any,
          "fraction of the worst ICP correspondences left out (0: the paper's plain ICP)");
+    real("stairwell_veto_variance_m2", &O::stairwell_veto_variance_m2, "m^2", any,
+         "a level change outside a stairwell is refused at or below this variance (0: never)");
     real("compare_every_m", &O::compare_every_m, "m", any, "distance walked between comparisons");
     real("variance_alarm_m2", &O::variance_alarm_m2, "m^2", any,
          "map-error indicator level (sec. V-E)");
@@ -129,16 +133,33 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
 
 namespace {
 
+/// One level of the building: its plan, search sequences, grid and wall distances.
+struct Level {
+  int level = 0;
+  FloorPlan plan;
+  std::vector<NodeSequence> sequences;
+  std::unique_ptr<SearchGrid> grid;
+  std::shared_ptr<const DistanceField> wall_distance;  ///< shared by the agents' filters
+  std::vector<const Room*> stairwells;
+};
+
 struct AgentTrack {
-  std::unique_ptr<MapParticleFilter> filter;
+  std::map<std::size_t, std::unique_ptr<MapParticleFilter>> filters;  ///< by level index
+  MapParticleFilter* filter = nullptr;  ///< the current level's
+  std::size_t level = 0;                ///< index into Impl::levels
+  std::uint64_t seed = 1;
   Vec2 odometry_n = Vec2::Zero();
   double walked_m = 0, since_compare_m = 0;
+  double level_walked_m = 0;  ///< walked when the agent came to this level
   std::deque<std::pair<double, Vec2>> history;  ///< (distance walked, odometry position)
   bool alarm = false;
   TimeS alarm_since = 0, t = 0;
   std::vector<std::pair<TimeS, TimeS>> alarms;
   std::vector<std::string> wall_alarms;  ///< when and where the walk crossed the map's walls
   std::size_t comparisons = 0, skipped_comparisons = 0;
+  std::size_t level_changes = 0, level_changes_outside_stairwell = 0, level_changes_refused = 0;
+  std::optional<int> refused_level;  ///< the level change being refused now
+  std::vector<std::string> level_notes;
 };
 
 }  // namespace
@@ -146,11 +167,9 @@ struct AgentTrack {
 struct MapMatchEstimator::Impl {
   MissionInfo info;
   MapMatchEstimatorOptions o;
-  FloorPlan plan;
-  std::vector<NodeSequence> sequences;
-  std::unique_ptr<SearchGrid> grid;
-  std::shared_ptr<const DistanceField> wall_distance;  ///< shared by the agents' filters
+  std::vector<Level> levels;
   std::map<std::string, AgentTrack> agents;
+  const LevelSource* level_source = nullptr;
   EstimatorSummary setup;
   std::size_t icp_runs = 0, icp_abandoned = 0, ignored = 0;
   TimeS t_last = 0;
@@ -161,9 +180,84 @@ struct MapMatchEstimator::Impl {
       alarms.emplace_back(a.alarm_since, t_last);
     return alarms;
   }
+  std::optional<std::size_t> IndexOf(int level) const {
+    for (std::size_t i = 0; i < levels.size(); ++i) {
+      if (levels[i].level == level) return i;
+    }
+    return std::nullopt;
+  }
+  /// The filter of `a` on level index `i` (made on first use, with its own random stream).
+  MapParticleFilter& FilterOn(AgentTrack& a, std::size_t i) {
+    auto& f = a.filters[i];
+    if (!f) {
+      MapParticleFilterOptions fo = o.filter;
+      fo.seed = a.seed + 7919 * i;
+      const Level& l = levels[i];
+      f = std::make_unique<MapParticleFilter>(*l.grid, l.sequences, fo, l.wall_distance);
+    }
+    return *f;
+  }
+  /// Moves the agent's belief to level index `to` at time t: the particles in a stairwell of
+  /// either level go on; when no weight is in one, the change is refused while the belief is
+  /// confident (stairwell_veto_variance_m2), else every particle goes on (noted).
+  void ChangeLevel(const std::string& id, AgentTrack& a, std::size_t to, TimeS t) {
+    const Level& from_level = levels[a.level];
+    const Level& to_level = levels[to];
+    const auto& particles = a.filter->particles();
+    std::vector<char> keep(particles.size(), 0);
+    double mass = 0;
+    for (std::size_t k = 0; k < particles.size(); ++k) {
+      for (const Level* l : {&from_level, &to_level}) {
+        for (const Room* r : l->stairwells) {
+          if (PointInPolygon(particles[k].position_n, r->ring)) keep[k] = 1;
+        }
+      }
+      if (keep[k]) mass += particles[k].weight;
+    }
+    const bool marked = !from_level.stairwells.empty() || !to_level.stairwells.empty();
+    const bool stairs = mass >= kMinStairwellMass;
+    if (!stairs && marked && a.filter->Covariance().trace() <= o.stairwell_veto_variance_m2) {
+      if (a.refused_level != to_level.level) {
+        ++a.level_changes_refused;
+        a.level_notes.push_back(fmt::format(
+            "{}: t={:.1f} s level {} -> {} refused: {:.0f} % of the belief in a stairwell", id, t,
+            from_level.level, to_level.level, 100 * mass));
+      }
+      a.refused_level = to_level.level;
+      return;
+    }
+    a.refused_level.reset();
+    if (!stairs) std::fill(keep.begin(), keep.end(), 1);
+    MapParticleFilter& next = FilterOn(a, to);
+    next.ContinueFrom(*a.filter, keep);
+    ++a.level_changes;
+    if (!stairs) {
+      ++a.level_changes_outside_stairwell;
+      a.level_notes.push_back(fmt::format(
+          "{}: t={:.1f} s level {} -> {} with {:.0f} % of the belief in a stairwell{}: every "
+          "particle kept",
+          id, t, from_level.level, to_level.level, 100 * mass,
+          marked ? "" : " (the plan marks none)"));
+    }
+    a.filter = &next;
+    a.level = to;
+    a.level_walked_m = a.walked_m;
+    a.since_compare_m = 0;
+    a.history.clear();
+    a.history.emplace_back(a.walked_m, a.odometry_n);
+  }
+  /// Ours: a level change moves only the particles in a stairwell when they carry at least
+  /// this share of the belief; below it, the stairwell is not where the filter thinks the
+  /// walker is (or the plan marks none) and every particle goes on.
+  static constexpr double kMinStairwellMass = 0.05;
 };
 
 MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, FloorPlan plan,
+                                     std::string plan_source, MapMatchEstimatorOptions options)
+    : MapMatchEstimator(info, LevelPlans{{0, std::move(plan)}}, std::move(plan_source),
+                        std::move(options)) {}
+
+MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, LevelPlans levels,
                                      std::string plan_source, MapMatchEstimatorOptions options)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
@@ -171,45 +265,99 @@ MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, FloorPlan plan,
   m.o = std::move(options);
   std::string why;
   if (!m.o.IsValid(&why)) throw std::invalid_argument("mapmatch: " + why);
-  m.plan = std::move(plan);
-  for (const auto& p : CheckFloorPlan(m.plan, m.o.sequences.wall_snap_m)) {
-    if (p.fatal) throw InputError(plan_source, 0, p.message);
-    m.setup.notes.push_back("floor plan: " + p.message);
-  }
-  // The entry: the first agent's start, else the single base, else a corner of the building.
-  std::optional<Vec2> entry;
+  if (levels.empty()) throw std::invalid_argument("mapmatch: no floor plan");
+  // The first agent's start, else the single base.
+  std::optional<Vec3> start;
   for (const NodeInfo& n : info.nodes) {
     if (n.kind != NodeKind::kAgent) continue;
-    if (const auto s = info.AgentStart(n)) {
-      entry = s->head<2>();
-      break;
-    }
+    if ((start = info.AgentStart(n))) break;
   }
-  if (!entry) {
-    entry = m.plan.Bounds().min;
-    m.setup.notes.push_back(
-        "no agent start or base: the search sequence starts at the building's corner");
-  }
-  try {
-    m.sequences = ExtractSearchSequences(m.plan, *entry, m.o.sequences);
-  } catch (const std::invalid_argument& e) {
-    throw InputError(plan_source, 0, e.what());
-  }
-  m.grid = std::make_unique<SearchGrid>(m.plan, m.o.sequences.grid);
-  if (m.o.filter.wall_follow) {
-    try {
-      m.wall_distance = MakeWallDistanceField(m.plan);
-    } catch (const std::invalid_argument& e) {
-      throw InputError(plan_source, 0, e.what());
-    }
-  }
+  const bool multi = levels.size() > 1;
   std::size_t nodes = 0;
-  for (const auto& s : m.sequences) nodes += s.nodes.size();
-  const double cell = m.o.sequences.grid.spacing_m;
-  m.setup.numbers["search_sequences"] = static_cast<double>(m.sequences.size());
+  double inside_m2 = 0;
+  // The level the agents are taken to start on when they have no start: 0, else the lowest.
+  int primary = levels.front().first;
+  for (const auto& [level_number, plan] : levels) {
+    if (level_number == 0) primary = 0;
+    if (primary != 0) primary = std::min(primary, level_number);
+  }
+  m.levels.reserve(levels.size());  // the filters keep references into the levels
+  for (auto& [level_number, plan] : levels) {
+    const std::string prefix = multi ? fmt::format("level {}: ", level_number) : "";
+    Level l;
+    l.level = level_number;
+    l.plan = std::move(plan);
+    std::vector<std::string> notes;
+    try {
+      for (const auto& p : CheckFloorPlan(l.plan, m.o.sequences.wall_snap_m)) {
+        if (p.fatal) throw InputError(plan_source, 0, prefix + p.message);
+        notes.push_back("floor plan: " + prefix + p.message);
+      }
+      // Where the searches of the level start: the entry (the first agent's start) on its
+      // level, else the stairwell, else the building's corner.
+      std::vector<const Room*> stairwells;
+      for (const Room& r : l.plan.rooms()) {
+        if (IsStairwell(r)) stairwells.push_back(&r);
+      }
+      std::optional<Vec2> entry;
+      if (start && (!multi || LevelAt(info.floors, start->z()) == l.level))
+        entry = start->head<2>();
+      if (!entry && !stairwells.empty()) {
+        Vec2 c = Vec2::Zero();
+        for (const Vec2& v : stairwells.front()->ring) c += v;
+        entry = c / static_cast<double>(stairwells.front()->ring.size());
+      }
+      if (!entry && start) entry = start->head<2>();
+      if (!entry) {
+        entry = l.plan.Bounds().min;
+        notes.push_back(prefix +
+                        "no agent start or base: the search sequence starts at the building's "
+                        "corner");
+      }
+      try {
+        l.sequences = ExtractSearchSequences(l.plan, *entry, m.o.sequences);
+        if (m.o.filter.wall_follow) l.wall_distance = MakeWallDistanceField(l.plan);
+      } catch (const std::invalid_argument& e) {
+        throw InputError(plan_source, 0, prefix + e.what());
+      }
+    } catch (const InputError& e) {
+      // A level that cannot be matched on is left out, unless it is the one every agent
+      // starts on when nothing says otherwise.
+      if (!multi || l.level == primary) throw;
+      m.setup.notes.push_back(fmt::format(
+          "floor plan: level {} left out ({}): an agent on it keeps the plan of the level it came "
+          "from",
+          l.level, e.what()));
+      continue;
+    }
+    m.setup.notes.insert(m.setup.notes.end(), notes.begin(), notes.end());
+    Level& kept = m.levels.emplace_back(std::move(l));
+    // Pointers into the plan's rooms, taken after the move.
+    for (const Room& r : kept.plan.rooms()) {
+      if (IsStairwell(r)) kept.stairwells.push_back(&r);
+    }
+    kept.grid = std::make_unique<SearchGrid>(kept.plan, m.o.sequences.grid);
+    for (const auto& s : kept.sequences) nodes += s.nodes.size();
+    const double cell = m.o.sequences.grid.spacing_m;
+    inside_m2 += kept.grid->inside_count() * cell * cell;
+    m.setup.numbers["search_sequences"] += static_cast<double>(kept.sequences.size());
+  }
   m.setup.numbers["search_nodes"] = static_cast<double>(nodes);
-  m.setup.numbers["inside_area_m2"] = m.grid->inside_count() * cell * cell;
+  m.setup.numbers["inside_area_m2"] = inside_m2;
+  if (m.levels.size() > 1) {
+    m.setup.numbers["levels"] = static_cast<double>(m.levels.size());
+    std::size_t stairwells = 0;
+    for (const Level& l : m.levels) stairwells += l.stairwells.size();
+    m.setup.numbers["stairwells"] = static_cast<double>(stairwells);
+    if (stairwells == 0) {
+      m.setup.notes.push_back(
+          "floor plan: no room is a stairwell (a room named \"stair...\"): a level change "
+          "keeps the whole belief");
+    }
+  }
 }
+
+void MapMatchEstimator::UseLevels(const LevelSource* levels) { impl_->level_source = levels; }
 
 MapMatchEstimator::~MapMatchEstimator() = default;
 
@@ -224,7 +372,9 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     const Vec2 mean = a.filter->Mean();
     const Mat2 c = a.filter->Covariance();
     a.t = t;
-    sink.Add({t, id, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+    Estimate e{t, id, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
+    if (m.levels.size() > 1) e.floor = m.levels[a.level].level;
+    sink.Add(e);
   };
   auto it = m.agents.find(step->agent);
   if (it == m.agents.end()) {
@@ -241,9 +391,18 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
           fmt::format("init=known but agent '{}' has no start in mission.json", step->agent));
     }
     AgentTrack a;
-    MapParticleFilterOptions o = m.o.filter;
-    o.seed = m.o.filter.seed + m.agents.size();
-    a.filter = std::make_unique<MapParticleFilter>(*m.grid, m.sequences, o, m.wall_distance);
+    a.seed = m.o.filter.seed + m.agents.size();
+    // The level it starts on: its start's, else its height channel's, else level 0 (or the
+    // lowest the plan has).
+    if (m.levels.size() > 1) {
+      std::optional<int> level;
+      if (start) level = LevelAt(m.info.floors, start->z());
+      else if (m.level_source) {
+        if (const auto b = m.level_source->NodeLevel(step->agent)) level = b->level;
+      }
+      a.level = m.IndexOf(level.value_or(0)).value_or(m.IndexOf(0).value_or(0));
+    }
+    a.filter = &m.FilterOn(a, a.level);
     if (known) {
       a.filter->InitializeKnown(
           start->head<2>(), 0.0,
@@ -259,6 +418,17 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     emit(step->t0, step->agent, it->second);
   }
   AgentTrack& a = it->second;
+  // The level its height channel puts it on now (the step included).
+  if (m.levels.size() > 1 && m.level_source) {
+    if (const auto b = m.level_source->NodeLevel(step->agent)) {
+      const auto to = m.IndexOf(b->level);
+      if (to && *to != a.level) {
+        m.ChangeLevel(step->agent, a, *to, step->t1);
+      } else {
+        a.refused_level.reset();
+      }
+    }
+  }
   const Vec2 d = step->delta_n.head<2>();
   a.filter->Predict(d);
   a.odometry_n += d;
@@ -268,14 +438,15 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   while (a.history.size() > 2 && a.history[1].first <= a.walked_m - m.o.comparison.pattern_length_m)
     a.history.pop_front();
   if (m.o.filter.pseudo_observations && a.since_compare_m >= m.o.compare_every_m &&
-      a.walked_m >= m.o.comparison.pattern_length_m) {
+      a.walked_m - a.level_walked_m >= m.o.comparison.pattern_length_m) {
     a.since_compare_m = 0;
     if (!a.filter->WantsPatterns()) {
       ++a.skipped_comparisons;  // converged: the comparison would not be used
     } else {
       std::vector<Vec2> trajectory;
       for (const auto& h : a.history) trajectory.push_back(h.second);
-      const PatternComparison pc = ComparePatterns(trajectory, m.sequences, m.o.comparison);
+      const PatternComparison pc =
+          ComparePatterns(trajectory, m.levels[a.level].sequences, m.o.comparison);
       m.icp_runs += pc.icp_runs;
       m.icp_abandoned += pc.icp_abandoned;
       // The odometry's walking direction over its last metre.
@@ -312,7 +483,9 @@ std::optional<Estimate> MapMatchEstimator::Current(const std::string& node) cons
   if (it == impl_->agents.end()) return std::nullopt;
   const Vec2 mean = it->second.filter->Mean();
   const Mat2 c = it->second.filter->Covariance();
-  return Estimate{it->second.t, node, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
+  Estimate e{it->second.t, node, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
+  if (impl_->levels.size() > 1) e.floor = impl_->levels[it->second.level].level;
+  return e;
 }
 
 std::optional<AgentMapEvidence> MapMatchEstimator::Evidence(const std::string& agent) const {
@@ -361,9 +534,22 @@ EstimatorSummary MapMatchEstimator::Summary() const {
     summary.numbers[id + ".pattern_comparisons"] = static_cast<double>(a.comparisons);
     summary.numbers[id + ".comparisons_skipped_converged"] =
         static_cast<double>(a.skipped_comparisons);
-    summary.numbers[id + ".wall_eliminations"] =
-        static_cast<double>(a.filter->summary().wall_eliminations);
-    summary.numbers[id + ".restarts"] = static_cast<double>(a.filter->summary().restarts);
+    std::size_t eliminations = 0, restarts = 0;
+    for (const auto& [level, f] : a.filters) {
+      eliminations += f->summary().wall_eliminations;
+      restarts += f->summary().restarts;
+    }
+    summary.numbers[id + ".wall_eliminations"] = static_cast<double>(eliminations);
+    summary.numbers[id + ".restarts"] = static_cast<double>(restarts);
+    if (m.levels.size() > 1) {
+      summary.numbers[id + ".level_changes"] = static_cast<double>(a.level_changes);
+      summary.numbers[id + ".level_changes_outside_stairwell"] =
+          static_cast<double>(a.level_changes_outside_stairwell);
+      summary.numbers[id + ".level_changes_refused"] =
+          static_cast<double>(a.level_changes_refused);
+      summary.numbers[id + ".final_level"] = m.levels[a.level].level;
+      summary.notes.insert(summary.notes.end(), a.level_notes.begin(), a.level_notes.end());
+    }
   }
   summary.numbers["icp_runs"] = static_cast<double>(m.icp_runs);
   summary.numbers["icp_abandoned"] = static_cast<double>(m.icp_abandoned);

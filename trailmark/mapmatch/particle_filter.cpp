@@ -10,6 +10,7 @@
 #include <nanoflann.hpp>
 #include <numbers>
 #include <numeric>
+#include <stdexcept>
 
 namespace trailmark::mapmatch {
 
@@ -166,6 +167,30 @@ void MapParticleFilter::InitializeUniform() {
     q.p_off_wall = 0;
     q.weight = 1.0 / particles_.size();
   }
+}
+
+void MapParticleFilter::ContinueFrom(const MapParticleFilter& from,
+                                     const std::vector<char>& keep) {
+  if (from.particles_.size() != particles_.size() || keep.size() != particles_.size()) {
+    throw std::invalid_argument("ContinueFrom: filters with different numbers of particles");
+  }
+  uniform_start_ = from.uniform_start_;
+  converged_ = from.converged_;
+  tracking_ = from.tracking_;
+  pattern_updates_applied_ = from.pattern_updates_applied_;
+  forced_pattern_updates_ = from.forced_pattern_updates_;
+  wall_cusum_ = 0;
+  last_blocked_mass_ = 0;
+  last_step_alarm_ = false;
+  particles_ = from.particles_;
+  for (auto& q : particles_) q.step_from_n = q.position_n;
+  std::vector<char> dead(keep.size());
+  bool any = false;
+  for (std::size_t i = 0; i < keep.size(); ++i) {
+    dead[i] = keep[i] ? 0 : 1;
+    any = any || (keep[i] && particles_[i].weight > 0);
+  }
+  if (any) ReplaceFromSurvivors(dead);
 }
 
 std::uint8_t MapParticleFilter::RandomHand() {

@@ -181,6 +181,12 @@ class MapParticleFilter {
   /// Unknown initial state: uniform over the inside of the building and over the heading.
   void InitializeUniform();
 
+  /// Continues the belief of `from`, a filter of another level of the same building (same
+  /// frame, same number of particles): its particles where `keep` is non-zero, the others
+  /// replaced by copies of those (by weight; every particle when none is kept), and its
+  /// convergence state; the wall alarm's CUSUM starts again.
+  void ContinueFrom(const MapParticleFilter& from, const std::vector<char>& keep);
+
   /// Odometry displacement (odometry frame) since the last update.
   void Predict(const Vec2& delta_odometry);
   /// Eq. (2)-(3) and the resampling from the pseudo observations. `odometry_heading_rad` is

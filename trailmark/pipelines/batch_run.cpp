@@ -66,11 +66,23 @@ void RequireCanRun(const PipelineSpec& pipeline, const MissionDirectory& mission
 std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
                                            const MissionDirectory& mission,
                                            const OptionValues& options,
-                                           std::vector<std::string>* notes) {
+                                           std::vector<std::string>* notes,
+                                           LevelPlans* all_levels) {
   const std::optional<int> level =
       pipeline.floor_level ? pipeline.floor_level(options) : std::nullopt;
   std::vector<int> levels;
   std::optional<FloorPlan> plan = mission.LoadFloorPlan(level, &levels);
+  if (plan && all_levels && !level && levels.size() > 1) {
+    all_levels->clear();
+    for (const int l : levels) all_levels->emplace_back(l, *mission.LoadFloorPlan(l));
+    if (notes) {
+      notes->push_back(fmt::format(
+          "floor plan: {} levels ({}); each agent's filter uses the plan of the level it is on "
+          "(option level=N for one level only)",
+          levels.size(), fmt::join(levels, ", ")));
+    }
+    return plan;
+  }
   if (plan && notes && levels.size() > 1) {
     notes->push_back(fmt::format("floor plan: {} levels ({}); the filter uses level {}{}",
                                  levels.size(), fmt::join(levels, ", "),
@@ -142,12 +154,14 @@ EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& c
   const StreamSet feed =
       FeedStreams(pipeline.uses, pipeline.steps_based, mission, context.options, &summary.notes);
   std::optional<FloorPlan> floor;
+  LevelPlans levels;
   std::string plan_source = "the floor plan";
   if (pipeline.needs_floor_plan) {
-    floor = LoadPipelineFloor(pipeline, mission, context.options, &summary.notes);
+    floor = LoadPipelineFloor(pipeline, mission, context.options, &summary.notes, &levels);
     plan_source = mission.Path(*mission.info().floorplan).string();
   }
-  const EstimatorInputs inputs{mission.info(), floor ? &*floor : nullptr, plan_source};
+  const EstimatorInputs inputs{mission.info(), floor ? &*floor : nullptr, plan_source,
+                               levels.empty() ? nullptr : &levels};
   const auto estimator = pipeline.make(inputs, context.options, Feed::kTimeOrdered);
   MergedStream stream(mission, feed);
   Drive(*estimator, stream, mission, sink, context.progress);

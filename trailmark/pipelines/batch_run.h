@@ -39,10 +39,13 @@ void RequireCanRun(const PipelineSpec& pipeline, const MissionDirectory& mission
 /// The floor the pipeline works on, loaded from the mission's plan (its `level` option, else
 /// the default floor); nullopt when the mission has none. `notes` (optional) gets a line
 /// naming the levels of a multi-floor plan.
+/// `all_levels` (optional) gets every level's plan when the plan has several and no `level`
+/// option is given: a pipeline that follows the floors (mapmatch) then uses them all.
 std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
                                            const MissionDirectory& mission,
                                            const OptionValues& options,
-                                           std::vector<std::string>* notes = nullptr);
+                                           std::vector<std::string>* notes = nullptr,
+                                           LevelPlans* all_levels = nullptr);
 
 /// Runs the pipeline: estimates to `sink` in the order the estimator emits them. Throws
 /// InputError for bad input (file:line of the row an estimator refused) or a mission that

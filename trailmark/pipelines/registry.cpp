@@ -77,8 +77,8 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
   all->Include("", &P::streams, integrity::StreamCheckOptionTable());
   if (spec.needs_floor_plan) {
     all->Integer("level", &P::level, OptionBounds::Between(-1000000, 1000000),
-                 "the floor of a multi-floor plan to work on",
-                 "the plan's level 0, else its lowest");
+                 "work on this floor of a multi-floor plan only",
+                 "every level, each agent on its height channel's");
   }
   P default_options;
   default_options.estimator = defaults;
@@ -237,6 +237,10 @@ std::vector<PipelineSpec> BuildRegistry() {
     out.push_back(Make<mapmatch::MapMatchEstimatorOptions>(
         s, {}, mapmatch::MapMatchOptionTable(), Front::kPerAgent,
         [](const EstimatorInputs& in, const mapmatch::MapMatchEstimatorOptions& o) {
+          if (in.floor_levels != nullptr && in.floor_levels->size() > 1) {
+            return std::make_unique<mapmatch::MapMatchEstimator>(in.info, *in.floor_levels,
+                                                                 in.floor_plan_source, o);
+          }
           return std::make_unique<mapmatch::MapMatchEstimator>(in.info, *in.floor_plan,
                                                                in.floor_plan_source, o);
         }));

@@ -27,6 +27,9 @@ struct EstimatorInputs {
   const MissionInfo& info;
   const FloorPlan* floor_plan = nullptr;  ///< pipelines that need one: the floor to use
   std::string floor_plan_source = "the floor plan";  ///< names it in errors
+  /// Every level's plan of a multi-level building, when the pipeline follows the floors (no
+  /// `level` option given); null otherwise.
+  const LevelPlans* floor_levels = nullptr;
 };
 
 struct PipelineSpec {

@@ -17,7 +17,19 @@ namespace {
 // the stairwell x in [20, 24], open to the corridor; flights along y at x = 21 (down the page)
 // and x = 23 (up the page), the half landing at y < 1.5.
 constexpr double kWidth = 24, kDepth = 12, kCorridorLo = 5, kCorridorHi = 7, kStairX = 20;
-constexpr double kRoomCentres[] = {3.0, 9.0, 16.0};
+
+/// The rooms of a level: three on each side of the corridor, between partitions at `x[0]` and
+/// `x[1]`; their doors at `centre`. Levels differ (a plant room in the basement, an open office
+/// on level 2), so that a map matcher that keeps one level's plan crosses walls on the others.
+struct LevelLayout {
+  double x[2];
+  double centre[3];
+};
+LevelLayout LayoutOf(int level) {
+  if (level < 0) return {{8.0, 14.0}, {4.0, 11.0, 17.0}};
+  if (level >= 2) return {{5.0, 13.0}, {2.5, 9.0, 16.5}};
+  return {{6.0, 12.0}, {3.0, 9.0, 16.0}};
+}
 const Vec2 kOutside(2.5, -4.0);  // the street, in front of the entrance
 
 struct RouteBuilder {
@@ -48,10 +60,11 @@ struct RouteBuilder {
     }
   }
   /// A search of a level from the stairwell: every room, west along the corridor and back.
-  void Search(double z, Random& rng, bool north_first) {
+  void Search(int level, double z, Random& rng, bool north_first) {
+    const LevelLayout layout = LayoutOf(level);
     To(19.5, 6.0, z);
     for (int i = 2; i >= 0; --i) {
-      const double c = kRoomCentres[i] + rng.Uniform(-0.3, 0.3);
+      const double c = layout.centre[i] + rng.Uniform(-0.3, 0.3);
       for (const bool north : {north_first, !north_first}) {
         const double door_y = north ? kCorridorHi : kCorridorLo;
         const double inside = north ? 9.5 : 2.5;
@@ -116,14 +129,15 @@ FloorPlan BuildMultiFloorLevel(int level) {
   AddRectangle(walls, {0, 0}, {kWidth, kDepth});
   walls.push_back({{0, kCorridorLo}, {kStairX, kCorridorLo}});
   walls.push_back({{0, kCorridorHi}, {kStairX, kCorridorHi}});
-  for (const double x : {6.0, 12.0}) {
+  const LevelLayout layout = LayoutOf(level);
+  for (const double x : layout.x) {
     walls.push_back({{x, 0}, {x, kCorridorLo}});
     walls.push_back({{x, kCorridorHi}, {x, kDepth}});
   }
   walls.push_back({{kStairX, 0}, {kStairX, kCorridorLo}});
   walls.push_back({{kStairX, kCorridorHi}, {kStairX, kDepth}});
   walls.push_back({{22.0, 1.5}, {22.0, 4.5}});  // between the two flights
-  for (const double c : kRoomCentres) {
+  for (const double c : layout.centre) {
     doors.push_back({{c - 0.45, kCorridorLo}, {c + 0.45, kCorridorLo}});
     doors.push_back({{c - 0.45, kCorridorHi}, {c + 0.45, kCorridorHi}});
   }
@@ -154,18 +168,18 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
   a.To(19.5, 6.0, 0);
   a.To(21.0, 6.0, 0);
   a.Stairs(0, e1);
-  a.Search(e1, rng, rng.Uniform() < 0.5);
+  a.Search(1, e1, rng, rng.Uniform() < 0.5);
   a.Stairs(e1, e2);
-  a.Search(e2, rng, rng.Uniform() < 0.5);
+  a.Search(2, e2, rng, rng.Uniform() < 0.5);
   a.Stairs(e2, e1);
   a.Stairs(e1, 0);
   a.To(19.5, 6.0, 0);
   a.Leave();
   RouteBuilder b;
   b.Enter();
-  b.Search(0, rng, rng.Uniform() < 0.5);
+  b.Search(0, 0, rng, rng.Uniform() < 0.5);
   b.Stairs(0, em1);
-  b.Search(em1, rng, rng.Uniform() < 0.5);
+  b.Search(-1, em1, rng, rng.Uniform() < 0.5);
   b.Stairs(em1, 0);
   b.To(19.5, 6.0, 0);
   b.Leave();

@@ -3,7 +3,7 @@
 /// A multi-storey building for the floors issue (issue 26): a basement, a ground floor and two
 /// upper floors of an office block, a switchback stairwell joining them, and two firefighters
 /// who walk in from the street — one searches the two upper floors, the other the basement and
-/// the ground floor — with a phone-class PDR (steps that do not measure height), a foot IMU that
+/// the ground floor; the rooms' partitions differ between levels — with a phone-class PDR (steps that do not measure height), a foot IMU that
 /// climbs the stairs, and a barometer each (noise, device offset, weather drift, the building's
 /// overpressure from a ventilation fan, rare spikes). Storey heights, room visits, stops and
 /// the weather are drawn per seed. No I/O.

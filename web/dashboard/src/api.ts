@@ -50,9 +50,18 @@ export interface KnownNode {
   y: number;
 }
 
+/** One level's walls of a multi-level plan. */
+export interface LevelWalls {
+  level: number;
+  walls: Wall[];
+}
+
 export interface FloorPlan {
   walls: Wall[];
   nodes: KnownNode[];
+  /** A multi-level plan: the level of `walls`, and every level's walls. */
+  level?: number;
+  levels?: LevelWalls[];
 }
 
 export class Api {

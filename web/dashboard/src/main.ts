@@ -1,9 +1,11 @@
 // SPDX-License-Identifier: MIT
 // The incident commander's dashboard: floor plan, every firefighter with position, 95 % ellipse,
 // trail and name; crumbs, landmarks, the base; status and alerts per firefighter; a timeline
-// to scrub back. Live through server-sent events; history from /api/history.
+// to scrub back; in a multi-level building a floor selector draws one level's plan (the
+// selected firefighter's floor when picked), nodes on other floors dimmed with their floor. Live
+// through server-sent events; history from /api/history.
 import './style.css';
-import { Api, type Alert, type History, type KnownNode, type NodeState, type State, type TrailRow, type Wall } from './api';
+import { Api, type Alert, type History, type KnownNode, type LevelWalls, type NodeState, type State, type TrailRow, type Wall } from './api';
 import { ellipse95, fitView, rowAt, toScreen, type View } from './geometry';
 
 const token = new URLSearchParams(location.search).get('token') ?? '';
@@ -13,8 +15,11 @@ const canvas = $<HTMLCanvasElement>('map');
 const ctx = canvas.getContext('2d')!;
 const timeline = $<HTMLInputElement>('timeline');
 const liveButton = $<HTMLButtonElement>('live');
+const floorSelect = $<HTMLSelectElement>('floor');
 
 let walls: Wall[] = [];
+let levels: LevelWalls[] = [];
+let shownLevel: number | null = null; // null: a single-level plan
 let known: KnownNode[] = [];
 let live: State = { t: null, nodes: [], alerts: [] };
 let trails: Record<string, TrailRow[]> = {};
@@ -96,6 +101,42 @@ function alertsAt(t: number | null): Alert[] {
   return alertLog.filter((a) => a.t <= t && a.t > t - 60);
 }
 
+/** The walls drawn: the shown level's of a multi-level plan, else the plan's. */
+function shownWalls(): Wall[] {
+  if (shownLevel === null) return walls;
+  return levels.find((l) => l.level === shownLevel)?.walls ?? walls;
+}
+
+/** Whether a node is known to be on another floor than the one shown. */
+function offFloor(floor: number | undefined): boolean {
+  return shownLevel !== null && floor !== undefined && floor !== shownLevel;
+}
+
+function showLevel(level: number): void {
+  if (shownLevel === null || !levels.some((l) => l.level === level)) return;
+  shownLevel = level;
+  floorSelect.value = String(level);
+}
+
+function setUpFloors(plan: { level?: number; levels?: LevelWalls[] }): void {
+  levels = (plan.levels ?? []).slice().sort((a, b) => a.level - b.level);
+  if (levels.length < 2) return;
+  shownLevel = plan.level ?? levels[0].level;
+  floorSelect.replaceChildren(
+    ...levels
+      .slice()
+      .reverse()
+      .map((l) => {
+        const o = document.createElement('option');
+        o.value = String(l.level);
+        o.textContent = String(l.level);
+        return o;
+      }),
+  );
+  floorSelect.value = String(shownLevel);
+  $('floorbar').hidden = false;
+}
+
 function resize(): void {
   const r = canvas.getBoundingClientRect();
   const dpr = window.devicePixelRatio || 1;
@@ -110,7 +151,7 @@ function render(): void {
   const alerts = alertsAt(t);
   const estimated = live.nodes.filter((n) => n.kind !== 'agent');
   // known nodes (the base, surveyed landmarks) where no estimate replaces them
-  const others: Array<Pick<NodeState, 'id' | 'kind' | 'x' | 'y'>> = [
+  const others: Array<Pick<NodeState, 'id' | 'kind' | 'x' | 'y' | 'floor'>> = [
     ...estimated,
     ...known.filter((k) => !estimated.some((n) => n.id === k.id)),
   ];
@@ -118,7 +159,8 @@ function render(): void {
   const h = canvas.clientHeight;
   const xs: number[] = [];
   const ys: number[] = [];
-  for (const wl of walls) xs.push(wl[0], wl[2]), ys.push(wl[1], wl[3]);
+  // The view fits every level, so that changing the floor shown does not move the map.
+  for (const wl of levels.length ? levels.flatMap((l) => l.walls) : walls) xs.push(wl[0], wl[2]), ys.push(wl[1], wl[3]);
   for (const n of [...agents, ...others]) xs.push(n.x), ys.push(n.y);
   for (const rows of Object.values(trails)) for (const r of rows) xs.push(r[1]), ys.push(r[2]);
   view = fitView(xs, ys, w, h);
@@ -127,13 +169,14 @@ function render(): void {
   ctx.fillRect(0, 0, w, h);
   ctx.strokeStyle = '#8a93a0';
   ctx.lineWidth = 2;
-  for (const wl of walls) {
+  for (const wl of shownWalls()) {
     ctx.beginPath();
     ctx.moveTo(...toScreen(view, wl[0], wl[1]));
     ctx.lineTo(...toScreen(view, wl[2], wl[3]));
     ctx.stroke();
   }
   for (const n of others) {
+    ctx.globalAlpha = offFloor(n.floor) ? 0.3 : 1;
     const [px, py] = toScreen(view, n.x, n.y);
     ctx.fillStyle = n.kind === 'base' ? '#4aa8ff' : n.kind === 'landmark' ? '#c8a2ff' : '#7fd17f';
     ctx.fillRect(px - 4, py - 4, 8, 8);
@@ -143,6 +186,8 @@ function render(): void {
   }
   const alerted = new Set(alerts.map((a) => a.id));
   for (const n of agents) {
+    const off = offFloor(n.floor);
+    ctx.globalAlpha = off ? 0.3 : 1;
     const rows = trails[n.id] ?? [];
     ctx.strokeStyle = n.id === selected ? '#ffe066' : '#5b6470';
     ctx.lineWidth = n.id === selected ? 2 : 1;
@@ -169,8 +214,9 @@ function render(): void {
     ctx.fill();
     ctx.fillStyle = '#ffffff';
     ctx.font = 'bold 13px system-ui, sans-serif';
-    ctx.fillText(n.id, px + 9, py - 9);
+    ctx.fillText(off ? `${n.id} (floor ${n.floor})` : n.id, px + 9, py - 9);
   }
+  ctx.globalAlpha = 1;
   renderSide(agents, alerts, t);
 }
 
@@ -256,6 +302,9 @@ function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): voi
 
 function select(id: string): void {
   selected = selected === id ? null : id;
+  // Picking a firefighter shows the floor it is on.
+  const floor = live.nodes.find((n) => n.id === selected)?.floor;
+  if (selected !== null && floor !== undefined) showLevel(floor);
   render();
 }
 
@@ -277,6 +326,10 @@ timeline.addEventListener('input', () => {
   liveButton.classList.toggle('on', following);
   render();
 });
+floorSelect.addEventListener('change', () => {
+  showLevel(Number(floorSelect.value));
+  render();
+});
 liveButton.addEventListener('click', () => {
   following = true;
   liveButton.classList.add('on');
@@ -294,6 +347,7 @@ async function start(): Promise<void> {
     const plan = await api.floorPlan();
     walls = plan.walls;
     known = plan.nodes;
+    setUpFloors(plan);
     mergeHistory(await api.history());
     onState(await api.state());
   } catch (e) {

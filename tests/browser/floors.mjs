@@ -1,0 +1,50 @@
+// SPDX-License-Identifier: MIT
+// The dashboard's floor selector (issue 26) in Debian's Chromium: a replayed multi-floor mission
+// lists the plan's four levels (the ground floor shown first); picking a firefighter shows the
+// floor /api/state gives it; choosing another floor from the selector draws that level's walls
+// (the canvas changes) and marks firefighters on other floors with their floor in the list.
+// usage: node floors.mjs URL TOKEN SCREENSHOT.png
+import { chromium } from 'playwright-core';
+
+const [url, token, shot] = process.argv.slice(2);
+const fail = (msg) => { console.error('FAIL: ' + msg); process.exit(1); };
+const browser = await chromium.launch({ executablePath: process.env.CHROMIUM || '/usr/bin/chromium',
+                                        args: ['--no-sandbox', '--headless=new'] });
+const api = async (path) => (await fetch(`${url}${path}`, { headers: { Authorization: `Bearer ${token}` } })).json();
+try {
+  const plan = await api('/api/floorplan');
+  const levels = (plan.levels ?? []).map((l) => l.level).sort((a, b) => a - b);
+  if (levels.join(',') !== '-1,0,1,2') fail(`/api/floorplan levels: ${JSON.stringify(levels)}`);
+  const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  await page.goto(`${url}/?token=${token}`);
+  await page.waitForSelector('#list .node', { timeout: 10000 });
+  if (await page.$eval('#floorbar', (e) => e.hidden)) fail('no floor selector for a four-level plan');
+  const options = await page.$$eval('#floor option', (els) => els.map((e) => e.value));
+  if (options.join(',') !== '2,1,0,-1') fail(`selector options ${options}`);
+  if ((await page.$eval('#floor', (e) => e.value)) !== '0') fail('the ground floor is not shown first');
+  // Wait until ff1 has climbed (the replay runs at 20x), then pick it: its floor is shown.
+  let ff1 = null;
+  for (let i = 0; i < 60; ++i) {
+    const state = await api('/api/state');
+    ff1 = state.nodes.find((n) => n.id === 'ff1');
+    if (ff1 && ff1.floor >= 1) break;
+    await page.waitForTimeout(500);
+  }
+  if (!ff1 || !(ff1.floor >= 1)) fail(`ff1 never reached an upper floor: ${JSON.stringify(ff1)}`);
+  await page.click('#list .node[data-id="ff1"]');
+  await page.waitForTimeout(300);
+  const shownFloor = Number(await page.$eval('#floor', (e) => e.value));
+  if (shownFloor < 1) fail(`picking ff1 (floor ${ff1.floor}) shows floor ${shownFloor}`);
+  // Another floor draws other walls: the basement's partitions differ from the upper floors'.
+  await page.click('#live');  // stop following a selection change, keep live
+  const before = await page.$eval('#map', (c) => c.toDataURL());
+  await page.selectOption('#floor', '-1');
+  await page.waitForTimeout(100);
+  const after = await page.$eval('#map', (c) => c.toDataURL());
+  if (before === after) fail('choosing the basement did not redraw the plan');
+  if ((await page.$eval('#floor', (e) => e.value)) !== '-1') fail('the selector did not keep the basement');
+  await page.screenshot({ path: shot });
+  console.log(`floors: levels ${options.join(', ')}; ff1 picked on floor ${shownFloor}; basement drawn; screenshot ${shot}`);
+} finally {
+  await browser.close();
+}
