@@ -180,11 +180,16 @@ Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
       for (const auto& [id, rate] : f.hit_rate_by_agent) {
         by_agent += fmt::format("{}{} {:.1f} %", by_agent.empty() ? "" : ", ", id, 100 * rate);
       }
+      const std::string vertical =
+          f.vertical_checked > 0
+              ? fmt::format(", vertical in95 {:.0f} % (NEES {:.2f})", 100 * f.vertical_in95,
+                            f.vertical_mean_nees)
+              : std::string();
       fmt::print(
           "floors: right floor {:.1f} % ({}), CE95 {:.2f} m, VE95 {:.2f} m, SE95 {:.2f} m, "
-          "vertical mean {:.2f} m, IPIN score {:.2f} m\n",
+          "vertical mean {:.2f} m, IPIN score {:.2f} m{}\n",
           100 * f.floor_hit_rate, by_agent, f.ce95_m, f.ve95_m, f.se95_m, f.vertical_mean_m,
-          f.ipin_score_m);
+          f.ipin_score_m, vertical);
     }
     fmt::print("metrics written to {}\n", metrics_out.string());
   }

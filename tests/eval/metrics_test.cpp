@@ -51,6 +51,41 @@ TEST(Evaluate, AgentOnlineSemanticsHandComputed) {
   EXPECT_EQ(m.agents.stats.samples, 4u);
 }
 
+TEST(Evaluate, FloorFiguresHandComputed) {
+  // Levels 0 at z = 0 and 1 at z = 3. Truth at t = 0..3 on level 0, then t = 4 on level 1
+  // (z = 3); x = t. Estimates held from their time:
+  //   t=0: (0, 0, 0.5)  szz 1     floor 0  -> dh 0, dz 0.5, nees 0.25 (in), right floor
+  //   t=1: (1, 3, 0)    szz 0.25  floor 0  -> dh 3, dz 0,   nees 0 (in), right floor
+  //   t=2: (2, 0, 2.5)  szz 1     floor 1  -> dh 0, dz 2.5, nees 6.25 (out), wrong by 1
+  //   t=3: held from t=2 (truth (3, 0, 0)) -> dh 1, dz 2.5, nees 6.25 (out), wrong by 1
+  //   t=4: (4, 0, 3)    no szz   floor from z: 1 -> dh 0, dz 0, right; not checked
+  MissionInfo info = Info();
+  info.floors = {{0, 0.0}, {1, 3.0}};
+  std::vector<TruthSample> truth;
+  for (int t = 0; t <= 3; ++t) truth.push_back({double(t), "ff1", Vec3(t, 0, 0), 0});
+  truth.push_back({4.0, "ff1", Vec3(4, 0, 3), 1});
+  std::vector<Estimate> est{{0.0, "ff1", Vec3(0, 0, 0.5), 1, 0, 1, 1.0, 0},
+                            {1.0, "ff1", Vec3(1, 3, 0), 1, 0, 1, 0.25, 0},
+                            {2.0, "ff1", Vec3(2, 0, 2.5), 1, 0, 1, 1.0, 1},
+                            {4.0, "ff1", Vec3(4, 0, 3), 1, 0, 1}};
+  const Metrics m = Evaluate(info, truth, est);
+  ASSERT_TRUE(m.floors.has_value());
+  const FloorMetrics& f = *m.floors;
+  EXPECT_EQ(f.samples, 5u);
+  EXPECT_DOUBLE_EQ(f.floor_hit_rate, 3.0 / 5);
+  EXPECT_DOUBLE_EQ(f.hit_rate_by_agent.at("ff1"), 3.0 / 5);
+  // Horizontal {0, 3, 0, 1, 0}; vertical {0.5, 0, 2.5, 2.5, 0}.
+  EXPECT_NEAR(f.ce95_m, Percentile({0, 3, 0, 1, 0}, 95), 1e-12);
+  EXPECT_NEAR(f.ve95_m, 2.5, 1e-12);
+  EXPECT_NEAR(f.vertical_mean_m, 5.5 / 5, 1e-12);
+  EXPECT_NEAR(f.se95_m, Percentile({0.5, 3, 2.5, std::hypot(1, 2.5), 0}, 95), 1e-12);
+  // IPIN: horizontal + 15 m per wrong floor {0, 3, 15, 16, 0}, 75th percentile.
+  EXPECT_NEAR(f.ipin_score_m, Percentile({0, 3, 15, 16, 0}, 75), 1e-12);
+  EXPECT_EQ(f.vertical_checked, 4u);
+  EXPECT_DOUBLE_EQ(f.vertical_in95, 0.5);
+  EXPECT_NEAR(f.vertical_mean_nees, (0.25 + 0 + 6.25 + 6.25) / 4, 1e-12);
+}
+
 TEST(Evaluate, EllipsesAreAlsoCheckedAtEachEstimatesOwnInstant) {
   // Truth along x at 1 m/s, samples at t = 0..4. Estimates exact at their own time (t = 1.5 and
   // t = 3.25: between truth samples) with a 0.1 m sigma, and one after the truth ends.

@@ -120,7 +120,8 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
                       std::any_of(truth.begin(), truth.end(),
                                   [](const TruthSample& s) { return s.floor.has_value(); });
   std::vector<double> h_err, v_err, s_err, ipin;
-  std::size_t hits = 0;
+  std::size_t hits = 0, vertical_in = 0;
+  double vertical_nees_sum = 0;
   FloorMetrics floor_metrics;
 
   for (const auto& id : order) {
@@ -153,6 +154,12 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
           v_err.push_back(v);
           s_err.push_back(std::hypot(h, v));
           ipin.push_back(h + 15.0 * std::abs(level - true_level));
+          if (e.szz && *e.szz > 0) {
+            const double nees = v * v / *e.szz;
+            ++floor_metrics.vertical_checked;
+            vertical_nees_sum += nees;
+            vertical_in += nees <= kChi2Dof1P95;
+          }
           agent_hits += level == true_level;
           ++agent_samples;
         }
@@ -225,6 +232,11 @@ Metrics Evaluate(const MissionInfo& info, const std::vector<TruthSample>& truth,
       f.ve95_m = Percentile(v_err, 95);
       f.se95_m = Percentile(s_err, 95);
       f.ipin_score_m = Percentile(ipin, 75);
+    }
+    if (f.vertical_checked > 0) {
+      const double n = static_cast<double>(f.vertical_checked);
+      f.vertical_in95 = static_cast<double>(vertical_in) / n;
+      f.vertical_mean_nees = vertical_nees_sum / n;
     }
     out.floors = f;
   }

@@ -36,6 +36,8 @@ struct ErrorSample {
 double HorizontalNees(const Vec2& error_n, double sxx, double sxy, double syy);
 /// The 95 % point of the chi-square distribution with 2 degrees of freedom: -2 ln(0.05).
 inline constexpr double kChi2Dof2P95 = 5.991464547107979;
+/// The same with 1 degree of freedom (a height): 1.959964^2.
+inline constexpr double kChi2Dof1P95 = 3.841458820694124;
 
 struct ErrorStatistics {
   std::size_t samples = 0;
@@ -83,6 +85,12 @@ struct FloorMetrics {
   double se95_m = 0;                 ///< spherical (3-D) error, 95th percentile
   double ipin_score_m = 0;           ///< p75 of (horizontal + 15 m x |floor difference|)
   std::map<std::string, double> hit_rate_by_agent;
+  /// Honest vertical uncertainty over the instants whose estimate has szz > 0: the share of
+  /// true heights inside the estimate's own 95 % interval (dz^2 / szz <= 3.841, chi-square
+  /// with 1 dof; 0.95 when honest), and the mean NEES (1 when honest).
+  std::size_t vertical_checked = 0;
+  double vertical_in95 = 0;
+  double vertical_mean_nees = 0;
 };
 
 struct Metrics {

@@ -63,7 +63,12 @@ std::string MetricsToJson(const Metrics& metrics, std::size_t max_series) {
                       {"vertical_mean_m", f.vertical_mean_m},
                       {"se95_m", f.se95_m},
                       {"ipin_score_m", f.ipin_score_m},
-                      {"hit_rate_by_agent", f.hit_rate_by_agent}};
+                      {"hit_rate_by_agent", f.hit_rate_by_agent},
+                      {"vertical_checked", f.vertical_checked}};
+    if (f.vertical_checked > 0) {
+      root["floors"]["vertical_in95"] = f.vertical_in95;
+      root["floors"]["vertical_mean_nees"] = f.vertical_mean_nees;
+    }
   }
   return root.dump(1) + "\n";
 }
