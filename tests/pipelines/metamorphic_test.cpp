@@ -28,14 +28,18 @@ SimulatedMission Isotropic(SimulatedMission sim) { return Drawn(std::move(sim), 
 std::vector<Estimate> Run(const std::string& pipeline, const SimulatedMission& sim,
                           const OptionValues& options) {
   testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  if (sim.levels.empty()) {
+    WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  } else {
+    WriteMissionDirectory(dir.path(), sim.data, sim.levels);
+  }
   VectorSink sink;
   testing::RunNamed(pipeline, MissionDirectory(dir.path()), options, sink);
   return sink.rows;
 }
 
 /// The largest distance between the estimates in the first frame and those of the other
-/// frame mapped back, node by node (and the estimate counts must agree).
+/// frame mapped back, node by node (and the estimate counts and their floors must agree).
 double LargestDifference(const std::string& pipeline, const SimulatedMission& sim,
                          const Frame& f, const OptionValues& options = {}) {
   const SimulatedMission a_sim = Isotropic(sim);
@@ -51,6 +55,8 @@ double LargestDifference(const std::string& pipeline, const SimulatedMission& si
     for (std::size_t i = 0; i < std::min(rows.size(), other.size()); ++i) {
       const Vec2 back = f.Back(Vec2(other[i].position_n.head<2>()));
       worst = std::max(worst, (back - Vec2(rows[i].position_n.head<2>())).norm());
+      EXPECT_EQ(rows[i].floor, other[i].floor) << pipeline << " " << id << " t=" << rows[i].t;
+      EXPECT_EQ(rows[i].position_n.z(), other[i].position_n.z()) << pipeline << " " << id;
     }
   }
   return worst;
@@ -108,6 +114,16 @@ TEST(Metamorphic, MapMatchingDoesNotDependOnTheFramesOrigin) {
   EXPECT_LT(LargestDifference("mapmatch", SimulateScenario("house1-search", 2), shifted,
                               {{"init", "known"}}),
             1e-6);
+}
+
+// Floors (issue 26): the multi-floor building in another frame gives the same heights and floors
+// (exactly: the height channel sees no x or y) and the same horizontal estimates; map matching on
+// every level's plan, shifted (its rotation is issue 23's).
+TEST(Metamorphic, FloorsDoNotDependOnTheFrame) {
+  const SimulatedMission sim = SimulateScenario("multi-floor", 13);
+  EXPECT_LT(LargestDifference("pdr", sim, kRotatedShifted), 1e-6);
+  const Frame shifted{0.0, kRotatedShifted.shift_m};
+  EXPECT_LT(LargestDifference("mapmatch", sim, shifted), 1e-6);
 }
 
 /// The largest difference between the estimates on `sim` as written by default and on the same

@@ -53,14 +53,18 @@ SimulatedMission DrawnInFrame(SimulatedMission sim, const FrameMotion& f) {
       s.heading_rad = WrapAngle(s.heading_rad + f.angle_rad);
     }
   }
-  std::vector<Segment2> walls, doors;
-  for (const auto& w : sim.plan.walls()) walls.push_back({f.Point(w.a), f.Point(w.b)});
-  for (const auto& w : sim.plan.doors()) doors.push_back({f.Point(w.a), f.Point(w.b)});
-  std::vector<Room> rooms = sim.plan.rooms();
-  for (Room& r : rooms) {
-    for (Vec2& p : r.ring) p = f.Point(p);
-  }
-  sim.plan = FloorPlan(walls, doors, rooms);
+  auto drawn = [&f](const FloorPlan& plan) {
+    std::vector<Segment2> walls, doors;
+    for (const auto& w : plan.walls()) walls.push_back({f.Point(w.a), f.Point(w.b)});
+    for (const auto& w : plan.doors()) doors.push_back({f.Point(w.a), f.Point(w.b)});
+    std::vector<Room> rooms = plan.rooms();
+    for (Room& r : rooms) {
+      for (Vec2& p : r.ring) p = f.Point(p);
+    }
+    return FloorPlan(walls, doors, rooms);
+  };
+  sim.plan = drawn(sim.plan);
+  for (auto& [level, plan] : sim.levels) plan = drawn(plan);
   return sim;
 }
 

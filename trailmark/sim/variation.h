@@ -29,7 +29,7 @@ struct FrameMotion {
 };
 
 /// The same mission drawn in another frame: node positions, starts, start headings, steps,
-/// bearings, truth, walks and the floor plan (foot-IMU samples are in the body frame: the start
+/// bearings, truth, walks and the floor plan (every level's; foot-IMU samples are in the body frame: the start
 /// heading carries the rotation). Per-axis step variances are not rotation-invariant; they
 /// become isotropic with the same horizontal total.
 SimulatedMission DrawnInFrame(SimulatedMission sim, const FrameMotion& f);
