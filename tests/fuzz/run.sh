@@ -23,6 +23,8 @@ printf 't0,t1,agent,dx,dy,sxx,syy\n0,1,ff1,0.5,0,0.01,0.01\n1,2,ff1,nan,0,,\n' >
 printf 't,rx,tx,rssi_dbm\n0,a,b,-50\n"q,x",a,b,1\n' > "$OUT/corpus/rssi.csv"
 printf '{"nodes":[{"id":"b","kind":"base","position":[0,0,0]}],"radio":{"alpha_dbm":-40}}' > "$OUT/corpus/m.json"
 printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"kind":"wall"},"geometry":{"type":"LineString","coordinates":[[0,0],[1,0]]}}]}' > "$OUT/corpus/p.json"
+# Regressions the fuzzer found: a geometry whose "type" is an array (2026-12-02).
+printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"kind":"wall"},"geometry":{"type":[[0,0],[1,0]]}}]}' > "$OUT/corpus/p-type-array.json"
 cd "$OUT"
 ./csv_fuzz -max_total_time="$SECONDS_LIMIT" -max_len=4096 -timeout=10 -print_final_stats=1 corpus 2>&1 | tail -5
 echo "fuzz: 1 passed, 0 failed"

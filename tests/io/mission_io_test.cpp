@@ -251,6 +251,11 @@ TEST(FloorPlanGeoJson, BadGeometryIsNamed) {
   EXPECT_THAT(error(R"({"type":"FeatureCollection","features":[{"type":"Feature",
       "properties":{"kind":"wall"},"geometry":{"type":"Point","coordinates":[0,0]}}]})"),
               HasSubstr("LineString"));
+  // A "type" that is not a string (found by the fuzzer: it escaped as a JSON library error).
+  EXPECT_THAT(error(R"({"type":"FeatureCollection","features":[{"type":"Feature",
+      "properties":{"kind":"wall"},"geometry":{"type":[[0,0],[1,0]]}}]})"),
+              HasSubstr("/features/0/geometry"));
+  EXPECT_THAT(error(R"({"type":["FeatureCollection"]})"), HasSubstr("FeatureCollection"));
 }
 
 }  // namespace

@@ -257,11 +257,20 @@ void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info
   if (!out) throw std::runtime_error(path.string() + ": write failed");
 }
 
+namespace {
+/// An object's string member, "" when absent or not a string (a value of another type is then
+/// refused by whoever needs the string, with its path).
+std::string StringMember(const nlohmann::json& object, const char* key) {
+  const auto it = object.find(key);
+  return it != object.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+}  // namespace
+
 FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source,
                                 std::optional<int> level, std::vector<int>* levels_present) {
   std::set<int> levels;
   const json root = ParseJson(text, source);
-  if (!root.is_object() || root.value("type", "") != "FeatureCollection") {
+  if (!root.is_object() || StringMember(root, "type") != "FeatureCollection") {
     Bad(source, "/", "expected a GeoJSON FeatureCollection");
   }
   if (!root.contains("features") || !root["features"].is_array()) {
@@ -292,7 +301,7 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
       Bad(source, where + "/geometry", "missing geometry");
     }
     const json& g = f["geometry"];
-    const std::string type = g.value("type", "");
+    const std::string type = StringMember(g, "type");
     if (!g.contains("coordinates") || !g["coordinates"].is_array()) {
       Bad(source, where + "/geometry/coordinates", "expected an array");
     }
