@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // `trailmark reproduce floors` (issue 26): the multi-floor building, `ins` (foot IMU) and `pdr`
 // (phone steps without height) with and without the barometer, and `mapmatch` on every level's
-// plan (without and with its stairwell veto) and on the ground floor's plan only; the right
+// plan (without and with its stairwell veto) and on the ground floor's plan only, and
+// `breadcrumb` with its radio gated by floor and without; the right
 // floor, vertical and horizontal error and the IPIN score per seed, against the must-hold
 // (right floor >= 95 %).
 
@@ -30,9 +31,11 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
       {"mapmatch, every level + baro", "mapmatch", {}},
       {"mapmatch, stairwell veto at 4 m^2", "mapmatch", {{"stairwell_veto_variance_m2", "4"}}},
       {"mapmatch, level 0's plan only", "mapmatch", {{"level", "0"}}},
+      {"breadcrumb, radio gated by floor", "breadcrumb", {}},
+      {"breadcrumb, radio across floors", "breadcrumb", {{"gate_other_floors", "false"}}},
   };
   struct Figures {
-    std::vector<double> hit, ve95, ipin, ce95, worst_agent, mean_h, in95, vertical_in95;
+    std::vector<double> hit, ve95, ipin, ce95, worst_agent, mean_h, in95, vertical_in95, crumbs;
   };
   std::vector<Figures> figures(arms.size());
   std::string text = fmt::format(
@@ -64,6 +67,7 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
       g.mean_h.push_back(m.agents.stats.mean_m);
       g.in95.push_back(m.agents.stats.in95);
       if (f.vertical_checked > 0) g.vertical_in95.push_back(f.vertical_in95);
+      if (m.static_nodes.stats.samples > 0) g.crumbs.push_back(m.static_nodes.stats.mean_m);
       text += fmt::format("| {} | {} | {:.1f} ({:.1f}) | {:.2f} | {:.2f} | {:.2f} | {:.2f} |\n", seed,
                           arms[a].label, 100 * f.floor_hit_rate, 100 * worst, f.ve95_m,
                           f.vertical_mean_m, f.ce95_m, f.ipin_score_m);
@@ -72,17 +76,18 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
   text += "\nSummary over the seeds (must hold: right floor >= 95 % for ins and for pdr with the "
           "barometer):\n\n";
   text += "| arm | right floor % mean | min | worst agent min | VE95 m mean | IPIN score m mean "
-          "| horizontal mean m | CE95 m mean | in95 % | vertical in95 % |\n";
-  text += "|---|---|---|---|---|---|---|---|---|---|\n";
+          "| horizontal mean m | CE95 m mean | in95 % | vertical in95 % | crumbs mean m |\n";
+  text += "|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (std::size_t a = 0; a < arms.size(); ++a) {
     const Figures& g = figures[a];
     text += fmt::format(
-        "| {} | {:.1f} | {:.1f} | {:.1f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.0f} | {} |\n",
+        "| {} | {:.1f} | {:.1f} | {:.1f} | {:.2f} | {:.2f} | {:.2f} | {:.2f} | {:.0f} | {} | {} |\n",
         arms[a].label, 100 * Mean(g.hit), 100 * *std::min_element(g.hit.begin(), g.hit.end()),
         100 * *std::min_element(g.worst_agent.begin(), g.worst_agent.end()), Mean(g.ve95),
         Mean(g.ipin), Mean(g.mean_h), Mean(g.ce95), 100 * Mean(g.in95),
         g.vertical_in95.empty() ? std::string("–")
-                                : fmt::format("{:.1f}", 100 * Mean(g.vertical_in95)));
+                                : fmt::format("{:.1f}", 100 * Mean(g.vertical_in95)),
+        g.crumbs.empty() ? std::string("–") : fmt::format("{:.2f}", Mean(g.crumbs)));
   }
   return WriteReproduction(out, "Floors (issue 26)", text);
 }

@@ -4,6 +4,9 @@
 // single-floor mission stays on one floor with its horizontal estimates unchanged.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <set>
+
 #include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/eval/metrics.h"
@@ -86,6 +89,54 @@ TEST(Floors, MapMatchingFollowsTheLevelsThroughTheStairwell) {
   EXPECT_LT(every.p95_m, ground.p95_m);
 }
 
+// Breadcrumbs across floors (issue 26, item 4), seeds 11-14 (neither development nor held-out
+// seeds): the multi-floor building's crumbs lie on every level and its RSSI loses 10-20 dB per
+// floor; packets between nodes the height channel puts on different levels are not used (the
+// path-loss model has no floors). Over the four buildings the agents and the crumbs are far
+// better for it (on held-out seeds gating was better in 39 of 40 buildings, docs/floors.md; one
+// building may not be). The crumbs' truth has their level.
+TEST(Floors, BreadcrumbRadioIsGatedByFloor) {
+  double gated_agents = 0, open_agents = 0, gated_crumbs = 0, open_crumbs = 0, in95 = 0;
+  for (const int seed : {11, 12, 13, 14}) {
+    TempDir dir;
+    const SimulatedMission sim = SimulateScenario("multi-floor", seed);
+    std::set<int> crumb_levels;
+    for (const auto& t : sim.data.truth) {
+      if (t.id.rfind("c", 0) != 0) continue;
+      ASSERT_TRUE(t.floor.has_value()) << t.id;
+      EXPECT_EQ(*t.floor, LevelAt(sim.data.info.floors, t.position_n.z())) << t.id;
+      crumb_levels.insert(*t.floor);
+    }
+    EXPECT_GE(crumb_levels.size(), 3u) << seed;  // crumbs on three levels or more
+    WriteMissionDirectory(dir.path(), sim.data, sim.levels);
+    const MissionDirectory mission(dir.path());
+    auto run = [&](const OptionValues& options, EstimatorSummary* summary) {
+      VectorSink sink;
+      *summary = RunNamed("breadcrumb", mission, options, sink);
+      const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string());
+      return Evaluate(mission.info(), truth, sink.TakeSortedByTime());
+    };
+    EstimatorSummary gated_summary, open_summary;
+    const Metrics gated = run({}, &gated_summary);
+    const Metrics open = run({{"gate_other_floors", "false"}}, &open_summary);
+    EXPECT_GT(gated_summary.numbers.at("radio_other_floor"), 1000.0) << seed;
+    EXPECT_EQ(open_summary.numbers.at("radio_other_floor"), 0.0) << seed;
+    gated_agents += gated.agents.stats.mean_m;
+    open_agents += open.agents.stats.mean_m;
+    gated_crumbs += gated.static_nodes.stats.mean_m;
+    open_crumbs += open.static_nodes.stats.mean_m;
+    in95 += gated.agents.stats.in95 / 4;
+  }
+  // Measured 2026-12-02: agents 9.53 against 11.77 m (summed means), the magnitude on held-out
+  // seeds is in docs/floors.md; here only that gating is better, and honest.
+  EXPECT_LT(gated_agents, open_agents);
+  EXPECT_LT(gated_crumbs, open_crumbs);
+  EXPECT_GE(in95, 0.85);
+  std::printf("breadcrumb, seeds 11-14, summed means: agents %.2f gated / %.2f not; crumbs %.2f / "
+              "%.2f; in95 %.2f\n",
+              gated_agents, open_agents, gated_crumbs, open_crumbs, in95);
+}
+
 TEST(Floors, ASingleFloorMissionStaysOnItsFloorWithTheSameHorizontalEstimates) {
   TempDir dir;
   // The office loop with a foot IMU: the INS's steps carry small dz noise.
@@ -94,7 +145,8 @@ TEST(Floors, ASingleFloorMissionStaysOnItsFloorWithTheSameHorizontalEstimates) {
   const MissionDirectory mission(dir.path());
   for (const std::string pipeline : {"pdr", "breadcrumb", "ins"}) {
     VectorSink with, without;
-    RunNamed(pipeline, mission, {}, with);
+    const EstimatorSummary summary = RunNamed(pipeline, mission, {}, with);
+    if (pipeline == "breadcrumb") EXPECT_EQ(summary.numbers.at("radio_other_floor"), 0.0);
     // Height steps counted only from 100 m up: the channel never moves.
     RunNamed(pipeline, mission, {{"height.stairs_min_rise_m", "100"}}, without);
     ASSERT_EQ(with.rows.size(), without.rows.size()) << pipeline;

@@ -126,6 +126,19 @@ TEST(RssiChannel, MeanFollowsLogDistanceWallsAndBody) {
   RssiChannel fire(o, nullptr, {{"fire", {{4, -1}, {6, -1}, {6, 1}, {4, 1}}, 3.0, 0.0}}, Random(1));
   EXPECT_NEAR(fire.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt),
               o.alpha_dbm - 10 * o.path_loss_exponent - 2.0 * 3.0, 1e-9);
+  // Two floors between the ends, 7.5 m higher (issue 26): the floors' loss, and the height in
+  // the path (10 m across, 7.5 m up: 12.5 m); the walls of the level given, not the channel's.
+  LinkLevels up;
+  up.floors_crossed = 2;
+  up.dz_m = 7.5;
+  const FloorPlan open({{{50, -10}, {50, 10}}}, {}, {});
+  up.plan = &open;
+  EXPECT_NEAR(walled.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt, up),
+              o.alpha_dbm - 10 * o.path_loss_exponent * std::log10(12.5) - 2 * o.floor_loss_db,
+              1e-9);
+  // Same level: exactly the single-floor channel.
+  EXPECT_EQ(walled.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt, LinkLevels{}),
+            walled.MeanRssi({0, 0}, {10, 0}, std::nullopt, std::nullopt));
 }
 
 TEST(RssiChannel, SamplesAreUnbiasedWithTheStatedSpread) {

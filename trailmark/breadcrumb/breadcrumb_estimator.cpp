@@ -85,6 +85,8 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     out.Include("", &O::localizer, t);
     out.Real("static_period_s", &O::static_period_s, "s", nonneg,
              "how often static estimates are checked for output");
+    out.Flag("gate_other_floors", &O::gate_other_floors,
+             "radio between nodes on different levels is not used");
     return out;
   }();
   return table;
@@ -92,7 +94,7 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
 
 BreadcrumbEstimator::BreadcrumbEstimator(const MissionInfo& info,
                                          BreadcrumbEstimatorOptions options)
-    : options_(std::move(options)) {
+    : options_(std::move(options)), info_(info) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("breadcrumb: " + why);
   if (info.radio) {
@@ -201,9 +203,17 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     loc_->AddStep(*step);
     EmitAgent(step->agent, sink);
   } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
-    loc_->AddRssi(*p);
+    if (OnOtherFloors(p->rx, p->tx)) {
+      ++other_floor_;
+    } else {
+      loc_->AddRssi(*p);
+    }
   } else if (const auto* r = std::get_if<RangeMeasurement>(&row)) {
-    loc_->AddRange(*r);
+    if (OnOtherFloors(r->a, r->b)) {
+      ++other_floor_;
+    } else {
+      loc_->AddRange(*r);
+    }
   } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
     loc_->AddEvent(*e);
   }
@@ -215,6 +225,21 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   latency_us_.push_back(static_cast<float>(
       std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0)
           .count()));
+}
+
+std::optional<int> BreadcrumbEstimator::LevelOf(const std::string& node) const {
+  if (levels_ != nullptr) {
+    if (const auto b = levels_->NodeLevel(node)) return b->level;
+  }
+  const NodeInfo* n = info_.Find(node);
+  if (n != nullptr && n->position) return LevelAt(info_.floors, n->position->z());
+  return std::nullopt;
+}
+
+bool BreadcrumbEstimator::OnOtherFloors(const std::string& a, const std::string& b) const {
+  if (!options_.gate_other_floors || levels_ == nullptr) return false;
+  const auto la = LevelOf(a), lb = LevelOf(b);
+  return la && lb && *la != *lb;
 }
 
 void BreadcrumbEstimator::Finish(EstimateSink& sink) {
@@ -257,6 +282,7 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["unusable"] = static_cast<double>(s.unusable);
   num["factorizations"] = static_cast<double>(s.factorizations);
   num["rows_ignored"] = static_cast<double>(ignored_);
+  num["radio_other_floor"] = static_cast<double>(other_floor_);
   if (!latency_us_.empty()) {
     std::vector<float> l = latency_us_;
     auto pct = [&](double q) {

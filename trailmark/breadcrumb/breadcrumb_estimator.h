@@ -23,6 +23,11 @@ namespace trailmark::breadcrumb {
 struct BreadcrumbEstimatorOptions {
   LocalizerOptions localizer;
   double static_period_s = 1.0;  ///< s; how often static estimates are checked for output
+  /// Ours (issue 26): RSSI and ranges between nodes on different levels are not used — the
+  /// path-loss model has no floors, and a floor costs 10-20 dB (a packet from the floor below
+  /// reads as metres farther away). A node's level: the height channel's (an agent now, a
+  /// crumb its dropper's at the drop), a node of known position its z's.
+  bool gate_other_floors = true;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -39,6 +44,7 @@ class BreadcrumbEstimator : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   /// Every agent's and static node's final estimate.
   void Finish(EstimateSink& sink) override;
+  void UseLevels(const LevelSource* levels) override { levels_ = levels; }
   /// The node's latest estimate as emitted (agents at their latest step, static nodes at their
   /// latest change).
   std::optional<Estimate> Current(const std::string& node) const override;
@@ -62,6 +68,12 @@ class BreadcrumbEstimator : public OnlineEstimator {
   TimeS t_last_ = -1e300, next_static_ = -1e300;  ///< t_last_: the latest row's time
   bool any_ = false;
   std::size_t ignored_ = 0;
+  /// Whether the two ends of a radio measurement are known to be on different levels.
+  bool OnOtherFloors(const std::string& a, const std::string& b) const;
+  std::optional<int> LevelOf(const std::string& node) const;
+  const LevelSource* levels_ = nullptr;
+  MissionInfo info_;
+  std::size_t other_floor_ = 0;
 };
 
 }  // namespace trailmark::breadcrumb

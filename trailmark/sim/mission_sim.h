@@ -66,6 +66,18 @@ struct MissionSimOptions {
   std::vector<AttenuationZone> zones;
 };
 
+/// The radio of a mission whose walks are simulated (`sim.walks`, `sim.plan`): a base at
+/// `base_n`, every agent's dispenser dropping crumbs ("drop" events, the crumbs' truth), RSSI
+/// between every pair of nodes in range, crumbs kicked. `floors` (a multi-floor building,
+/// `sim.levels` its plans): a node's level is its z's (a crumb's its dropper's at the drop),
+/// walls count on the receiver's level and every floor between the ends costs
+/// `options.radio.floor_loss_db`; the crumbs' truth then has z and level. `agent_truth`: also
+/// the agents' truth at every tick (SimulateAgents). The random streams: the channel's, the
+/// drops' and the kicks'.
+void SimulateCrumbNetwork(SimulatedMission& sim, const Vec3& base_n,
+                          const std::vector<FloorLevel>& floors, const MissionSimOptions& options,
+                          bool agent_truth, Random radio_rng, Random& drop_rng, Random& kick_rng);
+
 /// Simulates the agents on `plan` from a base at `base_n` (a node "base" with known position).
 SimulatedMission SimulateAgents(FloorPlan plan, const Vec2& base_n,
                                 const std::vector<AgentPlan>& agents,

@@ -31,6 +31,7 @@ LevelLayout LayoutOf(int level) {
   return {{6.0, 12.0}, {3.0, 9.0, 16.0}};
 }
 const Vec2 kOutside(2.5, -4.0);  // the street, in front of the entrance
+const Vec2 kBase(0.0, -6.0);     // the command post's radio, in the street
 
 struct RouteBuilder {
   Route route;
@@ -242,7 +243,22 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       m.imu.insert(m.imu.end(), imu.samples.begin(), imu.samples.end());
     }
   }
+  // The radio last: the random streams above are those of the building without it.
+  double floor_loss_db = 0;
+  if (o.radio) {
+    MissionSimOptions net = o.network;
+    floor_loss_db = rng.Uniform(o.floor_loss_min_db, o.floor_loss_max_db);
+    net.radio.floor_loss_db = floor_loss_db;
+    m.info.nodes.push_back(NodeInfo::Base("base", Vec3(kBase.x(), kBase.y(), 0.0)));
+    m.info.radio = RadioCalibration{"log-distance", net.radio.alpha_dbm,
+                                    net.radio.path_loss_exponent, net.radio.shadowing_sigma_db};
+    Random radio_rng = rng.Fork(), drop_rng = rng.Fork(), kick_rng = rng.Fork();
+    SimulateCrumbNetwork(sim, Vec3(kBase.x(), kBase.y(), 0.0), floors, net, false, radio_rng,
+                         drop_rng, kick_rng);
+  }
   auto by_time = [](const auto& x, const auto& y) { return x.t < y.t; };
+  std::stable_sort(m.events.begin(), m.events.end(), by_time);
+  std::stable_sort(m.rssi.begin(), m.rssi.end(), by_time);
   std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
   std::stable_sort(m.baro.begin(), m.baro.end(), by_time);
   std::stable_sort(m.imu.begin(), m.imu.end(), by_time);
@@ -253,8 +269,11 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       "level 2 at {:.2f} m, a switchback stairwell; ff1 searches levels 1 and 2, ff2 the ground "
       "floor and the basement; phone PDR steps (no height), a foot IMU at {:g} Hz, a barometer "
       "each at {:g} Hz (offset, weather {:+.2f} hPa/h, a ventilation fan from t = {:.0f} s); "
-      "simulated, seed {}",
+      "{}simulated, seed {}",
       em1, e1, e2, o.imu.rate_hz, o.baro.rate_hz, weather_rate_hpa_per_s * 3600, ppv_start_s,
+      o.radio ? fmt::format("breadcrumbs and a base, RSSI losing {:.1f} dB per floor; ",
+                            floor_loss_db)
+              : std::string(),
       seed);
   return out;
 }

@@ -5,8 +5,9 @@
 /// who walk in from the street — one searches the two upper floors, the other the basement and
 /// the ground floor; the rooms' partitions differ between levels — with a phone-class PDR (steps that do not measure height), a foot IMU that
 /// climbs the stairs, and a barometer each (noise, device offset, weather drift, the building's
-/// overpressure from a ventilation fan, rare spikes). Storey heights, room visits, stops and
-/// the weather are drawn per seed. No I/O.
+/// overpressure from a ventilation fan, rare spikes), and a breadcrumb dispenser each with a
+/// base in the street: RSSI through walls and floors (10-20 dB per floor). Storey heights, room
+/// visits, stops, the weather and the floors' loss are drawn per seed. No I/O.
 
 #include <cstdint>
 #include <utility>
@@ -41,6 +42,11 @@ struct BaroSimOptions {
 
 struct MultiFloorOptions {
   WalkerOptions walker;
+  /// The breadcrumb radio (SimulateCrumbNetwork): each firefighter's dispenser, a base in the
+  /// street; a floor between two nodes costs a loss drawn per building.
+  bool radio = true;
+  MissionSimOptions network;
+  double floor_loss_min_db = 10.0, floor_loss_max_db = 20.0;
   PdrErrorOptions pdr;
   BaroSimOptions baro;
   ImuSimOptions imu;          ///< the foot IMU (100 Hz, industrial grade by default)

@@ -40,12 +40,14 @@ double RssiChannel::ZoneLoss(const Vec2& a, const Vec2& b, double* extra_sigma) 
 }
 
 double RssiChannel::MeanRssi(const Vec2& rx, const Vec2& tx, std::optional<double> hrx,
-                             std::optional<double> htx) const {
-  const double d = std::max((rx - tx).norm(), options_.min_distance_m);
+                             std::optional<double> htx, const LinkLevels& levels) const {
+  const double d = std::max(std::hypot((rx - tx).norm(), levels.dz_m), options_.min_distance_m);
   double rssi = options_.alpha_dbm - 10.0 * options_.path_loss_exponent * std::log10(d);
-  if (plan_ != nullptr) {
-    rssi -= options_.wall_loss_db * std::min(plan_->WallsBetween(rx, tx), options_.max_walls_counted);
+  const FloorPlan* plan = levels.plan != nullptr ? levels.plan : plan_;
+  if (plan != nullptr) {
+    rssi -= options_.wall_loss_db * std::min(plan->WallsBetween(rx, tx), options_.max_walls_counted);
   }
+  rssi -= options_.floor_loss_db * levels.floors_crossed;
   rssi -= BodyLoss(rx, tx, hrx) + BodyLoss(tx, rx, htx);
   double extra_sigma = 0;
   rssi -= ZoneLoss(rx, tx, &extra_sigma);
@@ -54,8 +56,9 @@ double RssiChannel::MeanRssi(const Vec2& rx, const Vec2& tx, std::optional<doubl
 
 std::optional<double> RssiChannel::Sample(const std::string& rx_id, const Vec2& rx,
                                           const std::string& tx_id, const Vec2& tx,
-                                          std::optional<double> hrx, std::optional<double> htx) {
-  const double mean = MeanRssi(rx, tx, hrx, htx);
+                                          std::optional<double> hrx, std::optional<double> htx,
+                                          const LinkLevels& levels) {
+  const double mean = MeanRssi(rx, tx, hrx, htx, levels);
   // Slow shadowing: one AR(1) process per unordered link, decorrelating with distance moved.
   const auto key = rx_id < tx_id ? std::pair(rx_id, tx_id) : std::pair(tx_id, rx_id);
   LinkState& link = links_[key];

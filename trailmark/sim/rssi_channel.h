@@ -1,9 +1,11 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 /// Received signal strength between two nodes:
-///   rssi = alpha - 10 n log10(d / 1 m) - L_walls - L_body - L_zones + X,
+///   rssi = alpha - 10 n log10(d / 1 m) - L_walls - L_floors - L_body - L_zones + X,
 /// log-distance path loss (Rappaport, "Wireless Communications", 2002, sec. 4.9) with
-/// per-wall attenuation (multi-wall model, COST 231), a body-shadowing term for a radio worn
+/// per-wall attenuation (multi-wall model, COST 231), a floor attenuation factor per floor
+/// crossed (Seidel and Rappaport 1992: 10-20 dB for one floor; d then includes the height
+/// difference), a body-shadowing term for a radio worn
 /// on the torso (breadcrumb paper ref. [12]), zones of extra attenuation per metre (fire,
 /// water: breadcrumb paper Fig. 8 and sec. V-C), and shadowing X that is log-normal and
 /// correlated over distance moved (Gudmundson 1991: exponential, d_corr of a few metres).
@@ -35,8 +37,17 @@ struct RssiChannelOptions {
   double wall_loss_db = 3.5;          ///< per interior wall crossed (drywall, 2.4 GHz)
   int max_walls_counted = 6;
   double body_loss_db = 8.0;          ///< when the other node is right behind the wearer
+  double floor_loss_db = 15.0;        ///< per floor between the nodes (multi-floor links only)
   double sensitivity_dbm = -95.0;     ///< packets below this are not received (CC2420)
   double min_distance_m = 0.1;
+};
+
+/// Where the two ends of a link are vertically (multi-floor buildings).
+struct LinkLevels {
+  int floors_crossed = 0;
+  double dz_m = 0;                    ///< height difference, in the path length
+  const FloorPlan* plan = nullptr;    ///< the walls to count (the receiver's level); null: the
+                                      ///< channel's plan
 };
 
 class RssiChannel {
@@ -46,11 +57,12 @@ class RssiChannel {
 
   /// Mean received power (no random terms), for calibration truth and the dispenser.
   double MeanRssi(const Vec2& rx, const Vec2& tx, std::optional<double> wearer_heading_rx,
-                  std::optional<double> wearer_heading_tx) const;
+                  std::optional<double> wearer_heading_tx, const LinkLevels& levels = {}) const;
   /// One packet on link (rx_id, tx_id); empty when below sensitivity.
   std::optional<double> Sample(const std::string& rx_id, const Vec2& rx, const std::string& tx_id,
                                const Vec2& tx, std::optional<double> wearer_heading_rx,
-                               std::optional<double> wearer_heading_tx);
+                               std::optional<double> wearer_heading_tx,
+                               const LinkLevels& levels = {});
 
   const RssiChannelOptions& options() const { return options_; }
   /// Antenna gain offset of a node (dB, added on every link of the node): a breadcrumb knocked
