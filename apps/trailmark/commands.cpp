@@ -426,11 +426,12 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
   }
   {
     // Floors (issue 26): the multi-floor building with the foot INS and the phone's steps and
-    // barometer, and map matching on every level; the report has the Floors table.
+    // barometer, map matching on every level and the breadcrumbs; the report has the Floors
+    // table.
     const std::string extra = "multi-floor";
     const fs::path mdir = out / "missions" / extra;
     Simulate(extra, seed, mdir);
-    const std::set<std::string> floors_pipelines{"pdr", "ins", "mapmatch"};
+    const std::set<std::string> floors_pipelines{"pdr", "ins", "mapmatch", "breadcrumb"};
     for (const auto& p : Pipelines()) {
       if (floors_pipelines.count(p.name)) done.erase(p.name);
       else done.insert(p.name);
