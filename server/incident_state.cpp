@@ -134,13 +134,14 @@ nlohmann::json IncidentState::HistoryJson() const {
   for (const auto& [id, n] : nodes_) {
     if (n.kind != NodeKind::kAgent) continue;
     nlohmann::json rows = nlohmann::json::array();
-    for (const Estimate& e : n.history)
-      rows.push_back({e.t, e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy});
+    // The floor last: null where the estimator gives none (a single-floor mission 1.0).
+    auto row = [](const Estimate& e) {
+      return nlohmann::json{e.t,   e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy,
+                            e.floor ? nlohmann::json(*e.floor) : nlohmann::json(nullptr)};
+    };
+    for (const Estimate& e : n.history) rows.push_back(row(e));
     // and the latest, so that the timeline ends where the live view is
-    if (!n.history.empty() && n.history.back().t < n.estimate.t) {
-      const Estimate& e = n.estimate;
-      rows.push_back({e.t, e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy});
-    }
+    if (!n.history.empty() && n.history.back().t < n.estimate.t) rows.push_back(row(n.estimate));
     trails[id] = rows;
   }
   nlohmann::json log = nlohmann::json::array();
@@ -148,7 +149,7 @@ nlohmann::json IncidentState::HistoryJson() const {
     log.push_back({{"id", a.id}, {"kind", a.kind}, {"t", a.t}, {"message", a.message}});
   nlohmann::json j;
   j["t"] = std::isfinite(now_) && now_ > -1e299 ? nlohmann::json(now_) : nlohmann::json(nullptr);
-  j["columns"] = {"t", "x", "y", "sxx", "sxy", "syy"};
+  j["columns"] = {"t", "x", "y", "sxx", "sxy", "syy", "floor"};
   j["trails"] = trails;
   j["alerts"] = log;
   return j;

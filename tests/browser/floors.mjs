@@ -2,7 +2,8 @@
 // The dashboard's floor selector (issue 26) in Debian's Chromium: a replayed multi-floor mission
 // lists the plan's four levels (the ground floor shown first); picking a firefighter shows the
 // floor /api/state gives it; choosing another floor from the selector draws that level's walls
-// (the canvas changes) and marks firefighters on other floors with their floor in the list.
+// (the canvas changes) and marks firefighters on other floors with their floor in the list; the
+// timeline dragged back shows the floors of then.
 // usage: node floors.mjs URL TOKEN SCREENSHOT.png
 import { chromium } from 'playwright-core';
 
@@ -44,6 +45,12 @@ try {
   if (before === after) fail('choosing the basement did not redraw the plan');
   if ((await page.$eval('#floor', (e) => e.value)) !== '-1') fail('the selector did not keep the basement');
   await page.screenshot({ path: shot });
+  // Replay: the timeline dragged back to the start shows ff1 where it was, on the ground floor
+  // (the history carries each row's floor).
+  await page.$eval('#timeline', (el) => { el.value = el.min; el.dispatchEvent(new Event('input')); });
+  await page.waitForTimeout(300);
+  const detail = await page.$eval('#list .node[data-id="ff1"] small', (e) => e.textContent);
+  if (!/floor 0$/.test(detail)) fail(`ff1 at the start of the timeline: '${detail}'`);
   console.log(`floors: levels ${options.join(', ')}; ff1 picked on floor ${shownFloor}; basement drawn; screenshot ${shot}`);
 } finally {
   await browser.close();

@@ -180,7 +180,15 @@ TEST(IncidentState, HistoryKeepsTheTrailAtItsPeriodAndTheLatestEstimate) {
   ASSERT_EQ(rows.size(), 9u);
   EXPECT_NEAR(rows[1][0].get<double>(), 0.5, 1e-9);
   EXPECT_DOUBLE_EQ(rows.back()[1].get<double>(), 40.0);
-  EXPECT_EQ(h.at("columns").size(), 6u);
+  EXPECT_EQ(h.at("columns").size(), 7u);
+  EXPECT_EQ(h.at("columns").back(), "floor");
+  EXPECT_TRUE(rows.back()[6].is_null());  // no floor given
+  // With floors: each row carries the estimate's.
+  Estimate up = At("ff1", 4.5, 41);
+  up.floor = 2;
+  s.Apply(up);
+  const auto later = s.HistoryJson();
+  EXPECT_EQ(later.at("trails").at("ff1").back()[6].get<int>(), 2);
 }
 
 }  // namespace

@@ -32,7 +32,8 @@ export interface State {
 }
 
 /** Rows [t, x, y, sxx, sxy, syy] of each agent, oldest first. */
-export type TrailRow = [number, number, number, number, number, number];
+/** t, x, y, sxx, sxy, syy, floor (null where the estimator gives none). */
+export type TrailRow = [number, number, number, number, number, number, (number | null)?];
 
 export interface History {
   t: number | null;

@@ -53,7 +53,7 @@ function onState(s: State): void {
     if (n.kind !== 'agent') continue;
     const trail = (trails[n.id] ??= []);
     const last = trail[trail.length - 1];
-    if (!last || n.t >= last[0] + TRAIL_PERIOD_S) trail.push([n.t, n.x, n.y, n.sxx, n.sxy, n.syy]);
+    if (!last || n.t >= last[0] + TRAIL_PERIOD_S) trail.push([n.t, n.x, n.y, n.sxx, n.sxy, n.syy, n.floor ?? null]);
   }
   for (const a of s.alerts) {
     if (!alertLog.some((b) => b.id === a.id && b.kind === a.kind && Math.abs(b.t - a.t) < 60)) alertLog.push(a);
@@ -90,7 +90,7 @@ function agentsAt(t: number | null): NodeState[] {
   const out: NodeState[] = [];
   for (const [id, rows] of Object.entries(trails)) {
     const r = rowAt(rows, t);
-    if (r) out.push({ id, kind: 'agent', t: r[0], x: r[1], y: r[2], z: 0, sxx: r[3], sxy: r[4], syy: r[5] });
+    if (r) out.push({ id, kind: 'agent', t: r[0], x: r[1], y: r[2], z: 0, sxx: r[3], sxy: r[4], syy: r[5], floor: r[6] ?? undefined });
   }
   return out.sort((a, b) => a.id.localeCompare(b.id));
 }
@@ -303,7 +303,7 @@ function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): voi
 function select(id: string): void {
   selected = selected === id ? null : id;
   // Picking a firefighter shows the floor it is on.
-  const floor = live.nodes.find((n) => n.id === selected)?.floor;
+  const floor = agentsAt(shownTime()).find((n) => n.id === selected)?.floor;
   if (selected !== null && floor !== undefined) showLevel(floor);
   render();
 }
