@@ -227,19 +227,8 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
           .count()));
 }
 
-std::optional<int> BreadcrumbEstimator::LevelOf(const std::string& node) const {
-  if (levels_ != nullptr) {
-    if (const auto b = levels_->NodeLevel(node)) return b->level;
-  }
-  const NodeInfo* n = info_.Find(node);
-  if (n != nullptr && n->position) return LevelAt(info_.floors, n->position->z());
-  return std::nullopt;
-}
-
 bool BreadcrumbEstimator::OnOtherFloors(const std::string& a, const std::string& b) const {
-  if (!options_.gate_other_floors || levels_ == nullptr) return false;
-  const auto la = LevelOf(a), lb = LevelOf(b);
-  return la && lb && *la != *lb;
+  return options_.gate_other_floors && OnDifferentLevels(levels_, info_, a, b);
 }
 
 void BreadcrumbEstimator::Finish(EstimateSink& sink) {

@@ -70,7 +70,6 @@ class BreadcrumbEstimator : public OnlineEstimator {
   std::size_t ignored_ = 0;
   /// Whether the two ends of a radio measurement are known to be on different levels.
   bool OnOtherFloors(const std::string& a, const std::string& b) const;
-  std::optional<int> LevelOf(const std::string& node) const;
   const LevelSource* levels_ = nullptr;
   MissionInfo info_;
   std::size_t other_floor_ = 0;

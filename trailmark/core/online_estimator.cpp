@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/core/online_estimator.h"
 
+#include "trailmark/core/mission.h"
+
 #include <algorithm>
 #include <cmath>
 
@@ -88,6 +90,23 @@ std::string EstimatorSummary::BriefReport() const {
     out += fmt::format("{}{} {:g}", out.empty() ? "" : ", ", key, value);
   }
   return out;
+}
+
+std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& info,
+                               const std::string& node) {
+  if (levels != nullptr) {
+    if (const auto b = levels->NodeLevel(node)) return b->level;
+  }
+  const NodeInfo* n = info.Find(node);
+  if (n != nullptr && n->position) return LevelAt(info.floors, n->position->z());
+  return std::nullopt;
+}
+
+bool OnDifferentLevels(const LevelSource* levels, const MissionInfo& info, const std::string& a,
+                       const std::string& b) {
+  if (levels == nullptr) return false;
+  const auto la = NodeLevelOf(levels, info, a), lb = NodeLevelOf(levels, info, b);
+  return la && lb && *la != *lb;
 }
 
 }  // namespace trailmark

@@ -131,6 +131,17 @@ class LevelSource {
   virtual std::optional<LevelBelief> NodeLevel(const std::string& node) const = 0;
 };
 
+struct MissionInfo;
+
+/// The level of a node: the source's (null: none), else for a node of known position in
+/// mission.json its z's by the spec's rule (MissionInfo::floors); nullopt when neither knows.
+std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& info,
+                               const std::string& node);
+/// Whether two nodes are known to be on different levels (radio estimators leave such
+/// measurements out: their models have no floors).
+bool OnDifferentLevels(const LevelSource* levels, const MissionInfo& info, const std::string& a,
+                       const std::string& b);
+
 class OnlineEstimator {
  public:
   virtual ~OnlineEstimator() = default;

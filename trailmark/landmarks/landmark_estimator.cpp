@@ -58,13 +58,17 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
              "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
              "intersection: shared PDR errors and covariance intersection, honest)");
     t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
+    t.Flag("gate_other_floors", &O::gate_other_floors,
+           "packets between an agent and a landmark on another level are not used");
     return t;
   }();
   return table;
 }
 
 LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorOptions options)
-    : options_(std::move(options)), landmark_integrity_("landmark", options_.integrity) {
+    : options_(std::move(options)),
+      info_(info),
+      landmark_integrity_("landmark", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
   calibrated_ = info.radio.has_value();
@@ -307,6 +311,10 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     auto ait = agents_.find(agent);
     auto lit = index_.find(other);
     if (ait == agents_.end() || lit == index_.end()) return;
+    if (options_.gate_other_floors && OnDifferentLevels(levels_, info_, agent, other)) {
+      ++other_floor_;
+      return;
+    }
     Agent& a = ait->second;
     const int j = lit->second;
     if (a.stopped) {
@@ -365,6 +373,7 @@ EstimatorSummary LandmarkEstimator::Summary() const {
       static_cast<double>(std::count(known_.begin(), known_.end(), true));
   summary.numbers["handheld_fixes"] = static_cast<double>(fixes_);
   summary.numbers["ukf_rssi_updates"] = static_cast<double>(ukf_updates_);
+  summary.numbers["radio_other_floor"] = static_cast<double>(other_floor_);
   summary.numbers["radio_refits"] = refits_;
   summary.numbers["radio_path_loss_exponent"] = model_.path_loss_exponent;
   summary.numbers["radio_alpha_dbm"] = model_.alpha_dbm;

@@ -83,6 +83,10 @@ struct LandmarkEstimatorOptions {
   /// UKF: each landmark's RSSI innovations checked against their stated noise (issue 21); an
   /// inconsistent landmark (moved, offset, frozen) is left out until it agrees again.
   integrity::ConsistencyOptions integrity;
+  /// Ours (issue 26): a packet between an agent and a landmark on another level (the agent's
+  /// level from its height channel, the landmark's from its surveyed z) is not used: the
+  /// path-loss model has no floors (a floor costs 10-20 dB).
+  bool gate_other_floors = true;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -95,6 +99,7 @@ class LandmarkEstimator : public OnlineEstimator {
   /// Rows in global time order: steps, RSSI between an agent and a landmark, stop/go events;
   /// others are counted and ignored.
   void Add(const MissionRow& row, EstimateSink& sink) override;
+  void UseLevels(const LevelSource* levels) override { levels_ = levels; }
   /// The landmarks' final estimates.
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;
@@ -144,7 +149,9 @@ class LandmarkEstimator : public OnlineEstimator {
   TimeS t_last_ = -1e300;  ///< the latest row's time
   bool first_ = true;
   int refits_ = 0;
-  std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0;
+  std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0, other_floor_ = 0;
+  const LevelSource* levels_ = nullptr;
+  MissionInfo info_;
   integrity::ConsistencyMonitor landmark_integrity_;
 };
 
