@@ -76,9 +76,6 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
         "scenario");
   SimulatedMission sim =
       scenario == "search" ? SimulateSearchOnFile(search, seed) : SimulateScenario(scenario, seed);
-  if (!sim.levels.empty() && vary.k) {
-    throw std::invalid_argument("--vary does not draw variants of the multi-floor scenario yet");
-  }
   if (imu.rate_hz > 0) {
     sim.data.imu.clear();  // a scenario's own foot IMU gives way to the one asked for
     ImuSimOptions o;
@@ -107,7 +104,11 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     nlohmann::json drawn = nlohmann::json::object();
     for (const auto& [key, value] : v.Describe()) drawn[key] = value;
     sim.data.info.description += fmt::format(". Variant {} of family {}.", *vary.k, vary.family);
-    WriteMissionDirectory(out, sim.data, &sim.plan, style);
+    if (sim.levels.empty()) {
+      WriteMissionDirectory(out, sim.data, &sim.plan, style);
+    } else {
+      WriteMissionDirectory(out, sim.data, sim.levels, style);  // every level, drawn alike
+    }
     std::ofstream j(out / "variation.json");
     j << nlohmann::json{{"scenario", scenario}, {"seed", seed}, {"variation", drawn}, {"notes", notes}}
              .dump(2)

@@ -57,6 +57,10 @@ grep -q "wrote no estimates" "$dir/nosteps.err" || fail "no warning for a run wi
 "$TM" simulate office-loop-1lap --seed 2 --vary 4 --out "$dir/var" | matches "rotation_deg" || fail "simulate --vary"
 grep -q '"family": "all"' "$dir/var/variation.json" || fail "variation.json"
 "$TM" validate "$dir/var" | matches "^valid" || fail "variant valid"
+# The multi-floor building's variants keep every level.
+"$TM" simulate multi-floor --seed 2 --vary 3 --out "$dir/mfvar" > /dev/null || fail "simulate multi-floor --vary"
+"$TM" validate "$dir/mfvar" | matches "level -1: " || fail "multi-floor variant levels"
+"$TM" validate "$dir/mfvar" | matches "^valid" || fail "multi-floor variant valid"
 run_failing "$TM" simulate office-loop --vary -3 --out "$dir/x"
 [ $rc -ne 0 ] && grep -q "whole number >= 0, not '-3'" "$dir/err" || fail "negative --vary"
 run_failing "$TM" simulate office-loop --vary 1 --family weather --out "$dir/x"

@@ -13,6 +13,7 @@
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
 #include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/variation.h"
 
 namespace trailmark {
 namespace {
@@ -135,6 +136,44 @@ TEST(Floors, BreadcrumbRadioIsGatedByFloor) {
   std::printf("breadcrumb, seeds 11-14, summed means: agents %.2f gated / %.2f not; crumbs %.2f / "
               "%.2f; in95 %.2f\n",
               gated_agents, open_agents, gated_crumbs, open_crumbs, in95);
+}
+
+// The building drawn another way (`simulate multi-floor --vary K --family frame`): rotated and
+// shifted, doors across gaps on every level, walls as multi-vertex lines, CSV columns shuffled.
+// The height channel sees the same readings: the same floors, row for row; map matching still
+// changes level only in the stairwell, as often as the walk took stairs.
+TEST(Floors, AVariantDrawnAnotherWayKeepsItsFloors) {
+  const SimulatedMission sim = SimulateScenario("multi-floor", 13);
+  Variation v;
+  for (std::uint64_t k = 1; k < 100; ++k) {
+    v = DrawVariation(VariationFamily::kFrame, k);
+    if (v.doors_across_gaps && v.write.polyline_walls) break;
+  }
+  ASSERT_TRUE(v.doors_across_gaps && v.write.polyline_walls);
+  v.write.csv_shuffled_columns = v.write.csv_comments = true;  // (the csv family's)
+  SimulatedMission drawn = sim;
+  ApplyVariation(v, drawn);
+  TempDir a, b;
+  WriteMissionDirectory(a.path(), sim.data, sim.levels);
+  WriteMissionDirectory(b.path(), drawn.data, drawn.levels, v.write);
+  const MissionDirectory original(a.path()), variant(b.path());
+  std::vector<int> levels;
+  variant.LoadFloorPlan(std::nullopt, &levels);
+  EXPECT_EQ(levels, (std::vector<int>{-1, 0, 1, 2}));
+  VectorSink pa, pb;
+  RunNamed("pdr", original, {}, pa);
+  RunNamed("pdr", variant, {}, pb);
+  ASSERT_EQ(pa.rows.size(), pb.rows.size());
+  for (std::size_t i = 0; i < pa.rows.size(); ++i) {
+    ASSERT_EQ(pa.rows[i].floor, pb.rows[i].floor) << i;
+    ASSERT_EQ(pa.rows[i].position_n.z(), pb.rows[i].position_n.z()) << i;
+  }
+  VectorSink mm;
+  const EstimatorSummary s = RunNamed("mapmatch", variant, {}, mm);
+  EXPECT_EQ(s.numbers.at("ff1.level_changes"), 4.0);
+  EXPECT_EQ(s.numbers.at("ff2.level_changes"), 2.0);
+  EXPECT_EQ(s.numbers.at("ff1.level_changes_outside_stairwell"), 0.0);
+  EXPECT_EQ(s.numbers.at("ff2.level_changes_outside_stairwell"), 0.0);
 }
 
 TEST(Floors, ASingleFloorMissionStaysOnItsFloorWithTheSameHorizontalEstimates) {

@@ -418,9 +418,10 @@ std::string FloorPlanToGeoJson(const FloorPlan& plan, bool polyline_walls) {
   return FeatureCollection(std::move(features));
 }
 
-std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors) {
+std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors,
+                               bool polyline_walls) {
   json features = json::array();
-  for (const auto& [level, plan] : floors) AppendFloorFeatures(features, plan, level);
+  for (const auto& [level, plan] : floors) AppendFloorFeatures(features, plan, level, polyline_walls);
   return FeatureCollection(std::move(features));
 }
 
@@ -516,13 +517,14 @@ void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& 
 }
 
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
-                           const std::vector<std::pair<int, FloorPlan>>& levels) {
+                           const std::vector<std::pair<int, FloorPlan>>& levels,
+                           const MissionWriteStyle& style) {
   MissionData with_plan = data;
   if (!with_plan.info.floorplan) with_plan.info.floorplan = "floorplan.geojson";
-  WriteMissionDirectory(dir, with_plan, nullptr);
+  WriteMissionDirectory(dir, with_plan, nullptr, style);
   const std::filesystem::path path = dir / *with_plan.info.floorplan;
   std::ofstream out(path, std::ios::binary);
-  out << FloorPlanToGeoJson(levels);
+  out << FloorPlanToGeoJson(levels, style.polyline_walls);
   if (!out) throw std::runtime_error(path.string() + ": write failed");
 }
 

@@ -43,7 +43,8 @@ FloorPlan ReadFloorPlanFloor(const std::filesystem::path& path,
 /// `polyline_walls`: walls that continue one another as one multi-vertex LineString (spec 1.1).
 std::string FloorPlanToGeoJson(const FloorPlan& plan, bool polyline_walls = false);
 /// Several floors in one file: every feature of a floor carries its `level`.
-std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors);
+std::string FloorPlanToGeoJson(const std::vector<std::pair<int, FloorPlan>>& floors,
+                               bool polyline_walls = false);
 
 /// Writes mission.json, every non-empty stream and (when given) the floor plan into `dir`,
 /// creating it; the file of an empty stream is removed (a directory written twice holds the
@@ -56,7 +57,8 @@ void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& 
 /// The same, with a multi-floor plan: every level's plan in one file (each feature with its
 /// `level`), named by data.info.floorplan (default floorplan.geojson).
 void WriteMissionDirectory(const std::filesystem::path& dir, const MissionData& data,
-                           const std::vector<std::pair<int, FloorPlan>>& levels);
+                           const std::vector<std::pair<int, FloorPlan>>& levels,
+                           const MissionWriteStyle& style = {});
 
 /// The same CSV text drawn another way the spec allows: comment lines, the columns in another
 /// order, an extra (quoted) column. Cells are taken as written by CsvWriter (no quotes).

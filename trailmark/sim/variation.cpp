@@ -621,8 +621,13 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
   }
   if (on(VariationFamily::kFrame)) {
     if (v.doors_across_gaps && !sim.plan.empty()) {
-      // The other door convention (spec 1.1): the walls drawn with the gaps, the doors across.
-      sim.plan = FloorPlan(sim.plan.solid_walls(), sim.plan.doors(), sim.plan.rooms());
+      // The other door convention (spec 1.1): the walls drawn with the gaps, the doors across
+      // (on every level of a multi-floor building).
+      auto across = [](const FloorPlan& p) {
+        return FloorPlan(p.solid_walls(), p.doors(), p.rooms());
+      };
+      sim.plan = across(sim.plan);
+      for (auto& [level, plan] : sim.levels) plan = across(plan);
     }
     sim = DrawnInFrame(std::move(sim), v.frame);
   }
