@@ -23,6 +23,10 @@ try {
   const options = await page.$$eval('#floor option', (els) => els.map((e) => e.value));
   if (options.join(',') !== '2,1,0,-1') fail(`selector options ${options}`);
   if ((await page.$eval('#floor', (e) => e.value)) !== '0') fail('the ground floor is not shown first');
+  // The view fits the building and the walks (about 30 m across), wherever the frame's origin
+  // is: at least 8 px per metre on this screen.
+  const scale = await page.evaluate(() => window.trailmarkView?.scale ?? 0);
+  if (!(scale >= 8)) fail(`the map is drawn at ${scale} px/m: the view does not fit the building`);
   // Wait until ff1 has climbed (the replay runs at 20x), then pick it: its floor is shown.
   let ff1 = null;
   for (let i = 0; i < 60; ++i) {

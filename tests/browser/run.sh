@@ -17,8 +17,9 @@ port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve
 [ -n "$port" ] || { cat "$dir/serve.log"; echo "FAIL: serve did not start"; exit 1; }
 node "$here/dashboard.mjs" "http://127.0.0.1:$port" br0wser 2 "${SCREENSHOT:-$dir/dashboard.png}"
 kill $pid; wait $pid 2>/dev/null || true
-# The floor selector: the multi-floor building, replayed at 20x.
-"$TM" simulate multi-floor --seed 3 --out "$dir/f" > /dev/null
+# The floor selector: the multi-floor building drawn in another frame (rotated 224 degrees, the
+# origin 1.2 km away: the view must fit the building, not the origin), replayed at 20x.
+"$TM" simulate multi-floor --seed 3 --vary 1 --family frame --out "$dir/f" > /dev/null
 "$TM" serve --replay "$dir/f" --pipeline pdr --speed 20 --port 0 --token br0wser > "$dir/serve2.log" 2>&1 &
 pid=$!
 for _ in $(seq 100); do grep -q "listening on" "$dir/serve2.log" && break; sleep 0.1; done

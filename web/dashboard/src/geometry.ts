@@ -22,11 +22,22 @@ export interface View {
   oy: number;
 }
 
+/** The view that shows every point with a 2 m margin. The frame's origin is not assumed to be
+ *  near the building (spec 1.1: any origin), and the bounds are found in one pass: spreading
+ *  an hour of trails into Math.min(...) exceeds the engine's argument limit. */
 export function fitView(xs: number[], ys: number[], width: number, height: number): View {
-  const minx = Math.min(0, ...xs) - 2;
-  const maxx = Math.max(0, ...xs) + 2;
-  const miny = Math.min(0, ...ys) - 2;
-  const maxy = Math.max(0, ...ys) + 2;
+  let minx = Infinity;
+  let maxx = -Infinity;
+  let miny = Infinity;
+  let maxy = -Infinity;
+  for (const x of xs) if (Number.isFinite(x)) (minx = Math.min(minx, x)), (maxx = Math.max(maxx, x));
+  for (const y of ys) if (Number.isFinite(y)) (miny = Math.min(miny, y)), (maxy = Math.max(maxy, y));
+  if (!(minx <= maxx)) (minx = 0), (maxx = 0);
+  if (!(miny <= maxy)) (miny = 0), (maxy = 0);
+  minx -= 2;
+  maxx += 2;
+  miny -= 2;
+  maxy += 2;
   const scale = Math.max(1e-3, Math.min(width / (maxx - minx), height / (maxy - miny)));
   return { scale, ox: -minx * scale, oy: height + miny * scale };
 }

@@ -59,7 +59,18 @@ function onState(s: State): void {
     if (!alertLog.some((b) => b.id === a.id && b.kind === a.kind && Math.abs(b.t - a.t) < 60)) alertLog.push(a);
   }
   updateTimeline();
-  render();
+  scheduleRender();
+}
+
+// At most one redraw per animation frame: live messages come up to 100 a second.
+let renderPending = false;
+function scheduleRender(): void {
+  if (renderPending) return;
+  renderPending = true;
+  requestAnimationFrame(() => {
+    renderPending = false;
+    render();
+  });
 }
 
 /** The time shown: the live clock, or where the timeline was dragged. */
@@ -164,6 +175,7 @@ function render(): void {
   for (const n of [...agents, ...others]) xs.push(n.x), ys.push(n.y);
   for (const rows of Object.values(trails)) for (const r of rows) xs.push(r[1]), ys.push(r[2]);
   view = fitView(xs, ys, w, h);
+  (window as unknown as { trailmarkView?: View }).trailmarkView = view; // for the browser test
   ctx.clearRect(0, 0, w, h);
   ctx.fillStyle = '#101418';
   ctx.fillRect(0, 0, w, h);
