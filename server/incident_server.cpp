@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <future>
 #include <optional>
@@ -289,10 +291,22 @@ void IncidentServer::Start() {
   svr.Get("/api/history", [this, authorized, refuse, json](const httplib::Request& req,
                                                             httplib::Response& res) {
     if (!authorized(req, false)) return refuse(res);
+    std::optional<double> since;
+    if (req.has_param("since")) {
+      const std::string text = req.get_param_value("since");
+      char* end = nullptr;
+      const double v = std::strtod(text.c_str(), &end);
+      if (text.empty() || end != text.c_str() + text.size() || !std::isfinite(v)) {
+        res.status = 400;
+        json(res, {{"error", "since: expected a mission time in seconds, not '" + text + "'"}});
+        return;
+      }
+      since = v;
+    }
     nlohmann::json h;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      h = state_.HistoryJson();
+      h = state_.HistoryJson(since);
     }
     json(res, h);
   });

@@ -129,7 +129,8 @@ void IncidentState::Advance(TimeS now) {
   }
 }
 
-nlohmann::json IncidentState::HistoryJson() const {
+nlohmann::json IncidentState::HistoryJson(std::optional<double> since) const {
+  const auto after = [&](double t) { return !since || t > *since; };
   nlohmann::json trails = nlohmann::json::object();
   for (const auto& [id, n] : nodes_) {
     if (n.kind != NodeKind::kAgent) continue;
@@ -139,19 +140,25 @@ nlohmann::json IncidentState::HistoryJson() const {
       return nlohmann::json{e.t,   e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy,
                             e.floor ? nlohmann::json(*e.floor) : nlohmann::json(nullptr)};
     };
-    for (const Estimate& e : n.history) rows.push_back(row(e));
+    for (const Estimate& e : n.history) {
+      if (after(e.t)) rows.push_back(row(e));
+    }
     // and the latest, so that the timeline ends where the live view is
-    if (!n.history.empty() && n.history.back().t < n.estimate.t) rows.push_back(row(n.estimate));
+    if (!n.history.empty() && n.history.back().t < n.estimate.t && after(n.estimate.t))
+      rows.push_back(row(n.estimate));
     trails[id] = rows;
   }
   nlohmann::json log = nlohmann::json::array();
-  for (const auto& a : alert_log_)
-    log.push_back({{"id", a.id}, {"kind", a.kind}, {"t", a.t}, {"message", a.message}});
+  for (const auto& a : alert_log_) {
+    if (after(a.t))
+      log.push_back({{"id", a.id}, {"kind", a.kind}, {"t", a.t}, {"message", a.message}});
+  }
   nlohmann::json j;
   j["t"] = std::isfinite(now_) && now_ > -1e299 ? nlohmann::json(now_) : nlohmann::json(nullptr);
   j["columns"] = {"t", "x", "y", "sxx", "sxy", "syy", "floor"};
   j["trails"] = trails;
   j["alerts"] = log;
+  if (since) j["since"] = *since;
   return j;
 }
 

@@ -75,7 +75,9 @@ class IncidentState {
   /// Every alert as it was raised (a kind for a node, once until it clears), in time order.
   const std::vector<Alert>& alert_log() const { return alert_log_; }
   /// GET /api/history: the agents' trails and the alert log, for the dashboard's timeline.
-  nlohmann::json HistoryJson() const;
+  /// `since`: only trail rows and alerts after that mission time (the dashboard's refresh
+  /// fetches what it lacks, not the whole incident); "since" in the JSON says so.
+  nlohmann::json HistoryJson(std::optional<double> since = std::nullopt) const;
 
  private:
   MissionInfo info_;

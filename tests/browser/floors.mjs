@@ -3,7 +3,7 @@
 // lists the plan's four levels (the ground floor shown first); picking a firefighter shows the
 // floor /api/state gives it; choosing another floor from the selector draws that level's walls
 // (the canvas changes) and marks firefighters on other floors with their floor in the list; the
-// timeline dragged back shows the floors of then.
+// timeline dragged back shows the floors of then; the history refresh asks only for what is new.
 // usage: node floors.mjs URL TOKEN SCREENSHOT.png
 import { chromium } from 'playwright-core';
 
@@ -17,6 +17,11 @@ try {
   const levels = (plan.levels ?? []).map((l) => l.level).sort((a, b) => a - b);
   if (levels.join(',') !== '-1,0,1,2') fail(`/api/floorplan levels: ${JSON.stringify(levels)}`);
   const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  // The periodic refresh asks only for what came after its last fetch (issue 28).
+  const refreshes = [];
+  page.on('response', async (r) => {
+    if (r.url().includes('/api/history?since=')) refreshes.push({ status: r.status(), body: await r.json().catch(() => null) });
+  });
   await page.goto(`${url}/?token=${token}`);
   await page.waitForSelector('#list .node', { timeout: 10000 });
   if (await page.$eval('#floorbar', (e) => e.hidden)) fail('no floor selector for a four-level plan');
@@ -55,6 +60,13 @@ try {
   await page.waitForTimeout(300);
   const detail = await page.$eval('#list .node[data-id="ff1"] small', (e) => e.textContent);
   if (!/floor 0$/.test(detail)) fail(`ff1 at the start of the timeline: '${detail}'`);
+  for (let i = 0; i < 30 && refreshes.length === 0; ++i) await page.waitForTimeout(500);
+  if (refreshes.length === 0) fail('no /api/history?since= refresh within 15 s');
+  const r = refreshes[0];
+  if (r.status !== 200 || !r.body || typeof r.body.since !== 'number') fail(`history refresh: ${JSON.stringify(r).slice(0, 200)}`);
+  for (const rows of Object.values(r.body.trails)) {
+    if (rows.some((row) => !(row[0] > r.body.since))) fail('a refresh row older than its since');
+  }
   console.log(`floors: levels ${options.join(', ')}; ff1 picked on floor ${shownFloor}; basement drawn; screenshot ${shot}`);
 } finally {
   await browser.close();

@@ -179,6 +179,11 @@ grep -q '"nodes":\[{' "$dir/state.json" && grep -q '"kind":"agent"' "$dir/state.
   || { cat "$dir/state.json"; fail "serve: state"; }
 code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=t0k3n")
 [ "$code" = 200 ] || fail "serve: dashboard gave $code"
+# The history since a time, and a bad time named.
+curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/history?since=1" | grep -q '"since":1' \
+  || fail "serve: history since"
+code=$(curl -s -o "$dir/h.json" -w "%{http_code}" -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/history?since=soon")
+[ "$code" = 400 ] && grep -q "not 'soon'" "$dir/h.json" || fail "serve: a bad since gave $code"
 code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=wrong")
 [ "$code" = 401 ] || fail "serve: dashboard with a wrong token gave $code"
 kill $serve_pid; wait $serve_pid || true

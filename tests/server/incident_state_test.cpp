@@ -189,6 +189,13 @@ TEST(IncidentState, HistoryKeepsTheTrailAtItsPeriodAndTheLatestEstimate) {
   s.Apply(up);
   const auto later = s.HistoryJson();
   EXPECT_EQ(later.at("trails").at("ff1").back()[6].get<int>(), 2);
+  // Since a time: only what came after it (the dashboard's refresh).
+  const auto recent = s.HistoryJson(3.2);
+  const auto& tail = recent.at("trails").at("ff1");
+  ASSERT_EQ(tail.size(), 3u);  // t = 3.5, 4.0 and 4.5 (the one with a floor)
+  EXPECT_DOUBLE_EQ(tail.front()[0].get<double>(), 3.5);
+  EXPECT_EQ(recent.at("since").get<double>(), 3.2);
+  EXPECT_TRUE(s.HistoryJson(1e9).at("trails").at("ff1").empty());
 }
 
 }  // namespace

@@ -37,6 +37,8 @@ export type TrailRow = [number, number, number, number, number, number, (number 
 
 export interface History {
   t: number | null;
+  /** Present when only the part after this mission time was asked for. */
+  since?: number;
   trails: Record<string, TrailRow[]>;
   alerts: Alert[];
 }
@@ -77,8 +79,9 @@ export class Api {
   state(): Promise<State> {
     return this.get<State>('/api/state');
   }
-  history(): Promise<History> {
-    return this.get<History>('/api/history');
+  /** The whole history, or (`since`) only what came after that mission time. */
+  history(since?: number): Promise<History> {
+    return this.get<History>(since === undefined ? '/api/history' : `/api/history?since=${since}`);
   }
   floorPlan(): Promise<FloorPlan> {
     return this.get<FloorPlan>('/api/floorplan');

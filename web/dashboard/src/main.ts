@@ -38,13 +38,33 @@ const ALERT_LABEL: Record<string, string> = {
   integrity: 'INTEGRITY',
 };
 
+/** Merges a history (whole, or the part after `since`) into the trails and the alert log:
+ *  each trail keeps its rows before the fetched ones, then the fetched rows, then what came
+ *  live after them. */
 function mergeHistory(h: History): void {
   for (const [id, rows] of Object.entries(h.trails)) {
-    // the history, then what came live after its end
-    const end = rows.length ? rows[rows.length - 1][0] : -Infinity;
-    trails[id] = rows.concat((trails[id] ?? []).filter((r) => r[0] > end));
+    if (!rows.length) continue;
+    const first = rows[0][0];
+    const end = rows[rows.length - 1][0];
+    const old = trails[id] ?? [];
+    trails[id] = old.filter((r) => r[0] < first).concat(rows, old.filter((r) => r[0] > end));
   }
-  alertLog = h.alerts;
+  if (h.t !== null) historyEnd = Math.max(historyEnd ?? -Infinity, h.t);
+  if (h.since === undefined) {
+    alertLog = h.alerts;
+  } else {
+    for (const a of h.alerts) {
+      if (!alertLog.some((b) => b.id === a.id && b.kind === a.kind && b.t === a.t)) alertLog.push(a);
+    }
+  }
+}
+
+/** The mission time the periodic refresh asks from: a little before the end of the last
+ *  history fetched (what came live since may have gaps: a lost connection), the whole history
+ *  before any. */
+let historyEnd: number | undefined;
+function refreshSince(): number | undefined {
+  return historyEnd === undefined ? undefined : historyEnd - 5;
 }
 
 function onState(s: State): void {
@@ -371,7 +391,7 @@ async function start(): Promise<void> {
     $('conn').className = ok ? 'muted' : 'warn';
   });
   // The history catches up what a reconnect missed.
-  setInterval(() => void api.history().then(mergeHistory).catch(() => undefined), 10000);
+  setInterval(() => void api.history(refreshSince()).then(mergeHistory).catch(() => undefined), 10000);
 }
 
 void start();
