@@ -334,16 +334,18 @@ void Validate(const fs::path& mission_dir) {
     fmt::print("{:<14} {} levels: {}\n", "floors", mission.info().floors.size(), list);
   }
   if (mission.HasStream<BaroSample>()) {
-    std::map<std::string, std::pair<double, double>> range;
+    // Each barometer's range without its spikes: the 1st to 99th percentile of its readings,
+    // and the extremes beside them.
+    std::map<std::string, std::vector<double>> readings;
     auto reader = mission.OpenStream<BaroSample>();
-    for (BaroSample b; reader.Next(b);) {
-      auto [it, fresh] = range.emplace(b.agent, std::pair{b.pressure_hpa, b.pressure_hpa});
-      it->second.first = std::min(it->second.first, b.pressure_hpa);
-      it->second.second = std::max(it->second.second, b.pressure_hpa);
-    }
-    for (const auto& [agent, r] : range) {
-      fmt::print("{:<14} {}: {:.2f} .. {:.2f} hPa ({:.1f} m of pressure altitude)\n", "barometer",
-                 agent, r.first, r.second, PressureAltitudeM(r.first) - PressureAltitudeM(r.second));
+    for (BaroSample b; reader.Next(b);) readings[b.agent].push_back(b.pressure_hpa);
+    for (auto& [agent, v] : readings) {
+      const double lo = Percentile(v, 1), hi = Percentile(v, 99);
+      const auto [mn, mx] = std::minmax_element(v.begin(), v.end());
+      fmt::print("{:<14} {}: {:.2f} .. {:.2f} hPa (1st-99th percentile; {:.1f} m of pressure "
+                 "altitude), extremes {:.2f} .. {:.2f} hPa\n",
+                 "barometer", agent, lo, hi, PressureAltitudeM(lo) - PressureAltitudeM(hi), *mn,
+                 *mx);
     }
   }
   if (mission.HasStream<TruthSample>()) {

@@ -61,6 +61,12 @@ grep -q '"family": "all"' "$dir/var/variation.json" || fail "variation.json"
 "$TM" simulate multi-floor --seed 2 --vary 3 --out "$dir/mfvar" > /dev/null || fail "simulate multi-floor --vary"
 "$TM" validate "$dir/mfvar" | matches "level -1: " || fail "multi-floor variant levels"
 "$TM" validate "$dir/mfvar" | matches "^valid" || fail "multi-floor variant valid"
+# A barometer's range is its 1st-99th percentile: one spike shows among the extremes only.
+"$TM" simulate multi-floor --seed 2 --out "$dir/mf" > /dev/null || fail "simulate multi-floor"
+awk -F, 'BEGIN{OFS=","} NR==101{$3="1020.00"} {print}' "$dir/mf/baro.csv" > "$dir/baro.tmp" && mv "$dir/baro.tmp" "$dir/mf/baro.csv"
+"$TM" validate "$dir/mf" > "$dir/v.txt" || fail "validate a spiked barometer"
+grep "barometer" "$dir/v.txt" | grep -q "extremes .* 1020.00 hPa" || { cat "$dir/v.txt"; fail "the spike among the extremes"; }
+! grep "barometer" "$dir/v.txt" | grep -q "\.\. 1020.00 hPa (1st-99th" || fail "the spike stretched the range"
 run_failing "$TM" simulate office-loop --vary -3 --out "$dir/x"
 [ $rc -ne 0 ] && grep -q "whole number >= 0, not '-3'" "$dir/err" || fail "negative --vary"
 run_failing "$TM" simulate office-loop --vary 1 --family weather --out "$dir/x"
