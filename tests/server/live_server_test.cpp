@@ -5,7 +5,9 @@
 // not yet ended) since a live incident has no end of data.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <map>
 #include <mutex>
 #include <thread>
@@ -13,6 +15,7 @@
 #include "pipelines/run_named.h"
 #include "server/incident_server.h"
 #include "test_util.h"
+#include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
 #include "trailmark/sim/imu_sim.h"
@@ -56,7 +59,11 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
                                 bool exact_height = true) {
   SCOPED_TRACE(pipeline);
   TempDir dir;
-  WriteMissionDirectory(dir.path() / "mission", sim.data, &sim.plan);
+  if (sim.levels.empty()) {
+    WriteMissionDirectory(dir.path() / "mission", sim.data, &sim.plan);
+  } else {
+    WriteMissionDirectory(dir.path() / "mission", sim.data, sim.levels);
+  }
   const MissionDirectory mission(dir.path() / "mission");
   VectorSink batch;
   trailmark::testing::RunNamed(pipeline, mission, {}, batch);
@@ -148,6 +155,76 @@ TEST(LiveServer, PdrWithABarometerOnTheJournalIsTheBatchRunFloorsIncluded) {
   SimulatedMission sim = SimulateScenario("multi-floor", 3);
   sim.data.imu.clear();  // the phone's steps only (the batch run would shadow the IMU with them)
   ExpectLiveIsTheBatchPrefix("pdr", sim, /*exact_height=*/false);
+}
+
+TEST(LiveServer, BreadcrumbAcrossFloorsOnTheJournalIsTheBatchRun) {
+  // The multi-floor building's crumbs on every level, radio gated by floor (issue 26): a
+  // pipeline in global time order gets the batch run's heights, so the same packets are gated
+  // and the estimates are the batch run's bit for bit, floors included.
+  SimulatedMission sim = SimulateScenario("multi-floor", 5);
+  sim.data.imu.clear();
+  ExpectLiveIsTheBatchPrefix("breadcrumb", sim);
+}
+
+TEST(LiveServer, MapMatchingFollowsTheFloorsLive) {
+  // `trailmark serve --pipeline mapmatch` on a multi-floor building: every level's plan, each
+  // agent's filter changing level in the stairwell as its barometer readings arrive. A
+  // per-agent pipeline gets a device's steps and readings as they come, so a level may change
+  // a step earlier or later than in the batch run and the particles differ: the live estimates
+  // are as good as the batch run's, not equal to them.
+  SimulatedMission sim = SimulateScenario("multi-floor", 13);
+  sim.data.imu.clear();
+  TempDir dir;
+  WriteMissionDirectory(dir.path() / "mission", sim.data, sim.levels);
+  const MissionDirectory mission(dir.path() / "mission");
+  VectorSink batch;
+  trailmark::testing::RunNamed("mapmatch", mission, {}, batch);
+
+  ServerOptions o;
+  o.live_dir = dir.path() / "mission";
+  o.journal_file = dir.path() / "journal.db";
+  o.pipeline = "mapmatch";
+  o.floor_plan = sim.levels[1].second;  // the ground floor's
+  o.floor_levels = sim.levels;
+  o.port = 0;
+  o.token = "t";
+  o.log = [](const std::string&) {};
+  std::mutex m;
+  std::vector<Estimate> live;
+  o.on_estimate = [&](const Estimate& e) {
+    std::lock_guard<std::mutex> lock(m);
+    live.push_back(e);
+  };
+  IncidentServer server(sim.data.info, {}, o);
+  server.Start();
+  const MissionData& d = sim.data;
+  for (TimeS t = -5; t < d.truth.back().t + 1; t += 1.0) {
+    Post(server, "steps.csv", d.steps, t, t + 1);
+    Post(server, "baro.csv", d.baro, t, t + 1);
+  }
+  const std::size_t rows = d.steps.size() + d.baro.size();
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (server.stats().estimated_rows.load() < rows && std::chrono::steady_clock::now() < give_up)
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  server.Stop();
+  ASSERT_EQ(server.stats().estimated_rows.load(), rows);
+  auto sorted = [](std::vector<Estimate> v) {
+    std::stable_sort(v.begin(), v.end(), [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
+    return v;
+  };
+  const Metrics mb = Evaluate(sim.data.info, d.truth, sorted(batch.rows));
+  const Metrics ml = Evaluate(sim.data.info, d.truth, sorted(live));
+  ASSERT_TRUE(mb.floors && ml.floors);
+  EXPECT_GE(ml.floors->floor_hit_rate, mb.floors->floor_hit_rate - 0.01);
+  EXPECT_LT(ml.agents.stats.mean_m, mb.agents.stats.mean_m + 0.5);
+  EXPECT_LT(ml.agents.stats.mean_m, 2.0);
+  std::printf("mapmatch live: mean %.2f m (batch %.2f m), right floor %.1f %% (batch %.1f %%)\n",
+              ml.agents.stats.mean_m, mb.agents.stats.mean_m, 100 * ml.floors->floor_hit_rate,
+              100 * mb.floors->floor_hit_rate);
+  // Every live estimate of an agent carries its level.
+  for (const Estimate& e : live) {
+    if (e.id == "ff1" || e.id == "ff2") ASSERT_TRUE(e.floor.has_value()) << e.id << " " << e.t;
+  }
 }
 
 TEST(LiveServer, BreadcrumbOnTheJournalIsTheBatchRun) {
