@@ -19,6 +19,7 @@
 #include "trailmark/sim/beacon_lab.h"
 #include "trailmark/mapmatch/pattern_comparison.h"
 #include "trailmark/mapmatch/particle_filter.h"
+#include "trailmark/mapmatch/search_map.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/geometry/rigid_fit.h"
@@ -93,6 +94,34 @@ void BM_WallCrossingQuery(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations());
 }
 BENCHMARK(BM_WallCrossingQuery);
+
+/// A floor of n x n cells of 1.5 m: the outline and 2 (n - 1) n partition pieces with door gaps
+/// (n = 100: 19,804 walls, a 150 m square floor).
+FloorPlan CellularFloor(int n) {
+  std::vector<Segment2> walls;
+  const double cell = 1.5, side = n * cell;
+  AddRectangle(walls, {0, 0}, {side, side});
+  for (int i = 1; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      walls.push_back({{i * cell, j * cell}, {i * cell, j * cell + 0.6 * cell}});
+      walls.push_back({{j * cell, i * cell}, {j * cell + 0.6 * cell, i * cell}});
+    }
+  }
+  return FloorPlan(std::move(walls), {}, {});
+}
+
+// Issue 30, item 5: the map matcher's set-up on a large plan (the floor-plan checks, the wall
+// graph, the search sequences) — every wall against every wall before 2026-12-02 (session 7):
+// 19.9 s for `trailmark run --pipeline mapmatch` on 19,804 walls, 2.6 s after, the same output.
+void BM_MapMatchSetUpLargePlan(benchmark::State& state) {
+  const FloorPlan plan = CellularFloor(static_cast<int>(state.range(0)));
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(mapmatch::CheckFloorPlan(plan));
+    benchmark::DoNotOptimize(mapmatch::ExtractSearchSequences(plan, {0.7, 0.7}));
+  }
+  state.counters["walls"] = static_cast<double>(plan.walls().size());
+}
+BENCHMARK(BM_MapMatchSetUpLargePlan)->Arg(30)->Arg(100)->Unit(benchmark::kMillisecond);
 
 void BM_PdrPipelineOfficeLoop(benchmark::State& state) {
   const fs::path dir = BenchDir() / "mission";

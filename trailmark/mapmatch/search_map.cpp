@@ -10,6 +10,8 @@
 #include <numeric>
 #include <stdexcept>
 
+#include "trailmark/geometry/segment_index.h"
+
 namespace trailmark::mapmatch {
 namespace {
 
@@ -22,15 +24,53 @@ struct UnionFind {
 
 double Cross(const Vec2& a, const Vec2& b) { return a.x() * b.y() - a.y() * b.x(); }
 
+/// The box around a segment (or a point: a == b), grown by `margin` on every side.
+Box2 BoxAround(const Vec2& a, const Vec2& b, double margin) {
+  Box2 box;
+  box.Extend(a);
+  box.Extend(b);
+  box.min -= Vec2::Constant(margin);
+  box.max += Vec2::Constant(margin);
+  return box;
+}
+
+/// The indices of the indexed segments near a box, ascending (the order a scan over every
+/// segment would visit them: results and messages stay those of the scan, issue 30 item 5 —
+/// the scans were every wall against every wall).
+std::vector<std::size_t> Near(const SegmentIndex& index, const Box2& box) {
+  std::vector<std::size_t> out;
+  index.ForEachCandidate(box, [&](std::size_t i) { out.push_back(i); });
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
 }  // namespace
 
 WallGraph WallGraph::Build(const std::vector<Segment2>& walls, double snap_m) {
   WallGraph g;
+  // Nodes hashed by cells of snap_m: the first node (lowest index) within snap_m of p is in
+  // p's cell or a neighbour.
+  const double cell = std::max(snap_m, 1e-9);
+  std::map<std::pair<long long, long long>, std::vector<int>> cells;
+  auto key = [cell](const Vec2& p) {
+    return std::pair{static_cast<long long>(std::floor(p.x() / cell)),
+                     static_cast<long long>(std::floor(p.y() / cell))};
+  };
   auto node_of = [&](const Vec2& p) {
-    for (std::size_t i = 0; i < g.nodes.size(); ++i) {
-      if ((g.nodes[i] - p).norm() <= snap_m) return static_cast<int>(i);
+    const auto [cx, cy] = key(p);
+    int best = -1;
+    for (long long dx = -1; dx <= 1; ++dx) {
+      for (long long dy = -1; dy <= 1; ++dy) {
+        const auto it = cells.find({cx + dx, cy + dy});
+        if (it == cells.end()) continue;
+        for (const int i : it->second) {
+          if ((best < 0 || i < best) && (g.nodes[i] - p).norm() <= snap_m) best = i;
+        }
+      }
     }
+    if (best >= 0) return best;
     g.nodes.push_back(p);
+    cells[key(p)].push_back(static_cast<int>(g.nodes.size()) - 1);
     return static_cast<int>(g.nodes.size()) - 1;
   };
   std::vector<Segment2> kept;
@@ -48,9 +88,11 @@ WallGraph WallGraph::Build(const std::vector<Segment2>& walls, double snap_m) {
       edge_of_node[n] = e;
     }
   }
+  const SegmentIndex index(kept);
   for (int i = 0; i < E; ++i) {  // T-junctions and crossings
-    for (int j = i + 1; j < E; ++j) {
-      if (uf.Find(i) == uf.Find(j)) continue;
+    for (const std::size_t jj : Near(index, BoxAround(kept[i].a, kept[i].b, snap_m))) {
+      const int j = static_cast<int>(jj);
+      if (j <= i || uf.Find(i) == uf.Find(j)) continue;
       if (DistanceToSegment(kept[i].a, kept[j]) <= snap_m ||
           DistanceToSegment(kept[i].b, kept[j]) <= snap_m ||
           DistanceToSegment(kept[j].a, kept[i]) <= snap_m ||
@@ -89,11 +131,13 @@ std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
   if (zero > 1)
     problems.push_back({fmt::format("{} zero-length walls in all: ignored", zero), false});
   int overlaps = 0;
+  const SegmentIndex index(walls);
   for (std::size_t i = 0; i < walls.size(); ++i) {
     const Vec2 u = walls[i].b - walls[i].a;
     const double len = u.norm();
     if (len <= snap_m) continue;
-    for (std::size_t j = i + 1; j < walls.size(); ++j) {
+    for (const std::size_t j : Near(index, BoxAround(walls[i].a, walls[i].b, snap_m))) {
+      if (j <= i) continue;
       const Vec2 v = walls[j].b - walls[j].a;
       if (v.norm() <= snap_m || std::abs(Cross(u, v)) > 1e-6 * len * v.norm()) continue;
       if (std::abs(Cross(u / len, walls[j].a - walls[i].a)) > snap_m) continue;  // parallel, apart
@@ -116,9 +160,9 @@ std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
     if (walls[i].Length() <= snap_m) continue;
     for (const Vec2& end : {walls[i].a, walls[i].b}) {
       bool touches = false;
-      for (std::size_t j = 0; j < walls.size() && !touches; ++j) {
-        touches =
-            j != i && walls[j].Length() > snap_m && DistanceToSegment(end, walls[j]) <= snap_m;
+      for (const std::size_t j : Near(index, BoxAround(end, end, snap_m))) {
+        touches = touches ||
+                  (j != i && walls[j].Length() > snap_m && DistanceToSegment(end, walls[j]) <= snap_m);
       }
       if (!touches && dangling++ == 0) first = fmt::format("({:.2f}, {:.2f})", end.x(), end.y());
     }
@@ -309,12 +353,13 @@ std::vector<char> Touched(const SearchGrid& grid, const WallGraph& g,
                           const std::vector<NodeSequence>& sequences) {
   std::vector<char> touched(g.components, 0);
   const double reach = 0.75 * grid.spacing();
+  const SegmentIndex index(walls);
   for (const auto& s : sequences) {
     for (const Vec2& p : s.nodes) {
-      for (std::size_t e = 0; e < walls.size(); ++e) {
+      index.ForEachCandidate(BoxAround(p, p, reach), [&](std::size_t e) {
         if (!touched[g.component[e]] && DistanceToSegment(p, walls[e]) <= reach)
           touched[g.component[e]] = 1;
-      }
+      });
     }
   }
   return touched;
