@@ -5,22 +5,13 @@
 // a landmark's from its surveyed z.
 #include <gtest/gtest.h>
 
-#include <map>
-
+#include "set_levels.h"
 #include "trailmark/landmarks/landmark_estimator.h"
 
 namespace trailmark::landmarks {
 namespace {
 
-class SetLevels : public LevelSource {
- public:
-  std::optional<LevelBelief> NodeLevel(const std::string& node) const override {
-    const auto it = level.find(node);
-    if (it == level.end()) return std::nullopt;
-    return LevelBelief{it->second, 1.0, 3.0 * it->second, 0.01};
-  }
-  std::map<std::string, int> level;
-};
+using testing::SetLevels;
 
 MissionInfo TwoStoreys() {
   MissionInfo info;

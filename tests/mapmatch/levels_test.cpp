@@ -4,25 +4,16 @@
 // or is refused while the belief is confident when asked to; the estimates carry the level.
 #include <gtest/gtest.h>
 
-#include <map>
 #include <set>
 
 #include "trailmark/mapmatch/map_match_estimator.h"
+#include "set_levels.h"
 #include "trailmark/sim/multi_floor.h"
 
 namespace trailmark::mapmatch {
 namespace {
 
-/// The level each agent is on, as the test sets it (the height channel's role).
-class SetLevels : public LevelSource {
- public:
-  std::optional<LevelBelief> NodeLevel(const std::string& node) const override {
-    const auto it = level.find(node);
-    if (it == level.end()) return std::nullopt;
-    return LevelBelief{it->second, 1.0, 3.5 * it->second, 0.01};
-  }
-  std::map<std::string, int> level;
-};
+using testing::SetLevels;
 
 MissionInfo TwoStoreys() {
   MissionInfo info;
@@ -53,6 +44,7 @@ TEST(MapMatchLevels, TheBeliefChangesLevelInTheStairwellAndTheEstimatesCarryIt) 
   o.filter.particles = 500;
   MapMatchEstimator e(TwoStoreys(), Plans(), "plan", o);
   SetLevels levels;
+  levels.storey_m = 3.5;
   levels.level["ff1"] = 0;
   e.UseLevels(&levels);
   TimeS t = 0;
@@ -84,6 +76,7 @@ TEST(MapMatchLevels, AChangeOutsideAStairwellIsNotedOrRefused) {
     o.stairwell_veto_variance_m2 = veto;
     MapMatchEstimator e(TwoStoreys(), Plans(), "plan", o);
     SetLevels levels;
+    levels.storey_m = 3.5;
     levels.level["ff1"] = 0;
     e.UseLevels(&levels);
     TimeS t = 0;
@@ -112,6 +105,7 @@ TEST(MapMatchLevels, ASinglePlanNeverChangesLevelNorSetsTheFloor) {
   o.filter.particles = 300;
   MapMatchEstimator e(TwoStoreys(), BuildMultiFloorLevel(0), "plan", o);
   SetLevels levels;
+  levels.storey_m = 3.5;
   levels.level["ff1"] = 1;
   e.UseLevels(&levels);
   TimeS t = 0;

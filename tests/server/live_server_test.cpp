@@ -51,27 +51,30 @@ std::map<std::string, std::vector<Estimate>> ByNode(const std::vector<Estimate>&
   return by;
 }
 
-/// `exact_height`: z, szz and floor bit for bit too. A per-agent pipeline (pdr, ins) gets a
-/// device's steps and barometer readings as they arrive, not merged in time order: an estimate's
-/// height then uses the readings received so far, and only its horizontal part is the batch
-/// run's bit for bit.
-void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMission& sim,
-                                bool exact_height = true) {
-  SCOPED_TRACE(pipeline);
-  TempDir dir;
+/// The mission written into `dir`/mission (every level's plan of a multi-floor building).
+MissionDirectory WriteMission(const TempDir& dir, const SimulatedMission& sim) {
   if (sim.levels.empty()) {
     WriteMissionDirectory(dir.path() / "mission", sim.data, &sim.plan);
   } else {
     WriteMissionDirectory(dir.path() / "mission", sim.data, sim.levels);
   }
-  const MissionDirectory mission(dir.path() / "mission");
-  VectorSink batch;
-  trailmark::testing::RunNamed(pipeline, mission, {}, batch);
+  return MissionDirectory(dir.path() / "mission");
+}
 
+/// What a live server running `pipeline` on the mission in `dir` estimated from the mission's
+/// streams posted as its devices would (each device's rows of a second in one body), once every
+/// row was estimated (or a minute passed); `rows_estimated`/`refusals` get the server's counts.
+std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
+                              const SimulatedMission& sim, std::size_t* rows_posted,
+                              std::size_t* rows_estimated, std::size_t* refusals) {
   ServerOptions o;
   o.live_dir = dir.path() / "mission";
   o.journal_file = dir.path() / "journal.db";
   o.pipeline = pipeline;
+  if (!sim.levels.empty()) {
+    o.floor_plan = sim.plan;  // the ground floor's
+    o.floor_levels = sim.levels;
+  }
   o.port = 0;
   o.token = "t";
   o.log = [](const std::string&) {};
@@ -85,7 +88,6 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
   server.Start();
   const MissionData& d = sim.data;
   const TimeS end = d.truth.back().t + 1;
-  std::size_t rows = 0;
   for (TimeS t = -5; t < end; t += 1.0) {
     Post(server, "events.csv", d.events, t, t + 1);
     Post(server, "steps.csv", d.steps, t, t + 1);
@@ -95,14 +97,33 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
     Post(server, "rssi.csv", d.rssi, t, t + 1);
     Post(server, "baro.csv", d.baro, t, t + 1);
   }
-  rows = d.events.size() + d.steps.size() + d.imu.size() + d.ranges.size() + d.bearings.size() +
-         d.rssi.size() + d.baro.size();
+  const std::size_t rows = d.events.size() + d.steps.size() + d.imu.size() + d.ranges.size() +
+                           d.bearings.size() + d.rssi.size() + d.baro.size();
   const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (server.stats().estimated_rows.load() < rows && std::chrono::steady_clock::now() < give_up)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   server.Stop();
-  EXPECT_EQ(server.stats().estimated_rows.load(), rows);
-  EXPECT_EQ(server.stats().estimator_refusals.load(), 0u);
+  *rows_posted = rows;
+  *rows_estimated = server.stats().estimated_rows.load();
+  *refusals = server.stats().estimator_refusals.load();
+  return live;
+}
+
+/// `exact_height`: z, szz and floor bit for bit too. A per-agent pipeline (pdr, ins) gets a
+/// device's steps and barometer readings as they arrive, not merged in time order: an estimate's
+/// height then uses the readings received so far, and only its horizontal part is the batch
+/// run's bit for bit.
+void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMission& sim,
+                                bool exact_height = true) {
+  SCOPED_TRACE(pipeline);
+  TempDir dir;
+  const MissionDirectory mission = WriteMission(dir, sim);
+  VectorSink batch;
+  trailmark::testing::RunNamed(pipeline, mission, {}, batch);
+  std::size_t rows = 0, estimated = 0, refusals = 0;
+  const std::vector<Estimate> live = RunLive(dir, pipeline, sim, &rows, &estimated, &refusals);
+  EXPECT_EQ(estimated, rows);
+  EXPECT_EQ(refusals, 0u);
 
   const auto a = ByNode(batch.rows), b = ByNode(live);
   std::size_t compared = 0, held = 0, floors_differ = 0;
@@ -175,39 +196,13 @@ TEST(LiveServer, MapMatchingFollowsTheFloorsLive) {
   SimulatedMission sim = SimulateScenario("multi-floor", 13);
   sim.data.imu.clear();
   TempDir dir;
-  WriteMissionDirectory(dir.path() / "mission", sim.data, sim.levels);
-  const MissionDirectory mission(dir.path() / "mission");
+  const MissionDirectory mission = WriteMission(dir, sim);
   VectorSink batch;
   trailmark::testing::RunNamed("mapmatch", mission, {}, batch);
-
-  ServerOptions o;
-  o.live_dir = dir.path() / "mission";
-  o.journal_file = dir.path() / "journal.db";
-  o.pipeline = "mapmatch";
-  o.floor_plan = sim.levels[1].second;  // the ground floor's
-  o.floor_levels = sim.levels;
-  o.port = 0;
-  o.token = "t";
-  o.log = [](const std::string&) {};
-  std::mutex m;
-  std::vector<Estimate> live;
-  o.on_estimate = [&](const Estimate& e) {
-    std::lock_guard<std::mutex> lock(m);
-    live.push_back(e);
-  };
-  IncidentServer server(sim.data.info, {}, o);
-  server.Start();
+  std::size_t rows = 0, estimated = 0, refusals = 0;
+  const std::vector<Estimate> live = RunLive(dir, "mapmatch", sim, &rows, &estimated, &refusals);
+  ASSERT_EQ(estimated, rows);
   const MissionData& d = sim.data;
-  for (TimeS t = -5; t < d.truth.back().t + 1; t += 1.0) {
-    Post(server, "steps.csv", d.steps, t, t + 1);
-    Post(server, "baro.csv", d.baro, t, t + 1);
-  }
-  const std::size_t rows = d.steps.size() + d.baro.size();
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (server.stats().estimated_rows.load() < rows && std::chrono::steady_clock::now() < give_up)
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  server.Stop();
-  ASSERT_EQ(server.stats().estimated_rows.load(), rows);
   auto sorted = [](std::vector<Estimate> v) {
     std::stable_sort(v.begin(), v.end(), [](const Estimate& a, const Estimate& b) { return a.t < b.t; });
     return v;

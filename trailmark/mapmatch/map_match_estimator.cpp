@@ -284,9 +284,14 @@ MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, LevelPlans levels,
   m.levels.reserve(levels.size());  // the filters keep references into the levels
   for (auto& [level_number, plan] : levels) {
     const std::string prefix = multi ? fmt::format("level {}: ", level_number) : "";
-    Level l;
+    // In place from the start (reserved: no reallocation), so that the stairwells point into
+    // the plan for good; a level left out is popped.
+    Level& l = m.levels.emplace_back();
     l.level = level_number;
     l.plan = std::move(plan);
+    for (const Room& r : l.plan.rooms()) {
+      if (IsStairwell(r)) l.stairwells.push_back(&r);
+    }
     std::vector<std::string> notes;
     try {
       for (const auto& p : CheckFloorPlan(l.plan, m.o.sequences.wall_snap_m)) {
@@ -295,17 +300,13 @@ MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, LevelPlans levels,
       }
       // Where the searches of the level start: the entry (the first agent's start) on its
       // level, else the stairwell, else the building's corner.
-      std::vector<const Room*> stairwells;
-      for (const Room& r : l.plan.rooms()) {
-        if (IsStairwell(r)) stairwells.push_back(&r);
-      }
       std::optional<Vec2> entry;
       if (start && (!multi || LevelAt(info.floors, start->z()) == l.level))
         entry = start->head<2>();
-      if (!entry && !stairwells.empty()) {
+      if (!entry && !l.stairwells.empty()) {
         Vec2 c = Vec2::Zero();
-        for (const Vec2& v : stairwells.front()->ring) c += v;
-        entry = c / static_cast<double>(stairwells.front()->ring.size());
+        for (const Vec2& v : l.stairwells.front()->ring) c += v;
+        entry = c / static_cast<double>(l.stairwells.front()->ring.size());
       }
       if (!entry && start) entry = start->head<2>();
       if (!entry) {
@@ -323,24 +324,20 @@ MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, LevelPlans levels,
     } catch (const InputError& e) {
       // A level that cannot be matched on is left out, unless it is the one every agent
       // starts on when nothing says otherwise.
-      if (!multi || l.level == primary) throw;
+      if (!multi || level_number == primary) throw;
       m.setup.notes.push_back(fmt::format(
           "floor plan: level {} left out ({}): an agent on it keeps the plan of the level it came "
           "from",
-          l.level, e.what()));
+          level_number, e.what()));
+      m.levels.pop_back();
       continue;
     }
     m.setup.notes.insert(m.setup.notes.end(), notes.begin(), notes.end());
-    Level& kept = m.levels.emplace_back(std::move(l));
-    // Pointers into the plan's rooms, taken after the move.
-    for (const Room& r : kept.plan.rooms()) {
-      if (IsStairwell(r)) kept.stairwells.push_back(&r);
-    }
-    kept.grid = std::make_unique<SearchGrid>(kept.plan, m.o.sequences.grid);
-    for (const auto& s : kept.sequences) nodes += s.nodes.size();
+    l.grid = std::make_unique<SearchGrid>(l.plan, m.o.sequences.grid);
+    for (const auto& s : l.sequences) nodes += s.nodes.size();
     const double cell = m.o.sequences.grid.spacing_m;
-    inside_m2 += kept.grid->inside_count() * cell * cell;
-    m.setup.numbers["search_sequences"] += static_cast<double>(kept.sequences.size());
+    inside_m2 += l.grid->inside_count() * cell * cell;
+    m.setup.numbers["search_sequences"] += static_cast<double>(l.sequences.size());
   }
   m.setup.numbers["search_nodes"] = static_cast<double>(nodes);
   m.setup.numbers["inside_area_m2"] = inside_m2;
