@@ -167,6 +167,78 @@ TEST(HeightFilter, AFansPressureRiseIsNotAFloorChangeForAPhone) {
   EXPECT_LT(slow.height_m(), -1.5);
 }
 
+// Readings every 0.2 s over 7 s: a climb at r plus a jump J rising from t_j over `rise`.
+std::vector<std::pair<TimeS, double>> ClimbWithJump(double a, double r, double jump, int j,
+                                                    double rise) {
+  std::vector<std::pair<TimeS, double>> ty;
+  const TimeS t_end = 0.2 * 35;
+  const TimeS t_j = 0.2 * j;
+  for (int k = 0; k <= 35; ++k) {
+    const TimeS t = 0.2 * k;
+    const double ramp = t < t_j ? 0.0 : (rise > 0 ? std::min(1.0, (t - t_j) / rise) : 1.0);
+    ty.emplace_back(t, a + r * (t - t_end) + jump * ramp);
+  }
+  return ty;
+}
+
+TEST(PressureJumpFit, RecoversAClimbAndAJumpExactly) {
+  // Noise-free readings of the model itself: the fit is the model's parameters.
+  for (const double rise : {0.0, 0.5, 1.0, 2.0}) {
+    const auto ty = ClimbWithJump(4.0, 0.3, -2.5, 15, rise);
+    const auto fit = FitPressureJump(ty, 0.3, true);
+    ASSERT_TRUE(fit.has_value());
+    EXPECT_NEAR(fit->rate_mps, 0.3, 1e-9) << rise;
+    EXPECT_NEAR(fit->jump_m, -2.5, 1e-9) << rise;
+    EXPECT_NEAR(fit->level_end_m, 4.0 - 2.5, 1e-9) << rise;
+    EXPECT_NEAR(fit->jump_start, 0.2 * 15, 1e-12) << rise;
+    EXPECT_DOUBLE_EQ(fit->rise_s, rise);
+    EXPECT_LT(fit->sse_m2, 1e-18);
+    EXPECT_EQ(fit->used, ty.size());
+    // The variances are those of least squares: r's for 36 readings over 7 s is about
+    // sigma^2 / sum (t - mean)^2 and grows with the jump's columns; all positive.
+    EXPECT_GT(fit->rate_var, 0.09 / 150.0);
+    EXPECT_GT(fit->level_end_var_m2, 0.0);
+    EXPECT_GT(fit->jump_var_m2, 0.0);
+  }
+  // Level floor: the fit without a rate returns r = 0 with no variance.
+  const auto level = FitPressureJump(ClimbWithJump(1.0, 0.0, 2.0, 20, 0.5), 0.3, false);
+  ASSERT_TRUE(level.has_value());
+  EXPECT_EQ(level->rate_mps, 0.0);
+  EXPECT_EQ(level->rate_var, 0.0);
+  EXPECT_NEAR(level->jump_m, 2.0, 1e-9);
+  EXPECT_NEAR(level->level_end_m, 3.0, 1e-9);
+  // A lone spike of 16 m is left out and changes nothing.
+  auto spiked = ClimbWithJump(4.0, 0.3, -2.5, 15, 1.0);
+  spiked[25].second += 16.0;
+  const auto fit = FitPressureJump(spiked, 0.3, true);
+  ASSERT_TRUE(fit.has_value());
+  EXPECT_EQ(fit->used, spiked.size() - 1);
+  EXPECT_NEAR(fit->rate_mps, 0.3, 1e-9);
+  EXPECT_NEAR(fit->jump_m, -2.5, 1e-9);
+  // Too few readings: no fit.
+  EXPECT_FALSE(FitPressureJump({spiked.begin(), spiked.begin() + 7}, 0.3, true).has_value());
+}
+
+TEST(HeightFilter, AFanStartedOnTheStairsLeavesThePhonesClimbItsOwn) {
+  // Steps without height climb 3.5 m over 10 s; 3 s into the climb a fan raises the pressure
+  // by 0.3 hPa (-2.5 m) within a second. The climb of the seconds around the fan is the
+  // agent's (issue 26: it used to go into the offset with the fan's jump).
+  HeightFilter f(0.0, 0.05);
+  Random rng(23);
+  for (int k = 0; k < 400; ++k) {
+    const TimeS t = 0.2 * k;
+    const double z = std::clamp((t - 20.0) * 0.35, 0.0, 3.5);
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
+    BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
+    r.pressure_hpa += 0.3 * std::clamp(t - 23.0, 0.0, 1.0);
+    f.AddBaro(r);
+  }
+  EXPECT_EQ(f.Counters().at("baro_jumps"), 1);
+  EXPECT_NEAR(f.height_m(), 3.5, 0.35);
+  EXPECT_LE(std::abs(f.height_m() - 3.5), 3 * std::sqrt(f.height_variance_m2()));
+  EXPECT_EQ(f.Level(kSpecFloors).first, 1);
+}
+
 TEST(HeightFilter, ASpikeIsSkippedAndAStuckSensorIsNamed) {
   HeightFilter f(0.0, 0.05);
   Random rng(5);

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/ins/height.h"
 
+#include <Eigen/Dense>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -134,40 +135,93 @@ void HeightFilter::AddStep(const Step& step) {
   }
 }
 
+std::optional<PressureJumpFit> FitPressureJump(const std::vector<std::pair<TimeS, double>>& ty,
+                                               double sigma_m, bool with_rate) {
+  if (ty.size() < 8 || !(sigma_m > 0)) return std::nullopt;
+  // Spikes: further than 5 sigma from the median of the five readings around them.
+  std::vector<std::pair<TimeS, double>> pts;
+  for (std::size_t i = 0; i < ty.size(); ++i) {
+    const std::size_t lo = i >= 2 ? i - 2 : 0, hi = std::min(ty.size(), i + 3);
+    std::vector<double> near;
+    for (std::size_t k = lo; k < hi; ++k) near.push_back(ty[k].second);
+    std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
+    if (std::abs(ty[i].second - near[near.size() / 2]) <= 5 * sigma_m) pts.push_back(ty[i]);
+  }
+  if (pts.size() < 8) return std::nullopt;
+  const TimeS t_end = pts.back().first;
+  // Columns: a, J, and r when fitted; the model's row at time t for a jump from t_j over rise.
+  auto row = [&](TimeS t, TimeS t_j, double rise) {
+    Eigen::Vector3d a;
+    a << 1.0, t < t_j ? 0.0 : (rise > 0 ? std::min(1.0, (t - t_j) / rise) : 1.0), t - t_end;
+    return a;
+  };
+  std::optional<PressureJumpFit> best;
+  double best_sse = std::numeric_limits<double>::infinity();
+  for (const double rise : {0.0, 0.5, 1.0, 2.0}) {
+    for (std::size_t j = 1; j + 1 < pts.size(); ++j) {
+      const TimeS t_j = pts[j].first;
+      Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
+      Eigen::Vector3d Aty = Eigen::Vector3d::Zero();
+      for (const auto& [t, y] : pts) {
+        const Eigen::Vector3d a = row(t, t_j, rise);
+        AtA += a * a.transpose();
+        Aty += a * y;
+      }
+      if (!with_rate) AtA(2, 2) = 1.0, Aty[2] = 0.0;  // r = 0: decoupled, solved as 0
+      if (!with_rate) AtA(0, 2) = AtA(2, 0) = AtA(1, 2) = AtA(2, 1) = 0.0;
+      const Eigen::LDLT<Eigen::Matrix3d> ldlt(AtA);
+      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 1e-9)) continue;
+      const Eigen::Vector3d x = ldlt.solve(Aty);
+      double sse = 0;
+      for (const auto& [t, y] : pts) {
+        const double r = y - row(t, t_j, rise).dot(x);
+        sse += r * r;
+      }
+      if (sse < best_sse) {
+        best_sse = sse;
+        Eigen::Matrix3d C = ldlt.solve(Eigen::Matrix3d::Identity()) * sigma_m * sigma_m;
+        if (!with_rate) C(2, 2) = 0.0;
+        const Eigen::Vector3d end(1.0, 1.0, 0.0);
+        PressureJumpFit f;
+        f.jump_m = x[1];
+        f.jump_var_m2 = C(1, 1);
+        f.rate_mps = x[2];
+        f.rate_var = C(2, 2);
+        f.level_end_m = x[0] + x[1];
+        f.level_end_var_m2 = end.dot(C * end);
+        f.jump_start = t_j;
+        f.rise_s = rise;
+        f.used = pts.size();
+        f.sse_m2 = sse;
+        best = f;
+      }
+    }
+  }
+  return best;
+}
+
 bool HeightFilter::LevelShift(TimeS t, double y) {
   // Where the steps do not measure height, the filter follows the barometer closely and a fast
   // change of the air would pass the gate as a climb. The median of the last second against
   // the second before: a change faster than a person climbs (beyond 3 sigma of the two
-  // medians) is the air's. The readings of the next second settle it: then h goes back to
-  // where it was before the change and the offset takes the change.
+  // medians) is the air's. The readings of the next seconds settle it (SettleShift).
   if (shift_) {
-    shift_->settling.push_back(y);
-    if (t - shift_->since < kShiftWindowS) return true;  // settling: not used
-    std::vector<double> v = std::move(shift_->settling);
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    const double settled = v[v.size() / 2];
-    const double change = settled - shift_->before_m;
-    x_[0] = shift_->h_m;
-    x_[1] = settled - x_[0];
-    P_(1, 1) += options_.baro_sigma_m * options_.baro_sigma_m / static_cast<double>(v.size());
-    P_(0, 1) = P_(1, 0) = 0.0;
-    shift_.reset();
-    recent_.clear();
-    rejected_run_.clear();
-    Agree(t);
-    ++jumps_;
-    notes_.push_back({t, "", "", "repeats",
-                      fmt::format("barometer changed by {:+.2f} m ({:+.2f} hPa) within seconds, "
-                                  "faster than a person climbs: taken as a pressure change (a "
-                                  "door, ventilation), re-referenced",
-                                  change, -change / 8.3)});
+    shift_->readings.emplace_back(t, y);
+    if (t - shift_->since < kShiftSettleS) return true;  // settling: not used
+    SettleShift(t);
     return true;
   }
-  recent_.push_back({t, y, x_[0]});
-  while (!recent_.empty() && recent_.front().t < t - 2 * kShiftWindowS) recent_.pop_front();
+  recent_.push_back({t, y, x_[1], P_(1, 1)});
+  while (!recent_.empty() && recent_.front().t < t - kShiftHistoryS) recent_.pop_front();
   // Medians: a lone spike moves neither.
   std::vector<double> fresh, older;
-  for (const auto& r : recent_) (r.t > t - kShiftWindowS ? fresh : older).push_back(r.y);
+  for (const auto& r : recent_) {
+    if (r.t > t - kShiftWindowS) {
+      fresh.push_back(r.y);
+    } else if (r.t > t - 2 * kShiftWindowS) {
+      older.push_back(r.y);
+    }
+  }
   if (fresh.size() < 4 || older.size() < 4) return false;
   auto median = [](std::vector<double> v) {
     std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
@@ -180,11 +234,57 @@ bool HeightFilter::LevelShift(TimeS t, double y) {
                          std::sqrt(1.0 / static_cast<double>(fresh.size()) +
                                    1.0 / static_cast<double>(older.size()));
   if (std::abs(d) <= options_.max_vertical_speed_mps * kShiftWindowS + 3 * sigma_d) return false;
-  shift_ = Shift{t, before, recent_.front().h_m, {}};
-  for (const auto& r : recent_) {
-    if (r.t > t - kShiftWindowS) shift_->settling.push_back(r.y);
-  }
+  shift_ = Shift{t, before, recent_.front().offset_m, recent_.front().offset_var_m2, {}};
+  for (const auto& r : recent_) shift_->readings.emplace_back(r.t, r.y);
   return true;
+}
+
+void HeightFilter::SettleShift(TimeS t) {
+  // The window's readings as the agent's climb at a constant rate plus the air's jump J: the
+  // offset takes J on top of what it was before the window, and h is the fitted level now
+  // seen through that offset (a climb of those seconds stays the agent's; what the filter
+  // lagged behind the readings is not frozen into the offset).
+  const Shift shift = std::move(*shift_);
+  shift_.reset();
+  recent_.clear();
+  rejected_run_.clear();
+  // A climb only where the readings show one: a rate within 2 sigma of zero is a level floor
+  // (most of the time), and the jump is fitted without one.
+  auto fit = FitPressureJump(shift.readings, options_.baro_sigma_m, true);
+  if (fit && !(std::abs(fit->rate_mps) > kRateSignificance * std::sqrt(fit->rate_var))) {
+    fit = FitPressureJump(shift.readings, options_.baro_sigma_m, false);
+  }
+  double change = 0;
+  if (fit && std::abs(fit->rate_mps) <= options_.max_vertical_speed_mps) {
+    // J's variance: that of the level after it and of the level before it, which the fit
+    // shares; the level's own is a fair bound for both.
+    x_[1] = shift.offset_m + fit->jump_m;
+    P_(1, 1) = shift.offset_var_m2 + 2 * fit->level_end_var_m2;
+    x_[0] = fit->level_end_m - x_[1];
+    P_(0, 0) = P_(1, 1) + fit->level_end_var_m2;
+    P_(0, 1) = P_(1, 0) = -P_(1, 1);
+    change = fit->jump_m;
+  } else {
+    // No fit (too few readings) or a rate no person climbs at: the offset takes the change
+    // of the medians, h stays.
+    std::vector<double> after;
+    for (const auto& [ti, yi] : shift.readings) {
+      if (ti >= shift.since) after.push_back(yi);
+    }
+    std::nth_element(after.begin(), after.begin() + after.size() / 2, after.end());
+    change = after[after.size() / 2] - shift.before_m;
+    x_[1] = shift.offset_m + change;
+    P_(1, 1) = shift.offset_var_m2 + 2 * options_.baro_sigma_m * options_.baro_sigma_m /
+                                         static_cast<double>(after.size());
+    P_(0, 1) = P_(1, 0) = 0.0;
+  }
+  Agree(t);
+  ++jumps_;
+  notes_.push_back({t, "", "", "repeats",
+                    fmt::format("barometer changed by {:+.2f} m ({:+.2f} hPa) within seconds, "
+                                "faster than a person climbs: taken as a pressure change (a "
+                                "door, ventilation), re-referenced",
+                                change, -change / 8.3)});
 }
 
 void HeightFilter::Agree(TimeS t) {

@@ -120,17 +120,25 @@ class HeightFilter {
   };
   void Agree(TimeS t);
   bool LevelShift(TimeS t, double y);
-  static constexpr double kShiftWindowS = 1.0;
+  void SettleShift(TimeS t);
+  static constexpr double kShiftWindowS = 1.0;  ///< the medians compared to detect a change
+  /// The readings kept before a change (fitted with it) and awaited after it, and how many
+  /// sigma from zero a fitted climb rate must be to be a climb. Chosen on development seeds
+  /// 1-60 of `reproduce floors` only (docs/floors.md).
+  static constexpr double kShiftHistoryS = 4.0;
+  static constexpr double kShiftSettleS = 3.0;
+  static constexpr double kRateSignificance = 2.0;
   struct Recent {
     TimeS t;
-    double y, h_m;  ///< the reading's barometric height, h before it
+    double y;                ///< the reading's barometric height
+    double offset_m, offset_var_m2;  ///< b and its variance before it
   };
   std::deque<Recent> recent_;
   struct Shift {
     TimeS since;
     double before_m;  ///< the barometric height before the change (median)
-    double h_m;       ///< h before the change
-    std::vector<double> settling;
+    double offset_m, offset_var_m2;  ///< b before the window's first reading
+    std::vector<std::pair<TimeS, double>> readings;  ///< the window: before and settling
   };
   std::optional<Shift> shift_;  ///< a change of the air being settled
   double committed_since_agreement_ = 0;  ///< step height committed since the agreement
@@ -144,6 +152,28 @@ class HeightFilter {
               height_changes_ = 0, stuck_readings_ = 0;
   std::vector<IntegrityNote> notes_;
 };
+
+/// A change of the air seen by a barometer while its carrier may be climbing: the readings
+/// (t, barometric height) around it fitted as y(t) = a + r (t - t_end) + J ramp(t), a straight
+/// climb at rate r plus a jump J that rises linearly from t_j over `rise` (0: a step), t_j and
+/// rise chosen among the readings' times and {0, 0.5, 1, 2} s by least squares (readings further
+/// than 5 sigma from the median of their five neighbours are spikes and left out). Ours
+/// (issue 26: a fan started while a firefighter was on the stairs took the climb with it).
+struct PressureJumpFit {
+  double rate_mps = 0;           ///< r: the carrier's vertical speed over the window
+  double rate_var = 0;           ///< its variance, (m/s)^2
+  double jump_m = 0;             ///< J, as barometric height
+  double jump_var_m2 = 0;        ///< its variance
+  double level_end_m = 0;        ///< a + J: the fitted barometric height at the last reading
+  double level_end_var_m2 = 0;   ///< its variance
+  TimeS jump_start = 0;          ///< t_j
+  double rise_s = 0;
+  std::size_t used = 0;          ///< readings fitted (spikes left out)
+  double sse_m2 = 0;             ///< the residuals' sum of squares
+};
+/// with_rate false: r = 0 (a level floor). nullopt: fewer than 8 readings left.
+std::optional<PressureJumpFit> FitPressureJump(const std::vector<std::pair<TimeS, double>>& ty,
+                                               double sigma_m, bool with_rate = true);
 
 /// Every agent's height filter, created at its first row from its start (mission.json; else
 /// z = 0), and the height of every crumb at its drop. Annotates estimates: agents get z, szz
