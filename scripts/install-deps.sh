@@ -42,8 +42,8 @@ if ! command -v npm >/dev/null 2>&1; then
   $SUDO apt-get install -y -qq --no-install-recommends nodejs npm
 fi
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-if [ ! -d "$here/tests/browser/node_modules/playwright-core" ]; then
-  echo "[install] npm ci in tests/browser (playwright-core; the browser is Debian's chromium)"
+if [ ! -d "$here/tests/browser/node_modules/playwright-core" ] || [ ! -d "$here/tests/browser/node_modules/axe-core" ]; then
+  echo "[install] npm ci in tests/browser (playwright-core, axe-core; the browser is Debian's chromium)"
   (cd "$here/tests/browser" && npm ci --no-audit --no-fund --loglevel=error)
 fi
 if [ ! -f "$here/web/report/node_modules/chart.js/dist/chart.umd.js" ]; then

@@ -3,9 +3,12 @@
 // after a few seconds of replay the page lists the right firefighters near the positions the
 // API reports and keeps following them live (server-sent events); a click or the keyboard selects one; the
 // timeline scrubs back to the start of the incident and LIVE returns; on a tablet-sized
-// portrait screen the panel goes below the map; screenshots are written.
+// portrait screen the panel goes below the map; axe-core finds no serious or critical
+// accessibility violation on either layout (WCAG 2.1 AA and AAA colour contrast, a11y.mjs);
+// screenshots are written.
 // usage: node dashboard.mjs URL TOKEN EXPECTED_AGENTS SCREENSHOT.png
 import { chromium } from 'playwright-core';
+import { checkAccessibility, checkTheChecker } from './a11y.mjs';
 
 const [url, token, expected, shot] = process.argv.slice(2);
 const fail = (msg) => { console.error('FAIL: ' + msg); process.exit(1); };
@@ -17,7 +20,8 @@ const positions = (page) => page.$$eval('#list .node', (els) => els.map((e) => {
 }));
 const clock = (page) => page.$eval('#clock', (e) => e.textContent);
 try {
-  const page = await browser.newPage({ viewport: { width: 1280, height: 800 } });
+  await checkTheChecker(browser, fail);
+  const page = await browser.newPage({ viewport: { width: 1280, height: 800 }, bypassCSP: true });
   await page.goto(`${url}/?token=${token}`);
   await page.waitForSelector('#list .node', { timeout: 10000 });
   await page.waitForTimeout(3000);
@@ -52,6 +56,7 @@ try {
     await page.click(`#list .node[data-id="${names[0]}"]`);
   }
   await page.screenshot({ path: shot });
+  const minorLaptop = await checkAccessibility(page, 'laptop layout, one firefighter selected', fail);
   // Timeline: back to the start shows the firefighters where they were then (at the entry).
   await page.$eval('#timeline', (el) => { el.value = el.min; el.dispatchEvent(new Event('input')); });
   await page.waitForTimeout(300);
@@ -64,7 +69,7 @@ try {
   await page.waitForTimeout(800);
   if (!/^live/.test(await clock(page))) fail('LIVE did not return to live mode');
   // Tablet, portrait: the panel goes below the map.
-  const tablet = await browser.newPage({ viewport: { width: 768, height: 1024 }, hasTouch: true });
+  const tablet = await browser.newPage({ viewport: { width: 768, height: 1024 }, hasTouch: true, bypassCSP: true });
   await tablet.goto(`${url}/?token=${token}`);
   await tablet.waitForSelector('#list .node', { timeout: 10000 });
   const [map, side] = await Promise.all([tablet.$eval('#map', (e) => e.getBoundingClientRect().toJSON()),
@@ -72,11 +77,12 @@ try {
   if (!(side.top >= map.bottom - 1 && map.width > 700)) fail(`tablet layout: map ${JSON.stringify(map)}, panel ${JSON.stringify(side)}`);
   await tablet.tap(`#list .node[data-id="${names[1] ?? names[0]}"]`);
   await tablet.screenshot({ path: shot.replace(/\.png$/, '-tablet.png') });
+  const minorTablet = await checkAccessibility(tablet, 'tablet layout', fail);
   // Without the token: no data.
   const denied = await browser.newPage();
   const resp = await denied.goto(`${url}/?token=wrong`);
   if (resp.status() !== 401) fail(`a wrong token got HTTP ${resp.status()}`);
-  console.log(`dashboard: ${names.length} firefighters (${names.join(', ')}) live, ${names[0]} selected, timeline scrubbed, tablet layout, screenshots ${shot}`);
+  console.log(`dashboard: ${names.length} firefighters (${names.join(', ')}) live, ${names[0]} selected, timeline scrubbed, tablet layout, axe-core: no serious violation (others: laptop ${minorLaptop}; tablet ${minorTablet}), screenshots ${shot}`);
 } finally {
   await browser.close();
 }

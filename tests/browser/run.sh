@@ -8,7 +8,7 @@ TM="$1"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 dir=$(mktemp -d)
 trap 'kill $pid 2>/dev/null || true; rm -rf "$dir"' EXIT
-[ -d "$here/node_modules/playwright-core" ] || { echo "FAIL: run scripts/install-deps.sh (npm ci in tests/browser)"; exit 1; }
+[ -d "$here/node_modules/playwright-core" ] && [ -d "$here/node_modules/axe-core" ] || { echo "FAIL: run scripts/install-deps.sh (npm ci in tests/browser)"; exit 1; }
 "$TM" simulate training-building --seed 2 --out "$dir/m" > /dev/null
 "$TM" serve --replay "$dir/m" --pipeline pdr --speed 10 --port 0 --token br0wser > "$dir/serve.log" 2>&1 &
 pid=$!

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: MIT
-# Builds the libFuzzer target with clang (ASan + UBSan) and runs it for a bounded time on a
-# seed corpus of valid and broken files.
+# Builds the libFuzzer targets with clang (ASan + UBSan) and runs each for a bounded time on a
+# seed corpus of valid and broken files: the readers (csv_fuzz) and the converters of recorded
+# sets (convert_fuzz).
 set -euo pipefail
 CXX="$1"; SRC="$2"; OUT="$3"; SECONDS_LIMIT="${4:-20}"
 mkdir -p "$OUT/corpus"
@@ -13,11 +14,18 @@ sources=(core/types.cpp core/mission.cpp io/csv.cpp io/streams.cpp io/mission_io
          geometry/segment.cpp geometry/segment_index.cpp geometry/floor_plan.cpp)
 srcs=()
 for s in "${sources[@]}"; do srcs+=("$SRC/trailmark/$s"); done
-if [ ! -x "$OUT/csv_fuzz" ] || [ -n "$(find "$SRC/trailmark/io" "$SRC/tests/fuzz" -newer "$OUT/csv_fuzz" -name '*.*' | head -1)" ]; then
-  "$CXX" -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -DFMT_HEADER_ONLY \
-    -I"$SRC" -I"$gen" -isystem /usr/include/eigen3 \
-    "$SRC/tests/fuzz/csv_fuzz.cpp" "${srcs[@]}" -o "$OUT/csv_fuzz"
-fi
+for target in csv_fuzz convert_fuzz; do
+  if [ ! -x "$OUT/$target" ] || [ -n "$(find "$SRC/trailmark/io" "$SRC/tests/fuzz" -newer "$OUT/$target" -name '*.*' | head -1)" ]; then
+    extra=()
+    if [ "$target" = convert_fuzz ]; then
+      extra=("$SRC/trailmark/io/convert_foot_imu.cpp" "$SRC/trailmark/io/convert_pyshoe.cpp"
+             "$SRC/trailmark/io/convert_wrld.cpp")
+    fi
+    "$CXX" -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -DFMT_HEADER_ONLY \
+      -I"$SRC" -I"$gen" -isystem /usr/include/eigen3 \
+      "$SRC/tests/fuzz/$target.cpp" "${srcs[@]}" "${extra[@]}" -o "$OUT/$target"
+  fi
+done
 printf 't,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n' > "$OUT/corpus/imu.csv"
 printf 't0,t1,agent,dx,dy,sxx,syy\n0,1,ff1,0.5,0,0.01,0.01\n1,2,ff1,nan,0,,\n' > "$OUT/corpus/steps.csv"
 printf 't,rx,tx,rssi_dbm\n0,a,b,-50\n"q,x",a,b,1\n' > "$OUT/corpus/rssi.csv"
@@ -25,6 +33,15 @@ printf '{"nodes":[{"id":"b","kind":"base","position":[0,0,0]}],"radio":{"alpha_d
 printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"kind":"wall"},"geometry":{"type":"LineString","coordinates":[[0,0],[1,0]]}}]}' > "$OUT/corpus/p.json"
 # Regressions the fuzzer found: a geometry whose "type" is an array (2026-12-02).
 printf '{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"kind":"wall"},"geometry":{"type":[[0,0],[1,0]]}}]}' > "$OUT/corpus/p-type-array.json"
+# The converters' corpus: valid files of each set, split into files at "\n==\n".
+conv="$OUT/convert-corpus"
+mkdir -p "$conv"
+printf '0.1,0.2,9.8,0.01,0.02,0.03\n0.1,0.2,9.8,0.01,0.02,0.03\n' > "$conv/openshoe.txt"
+printf 't_s,ax_mps2,ay_mps2,az_mps2,gx_radps,gy_radps,gz_radps,gt_x_m,gt_y_m,gt_z_m,zv_best\n0,0,0,9.8,0,0,0,0,0,0,1\n' > "$conv/pyshoe.csv"
+printf 't_s,ax_mps2,ay_mps2,az_mps2,gx_radps,gy_radps,gz_radps\n0,0,0,9.8,0,0,0\n\n==\nt_s,x_m,y_m\n0,0,0\n' > "$conv/llio.csv"
+printf 'time_index,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0,0,0,9.8,0,0,0\n\n==\ntime_index,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0,0,0,9.8,0,0,0\n\n==\ntime_index,pos_left_x,pos_left_y,pos_left_z,pos_right_x,pos_right_y,pos_right_z\n0,0,0,0,0.2,0,0\n' > "$conv/dualfoot.csv"
+printf '{"id":"b","location":{"type":"Point","coordinates":[-6.3,53.3]},"levels":[{"id":"l0","filename":"level.json","z_order":0}]}\n==\n{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"type":"wall"},"geometry":{"type":"Polygon","coordinates":[[[-6.3,53.3],[-6.2999,53.3],[-6.2999,53.3001],[-6.3,53.3]]]}},{"type":"Feature","properties":{"type":"room","name":"A"},"geometry":{"type":"Polygon","coordinates":[[[-6.3,53.3],[-6.2999,53.3],[-6.2999,53.3001],[-6.3,53.3]]]}}]}' > "$conv/wrld.json"
 cd "$OUT"
 ./csv_fuzz -max_total_time="$SECONDS_LIMIT" -max_len=4096 -timeout=10 -print_final_stats=1 corpus 2>&1 | tail -5
-echo "fuzz: 1 passed, 0 failed"
+./convert_fuzz -max_total_time="$SECONDS_LIMIT" -max_len=4096 -timeout=10 -print_final_stats=1 convert-corpus 2>&1 | tail -5
+echo "fuzz: 2 passed, 0 failed"
