@@ -5,10 +5,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <map>
 #include <numeric>
 #include <stdexcept>
+#include <unordered_set>
 
 #include "trailmark/geometry/segment_index.h"
 
@@ -418,15 +420,16 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
     if (w.Length() > options.wall_snap_m) walls.push_back(w);
   }
   const WallGraph g = WallGraph::Build(walls, options.wall_snap_m);
+  // Each component's wall length, summed once (in the walls' order: the same sums as before).
+  std::vector<double> component_length(static_cast<std::size_t>(g.components), 0.0);
+  for (std::size_t e = 0; e < walls.size(); ++e) component_length[g.component[e]] += walls[e].Length();
   for (int extra = 0; extra < options.max_extra_sequences; ++extra) {
     const std::vector<char> touched = Touched(grid, g, walls, sequences);
     int component = -1;
     double longest = 0;
     for (int k = 0; k < g.components; ++k) {
       if (touched[k]) continue;
-      double len = 0;
-      for (std::size_t e = 0; e < walls.size(); ++e)
-        len += g.component[e] == k ? walls[e].Length() : 0.0;
+      const double len = component_length[k];
       if (len > longest) longest = len, component = k;
     }
     if (component < 0 || longest < options.grid.spacing_m) break;
@@ -447,20 +450,33 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
     if (!Touched(grid, g, walls, sequences)[component]) break;  // could not get round it
   }
   // Enclosed parts the searches never enter (rooms closed off, sec. V-A): a sequence each.
-  for (int extra = 0; extra < options.max_extra_sequences; ++extra) {
-    std::optional<SearchGrid::Cell> unreached;
-    for (const Vec2& c : grid.InsideCenters()) {
-      bool near = false;
-      for (const auto& s : sequences) {
-        for (const Vec2& p : s.nodes) {
-          if ((p - c).squaredNorm() <= 2.25 * options.grid.spacing_m * options.grid.spacing_m) {
-            near = true;
-            break;
+  // The cells whose centre lies within 1.5 spacings of a node of a sequence, marked once per
+  // sequence (such a centre is at most two cells from the node's cell).
+  const double near_m2 = 2.25 * options.grid.spacing_m * options.grid.spacing_m;
+  std::unordered_set<std::int64_t> near_cells;
+  auto key = [](const SearchGrid::Cell& c) {
+    return (static_cast<std::int64_t>(c.ix) << 32) ^ static_cast<std::uint32_t>(c.iy);
+  };
+  std::size_t marked = 0;
+  auto mark_new_sequences = [&] {
+    for (; marked < sequences.size(); ++marked) {
+      for (const Vec2& p : sequences[marked].nodes) {
+        const SearchGrid::Cell at = grid.CellOf(p);
+        for (int dy = -2; dy <= 2; ++dy) {
+          for (int dx = -2; dx <= 2; ++dx) {
+            const SearchGrid::Cell c{at.ix + dx, at.iy + dy};
+            if ((p - grid.Center(c)).squaredNorm() <= near_m2) near_cells.insert(key(c));
           }
         }
-        if (near) break;
       }
-      if (near) continue;
+    }
+  };
+  const std::vector<Vec2> inside_centers = grid.InsideCenters();
+  for (int extra = 0; extra < options.max_extra_sequences; ++extra) {
+    std::optional<SearchGrid::Cell> unreached;
+    mark_new_sequences();
+    for (const Vec2& c : inside_centers) {
+      if (near_cells.count(key(grid.CellOf(c))) != 0) continue;
       // Start where a wall is on the right.
       const SearchGrid::Cell cell = grid.CellOf(c);
       if (HeadingAlongWall(grid, cell)) {
