@@ -14,6 +14,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "server/gated_http_server.h"
 #include "server/journal.h"
 #include "trailmark_generated/version.h"
 #include "trailmark/core/error.h"
@@ -25,6 +26,7 @@ namespace trailmark::server {
 
 struct IncidentServer::Http {
   std::unique_ptr<httplib::Server> server;  ///< an httplib::SSLServer for HTTPS
+  GatedHttpServer* gated = nullptr;         ///< the server, for plain HTTP
 };
 
 struct IncidentServer::Live {
@@ -202,6 +204,11 @@ nlohmann::json IncidentServer::StatsJson() {
                       {"estimated_rows", stats_.estimated_rows.load()},
                       {"estimator_refusals", stats_.estimator_refusals.load()},
                       {"events_sent", stats_.events_sent.load()}};
+  if (http_ && http_->gated != nullptr) {
+    const GateStats& g = http_->gated->gate_stats();
+    j["connections_refused_per_address"] = g.refused_per_address.load();
+    j["header_deadlines_missed"] = g.header_deadlines.load();
+  }
   if (const MqttStats* m = mqtt_stats()) {
     j["mqtt"] = {{"received", m->received.load()},
                  {"ingested", m->ingested.load()},
@@ -226,7 +233,17 @@ void IncidentServer::Start() {
   if (options_.tls_cert_file.empty() != options_.tls_key_file.empty())
     throw std::invalid_argument("serve: HTTPS needs both a certificate and its key");
   if (options_.tls_cert_file.empty()) {
-    http_->server = std::make_unique<httplib::Server>();
+    ConnectionLimits limits;
+    limits.header_deadline_s = options_.header_deadline_s;
+    limits.max_per_address = options_.max_connections_per_address;
+    std::string why;
+    if (!limits.IsValid(&why)) throw std::invalid_argument("serve: " + why);
+    auto log = options_.log;
+    auto gated = std::make_unique<GatedHttpServer>(limits, [log](const std::string& line) {
+      if (log) log(line);
+    });
+    http_->gated = gated.get();
+    http_->server = std::move(gated);
   } else {
     for (const auto& f : {options_.tls_cert_file, options_.tls_key_file}) {
       if (!std::filesystem::exists(f)) throw std::invalid_argument("serve: " + f + ": no such file");
@@ -459,6 +476,11 @@ void IncidentServer::Start() {
     mqtt_->Start();
   }
   http_thread_ = std::thread([this] { http_->server->listen_after_bind(); });
+  // Until its accept loop runs, the library's stop() does nothing (it only stops a running
+  // server): a Stop() right after Start() would wait for ever on the HTTP thread.
+  for (int i = 0; i < 10000 && !http_->server->is_running(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
   replay_thread_ = std::thread([this] { live_ ? LiveLoop() : ReplayLoop(); });
 }
 

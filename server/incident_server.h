@@ -66,6 +66,11 @@ struct ServerOptions {
   /// Server-sent events: at most one state message per client this often (coalescing).
   double events_min_interval_s = 0.01;
   std::size_t http_threads = 64;  ///< each connected device and dashboard holds one
+  /// Plain HTTP: a request's line and headers must arrive within this (s) of its first byte,
+  /// and one client address may hold at most this many connections at once (0: no cap; a
+  /// gateway relaying many devices from one address needs more). Not applied with TLS.
+  double header_deadline_s = 10.0;
+  std::size_t max_connections_per_address = 32;  ///< half the default http_threads
   /// Receives every rejection reason (also counted; the latest are in /api/stats); default:
   /// a line on stderr.
   std::function<void(const std::string&)> log;

@@ -220,6 +220,8 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   }
   so.token = "load-test";
   so.http_threads = static_cast<std::size_t>(o.firefighters) + 8;
+  // Every simulated device connects from loopback: one address for all of them.
+  so.max_connections_per_address = 0;
   std::atomic<std::size_t> logged{0};
   so.log = [&logged](const std::string&) { ++logged; };
   IncidentServer server(info, {}, so);

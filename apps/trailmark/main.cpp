@@ -294,6 +294,11 @@ int main(int argc, char** argv) {
                     "address to listen on (default 127.0.0.1, loopback only)");
   serve->add_option("--token", serve_options.token,
                     "access token (default: $TRAILMARK_TOKEN, else a random one)");
+  serve->add_option("--header-deadline", serve_options.header_deadline_s,
+                    "plain HTTP: seconds a request's line and headers may take (default 10)")
+      ->check(CLI::PositiveNumber);
+  serve->add_option("--max-connections-per-address", serve_options.max_connections_per_address,
+                    "plain HTTP: connections one client address may hold (default 32; 0: no cap)");
   serve->add_flag("--exit-after-replay", serve_options.exit_after_replay,
                   "stop when the replay has ended");
 

@@ -66,6 +66,8 @@ int ServeLive(const ServeOptions& o) {
   so.tls_cert_file = o.tls_cert;
   so.tls_key_file = o.tls_key;
   so.bind = o.bind;
+  so.header_deadline_s = o.header_deadline_s;
+  so.max_connections_per_address = o.max_connections_per_address;
   so.port = o.port;
   so.token = o.token.empty() ? RandomToken() : o.token;
   so.alerts.map_error = spec.raises_map_alerts;
@@ -144,6 +146,8 @@ int Serve(const ServeOptions& o) {
   sink.rows = sink.TakeSortedByTime();
   server::ServerOptions so;
   so.bind = o.bind;
+  so.header_deadline_s = o.header_deadline_s;
+  so.max_connections_per_address = o.max_connections_per_address;
   so.port = o.port;
   so.tls_cert_file = o.tls_cert;
   so.tls_key_file = o.tls_key;

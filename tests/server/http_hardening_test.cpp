@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // Strangers cannot stall or bloat the live server (issue 30, item 2): the token is checked on
-// the headers before any body is read, the size limit holds for chunked bodies, and the token
-// comparison does not depend on where the first wrong byte is. Raw sockets on loopback, so the
+// the headers before any body is read, the size limit holds for chunked bodies, the token
+// comparison does not depend on where the first wrong byte is, a request's headers have a
+// deadline and one client address a cap on its connections. Raw sockets on loopback, so the
 // test sends exactly what a hostile client would (headers alone, endless chunks).
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -12,8 +13,12 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <memory>
 #include <string>
+#include <thread>
+#include <vector>
 
+#include "server/connection_limits.h"
 #include "server/incident_server.h"
 #include "test_util.h"
 #include "trailmark/io/mission_io.h"
@@ -26,7 +31,15 @@ using trailmark::testing::TempDir;
 
 class Connection {
  public:
-  explicit Connection(int port) : fd_(socket(AF_INET, SOCK_STREAM, 0)) {
+  /// `from`: the client's loopback address (Linux answers all of 127.0.0.0/8), so that one test
+  /// can be several clients.
+  explicit Connection(int port, const char* from = nullptr) : fd_(socket(AF_INET, SOCK_STREAM, 0)) {
+    if (from != nullptr && fd_ >= 0) {
+      sockaddr_in local{};
+      local.sin_family = AF_INET;
+      inet_pton(AF_INET, from, &local.sin_addr);
+      if (bind(fd_, reinterpret_cast<sockaddr*>(&local), sizeof local) != 0) return;
+    }
     sockaddr_in a{};
     a.sin_family = AF_INET;
     a.sin_port = htons(static_cast<std::uint16_t>(port));
@@ -37,6 +50,13 @@ class Connection {
     if (fd_ >= 0) close(fd_);
   }
   bool connected() const { return connected_; }
+  /// False once the server has closed the connection (or reset it).
+  bool Open() {
+    pollfd p{fd_, POLLIN, 0};
+    if (poll(&p, 1, 0) <= 0) return true;
+    char c;
+    return recv(fd_, &c, 1, MSG_PEEK | MSG_DONTWAIT) > 0;
+  }
   /// False once the server has closed its side (it refused the rest).
   bool Send(const std::string& s) {
     return send(fd_, s.data(), s.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(s.size());
@@ -65,7 +85,9 @@ class Connection {
 
 class LiveServerFixture : public ::testing::Test {
  protected:
-  void SetUp() override {
+  void SetUp() override { Start(); }
+  void Start(double header_deadline_s = 10.0, std::size_t per_address = 32,
+             std::size_t threads = 64) {
     const SimulatedMission sim = SimulateScenario("office-loop", 1);
     WriteMissionDirectory(dir_.path() / "mission", sim.data, &sim.plan);
     ServerOptions o;
@@ -75,9 +97,18 @@ class LiveServerFixture : public ::testing::Test {
     o.port = 0;
     o.token = "s3cret-token";
     o.max_request_bytes = 64 * 1024;
+    o.header_deadline_s = header_deadline_s;
+    o.max_connections_per_address = per_address;
+    o.http_threads = threads;
     o.log = [](const std::string&) {};
     server_ = std::make_unique<IncidentServer>(sim.data.info, std::vector<Estimate>{}, o);
     server_->Start();
+  }
+  void Restart(double header_deadline_s, std::size_t per_address, std::size_t threads) {
+    server_->Stop();
+    server_.reset();
+    dir_ = TempDir();
+    Start(header_deadline_s, per_address, threads);
   }
   void TearDown() override { server_->Stop(); }
   TempDir dir_;
@@ -136,6 +167,83 @@ TEST_F(LiveServerFixture, APathOutOfTheDashboardIsNotServed) {
     EXPECT_TRUE(reply.find(" 404 ") != std::string::npos || reply.find(" 400 ") != std::string::npos)
         << path << ": " << reply.substr(0, 120);
   }
+}
+
+bool Answered(Connection& c, const char* status) {
+  return c.Receive(std::chrono::milliseconds(3000)).find(status) != std::string::npos;
+}
+
+const std::string kHealth = "GET /api/health HTTP/1.1\r\nHost: x\r\n\r\n";
+
+TEST_F(LiveServerFixture, HeadersThatComeTooSlowlyAreCutOff) {
+  // A byte every 0.3 s keeps within the 5 s per-read timeout for ever; the 1 s deadline of the
+  // whole head closes the connection.
+  Restart(1.0, 32, 64);
+  Connection slow(server_->port());
+  ASSERT_TRUE(slow.connected());
+  const std::string head = "GET /api/health HTTP/1.1\r\nHost: x\r\nX-Slow: aaaaaaaaaaaaaaaa\r\n";
+  const auto t0 = std::chrono::steady_clock::now();
+  bool cut = false;
+  for (std::size_t i = 0; i < head.size() && !cut; ++i) {
+    cut = !slow.Send(head.substr(i, 1));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    cut = cut || !slow.Open();
+  }
+  const auto took = std::chrono::steady_clock::now() - t0;
+  EXPECT_TRUE(cut) << "the slow head was never cut off";
+  EXPECT_LT(took, std::chrono::milliseconds(4000));
+  EXPECT_GE(took, std::chrono::milliseconds(900));
+  // A client that sends its head at once is served on the same server.
+  Connection quick(server_->port());
+  ASSERT_TRUE(quick.Send(kHealth));
+  EXPECT_TRUE(Answered(quick, " 200 "));
+}
+
+TEST_F(LiveServerFixture, OneAddressCannotTakeEveryWorker) {
+  // 8 workers, 3 connections per address. A stranger (127.0.0.2) opens 12 connections that
+  // send half a head and stall: 3 hold workers, the others are answered 503 at once. A device
+  // from 127.0.0.1 is served meanwhile.
+  Restart(30.0, 3, 8);
+  std::vector<std::unique_ptr<Connection>> stranger;
+  for (int i = 0; i < 12; ++i) {
+    stranger.push_back(std::make_unique<Connection>(server_->port(), "127.0.0.2"));
+    ASSERT_TRUE(stranger.back()->connected());
+    ASSERT_TRUE(stranger.back()->Send("GET /api/health HTTP/1.1\r\nHost: x\r\n"));
+  }
+  std::size_t busy = 0;
+  for (auto& c : stranger) busy += c->Receive(std::chrono::milliseconds(1500)).find(" 503 ") != std::string::npos;
+  EXPECT_EQ(busy, 9u);
+  const std::string stats = server_->StatsJson().dump();
+  EXPECT_NE(stats.find("\"connections_refused_per_address\":9"), std::string::npos) << stats;
+  const auto t0 = std::chrono::steady_clock::now();
+  Connection device(server_->port(), "127.0.0.1");
+  ASSERT_TRUE(device.Send(kHealth));
+  EXPECT_TRUE(Answered(device, " 200 "));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(2000));
+  // Closing the stranger's connections frees its places (as soon as the server sees them close).
+  stranger.clear();
+  bool served = false;
+  for (int i = 0; i < 30 && !served; ++i) {
+    Connection again(server_->port(), "127.0.0.2");
+    served = again.Send(kHealth) && Answered(again, " 200 ");
+    if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(served);
+}
+
+TEST(AddressCounter, CountsPlacesPerAddress) {
+  AddressCounter c(2);
+  EXPECT_TRUE(c.Admit("a"));
+  EXPECT_TRUE(c.Admit("a"));
+  EXPECT_FALSE(c.Admit("a"));
+  EXPECT_TRUE(c.Admit("b"));
+  EXPECT_EQ(c.Open("a"), 2u);
+  c.Release("a");
+  EXPECT_TRUE(c.Admit("a"));
+  c.Release("x");  // unknown: nothing happens
+  EXPECT_EQ(c.Open("x"), 0u);
+  AddressCounter unlimited(0);
+  for (int i = 0; i < 1000; ++i) EXPECT_TRUE(unlimited.Admit("a"));
 }
 
 TEST(SameSecret, ComparesWholeSecretsOnly) {

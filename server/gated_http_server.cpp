@@ -1,0 +1,255 @@
+// SPDX-License-Identifier: MIT
+#include "server/gated_http_server.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <string_view>
+
+namespace trailmark::server {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// The address and port of a socket's peer (`peer`) or its own end.
+bool Endpoint(socket_t sock, bool peer, std::string& ip, int& port) {
+  sockaddr_storage a{};
+  socklen_t len = sizeof a;
+  const int rc = peer ? getpeername(sock, reinterpret_cast<sockaddr*>(&a), &len)
+                      : getsockname(sock, reinterpret_cast<sockaddr*>(&a), &len);
+  if (rc != 0) return false;
+  char text[INET6_ADDRSTRLEN] = {};
+  if (a.ss_family == AF_INET) {
+    const auto* v4 = reinterpret_cast<const sockaddr_in*>(&a);
+    inet_ntop(AF_INET, &v4->sin_addr, text, sizeof text);
+    port = ntohs(v4->sin_port);
+  } else if (a.ss_family == AF_INET6) {
+    const auto* v6 = reinterpret_cast<const sockaddr_in6*>(&a);
+    inet_ntop(AF_INET6, &v6->sin6_addr, text, sizeof text);
+    port = ntohs(v6->sin6_port);
+  } else {
+    return false;
+  }
+  ip = text;
+  return true;
+}
+
+/// poll() for `events` up to `timeout`; > 0 when ready.
+int Wait(socket_t sock, short events, std::chrono::milliseconds timeout) {
+  pollfd p{sock, events, 0};
+  const auto ms = std::max<long long>(0, timeout.count());
+  int rc;
+  do {
+    rc = poll(&p, 1, static_cast<int>(std::min<long long>(ms, 1 << 30)));
+  } while (rc < 0 && errno == EINTR);
+  return rc;
+}
+
+std::chrono::milliseconds Ms(time_t sec, time_t usec) {
+  return std::chrono::milliseconds(sec * 1000 + usec / 1000);
+}
+
+/// The library's socket stream, with a deadline for each request's line and headers: reads
+/// before the blank line that ends them wait at most until the deadline; after it, the
+/// library's per-read timeout as before. One per connection: bytes read ahead (a pipelined
+/// request) stay for the next request. Reads are buffered as the library's own stream's are
+/// (its header parser asks for one byte at a time).
+class DeadlineStream final : public httplib::Stream {
+ public:
+  DeadlineStream(socket_t sock, std::chrono::milliseconds read_timeout,
+                 std::chrono::milliseconds write_timeout)
+      : sock_(sock), read_timeout_(read_timeout), write_timeout_(write_timeout) {}
+
+  /// A new request starts (its first byte is here or buffered): its head is due by `deadline`.
+  void BeginRequest(Clock::time_point deadline) {
+    deadline_ = deadline;
+    matched_ = 0;
+    head_done_ = false;
+    deadline_missed_ = false;
+  }
+  bool deadline_missed() const { return deadline_missed_; }
+  bool buffered() const { return begin_ < end_; }
+
+  bool is_readable() const override { return buffered() || Wait(sock_, POLLIN, ReadWait()) > 0; }
+  bool is_writable() const override { return Wait(sock_, POLLOUT, write_timeout_) > 0; }
+
+  ssize_t read(char* ptr, size_t size) override {
+    if (size == 0) return 0;
+    if (!buffered()) {
+      if (Wait(sock_, POLLIN, ReadWait()) <= 0) {
+        if (!head_done_ && Clock::now() >= deadline_) deadline_missed_ = true;
+        return -1;
+      }
+      ssize_t n;
+      do {
+        n = recv(sock_, buffer_, sizeof buffer_, 0);
+      } while (n < 0 && errno == EINTR);
+      if (n <= 0) return n;
+      begin_ = 0;
+      end_ = static_cast<std::size_t>(n);
+    }
+    const std::size_t n = std::min(size, end_ - begin_);
+    std::memcpy(ptr, buffer_ + begin_, n);
+    begin_ += n;
+    if (!head_done_) Scan(std::string_view(ptr, n));
+    return static_cast<ssize_t>(n);
+  }
+
+  ssize_t write(const char* ptr, size_t size) override {
+    if (!is_writable()) return -1;
+    ssize_t n;
+    do {
+      n = send(sock_, ptr, size, MSG_NOSIGNAL);
+    } while (n < 0 && errno == EINTR);
+    return n;
+  }
+
+  void get_remote_ip_and_port(std::string& ip, int& port) const override {
+    if (!Endpoint(sock_, true, ip, port)) ip.clear(), port = 0;
+  }
+  void get_local_ip_and_port(std::string& ip, int& port) const override {
+    if (!Endpoint(sock_, false, ip, port)) ip.clear(), port = 0;
+  }
+  socket_t socket() const override { return sock_; }
+
+ private:
+  std::chrono::milliseconds ReadWait() const {
+    if (head_done_) return read_timeout_;
+    const auto left =
+        std::chrono::duration_cast<std::chrono::milliseconds>(deadline_ - Clock::now());
+    return std::clamp(left, std::chrono::milliseconds(0), read_timeout_);
+  }
+  // The head ends at the first CRLF CRLF of the bytes handed to the library (a small matcher
+  // across reads).
+  void Scan(std::string_view bytes) {
+    static constexpr std::string_view kEnd = "\r\n\r\n";
+    for (const char c : bytes) {
+      matched_ = c == kEnd[matched_] ? matched_ + 1 : (c == '\r' ? 1 : 0);
+      if (matched_ == kEnd.size()) {
+        head_done_ = true;
+        return;
+      }
+    }
+  }
+  socket_t sock_;
+  std::chrono::milliseconds read_timeout_, write_timeout_;
+  Clock::time_point deadline_{};
+  std::size_t matched_ = 0;
+  bool head_done_ = false;
+  bool deadline_missed_ = false;
+  char buffer_[4096];
+  std::size_t begin_ = 0, end_ = 0;
+};
+
+void CloseSocket(socket_t sock) {
+  shutdown(sock, SHUT_RDWR);
+  close(sock);
+}
+
+}  // namespace
+
+bool ConnectionLimits::IsValid(std::string* why) const {
+  if (!(header_deadline_s > 0) || !std::isfinite(header_deadline_s)) {
+    if (why) *why = "header_deadline_s must be positive and finite";
+    return false;
+  }
+  return true;
+}
+
+bool AddressCounter::Admit(const std::string& address) {
+  std::lock_guard lock(mutex_);
+  std::size_t& n = open_[address];
+  if (cap_ > 0 && n >= cap_) {
+    if (n == 0) open_.erase(address);
+    return false;
+  }
+  ++n;
+  return true;
+}
+
+void AddressCounter::Release(const std::string& address) {
+  std::lock_guard lock(mutex_);
+  const auto it = open_.find(address);
+  if (it == open_.end()) return;
+  if (--it->second == 0) open_.erase(it);
+}
+
+std::size_t AddressCounter::Open(const std::string& address) const {
+  std::lock_guard lock(mutex_);
+  const auto it = open_.find(address);
+  return it == open_.end() ? 0 : it->second;
+}
+
+GatedHttpServer::GatedHttpServer(ConnectionLimits limits,
+                                 std::function<void(const std::string&)> log)
+    : limits_(limits), log_(std::move(log)), addresses_(limits.max_per_address) {}
+
+void GatedHttpServer::Note(std::atomic<std::size_t>& counter, const std::string& what) {
+  const std::size_t n = ++counter;
+  // 1, 10, 100, ...: the first of each kind and then every power of ten.
+  std::size_t p = 1;
+  while (p < n) p *= 10;
+  if (p == n && log_) log_(what + " (" + std::to_string(n) + " so far)");
+}
+
+bool GatedHttpServer::process_and_close_socket(socket_t sock) {
+  std::string address;
+  int port = 0;
+  if (!Endpoint(sock, true, address, port)) address.assign(1, '?');
+  if (!addresses_.Admit(address)) {
+    static constexpr std::string_view kBusy =
+        "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nRetry-After: 1\r\n"
+        "Connection: close\r\n\r\n";
+    (void)send(sock, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+    CloseSocket(sock);
+    Note(stats_.refused_per_address,
+         "connection from " + address + " refused: it holds " +
+             std::to_string(limits_.max_per_address) + " connections already (503)");
+    return false;
+  }
+  // The library's keep-alive loop (process_server_socket_core in cpp-httplib 0.11): up to
+  // keep_alive_max_count_ requests, each awaited for keep_alive_timeout_sec_ — here in slices,
+  // so that a stopped server does not wait for its idle connections.
+  const auto deadline = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(limits_.header_deadline_s));
+  bool ret = false;
+  DeadlineStream strm(sock, Ms(read_timeout_sec_, read_timeout_usec_),
+                      Ms(write_timeout_sec_, write_timeout_usec_));
+  for (std::size_t count = keep_alive_max_count_; count > 0; --count) {
+    bool readable = strm.buffered();
+    const auto idle_until = Clock::now() + std::chrono::seconds(keep_alive_timeout_sec_);
+    while (!readable && svr_sock_ != INVALID_SOCKET && Clock::now() < idle_until) {
+      const int rc = Wait(sock, POLLIN, std::chrono::milliseconds(100));
+      if (rc < 0) break;
+      if (rc > 0) {
+        readable = true;
+        break;
+      }
+    }
+    if (!readable || svr_sock_ == INVALID_SOCKET) break;
+    strm.BeginRequest(Clock::now() + deadline);
+    bool connection_closed = false;
+    ret = process_request(strm, count == 1, connection_closed, nullptr);
+    if (strm.deadline_missed()) {
+      Note(stats_.header_deadlines,
+           fmt::format("connection from {} closed: its request's headers took longer than {:g} s",
+                       address, limits_.header_deadline_s));
+    }
+    if (!ret || connection_closed) break;
+  }
+  addresses_.Release(address);
+  CloseSocket(sock);
+  return ret;
+}
+
+}  // namespace trailmark::server

@@ -1,0 +1,38 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// cpp-httplib's server with a gate on each connection (issue 30, item 2): a cap on the
+/// connections one client address holds at once, and a deadline for each request's line and
+/// headers. cpp-httplib 0.11 (Debian 12) reads headers with a per-read timeout only, so a client
+/// sending a byte every few seconds held a worker thread for as long as it liked, and 100 such
+/// clients held every thread (health probes waited 30 s). This class takes over the library's
+/// per-connection loop (`process_and_close_socket`, the keep-alive loop around the library's own
+/// `process_request`) with a socket stream of its own that enforces the deadline; everything
+/// else — parsing, routing, responses — is the library's. Plain HTTP only: with TLS the
+/// library's SSL server runs ungated (docs/server.md).
+
+#include <httplib.h>
+
+#include <functional>
+#include <string>
+
+#include "server/connection_limits.h"
+
+namespace trailmark::server {
+
+class GatedHttpServer : public httplib::Server {
+ public:
+  /// `log` receives a line for the first refusal of each kind and then at every power of ten
+  /// (a flood of strangers does not flood the log); may be empty.
+  GatedHttpServer(ConnectionLimits limits, std::function<void(const std::string&)> log);
+  const GateStats& gate_stats() const { return stats_; }
+
+ private:
+  bool process_and_close_socket(socket_t sock) override;
+  void Note(std::atomic<std::size_t>& counter, const std::string& what);
+  ConnectionLimits limits_;
+  std::function<void(const std::string&)> log_;
+  AddressCounter addresses_;
+  GateStats stats_;
+};
+
+}  // namespace trailmark::server
