@@ -14,6 +14,12 @@ namespace trailmark::server {
 struct ConnectionLimits {
   /// A request's line and headers must all arrive within this (s) of its first byte.
   double header_deadline_s = 10.0;
+  /// ... and the whole request, its body too, within this (s): 1 MiB in 60 s is 17 kB/s. Not
+  /// the response (an event stream lasts the incident).
+  double request_deadline_s = 60.0;
+  /// Connections accepted while every worker is busy wait for one; beyond this many waiting,
+  /// a connection is answered 503 and closed at once.
+  std::size_t max_waiting = 256;
   /// Connections one client address may hold at once (0: no cap); more are answered 503 and
   /// closed. Below the server's worker threads, so that one address cannot take them all.
   std::size_t max_per_address = 32;
@@ -24,6 +30,8 @@ struct ConnectionLimits {
 struct GateStats {
   std::atomic<std::size_t> refused_per_address{0};  ///< connections over an address's cap
   std::atomic<std::size_t> header_deadlines{0};     ///< requests whose headers came too slowly
+  std::atomic<std::size_t> request_deadlines{0};    ///< requests whose bodies came too slowly
+  std::atomic<std::size_t> refused_waiting{0};      ///< connections beyond max_waiting
 };
 
 /// Open connections by client address (thread-safe).

@@ -70,24 +70,38 @@ class DeadlineStream final : public httplib::Stream {
                  std::chrono::milliseconds write_timeout)
       : sock_(sock), read_timeout_(read_timeout), write_timeout_(write_timeout) {}
 
-  /// A new request starts (its first byte is here or buffered): its head is due by `deadline`.
-  void BeginRequest(Clock::time_point deadline) {
-    deadline_ = deadline;
+  /// A new request starts (its first byte is here or buffered): its head is due by
+  /// `head_deadline`, the whole of it by `request_deadline` (until its response starts).
+  void BeginRequest(Clock::time_point head_deadline, Clock::time_point request_deadline) {
+    deadline_ = head_deadline;
+    request_deadline_ = request_deadline;
     matched_ = 0;
     head_done_ = false;
+    responding_ = false;
+    close_after_ = false;
     deadline_missed_ = false;
+    request_deadline_missed_ = false;
   }
   bool deadline_missed() const { return deadline_missed_; }
+  bool request_deadline_missed() const { return request_deadline_missed_; }
+  bool close_after() const { return close_after_; }
   bool buffered() const { return begin_ < end_; }
 
-  bool is_readable() const override { return buffered() || Wait(sock_, POLLIN, ReadWait()) > 0; }
+  bool is_readable() const override {
+    if (buffered()) return true;
+    if (Wait(sock_, POLLIN, ReadWait()) > 0) return !DeadlinePassed();
+    DeadlinePassed();
+    return false;
+  }
   bool is_writable() const override { return Wait(sock_, POLLOUT, write_timeout_) > 0; }
 
   ssize_t read(char* ptr, size_t size) override {
     if (size == 0) return 0;
+    // A deadline holds however steadily bytes trickle in.
+    if (DeadlinePassed()) return -1;
     if (!buffered()) {
       if (Wait(sock_, POLLIN, ReadWait()) <= 0) {
-        if (!head_done_ && Clock::now() >= deadline_) deadline_missed_ = true;
+        DeadlinePassed();
         return -1;
       }
       ssize_t n;
@@ -106,6 +120,16 @@ class DeadlineStream final : public httplib::Stream {
   }
 
   ssize_t write(const char* ptr, size_t size) override {
+    // The response starts (an interim "100 Continue" is not it): the request has been read.
+    const std::string_view bytes(ptr, size);
+    if (!responding_ && !bytes.starts_with("HTTP/1.1 100")) {
+      responding_ = true;
+      // A response that closes the connection (a refused request whose body was not read):
+      // what follows on it is not a next request.
+      const auto head_end = bytes.find("\r\n\r\n");
+      close_after_ = bytes.substr(0, head_end).find("\r\nConnection: close\r\n") !=
+                     std::string_view::npos;
+    }
     if (!is_writable()) return -1;
     ssize_t n;
     do {
@@ -123,10 +147,18 @@ class DeadlineStream final : public httplib::Stream {
   socket_t socket() const override { return sock_; }
 
  private:
+  // Whether the request's head or the request is overdue (noted for the log).
+  bool DeadlinePassed() const {
+    const auto now = Clock::now();
+    if (!head_done_ && now >= deadline_) deadline_missed_ = true;
+    if (!responding_ && now >= request_deadline_) request_deadline_missed_ = true;
+    return deadline_missed_ || request_deadline_missed_;
+  }
   std::chrono::milliseconds ReadWait() const {
-    if (head_done_) return read_timeout_;
-    const auto left =
-        std::chrono::duration_cast<std::chrono::milliseconds>(deadline_ - Clock::now());
+    if (responding_) return read_timeout_;
+    const auto due = head_done_ ? request_deadline_ : std::min(deadline_, request_deadline_);
+    // Rounded up: a wait that ends before the deadline would fail a read that is not overdue.
+    const auto left = std::chrono::ceil<std::chrono::milliseconds>(due - Clock::now());
     return std::clamp(left, std::chrono::milliseconds(0), read_timeout_);
   }
   // The head ends at the first CRLF CRLF of the bytes handed to the library (a small matcher
@@ -143,13 +175,26 @@ class DeadlineStream final : public httplib::Stream {
   }
   socket_t sock_;
   std::chrono::milliseconds read_timeout_, write_timeout_;
-  Clock::time_point deadline_{};
+  Clock::time_point deadline_{}, request_deadline_{};
   std::size_t matched_ = 0;
   bool head_done_ = false;
-  bool deadline_missed_ = false;
+  bool responding_ = false;
+  bool close_after_ = false;
+  mutable bool deadline_missed_ = false;
+  mutable bool request_deadline_missed_ = false;
   char buffer_[4096];
   std::size_t begin_ = 0, end_ = 0;
 };
+
+/// Set while the accepting thread runs a connection it cannot queue: refuse it.
+thread_local bool t_refuse = false;
+
+void Refuse(socket_t sock) {
+  static constexpr std::string_view kBusy =
+      "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nRetry-After: 1\r\n"
+      "Connection: close\r\n\r\n";
+  (void)send(sock, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+}
 
 void CloseSocket(socket_t sock) {
   shutdown(sock, SHUT_RDWR);
@@ -159,11 +204,61 @@ void CloseSocket(socket_t sock) {
 }  // namespace
 
 bool ConnectionLimits::IsValid(std::string* why) const {
-  if (!(header_deadline_s > 0) || !std::isfinite(header_deadline_s)) {
-    if (why) *why = "header_deadline_s must be positive and finite";
+  if (!(header_deadline_s > 0) || !std::isfinite(header_deadline_s) ||
+      !(request_deadline_s >= header_deadline_s) || !std::isfinite(request_deadline_s)) {
+    if (why) *why = "the header deadline must be positive and the request deadline at least it";
     return false;
   }
   return true;
+}
+
+BoundedThreadPool::BoundedThreadPool(std::size_t threads, std::size_t max_waiting)
+    : max_waiting_(max_waiting) {
+  for (std::size_t i = 0; i < threads; ++i) threads_.emplace_back([this] { Work(); });
+}
+
+BoundedThreadPool::~BoundedThreadPool() {
+  if (!threads_.empty()) shutdown();
+}
+
+void BoundedThreadPool::enqueue(std::function<void()> fn) {
+  {
+    std::unique_lock lock(mutex_);
+    if (jobs_.size() < max_waiting_) {
+      jobs_.push_back(std::move(fn));
+      lock.unlock();
+      cond_.notify_one();
+      return;
+    }
+  }
+  // Too many waiting: the connection is refused here, at once (the job sees t_refuse).
+  t_refuse = true;
+  fn();
+  t_refuse = false;
+}
+
+void BoundedThreadPool::shutdown() {
+  {
+    std::lock_guard lock(mutex_);
+    shutdown_ = true;
+  }
+  cond_.notify_all();
+  for (auto& t : threads_) t.join();
+  threads_.clear();
+}
+
+void BoundedThreadPool::Work() {
+  for (;;) {
+    std::function<void()> fn;
+    {
+      std::unique_lock lock(mutex_);
+      cond_.wait(lock, [&] { return !jobs_.empty() || shutdown_; });
+      if (shutdown_ && jobs_.empty()) return;
+      fn = std::move(jobs_.front());
+      jobs_.pop_front();
+    }
+    fn();
+  }
 }
 
 bool AddressCounter::Admit(const std::string& address) {
@@ -190,6 +285,10 @@ std::size_t AddressCounter::Open(const std::string& address) const {
   return it == open_.end() ? 0 : it->second;
 }
 
+httplib::TaskQueue* GatedHttpServer::NewTaskQueue(std::size_t threads) const {
+  return new BoundedThreadPool(threads, limits_.max_waiting);
+}
+
 GatedHttpServer::GatedHttpServer(ConnectionLimits limits,
                                  std::function<void(const std::string&)> log)
     : limits_(limits), log_(std::move(log)), addresses_(limits.max_per_address) {}
@@ -206,15 +305,21 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
   std::string address;
   int port = 0;
   if (!Endpoint(sock, true, address, port)) address.assign(1, '?');
-  if (!addresses_.Admit(address)) {
-    static constexpr std::string_view kBusy =
-        "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nRetry-After: 1\r\n"
-        "Connection: close\r\n\r\n";
-    (void)send(sock, kBusy.data(), kBusy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
+  // Counted before the answer: whoever reads the 503 finds it in /api/stats.
+  if (t_refuse) {
+    Note(stats_.refused_waiting,
+         fmt::format("connection from {} refused: {} connections wait for a worker already (503)",
+                     address, limits_.max_waiting));
+    Refuse(sock);
     CloseSocket(sock);
+    return false;
+  }
+  if (!addresses_.Admit(address)) {
     Note(stats_.refused_per_address,
-         "connection from " + address + " refused: it holds " +
-             std::to_string(limits_.max_per_address) + " connections already (503)");
+         fmt::format("connection from {} refused: it holds {} connections already (503)",
+                     address, limits_.max_per_address));
+    Refuse(sock);
+    CloseSocket(sock);
     return false;
   }
   // The library's keep-alive loop (process_server_socket_core in cpp-httplib 0.11): up to
@@ -222,6 +327,8 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
   // so that a stopped server does not wait for its idle connections.
   const auto deadline = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(limits_.header_deadline_s));
+  const auto request_deadline = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(limits_.request_deadline_s));
   bool ret = false;
   DeadlineStream strm(sock, Ms(read_timeout_sec_, read_timeout_usec_),
                       Ms(write_timeout_sec_, write_timeout_usec_));
@@ -237,7 +344,8 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
       }
     }
     if (!readable || svr_sock_ == INVALID_SOCKET) break;
-    strm.BeginRequest(Clock::now() + deadline);
+    const auto now = Clock::now();
+    strm.BeginRequest(now + deadline, now + request_deadline);
     bool connection_closed = false;
     ret = process_request(strm, count == 1, connection_closed, nullptr);
     if (strm.deadline_missed()) {
@@ -245,7 +353,12 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
            fmt::format("connection from {} closed: its request's headers took longer than {:g} s",
                        address, limits_.header_deadline_s));
     }
-    if (!ret || connection_closed) break;
+    if (strm.request_deadline_missed() && !strm.deadline_missed()) {
+      Note(stats_.request_deadlines,
+           fmt::format("connection from {} closed: its request took longer than {:g} s",
+                       address, limits_.request_deadline_s));
+    }
+    if (!ret || connection_closed || strm.close_after()) break;
   }
   addresses_.Release(address);
   CloseSocket(sock);

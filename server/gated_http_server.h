@@ -12,12 +12,36 @@
 
 #include <httplib.h>
 
+#include <condition_variable>
+#include <deque>
 #include <functional>
+#include <mutex>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "server/connection_limits.h"
 
 namespace trailmark::server {
+
+/// cpp-httplib's thread pool with a bound on the connections waiting for a worker: beyond
+/// `max_waiting` a connection is refused at once (503) by the accepting thread.
+class BoundedThreadPool : public httplib::TaskQueue {
+ public:
+  BoundedThreadPool(std::size_t threads, std::size_t max_waiting);
+  ~BoundedThreadPool() override;
+  void enqueue(std::function<void()> fn) override;
+  void shutdown() override;
+
+ private:
+  void Work();
+  std::size_t max_waiting_;
+  std::vector<std::thread> threads_;
+  std::deque<std::function<void()>> jobs_;
+  bool shutdown_ = false;
+  std::condition_variable cond_;
+  std::mutex mutex_;
+};
 
 class GatedHttpServer : public httplib::Server {
  public:
@@ -25,6 +49,8 @@ class GatedHttpServer : public httplib::Server {
   /// (a flood of strangers does not flood the log); may be empty.
   GatedHttpServer(ConnectionLimits limits, std::function<void(const std::string&)> log);
   const GateStats& gate_stats() const { return stats_; }
+  /// The pool to give the server (`new_task_queue`): `threads` workers, the gate's waiting cap.
+  httplib::TaskQueue* NewTaskQueue(std::size_t threads) const;
 
  private:
   bool process_and_close_socket(socket_t sock) override;

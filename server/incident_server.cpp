@@ -208,6 +208,8 @@ nlohmann::json IncidentServer::StatsJson() {
     const GateStats& g = http_->gated->gate_stats();
     j["connections_refused_per_address"] = g.refused_per_address.load();
     j["header_deadlines_missed"] = g.header_deadlines.load();
+    j["request_deadlines_missed"] = g.request_deadlines.load();
+    j["connections_refused_waiting"] = g.refused_waiting.load();
   }
   if (const MqttStats* m = mqtt_stats()) {
     j["mqtt"] = {{"received", m->received.load()},
@@ -236,6 +238,8 @@ void IncidentServer::Start() {
     ConnectionLimits limits;
     limits.header_deadline_s = options_.header_deadline_s;
     limits.max_per_address = options_.max_connections_per_address;
+    limits.request_deadline_s = options_.request_deadline_s;
+    limits.max_waiting = options_.max_waiting_connections;
     std::string why;
     if (!limits.IsValid(&why)) throw std::invalid_argument("serve: " + why);
     auto log = options_.log;
@@ -265,7 +269,11 @@ void IncidentServer::Start() {
   svr.set_keep_alive_max_count(1u << 30);
   svr.set_keep_alive_timeout(10);
   const std::size_t threads = std::max<std::size_t>(4, options_.http_threads);
-  svr.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
+  if (GatedHttpServer* gated = http_->gated) {
+    svr.new_task_queue = [gated, threads] { return gated->NewTaskQueue(threads); };
+  } else {
+    svr.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
+  }
   // Counts the request; true when it carries the token (the API: Authorization: Bearer; the
   // dashboard and its event stream may also take it as ?token=, the link a commander opens).
   auto authorized = [this](const httplib::Request& req, bool query_token_too) {

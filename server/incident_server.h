@@ -71,6 +71,10 @@ struct ServerOptions {
   /// gateway relaying many devices from one address needs more). Not applied with TLS.
   double header_deadline_s = 10.0;
   std::size_t max_connections_per_address = 32;  ///< half the default http_threads
+  /// The whole request (its body too) within this (s) of its first byte, and at most this
+  /// many connections waiting for a worker (more are answered 503 at once). Plain HTTP.
+  double request_deadline_s = 60.0;
+  std::size_t max_waiting_connections = 256;
   /// Receives every rejection reason (also counted; the latest are in /api/stats); default:
   /// a line on stderr.
   std::function<void(const std::string&)> log;

@@ -86,6 +86,7 @@ struct ServeOptions {
   std::string tls_cert, tls_key;  ///< HTTPS: the server's certificate chain and key (PEM)
   double header_deadline_s = 10.0;               ///< plain HTTP: see server::ServerOptions
   std::size_t max_connections_per_address = 32;  ///< plain HTTP; 0: no cap
+  double request_deadline_s = 60.0;              ///< plain HTTP
 };
 int Serve(const ServeOptions& options);
 int ServeLive(const ServeOptions& options);

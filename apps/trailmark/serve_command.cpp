@@ -68,6 +68,7 @@ int ServeLive(const ServeOptions& o) {
   so.bind = o.bind;
   so.header_deadline_s = o.header_deadline_s;
   so.max_connections_per_address = o.max_connections_per_address;
+  so.request_deadline_s = o.request_deadline_s;
   so.port = o.port;
   so.token = o.token.empty() ? RandomToken() : o.token;
   so.alerts.map_error = spec.raises_map_alerts;
@@ -148,6 +149,7 @@ int Serve(const ServeOptions& o) {
   so.bind = o.bind;
   so.header_deadline_s = o.header_deadline_s;
   so.max_connections_per_address = o.max_connections_per_address;
+  so.request_deadline_s = o.request_deadline_s;
   so.port = o.port;
   so.tls_cert_file = o.tls_cert;
   so.tls_key_file = o.tls_key;

@@ -2,7 +2,8 @@
 // Strangers cannot stall or bloat the live server (issue 30, item 2): the token is checked on
 // the headers before any body is read, the size limit holds for chunked bodies, the token
 // comparison does not depend on where the first wrong byte is, a request's headers have a
-// deadline and one client address a cap on its connections. Raw sockets on loopback, so the
+// deadline, the whole request another, one client address a cap on its connections and the
+// connections waiting for a worker a cap in total. Raw sockets on loopback, so the
 // test sends exactly what a hostile client would (headers alone, endless chunks).
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -87,7 +88,8 @@ class LiveServerFixture : public ::testing::Test {
  protected:
   void SetUp() override { Start(); }
   void Start(double header_deadline_s = 10.0, std::size_t per_address = 32,
-             std::size_t threads = 64) {
+             std::size_t threads = 64, double request_deadline_s = 60.0,
+             std::size_t max_waiting = 256) {
     const SimulatedMission sim = SimulateScenario("office-loop", 1);
     WriteMissionDirectory(dir_.path() / "mission", sim.data, &sim.plan);
     ServerOptions o;
@@ -100,15 +102,18 @@ class LiveServerFixture : public ::testing::Test {
     o.header_deadline_s = header_deadline_s;
     o.max_connections_per_address = per_address;
     o.http_threads = threads;
+    o.request_deadline_s = request_deadline_s;
+    o.max_waiting_connections = max_waiting;
     o.log = [](const std::string&) {};
     server_ = std::make_unique<IncidentServer>(sim.data.info, std::vector<Estimate>{}, o);
     server_->Start();
   }
-  void Restart(double header_deadline_s, std::size_t per_address, std::size_t threads) {
+  void Restart(double header_deadline_s, std::size_t per_address, std::size_t threads,
+               double request_deadline_s = 60.0, std::size_t max_waiting = 256) {
     server_->Stop();
     server_.reset();
     dir_ = TempDir();
-    Start(header_deadline_s, per_address, threads);
+    Start(header_deadline_s, per_address, threads, request_deadline_s, max_waiting);
   }
   void TearDown() override { server_->Stop(); }
   TempDir dir_;
@@ -225,6 +230,58 @@ TEST_F(LiveServerFixture, OneAddressCannotTakeEveryWorker) {
   bool served = false;
   for (int i = 0; i < 30 && !served; ++i) {
     Connection again(server_->port(), "127.0.0.2");
+    served = again.Send(kHealth) && Answered(again, " 200 ");
+    if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(served);
+}
+
+TEST_F(LiveServerFixture, ABodyThatComesTooSlowlyIsCutOff) {
+  // A device's headers at once, then its body a byte every 0.3 s: the 2 s deadline of the whole
+  // request closes it; nothing is ingested.
+  Restart(1.0, 32, 64, 2.0);
+  Connection slow(server_->port());
+  ASSERT_TRUE(slow.Send("POST /api/ingest/steps.csv HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer "
+                        "s3cret-token\r\nContent-Type: text/csv\r\nContent-Length: 200\r\n\r\n"));
+  const std::string body = "t0,t1,agent,dx,dy\n0,1,ff1,0.7,0\n1,2,ff1,0.7,0\n";
+  const auto t0 = std::chrono::steady_clock::now();
+  bool cut = false;
+  for (std::size_t i = 0; i < body.size() && !cut; ++i) {
+    cut = !slow.Send(body.substr(i, 1));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    cut = cut || !slow.Open();
+  }
+  const auto took = std::chrono::steady_clock::now() - t0;
+  EXPECT_TRUE(cut) << "the slow body was never cut off";
+  EXPECT_LT(took, std::chrono::milliseconds(5000));
+  EXPECT_GE(took, std::chrono::milliseconds(1800));
+  EXPECT_EQ(server_->stats().ingested_rows.load(), 0u);
+  const std::string stats = server_->StatsJson().dump();
+  EXPECT_NE(stats.find("\"request_deadlines_missed\":1"), std::string::npos) << stats;
+  // Its refusal closes the connection: the rest of its body is not read as a next request.
+  EXPECT_NE(stats.find("\"header_deadlines_missed\":0"), std::string::npos) << stats;
+}
+
+TEST_F(LiveServerFixture, ConnectionsBeyondTheWaitingCapAreRefusedAtOnce) {
+  // 4 workers, 2 connections may wait, no cap per address: 4 stalled heads hold the workers,
+  // 2 more wait, and the 7th is answered 503 at once by the accepting thread.
+  Restart(30.0, 0, 4, 60.0, 2);
+  std::vector<std::unique_ptr<Connection>> held;
+  for (int i = 0; i < 6; ++i) {
+    held.push_back(std::make_unique<Connection>(server_->port()));
+    ASSERT_TRUE(held.back()->Send("GET /api/health HTTP/1.1\r\nHost: x\r\n"));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  Connection seventh(server_->port());
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_TRUE(Answered(seventh, " 503 "));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(1000));
+  const std::string stats = server_->StatsJson().dump();
+  EXPECT_NE(stats.find("\"connections_refused_waiting\":1"), std::string::npos) << stats;
+  held.clear();  // the workers are free again: a request is served
+  bool served = false;
+  for (int i = 0; i < 30 && !served; ++i) {
+    Connection again(server_->port());
     served = again.Send(kHealth) && Answered(again, " 200 ");
     if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
