@@ -32,6 +32,7 @@ struct GateStats {
   std::atomic<std::size_t> header_deadlines{0};     ///< requests whose headers came too slowly
   std::atomic<std::size_t> request_deadlines{0};    ///< requests whose bodies came too slowly
   std::atomic<std::size_t> refused_waiting{0};      ///< connections beyond max_waiting
+  std::atomic<std::size_t> handshakes_failed{0};    ///< TLS: none within the header deadline
 };
 
 /// Open connections by client address (thread-safe).

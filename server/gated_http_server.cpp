@@ -5,7 +5,10 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <openssl/err.h>
+#include <openssl/ssl.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -14,6 +17,7 @@
 #include <cmath>
 #include <cstring>
 #include <string_view>
+#include <type_traits>
 
 namespace trailmark::server {
 
@@ -66,9 +70,10 @@ std::chrono::milliseconds Ms(time_t sec, time_t usec) {
 /// (its header parser asks for one byte at a time).
 class DeadlineStream final : public httplib::Stream {
  public:
-  DeadlineStream(socket_t sock, std::chrono::milliseconds read_timeout,
+  /// `ssl`: the connection's TLS session (its socket non-blocking), null for plain HTTP.
+  DeadlineStream(socket_t sock, SSL* ssl, std::chrono::milliseconds read_timeout,
                  std::chrono::milliseconds write_timeout)
-      : sock_(sock), read_timeout_(read_timeout), write_timeout_(write_timeout) {}
+      : sock_(sock), ssl_(ssl), read_timeout_(read_timeout), write_timeout_(write_timeout) {}
 
   /// A new request starts (its first byte is here or buffered): its head is due by
   /// `head_deadline`, the whole of it by `request_deadline` (until its response starts).
@@ -85,7 +90,7 @@ class DeadlineStream final : public httplib::Stream {
   bool deadline_missed() const { return deadline_missed_; }
   bool request_deadline_missed() const { return request_deadline_missed_; }
   bool close_after() const { return close_after_; }
-  bool buffered() const { return begin_ < end_; }
+  bool buffered() const { return begin_ < end_ || (ssl_ != nullptr && SSL_pending(ssl_) > 0); }
 
   bool is_readable() const override {
     if (buffered()) return true;
@@ -97,20 +102,9 @@ class DeadlineStream final : public httplib::Stream {
 
   ssize_t read(char* ptr, size_t size) override {
     if (size == 0) return 0;
-    // A deadline holds however steadily bytes trickle in.
-    if (DeadlinePassed()) return -1;
-    if (!buffered()) {
-      if (Wait(sock_, POLLIN, ReadWait()) <= 0) {
-        DeadlinePassed();
-        return -1;
-      }
-      ssize_t n;
-      do {
-        n = recv(sock_, buffer_, sizeof buffer_, 0);
-      } while (n < 0 && errno == EINTR);
+    if (begin_ == end_) {
+      const ssize_t n = Fill();
       if (n <= 0) return n;
-      begin_ = 0;
-      end_ = static_cast<std::size_t>(n);
     }
     const std::size_t n = std::min(size, end_ - begin_);
     std::memcpy(ptr, buffer_ + begin_, n);
@@ -130,6 +124,15 @@ class DeadlineStream final : public httplib::Stream {
       close_after_ = bytes.substr(0, head_end).find("\r\nConnection: close\r\n") !=
                      std::string_view::npos;
     }
+    if (ssl_ != nullptr) {
+      // Non-blocking: a retry passes the same bytes, as OpenSSL requires.
+      for (;;) {
+        const int r = SSL_write(ssl_, ptr, static_cast<int>(std::min<size_t>(size, 1 << 30)));
+        if (r > 0) return r;
+        const short ev = Want(r);
+        if (ev == 0 || Wait(sock_, ev, write_timeout_) <= 0) return -1;
+      }
+    }
     if (!is_writable()) return -1;
     ssize_t n;
     do {
@@ -147,6 +150,47 @@ class DeadlineStream final : public httplib::Stream {
   socket_t socket() const override { return sock_; }
 
  private:
+  // What a failed TLS call waits for: POLLIN, POLLOUT, or 0 (an error, or the peer closed).
+  short Want(int r) const {
+    const int e = SSL_get_error(ssl_, r);
+    return e == SSL_ERROR_WANT_READ ? POLLIN : e == SSL_ERROR_WANT_WRITE ? POLLOUT : 0;
+  }
+  // Reads what has come into the buffer: > 0 bytes, 0 when the peer closed, -1 on a timeout,
+  // a missed deadline or an error.
+  ssize_t Fill() {
+    // A deadline holds however steadily bytes trickle in (what is buffered has come already).
+    if (DeadlinePassed()) return -1;
+    for (;;) {
+      if (ssl_ != nullptr) {
+        const int r = SSL_read(ssl_, buffer_, sizeof buffer_);
+        if (r > 0) {
+          begin_ = 0;
+          end_ = static_cast<std::size_t>(r);
+          return r;
+        }
+        if (SSL_get_error(ssl_, r) == SSL_ERROR_ZERO_RETURN) return 0;
+        const short ev = Want(r);
+        if (ev == 0) return -1;
+        if (Wait(sock_, ev, ReadWait()) <= 0 || DeadlinePassed()) {
+          DeadlinePassed();
+          return -1;
+        }
+        continue;
+      }
+      if (Wait(sock_, POLLIN, ReadWait()) <= 0) {
+        DeadlinePassed();
+        return -1;
+      }
+      ssize_t n;
+      do {
+        n = recv(sock_, buffer_, sizeof buffer_, 0);
+      } while (n < 0 && errno == EINTR);
+      if (n <= 0) return n;
+      begin_ = 0;
+      end_ = static_cast<std::size_t>(n);
+      return n;
+    }
+  }
   // Whether the request's head or the request is overdue (noted for the log).
   bool DeadlinePassed() const {
     const auto now = Clock::now();
@@ -174,6 +218,7 @@ class DeadlineStream final : public httplib::Stream {
     }
   }
   socket_t sock_;
+  SSL* ssl_;
   std::chrono::milliseconds read_timeout_, write_timeout_;
   Clock::time_point deadline_{}, request_deadline_{};
   std::size_t matched_ = 0;
@@ -199,6 +244,30 @@ void Refuse(socket_t sock) {
 void CloseSocket(socket_t sock) {
   shutdown(sock, SHUT_RDWR);
   close(sock);
+}
+
+/// The TLS handshake of an accepted connection, by `deadline`: its session (the socket made
+/// non-blocking), or null.
+SSL* Handshake(socket_t sock, SSL_CTX* ctx, Clock::time_point deadline) {
+  const int flags = fcntl(sock, F_GETFL, 0);
+  if (flags < 0 || fcntl(sock, F_SETFL, flags | O_NONBLOCK) != 0) return nullptr;
+  SSL* ssl = SSL_new(ctx);
+  if (ssl == nullptr) return nullptr;
+  if (SSL_set_fd(ssl, sock) != 1) {
+    SSL_free(ssl);
+    return nullptr;
+  }
+  for (;;) {
+    const int r = SSL_accept(ssl);
+    if (r == 1) return ssl;
+    const int e = SSL_get_error(ssl, r);
+    const short ev = e == SSL_ERROR_WANT_READ ? POLLIN : e == SSL_ERROR_WANT_WRITE ? POLLOUT : 0;
+    const auto left = std::chrono::ceil<std::chrono::milliseconds>(deadline - Clock::now());
+    if (ev == 0 || left.count() <= 0 || Wait(sock, ev, left) <= 0) {
+      SSL_free(ssl);
+      return nullptr;
+    }
+  }
 }
 
 }  // namespace
@@ -285,15 +354,14 @@ std::size_t AddressCounter::Open(const std::string& address) const {
   return it == open_.end() ? 0 : it->second;
 }
 
-httplib::TaskQueue* GatedHttpServer::NewTaskQueue(std::size_t threads) const {
+httplib::TaskQueue* GateCore::NewTaskQueue(std::size_t threads) const {
   return new BoundedThreadPool(threads, limits_.max_waiting);
 }
 
-GatedHttpServer::GatedHttpServer(ConnectionLimits limits,
-                                 std::function<void(const std::string&)> log)
+GateCore::GateCore(ConnectionLimits limits, std::function<void(const std::string&)> log)
     : limits_(limits), log_(std::move(log)), addresses_(limits.max_per_address) {}
 
-void GatedHttpServer::Note(std::atomic<std::size_t>& counter, const std::string& what) {
+void GateCore::Note(std::atomic<std::size_t>& counter, const std::string& what) {
   const std::size_t n = ++counter;
   // 1, 10, 100, ...: the first of each kind and then every power of ten.
   std::size_t p = 1;
@@ -301,16 +369,19 @@ void GatedHttpServer::Note(std::atomic<std::size_t>& counter, const std::string&
   if (p == n && log_) log_(what + " (" + std::to_string(n) + " so far)");
 }
 
-bool GatedHttpServer::process_and_close_socket(socket_t sock) {
+template <class Base>
+bool Gated<Base>::process_and_close_socket(socket_t sock) {
+  constexpr bool kTls = std::is_same_v<Base, httplib::SSLServer>;
   std::string address;
   int port = 0;
   if (!Endpoint(sock, true, address, port)) address.assign(1, '?');
-  // Counted before the answer: whoever reads the 503 finds it in /api/stats.
+  // Counted before the answer: whoever reads the 503 finds it in /api/stats. (Over TLS the
+  // connection is closed without one: a plain answer means nothing to a TLS client.)
   if (t_refuse) {
     Note(stats_.refused_waiting,
          fmt::format("connection from {} refused: {} connections wait for a worker already (503)",
                      address, limits_.max_waiting));
-    Refuse(sock);
+    if (!kTls) Refuse(sock);
     CloseSocket(sock);
     return false;
   }
@@ -318,24 +389,39 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
     Note(stats_.refused_per_address,
          fmt::format("connection from {} refused: it holds {} connections already (503)",
                      address, limits_.max_per_address));
-    Refuse(sock);
+    if (!kTls) Refuse(sock);
     CloseSocket(sock);
     return false;
   }
-  // The library's keep-alive loop (process_server_socket_core in cpp-httplib 0.11): up to
-  // keep_alive_max_count_ requests, each awaited for keep_alive_timeout_sec_ — here in slices,
-  // so that a stopped server does not wait for its idle connections.
   const auto deadline = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(limits_.header_deadline_s));
   const auto request_deadline = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(limits_.request_deadline_s));
+  SSL* ssl = nullptr;
+  if constexpr (kTls) {
+    // The handshake within the header deadline too (a stranger's half handshake holds a
+    // worker no longer than a half request).
+    ssl = Handshake(sock, this->ssl_context(), Clock::now() + deadline);
+    if (ssl == nullptr) {
+      Note(stats_.handshakes_failed,
+           fmt::format("connection from {} closed: no TLS handshake within {:g} s", address,
+                       limits_.header_deadline_s));
+      ERR_clear_error();
+      addresses_.Release(address);
+      CloseSocket(sock);
+      return false;
+    }
+  }
+  // The library's keep-alive loop (process_server_socket_core in cpp-httplib 0.11): up to
+  // keep_alive_max_count_ requests, each awaited for keep_alive_timeout_sec_ — here in slices,
+  // so that a stopped server does not wait for its idle connections.
   bool ret = false;
-  DeadlineStream strm(sock, Ms(read_timeout_sec_, read_timeout_usec_),
-                      Ms(write_timeout_sec_, write_timeout_usec_));
-  for (std::size_t count = keep_alive_max_count_; count > 0; --count) {
+  DeadlineStream strm(sock, ssl, Ms(this->read_timeout_sec_, this->read_timeout_usec_),
+                      Ms(this->write_timeout_sec_, this->write_timeout_usec_));
+  for (std::size_t count = this->keep_alive_max_count_; count > 0; --count) {
     bool readable = strm.buffered();
-    const auto idle_until = Clock::now() + std::chrono::seconds(keep_alive_timeout_sec_);
-    while (!readable && svr_sock_ != INVALID_SOCKET && Clock::now() < idle_until) {
+    const auto idle_until = Clock::now() + std::chrono::seconds(this->keep_alive_timeout_sec_);
+    while (!readable && this->svr_sock_ != INVALID_SOCKET && Clock::now() < idle_until) {
       const int rc = Wait(sock, POLLIN, std::chrono::milliseconds(100));
       if (rc < 0) break;
       if (rc > 0) {
@@ -343,11 +429,11 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
         break;
       }
     }
-    if (!readable || svr_sock_ == INVALID_SOCKET) break;
+    if (!readable || this->svr_sock_ == INVALID_SOCKET) break;
     const auto now = Clock::now();
     strm.BeginRequest(now + deadline, now + request_deadline);
     bool connection_closed = false;
-    ret = process_request(strm, count == 1, connection_closed, nullptr);
+    ret = this->process_request(strm, count == 1, connection_closed, nullptr);
     if (strm.deadline_missed()) {
       Note(stats_.header_deadlines,
            fmt::format("connection from {} closed: its request's headers took longer than {:g} s",
@@ -360,9 +446,17 @@ bool GatedHttpServer::process_and_close_socket(socket_t sock) {
     }
     if (!ret || connection_closed || strm.close_after()) break;
   }
+  if (ssl != nullptr) {
+    SSL_shutdown(ssl);  // non-blocking: the close_notify is sent if it can be, not awaited
+    SSL_free(ssl);
+    ERR_clear_error();
+  }
   addresses_.Release(address);
   CloseSocket(sock);
   return ret;
 }
+
+template class Gated<httplib::Server>;
+template class Gated<httplib::SSLServer>;
 
 }  // namespace trailmark::server

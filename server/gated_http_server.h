@@ -7,8 +7,8 @@
 /// clients held every thread (health probes waited 30 s). This class takes over the library's
 /// per-connection loop (`process_and_close_socket`, the keep-alive loop around the library's own
 /// `process_request`) with a socket stream of its own that enforces the deadline; everything
-/// else — parsing, routing, responses — is the library's. Plain HTTP only: with TLS the
-/// library's SSL server runs ungated (docs/server.md).
+/// else — parsing, routing, responses — is the library's. With TLS, the handshake is ours as
+/// well (OpenSSL, on the library's context), within the header deadline.
 
 #include <httplib.h>
 
@@ -18,6 +18,7 @@
 #include <mutex>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "server/connection_limits.h"
@@ -43,22 +44,42 @@ class BoundedThreadPool : public httplib::TaskQueue {
   std::mutex mutex_;
 };
 
-class GatedHttpServer : public httplib::Server {
+/// What the gated servers share: the limits, the counts, the log.
+class GateCore {
  public:
-  /// `log` receives a line for the first refusal of each kind and then at every power of ten
-  /// (a flood of strangers does not flood the log); may be empty.
-  GatedHttpServer(ConnectionLimits limits, std::function<void(const std::string&)> log);
+  GateCore(ConnectionLimits limits, std::function<void(const std::string&)> log);
   const GateStats& gate_stats() const { return stats_; }
   /// The pool to give the server (`new_task_queue`): `threads` workers, the gate's waiting cap.
   httplib::TaskQueue* NewTaskQueue(std::size_t threads) const;
 
- private:
-  bool process_and_close_socket(socket_t sock) override;
+ protected:
+  /// `log` receives a line for the first event of each kind and then at every power of ten
+  /// (a flood of strangers does not flood the log).
   void Note(std::atomic<std::size_t>& counter, const std::string& what);
   ConnectionLimits limits_;
   std::function<void(const std::string&)> log_;
   AddressCounter addresses_;
   GateStats stats_;
 };
+
+/// `Base` (httplib::Server, or httplib::SSLServer: the handshake is ours too, within the
+/// header deadline) with the gate on each connection.
+template <class Base>
+class Gated final : public Base, public GateCore {
+ public:
+  template <class... BaseArgs>
+  Gated(ConnectionLimits limits, std::function<void(const std::string&)> log,
+        BaseArgs&&... base_args)
+      : Base(std::forward<BaseArgs>(base_args)...), GateCore(limits, std::move(log)) {}
+
+ private:
+  bool process_and_close_socket(socket_t sock) override;
+};
+
+using GatedHttpServer = Gated<httplib::Server>;
+using GatedHttpsServer = Gated<httplib::SSLServer>;
+
+extern template class Gated<httplib::Server>;
+extern template class Gated<httplib::SSLServer>;
 
 }  // namespace trailmark::server

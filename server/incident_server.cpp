@@ -26,7 +26,7 @@ namespace trailmark::server {
 
 struct IncidentServer::Http {
   std::unique_ptr<httplib::Server> server;  ///< an httplib::SSLServer for HTTPS
-  GatedHttpServer* gated = nullptr;         ///< the server, for plain HTTP
+  GateCore* gate = nullptr;                 ///< the server's connection gate
 };
 
 struct IncidentServer::Live {
@@ -204,12 +204,13 @@ nlohmann::json IncidentServer::StatsJson() {
                       {"estimated_rows", stats_.estimated_rows.load()},
                       {"estimator_refusals", stats_.estimator_refusals.load()},
                       {"events_sent", stats_.events_sent.load()}};
-  if (http_ && http_->gated != nullptr) {
-    const GateStats& g = http_->gated->gate_stats();
+  if (http_ && http_->gate != nullptr) {
+    const GateStats& g = http_->gate->gate_stats();
     j["connections_refused_per_address"] = g.refused_per_address.load();
     j["header_deadlines_missed"] = g.header_deadlines.load();
     j["request_deadlines_missed"] = g.request_deadlines.load();
     j["connections_refused_waiting"] = g.refused_waiting.load();
+    j["tls_handshakes_failed"] = g.handshakes_failed.load();
   }
   if (const MqttStats* m = mqtt_stats()) {
     j["mqtt"] = {{"received", m->received.load()},
@@ -234,31 +235,32 @@ nlohmann::json IncidentServer::StatsJson() {
 void IncidentServer::Start() {
   if (options_.tls_cert_file.empty() != options_.tls_key_file.empty())
     throw std::invalid_argument("serve: HTTPS needs both a certificate and its key");
+  ConnectionLimits limits;
+  limits.header_deadline_s = options_.header_deadline_s;
+  limits.max_per_address = options_.max_connections_per_address;
+  limits.request_deadline_s = options_.request_deadline_s;
+  limits.max_waiting = options_.max_waiting_connections;
+  std::string why;
+  if (!limits.IsValid(&why)) throw std::invalid_argument("serve: " + why);
+  auto log = [log = options_.log](const std::string& line) {
+    if (log) log(line);
+  };
   if (options_.tls_cert_file.empty()) {
-    ConnectionLimits limits;
-    limits.header_deadline_s = options_.header_deadline_s;
-    limits.max_per_address = options_.max_connections_per_address;
-    limits.request_deadline_s = options_.request_deadline_s;
-    limits.max_waiting = options_.max_waiting_connections;
-    std::string why;
-    if (!limits.IsValid(&why)) throw std::invalid_argument("serve: " + why);
-    auto log = options_.log;
-    auto gated = std::make_unique<GatedHttpServer>(limits, [log](const std::string& line) {
-      if (log) log(line);
-    });
-    http_->gated = gated.get();
+    auto gated = std::make_unique<GatedHttpServer>(limits, log);
+    http_->gate = gated.get();
     http_->server = std::move(gated);
   } else {
     for (const auto& f : {options_.tls_cert_file, options_.tls_key_file}) {
       if (!std::filesystem::exists(f)) throw std::invalid_argument("serve: " + f + ": no such file");
     }
-    auto ssl = std::make_unique<httplib::SSLServer>(options_.tls_cert_file.c_str(),
-                                                    options_.tls_key_file.c_str());
+    auto ssl = std::make_unique<GatedHttpsServer>(limits, log, options_.tls_cert_file.c_str(),
+                                                  options_.tls_key_file.c_str());
     if (!ssl->is_valid()) {
       throw std::invalid_argument("serve: " + options_.tls_cert_file + " / " +
                                   options_.tls_key_file +
                                   ": not a PEM certificate chain and its private key");
     }
+    http_->gate = ssl.get();
     http_->server = std::move(ssl);
   }
   httplib::Server& svr = *http_->server;
@@ -269,11 +271,7 @@ void IncidentServer::Start() {
   svr.set_keep_alive_max_count(1u << 30);
   svr.set_keep_alive_timeout(10);
   const std::size_t threads = std::max<std::size_t>(4, options_.http_threads);
-  if (GatedHttpServer* gated = http_->gated) {
-    svr.new_task_queue = [gated, threads] { return gated->NewTaskQueue(threads); };
-  } else {
-    svr.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
-  }
+  svr.new_task_queue = [gate = http_->gate, threads] { return gate->NewTaskQueue(threads); };
   // Counts the request; true when it carries the token (the API: Authorization: Bearer; the
   // dashboard and its event stream may also take it as ?token=, the link a commander opens).
   auto authorized = [this](const httplib::Request& req, bool query_token_too) {

@@ -68,11 +68,12 @@ struct ServerOptions {
   std::size_t http_threads = 64;  ///< each connected device and dashboard holds one
   /// Plain HTTP: a request's line and headers must arrive within this (s) of its first byte,
   /// and one client address may hold at most this many connections at once (0: no cap; a
-  /// gateway relaying many devices from one address needs more). Not applied with TLS.
+  /// gateway relaying many devices from one address needs more). With TLS too (the handshake
+  /// within the header deadline).
   double header_deadline_s = 10.0;
   std::size_t max_connections_per_address = 32;  ///< half the default http_threads
   /// The whole request (its body too) within this (s) of its first byte, and at most this
-  /// many connections waiting for a worker (more are answered 503 at once). Plain HTTP.
+  /// many connections waiting for a worker (more are answered 503 at once).
   double request_deadline_s = 60.0;
   std::size_t max_waiting_connections = 256;
   /// Receives every rejection reason (also counted; the latest are in /api/stats); default:

@@ -84,9 +84,9 @@ struct ServeOptions {
   std::string mqtt_uri, incident = "incident", mqtt_user, mqtt_password;  ///< live mode over MQTT
   std::string mqtt_ca;            ///< CA certificate (PEM) that signed the broker's (ssl://)
   std::string tls_cert, tls_key;  ///< HTTPS: the server's certificate chain and key (PEM)
-  double header_deadline_s = 10.0;               ///< plain HTTP: see server::ServerOptions
-  std::size_t max_connections_per_address = 32;  ///< plain HTTP; 0: no cap
-  double request_deadline_s = 60.0;              ///< plain HTTP
+  double header_deadline_s = 10.0;               ///< see server::ServerOptions
+  std::size_t max_connections_per_address = 32;  ///< 0: no cap
+  double request_deadline_s = 60.0;
 };
 int Serve(const ServeOptions& options);
 int ServeLive(const ServeOptions& options);

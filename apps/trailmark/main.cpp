@@ -295,13 +295,13 @@ int main(int argc, char** argv) {
   serve->add_option("--token", serve_options.token,
                     "access token (default: $TRAILMARK_TOKEN, else a random one)");
   serve->add_option("--header-deadline", serve_options.header_deadline_s,
-                    "plain HTTP: seconds a request's line and headers may take (default 10)")
+                    "seconds a request's line and headers (and a TLS handshake) may take (default 10)")
       ->check(CLI::PositiveNumber);
   serve->add_option("--request-deadline", serve_options.request_deadline_s,
-                    "plain HTTP: seconds a whole request, body included, may take (default 60)")
+                    "seconds a whole request, body included, may take (default 60)")
       ->check(CLI::PositiveNumber);
   serve->add_option("--max-connections-per-address", serve_options.max_connections_per_address,
-                    "plain HTTP: connections one client address may hold (default 32; 0: no cap)");
+                    "connections one client address may hold (default 32; 0: no cap)");
   serve->add_flag("--exit-after-replay", serve_options.exit_after_replay,
                   "stop when the replay has ended");
 
