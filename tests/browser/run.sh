@@ -9,6 +9,12 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 dir=$(mktemp -d)
 trap 'kill $pid 2>/dev/null || true; rm -rf "$dir"' EXIT
 [ -d "$here/node_modules/playwright-core" ] && [ -d "$here/node_modules/axe-core" ] || { echo "FAIL: run scripts/install-deps.sh (npm ci in tests/browser)"; exit 1; }
+# The dashboard's pure helpers, compiled with the dashboard's own TypeScript.
+web="$here/../../web/dashboard"
+"$web/node_modules/.bin/tsc" --target es2022 --module es2022 --moduleResolution bundler \
+  --outDir "$dir/geometry" "$web/src/geometry.ts" || { echo "FAIL: tsc geometry.ts"; exit 1; }
+echo '{"type":"module"}' > "$dir/geometry/package.json"
+node "$here/geometry.mjs" "$dir/geometry"
 "$TM" simulate training-building --seed 2 --out "$dir/m" > /dev/null
 "$TM" serve --replay "$dir/m" --pipeline pdr --speed 10 --port 0 --token br0wser > "$dir/serve.log" 2>&1 &
 pid=$!
@@ -26,4 +32,4 @@ for _ in $(seq 100); do grep -q "listening on" "$dir/serve2.log" && break; sleep
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve2.log")
 [ -n "$port" ] || { cat "$dir/serve2.log"; echo "FAIL: serve did not start"; exit 1; }
 node "$here/floors.mjs" "http://127.0.0.1:$port" br0wser "$dir/floors.png"
-echo "browser: 2 passed, 0 failed"
+echo "browser: 3 passed, 0 failed"

@@ -44,6 +44,38 @@ export function fitView(xs: number[], ys: number[], width: number, height: numbe
 
 export const toScreen = (v: View, x: number, y: number): [number, number] => [v.ox + x * v.scale, v.oy - y * v.scale];
 
+/** A box that only grows: the trails' extent kept as rows arrive, so that fitting the view
+ *  costs the same after four hours as after a minute. */
+export class Bounds {
+  minx = Infinity;
+  maxx = -Infinity;
+  miny = Infinity;
+  maxy = -Infinity;
+  add(x: number, y: number): void {
+    if (Number.isFinite(x)) (this.minx = Math.min(this.minx, x)), (this.maxx = Math.max(this.maxx, x));
+    if (Number.isFinite(y)) (this.miny = Math.min(this.miny, y)), (this.maxy = Math.max(this.maxy, y));
+  }
+  /** Its corners, for fitView (nothing when empty). */
+  corners(xs: number[], ys: number[]): void {
+    if (this.minx <= this.maxx) xs.push(this.minx, this.maxx);
+    if (this.miny <= this.maxy) ys.push(this.miny, this.maxy);
+  }
+}
+
+/** The points of a polyline worth drawing at this scale: each at least `minPx` pixels from the
+ *  last kept one, and the last point always (a four-hour trail is tens of thousands of rows;
+ *  the screen shows a few hundred distinct pixels of it). */
+export function decimate(points: Array<[number, number]>, minPx: number): Array<[number, number]> {
+  const out: Array<[number, number]> = [];
+  const min2 = minPx * minPx;
+  for (let i = 0; i < points.length; i++) {
+    const p = points[i];
+    const last = out[out.length - 1];
+    if (!last || i === points.length - 1 || (p[0] - last[0]) ** 2 + (p[1] - last[1]) ** 2 >= min2) out.push(p);
+  }
+  return out;
+}
+
 /** The last row at or before `t` (null when the trail starts later). Binary search. */
 export function rowAt(trail: TrailRow[], t: number): TrailRow | null {
   let lo = 0;

@@ -6,7 +6,7 @@
 // through server-sent events; history from /api/history.
 import './style.css';
 import { Api, type Alert, type History, type KnownNode, type LevelWalls, type NodeState, type State, type TrailRow, type Wall } from './api';
-import { ellipse95, fitView, rowAt, toScreen, type View } from './geometry';
+import { Bounds, decimate, ellipse95, fitView, rowAt, toScreen, type View } from './geometry';
 
 const token = new URLSearchParams(location.search).get('token') ?? '';
 const api = new Api(token);
@@ -23,6 +23,7 @@ let shownLevel: number | null = null; // null: a single-level plan
 let known: KnownNode[] = [];
 let live: State = { t: null, nodes: [], alerts: [] };
 let trails: Record<string, TrailRow[]> = {};
+const trailBounds = new Bounds(); // every trail row's extent, kept as rows arrive
 let alertLog: Alert[] = [];
 let following = true; // the timeline follows the incident
 let selected: string | null = null;
@@ -48,6 +49,7 @@ function mergeHistory(h: History): void {
     const end = rows[rows.length - 1][0];
     const old = trails[id] ?? [];
     trails[id] = old.filter((r) => r[0] < first).concat(rows, old.filter((r) => r[0] > end));
+    for (const r of rows) trailBounds.add(r[1], r[2]);
   }
   if (h.t !== null) historyEnd = Math.max(historyEnd ?? -Infinity, h.t);
   if (h.since === undefined) {
@@ -73,7 +75,10 @@ function onState(s: State): void {
     if (n.kind !== 'agent') continue;
     const trail = (trails[n.id] ??= []);
     const last = trail[trail.length - 1];
-    if (!last || n.t >= last[0] + TRAIL_PERIOD_S) trail.push([n.t, n.x, n.y, n.sxx, n.sxy, n.syy, n.floor ?? null]);
+    if (!last || n.t >= last[0] + TRAIL_PERIOD_S) {
+      trail.push([n.t, n.x, n.y, n.sxx, n.sxy, n.syy, n.floor ?? null]);
+      trailBounds.add(n.x, n.y);
+    }
   }
   for (const a of s.alerts) {
     if (!alertLog.some((b) => b.id === a.id && b.kind === a.kind && Math.abs(b.t - a.t) < 60)) alertLog.push(a);
@@ -193,7 +198,7 @@ function render(): void {
   // The view fits every level, so that changing the floor shown does not move the map.
   for (const wl of levels.length ? levels.flatMap((l) => l.walls) : walls) xs.push(wl[0], wl[2]), ys.push(wl[1], wl[3]);
   for (const n of [...agents, ...others]) xs.push(n.x), ys.push(n.y);
-  for (const rows of Object.values(trails)) for (const r of rows) xs.push(r[1]), ys.push(r[2]);
+  trailBounds.corners(xs, ys); // the trails' extent, not their every row
   view = fitView(xs, ys, w, h);
   (window as unknown as { trailmarkView?: View }).trailmarkView = view; // for the browser test
   ctx.clearRect(0, 0, w, h);
@@ -224,14 +229,13 @@ function render(): void {
     ctx.strokeStyle = n.id === selected ? '#ffe066' : '#5b6470';
     ctx.lineWidth = n.id === selected ? 2 : 1;
     ctx.beginPath();
-    let first = true;
+    const screen: Array<[number, number]> = [];
     for (const r of rows) {
       if (t !== null && r[0] > t) break;
-      const [px, py] = toScreen(view, r[1], r[2]);
-      if (first) ctx.moveTo(px, py);
-      else ctx.lineTo(px, py);
-      first = false;
+      screen.push(toScreen(view, r[1], r[2]));
     }
+    const kept = decimate(screen, 1.5);
+    kept.forEach(([px, py], i) => (i === 0 ? ctx.moveTo(px, py) : ctx.lineTo(px, py)));
     ctx.stroke();
     const e = ellipse95(n.sxx, n.sxy, n.syy);
     const [px, py] = toScreen(view, n.x, n.y);
