@@ -377,21 +377,19 @@ bool Gated<Base>::process_and_close_socket(socket_t sock) {
   if (!Endpoint(sock, true, address, port)) address.assign(1, '?');
   // Counted before the answer: whoever reads the 503 finds it in /api/stats. (Over TLS the
   // connection is closed without one: a plain answer means nothing to a TLS client.)
-  if (t_refuse) {
-    Note(stats_.refused_waiting,
-         fmt::format("connection from {} refused: {} connections wait for a worker already (503)",
-                     address, limits_.max_waiting));
+  auto refuse = [&](std::atomic<std::size_t>& counter, const std::string& why) {
+    Note(counter, fmt::format("connection from {} refused: {} (503)", address, why));
     if (!kTls) Refuse(sock);
     CloseSocket(sock);
     return false;
+  };
+  if (t_refuse) {
+    return refuse(stats_.refused_waiting,
+                  fmt::format("{} connections wait for a worker already", limits_.max_waiting));
   }
   if (!addresses_.Admit(address)) {
-    Note(stats_.refused_per_address,
-         fmt::format("connection from {} refused: it holds {} connections already (503)",
-                     address, limits_.max_per_address));
-    if (!kTls) Refuse(sock);
-    CloseSocket(sock);
-    return false;
+    return refuse(stats_.refused_per_address,
+                  fmt::format("it holds {} connections already", limits_.max_per_address));
   }
   const auto deadline = std::chrono::duration_cast<Clock::duration>(
       std::chrono::duration<double>(limits_.header_deadline_s));

@@ -301,7 +301,8 @@ int main(int argc, char** argv) {
                     "seconds a whole request, body included, may take (default 60)")
       ->check(CLI::PositiveNumber);
   serve->add_option("--max-connections-per-address", serve_options.max_connections_per_address,
-                    "connections one client address may hold (default 32; 0: no cap)");
+                    "connections one client address may hold (default 32; 0: no cap)")
+      ->check(CLI::Range(0, 1000000));
   serve->add_flag("--exit-after-replay", serve_options.exit_after_replay,
                   "stop when the replay has ended");
 

@@ -7,6 +7,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <optional>
 
 #include "trailmark/core/random.h"
 #include "trailmark/sim/multi_floor.h"
@@ -219,20 +220,26 @@ TEST(PressureJumpFit, RecoversAClimbAndAJumpExactly) {
   EXPECT_FALSE(FitPressureJump({spiked.begin(), spiked.begin() + 7}, 0.3, true).has_value());
 }
 
+/// A phone (steps without height) carried up 3.5 m over 10 s from t = 20 s, readings every
+/// 0.2 s for 80 s; from `fan_s` (if given) a fan raises the pressure by 0.3 hPa within 1 s.
+void PhoneClimbsAFlight(HeightFilter& f, Random& rng, std::optional<TimeS> fan_s = std::nullopt) {
+  for (int k = 0; k < 400; ++k) {
+    const TimeS t = 0.2 * k;
+    const double z = std::clamp((t - 20.0) * 0.35, 0.0, 3.5);
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
+    BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
+    if (fan_s) r.pressure_hpa += 0.3 * std::clamp(t - *fan_s, 0.0, 1.0);
+    f.AddBaro(r);
+  }
+}
+
 TEST(HeightFilter, AFanStartedOnTheStairsLeavesThePhonesClimbItsOwn) {
   // Steps without height climb 3.5 m over 10 s; 3 s into the climb a fan raises the pressure
   // by 0.3 hPa (-2.5 m) within a second. The climb of the seconds around the fan is the
   // agent's (issue 26: it used to go into the offset with the fan's jump).
   HeightFilter f(0.0, 0.05);
   Random rng(23);
-  for (int k = 0; k < 400; ++k) {
-    const TimeS t = 0.2 * k;
-    const double z = std::clamp((t - 20.0) * 0.35, 0.0, 3.5);
-    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
-    BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
-    r.pressure_hpa += 0.3 * std::clamp(t - 23.0, 0.0, 1.0);
-    f.AddBaro(r);
-  }
+  PhoneClimbsAFlight(f, rng, 23.0);
   EXPECT_EQ(f.Counters().at("baro_jumps"), 1);
   EXPECT_NEAR(f.height_m(), 3.5, 0.35);
   EXPECT_LE(std::abs(f.height_m() - 3.5), 3 * std::sqrt(f.height_variance_m2()));
@@ -268,12 +275,7 @@ TEST(HeightFilter, TheBarometerCarriesAPhonesStepsUpTheStairs) {
   // Steps without height; the barometer climbs 3.5 m over 10 s (a flight and a half).
   HeightFilter f(0.0, 0.05);
   Random rng(9);
-  for (int k = 0; k < 400; ++k) {
-    const TimeS t = 0.2 * k;
-    const double z = std::clamp((t - 20.0) * 0.35, 0.0, 3.5);
-    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
-    f.AddBaro(Reading(t, z + rng.Normal(0, 0.3)));
-  }
+  PhoneClimbsAFlight(f, rng);
   // Within its own 3 sigma, on level 1.
   EXPECT_LE(std::abs(f.height_m() - 3.5), 3 * std::sqrt(f.height_variance_m2()));
   EXPECT_EQ(f.Level(kSpecFloors).first, 1);

@@ -15,6 +15,7 @@
 
 #include <chrono>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -180,24 +181,42 @@ bool Answered(Connection& c, const char* status) {
 
 const std::string kHealth = "GET /api/health HTTP/1.1\r\nHost: x\r\n\r\n";
 
+/// Sends `bytes` one every 0.3 s until the server cuts the connection; how long that took
+/// (nullopt: never cut).
+std::optional<std::chrono::steady_clock::duration> TrickleUntilCut(Connection& c,
+                                                                 const std::string& bytes) {
+  const auto t0 = std::chrono::steady_clock::now();
+  for (std::size_t i = 0; i < bytes.size(); ++i) {
+    bool cut = !c.Send(bytes.substr(i, 1));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    cut = cut || !c.Open();
+    if (cut) return std::chrono::steady_clock::now() - t0;
+  }
+  return std::nullopt;
+}
+
+/// Whether a health request from `from` is answered within 3 s of retries (a closed
+/// connection's place is freed as soon as the server sees it close).
+bool ServedSoon(int port, const char* from = nullptr) {
+  for (int i = 0; i < 30; ++i) {
+    Connection c(port, from);
+    if (c.Send(kHealth) && Answered(c, " 200 ")) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return false;
+}
+
 TEST_F(LiveServerFixture, HeadersThatComeTooSlowlyAreCutOff) {
   // A byte every 0.3 s keeps within the 5 s per-read timeout for ever; the 1 s deadline of the
   // whole head closes the connection.
   Restart(1.0, 32, 64);
   Connection slow(server_->port());
   ASSERT_TRUE(slow.connected());
-  const std::string head = "GET /api/health HTTP/1.1\r\nHost: x\r\nX-Slow: aaaaaaaaaaaaaaaa\r\n";
-  const auto t0 = std::chrono::steady_clock::now();
-  bool cut = false;
-  for (std::size_t i = 0; i < head.size() && !cut; ++i) {
-    cut = !slow.Send(head.substr(i, 1));
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    cut = cut || !slow.Open();
-  }
-  const auto took = std::chrono::steady_clock::now() - t0;
-  EXPECT_TRUE(cut) << "the slow head was never cut off";
-  EXPECT_LT(took, std::chrono::milliseconds(4000));
-  EXPECT_GE(took, std::chrono::milliseconds(900));
+  const auto took = TrickleUntilCut(
+      slow, "GET /api/health HTTP/1.1\r\nHost: x\r\nX-Slow: aaaaaaaaaaaaaaaa\r\n");
+  ASSERT_TRUE(took.has_value()) << "the slow head was never cut off";
+  EXPECT_LT(*took, std::chrono::milliseconds(4000));
+  EXPECT_GE(*took, std::chrono::milliseconds(900));
   // A client that sends its head at once is served on the same server.
   Connection quick(server_->port());
   ASSERT_TRUE(quick.Send(kHealth));
@@ -227,13 +246,7 @@ TEST_F(LiveServerFixture, OneAddressCannotTakeEveryWorker) {
   EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(2000));
   // Closing the stranger's connections frees its places (as soon as the server sees them close).
   stranger.clear();
-  bool served = false;
-  for (int i = 0; i < 30 && !served; ++i) {
-    Connection again(server_->port(), "127.0.0.2");
-    served = again.Send(kHealth) && Answered(again, " 200 ");
-    if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  EXPECT_TRUE(served);
+  EXPECT_TRUE(ServedSoon(server_->port(), "127.0.0.2"));
 }
 
 TEST_F(LiveServerFixture, ABodyThatComesTooSlowlyIsCutOff) {
@@ -243,18 +256,10 @@ TEST_F(LiveServerFixture, ABodyThatComesTooSlowlyIsCutOff) {
   Connection slow(server_->port());
   ASSERT_TRUE(slow.Send("POST /api/ingest/steps.csv HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer "
                         "s3cret-token\r\nContent-Type: text/csv\r\nContent-Length: 200\r\n\r\n"));
-  const std::string body = "t0,t1,agent,dx,dy\n0,1,ff1,0.7,0\n1,2,ff1,0.7,0\n";
-  const auto t0 = std::chrono::steady_clock::now();
-  bool cut = false;
-  for (std::size_t i = 0; i < body.size() && !cut; ++i) {
-    cut = !slow.Send(body.substr(i, 1));
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    cut = cut || !slow.Open();
-  }
-  const auto took = std::chrono::steady_clock::now() - t0;
-  EXPECT_TRUE(cut) << "the slow body was never cut off";
-  EXPECT_LT(took, std::chrono::milliseconds(5000));
-  EXPECT_GE(took, std::chrono::milliseconds(1800));
+  const auto took = TrickleUntilCut(slow, "t0,t1,agent,dx,dy\n0,1,ff1,0.7,0\n1,2,ff1,0.7,0\n");
+  ASSERT_TRUE(took.has_value()) << "the slow body was never cut off";
+  EXPECT_LT(*took, std::chrono::milliseconds(5000));
+  EXPECT_GE(*took, std::chrono::milliseconds(1800));
   EXPECT_EQ(server_->stats().ingested_rows.load(), 0u);
   const std::string stats = server_->StatsJson().dump();
   EXPECT_NE(stats.find("\"request_deadlines_missed\":1"), std::string::npos) << stats;
@@ -279,13 +284,7 @@ TEST_F(LiveServerFixture, ConnectionsBeyondTheWaitingCapAreRefusedAtOnce) {
   const std::string stats = server_->StatsJson().dump();
   EXPECT_NE(stats.find("\"connections_refused_waiting\":1"), std::string::npos) << stats;
   held.clear();  // the workers are free again: a request is served
-  bool served = false;
-  for (int i = 0; i < 30 && !served; ++i) {
-    Connection again(server_->port());
-    served = again.Send(kHealth) && Answered(again, " 200 ");
-    if (!served) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  EXPECT_TRUE(served);
+  EXPECT_TRUE(ServedSoon(server_->port()));
 }
 
 TEST(AddressCounter, CountsPlacesPerAddress) {

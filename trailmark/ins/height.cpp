@@ -135,6 +135,14 @@ void HeightFilter::AddStep(const Step& step) {
   }
 }
 
+namespace {
+// The (upper) median: a lone spike moves it not.
+double Median(std::vector<double> v) {
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+}  // namespace
+
 std::optional<PressureJumpFit> FitPressureJump(const std::vector<std::pair<TimeS, double>>& ty,
                                                double sigma_m, bool with_rate) {
   if (ty.size() < 8 || !(sigma_m > 0)) return std::nullopt;
@@ -144,8 +152,7 @@ std::optional<PressureJumpFit> FitPressureJump(const std::vector<std::pair<TimeS
     const std::size_t lo = i >= 2 ? i - 2 : 0, hi = std::min(ty.size(), i + 3);
     std::vector<double> near;
     for (std::size_t k = lo; k < hi; ++k) near.push_back(ty[k].second);
-    std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
-    if (std::abs(ty[i].second - near[near.size() / 2]) <= 5 * sigma_m) pts.push_back(ty[i]);
+    if (std::abs(ty[i].second - Median(std::move(near))) <= 5 * sigma_m) pts.push_back(ty[i]);
   }
   if (pts.size() < 8) return std::nullopt;
   const TimeS t_end = pts.back().first;
@@ -223,12 +230,8 @@ bool HeightFilter::LevelShift(TimeS t, double y) {
     }
   }
   if (fresh.size() < 4 || older.size() < 4) return false;
-  auto median = [](std::vector<double> v) {
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    return v[v.size() / 2];
-  };
-  const double before = median(older);
-  const double d = median(fresh) - before;
+  const double before = Median(older);
+  const double d = Median(fresh) - before;
   // The median's standard error is 1.25 sigma / sqrt(n) for Gaussian noise.
   const double sigma_d = 1.25 * options_.baro_sigma_m *
                          std::sqrt(1.0 / static_cast<double>(fresh.size()) +
@@ -271,8 +274,7 @@ void HeightFilter::SettleShift(TimeS t) {
     for (const auto& [ti, yi] : shift.readings) {
       if (ti >= shift.since) after.push_back(yi);
     }
-    std::nth_element(after.begin(), after.begin() + after.size() / 2, after.end());
-    change = after[after.size() / 2] - shift.before_m;
+    change = Median(after) - shift.before_m;
     x_[1] = shift.offset_m + change;
     P_(1, 1) = shift.offset_var_m2 + 2 * options_.baro_sigma_m * options_.baro_sigma_m /
                                          static_cast<double>(after.size());
