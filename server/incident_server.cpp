@@ -74,26 +74,10 @@ void Parse(const std::string& name, const std::string& body, Journal::Batch& bat
 void ParseStream(const std::string& stream, const std::string& name, const std::string& body,
                  Journal::Batch& batch, std::vector<MissionRow>& typed) {
   batch.stream = stream;
-  if (stream == "steps.csv")
-    Parse<Step>(name, body, batch, typed);
-  else if (stream == "rssi.csv")
-    Parse<RssiPacket>(name, body, batch, typed);
-  else if (stream == "ranges.csv")
-    Parse<RangeMeasurement>(name, body, batch, typed);
-  else if (stream == "bearings.csv")
-    Parse<BearingMeasurement>(name, body, batch, typed);
-  else if (stream == "events.csv")
-    Parse<MissionEvent>(name, body, batch, typed);
-  else if (stream == "imu.csv")
-    Parse<ImuSample>(name, body, batch, typed);
-  else if (stream == "baro.csv")
-    Parse<BaroSample>(name, body, batch, typed);
-  else
-    throw std::invalid_argument("unknown stream '" + stream +
-                                "' (steps.csv, rssi.csv, ranges.csv, bearings.csv, events.csv, "
-                                "imu.csv, baro.csv)");
+  WithStreamRowType(stream, [&]<class Row>(std::type_identity<Row>) {
+    Parse<Row>(name, body, batch, typed);
+  });
 }
-
 
 /// (id, node JSON) of every agent: what is published to MQTT as its retained estimate.
 std::vector<std::pair<std::string, std::string>> AgentJson(const IncidentState& state) {

@@ -12,6 +12,9 @@
 #include <algorithm>
 #include <functional>
 #include <set>
+#include <stdexcept>
+#include <string_view>
+#include <type_traits>
 #include <map>
 #include <string>
 #include <vector>
@@ -185,5 +188,28 @@ template <>
 struct StreamTraits<Estimate> {
   static constexpr const char* kFileName = "estimates.csv";
 };
+
+/// Calls `f(std::type_identity<Row>{})` with the row type of a stream file: the measurement
+/// streams ("steps.csv", "imu.csv", "rssi.csv", "ranges.csv", "bearings.csv", "events.csv",
+/// "baro.csv") and, when `kOutputs`, "truth.csv" and "estimates.csv". Throws
+/// std::invalid_argument naming the known files for any other name.
+template <bool kOutputs = false, class F>
+decltype(auto) WithStreamRowType(std::string_view file, F&& f) {
+  if (file == "steps.csv") return f(std::type_identity<Step>{});
+  if (file == "imu.csv") return f(std::type_identity<ImuSample>{});
+  if (file == "rssi.csv") return f(std::type_identity<RssiPacket>{});
+  if (file == "ranges.csv") return f(std::type_identity<RangeMeasurement>{});
+  if (file == "bearings.csv") return f(std::type_identity<BearingMeasurement>{});
+  if (file == "events.csv") return f(std::type_identity<MissionEvent>{});
+  if (file == "baro.csv") return f(std::type_identity<BaroSample>{});
+  if constexpr (kOutputs) {
+    if (file == "truth.csv") return f(std::type_identity<TruthSample>{});
+    if (file == "estimates.csv") return f(std::type_identity<Estimate>{});
+  }
+  throw std::invalid_argument(
+      "unknown stream '" + std::string(file) +
+      "' (steps.csv, imu.csv, rssi.csv, ranges.csv, bearings.csv, events.csv, baro.csv" +
+      (kOutputs ? ", truth.csv, estimates.csv)" : ")"));
+}
 
 }  // namespace trailmark

@@ -146,13 +146,19 @@ void Drive(OnlineEstimator& estimator, MergedStream& stream, const MissionDirect
 
 }  // namespace
 
+StreamSet BatchFeedStreams(const PipelineSpec& pipeline, const MissionDirectory& mission,
+                           const OptionValues& options, std::vector<std::string>* notes) {
+  std::vector<std::string> ignored;
+  return FeedStreams(pipeline.uses, pipeline.steps_based, mission, options,
+                     notes != nullptr ? notes : &ignored);
+}
+
 EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& context,
                           EstimateSink& sink) {
   const MissionDirectory& mission = context.mission;
   RequireCanRun(pipeline, mission);
   EstimatorSummary summary;
-  const StreamSet feed =
-      FeedStreams(pipeline.uses, pipeline.steps_based, mission, context.options, &summary.notes);
+  const StreamSet feed = BatchFeedStreams(pipeline, mission, context.options, &summary.notes);
   std::optional<FloorPlan> floor;
   LevelPlans levels;
   std::string plan_source = "the floor plan";
@@ -169,35 +175,33 @@ EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& c
   return summary;
 }
 
+void RestampingSink::Add(const Estimate& e) {
+  if (e.t < last_t_) {
+    Estimate copy = e;
+    copy.t = last_t_;
+    inner_.Add(copy);
+    ++restamped_;
+  } else {
+    inner_.Add(e);
+    last_t_ = e.t;
+  }
+  ++count_;
+}
+
+bool EstimatesHaveFloorColumns(const MissionDirectory& mission) {
+  return !mission.info().floors.empty() || PresentStreams(mission).Has(Stream::kBaro);
+}
+
 namespace {
 
-class CsvEstimateSink : public EstimateSink {
+class CsvRowSink : public EstimateSink {
  public:
-  CsvEstimateSink(const std::string& path, bool floor_columns) : writer_(path, floor_columns) {}
-  // estimates.csv is in non-decreasing time (spec). An estimate is known when it is written:
-  // a row stamped earlier than one already written (e.g. an agent's start, emitted with its
-  // first step, after another agent's rows) is stamped with the latest time instead.
-  void Add(const Estimate& e) override {
-    if (e.t < last_t_) {
-      Estimate copy = e;
-      copy.t = last_t_;
-      writer_.Write(copy);
-      ++restamped_;
-    } else {
-      writer_.Write(e);
-      last_t_ = e.t;
-    }
-    ++count_;
-  }
-  std::size_t restamped() const { return restamped_; }
+  CsvRowSink(const std::string& path, bool floor_columns) : writer_(path, floor_columns) {}
+  void Add(const Estimate& e) override { writer_.Write(e); }
   void Close() { writer_.Close(); }
-  std::size_t count() const { return count_; }
 
  private:
   RowWriter<Estimate> writer_;
-  std::size_t count_ = 0;
-  std::size_t restamped_ = 0;
-  double last_t_ = -std::numeric_limits<double>::infinity();
 };
 
 }  // namespace
@@ -205,16 +209,13 @@ class CsvEstimateSink : public EstimateSink {
 RunResult RunPipeline(const PipelineSpec& pipeline, const PipelineContext& context,
                       const std::filesystem::path& out_dir) {
   std::filesystem::create_directories(out_dir);
-  // The 1.1 columns (szz, floor) where the mission is about floors: it lists them or has a
-  // barometer. A single-floor mission's estimates.csv keeps the 1.0 columns.
-  const bool floors = !context.mission.info().floors.empty() ||
-                      PresentStreams(context.mission).Has(Stream::kBaro);
-  CsvEstimateSink sink((out_dir / "estimates.csv").string(), floors);
+  CsvRowSink csv((out_dir / "estimates.csv").string(), EstimatesHaveFloorColumns(context.mission));
+  RestampingSink sink(csv);
   const auto t0 = std::chrono::steady_clock::now();
   RunResult result;
   result.pipeline = pipeline.name;
   result.summary = RunBatch(pipeline, context, sink);
-  sink.Close();
+  csv.Close();
   result.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   result.estimates = sink.count();
   nlohmann::json diag;

@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -47,11 +48,39 @@ std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
                                            std::vector<std::string>* notes = nullptr,
                                            LevelPlans* all_levels = nullptr);
 
+/// The streams of the mission a batch run of the pipeline feeds it: those it uses that the
+/// mission has, except that steps.csv shadows imu.csv for a steps-based pipeline (`notes`, when
+/// given, gets a line saying so).
+StreamSet BatchFeedStreams(const PipelineSpec& pipeline, const MissionDirectory& mission,
+                           const OptionValues& options, std::vector<std::string>* notes = nullptr);
+
 /// Runs the pipeline: estimates to `sink` in the order the estimator emits them. Throws
 /// InputError for bad input (file:line of the row an estimator refused) or a mission that
 /// lacks what the pipeline needs, std::invalid_argument for bad options.
 EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& context,
                           EstimateSink& sink);
+
+/// estimates.csv is in non-decreasing time (spec). An estimate is known when it is emitted: a
+/// row stamped earlier than one already passed on (e.g. an agent's start, emitted with its
+/// first step, after another agent's rows) is passed on stamped with the latest time instead.
+/// What `trailmark run` writes, and what the Python bindings return.
+class RestampingSink : public EstimateSink {
+ public:
+  explicit RestampingSink(EstimateSink& inner) : inner_(inner) {}
+  void Add(const Estimate& e) override;
+  std::size_t restamped() const { return restamped_; }
+  std::size_t count() const { return count_; }
+
+ private:
+  EstimateSink& inner_;
+  std::size_t count_ = 0;
+  std::size_t restamped_ = 0;
+  double last_t_ = -std::numeric_limits<double>::infinity();
+};
+
+/// Whether the mission's estimates carry the 1.1 columns (szz, floor): it lists floors or has a
+/// barometer. A single-floor mission's estimates.csv keeps the 1.0 columns.
+bool EstimatesHaveFloorColumns(const MissionDirectory& mission);
 
 struct RunResult {
   std::string pipeline;
