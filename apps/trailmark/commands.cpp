@@ -17,6 +17,7 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/io/trajectory_formats.h"
 #include "trailmark/ins/height.h"
 #include "trailmark/report/html_report.h"
 #include "trailmark/sim/house_search.h"
@@ -145,6 +146,34 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
                name, mission_dir.string());
   }
   return result;
+}
+
+std::size_t ExportTum(const fs::path& source, const std::string& id, const fs::path& out) {
+  // estimates.csv has the covariance columns; truth.csv does not.
+  bool estimates = false;
+  {
+    CsvReader header(source.string());
+    estimates = header.Column("sxx") >= 0;
+  }
+  std::string text;
+  std::set<std::string> ids;
+  auto collect = [&](const auto& rows) {
+    for (const auto& r : rows) ids.insert(r.id);
+    text = TumTrajectory(rows, id);
+  };
+  if (estimates) {
+    collect(ReadAll<Estimate>(source.string()));
+  } else {
+    collect(ReadAll<TruthSample>(source.string()));
+  }
+  if (ids.count(id) == 0) {
+    throw InputError(source.string(), 0,
+                     fmt::format("no rows of '{}' (ids: {})", id, fmt::join(ids, ", ")));
+  }
+  std::ofstream f(out, std::ios::binary);
+  f << text;
+  if (!f) throw std::runtime_error(out.string() + ": write failed");
+  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n')) - 1;
 }
 
 Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,

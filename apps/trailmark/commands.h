@@ -57,6 +57,11 @@ void Report(const std::vector<std::filesystem::path>& run_dirs,
 /// beacon trail, each with dead reckoning for comparison); print the summary table and write
 /// one HTML report per mission.
 int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
+/// `trailmark export tum FILE --id ID --out OUT`: the node's rows of an estimates.csv or a
+/// truth.csv (told apart by their header) as a TUM trajectory; returns the number of poses.
+/// Throws InputError naming the ids the file has when `id` is not among them.
+std::size_t ExportTum(const std::filesystem::path& source, const std::string& id,
+                      const std::filesystem::path& out);
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);

@@ -24,6 +24,7 @@
 #include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/convert_wrld.h"
+#include "trailmark/io/trajectory_formats.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/landmarks/energy.h"
 #include "experiments/experiments.h"
@@ -216,17 +217,29 @@ int main(int argc, char** argv) {
   auto* convert =
       app.add_subcommand("convert",
                          "convert recorded data into a mission directory (formats: pyshoe-vicon, "
-                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor)");
+                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor, euroc)");
   convert
       ->add_option("format", convert_format,
                    "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
                    "(WALK_imu.csv) | zupt-dualfoot (the folder) | wrld-indoor (the folder "
-                   "holding main.json: a WRLD indoor map as a multi-floor floor plan)")
+                   "holding main.json: a WRLD indoor map as a multi-floor floor plan) | euroc "
+                   "(a EuRoC mav0 folder or its state_groundtruth_estimate0/data.csv: ground "
+                   "truth, and imu0 when present)")
       ->required();
   convert->add_option("source", convert_src, "source file or folder")
       ->required()
       ->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
+
+  std::string export_format, export_source, export_id, export_out;
+  auto* export_cmd = app.add_subcommand(
+      "export", "write estimates or truth in a standard trajectory format (tum: for evo_ape / evo_rpe)");
+  export_cmd->add_option("format", export_format, "tum")->required();
+  export_cmd->add_option("source", export_source, "estimates.csv or truth.csv")
+      ->required()
+      ->check(CLI::ExistingFile);
+  export_cmd->add_option("--id", export_id, "the node whose trajectory to write")->required();
+  export_cmd->add_option("--out", export_out, "file to write")->required();
 
   landmarks::EnergyModel energy_model;
   std::vector<double> energy_after_years{0, 1, 2, 5};
@@ -399,12 +412,20 @@ int main(int argc, char** argv) {
           m = ReadLlioWalk(convert_src);
         else if (convert_format == "zupt-dualfoot")
           m = ReadDualFoot(convert_src);
+        else if (convert_format == "euroc")
+          m = ReadEuroc(convert_src);
         else
           throw std::invalid_argument("unknown format '" + convert_format + "'");
         WriteMissionDirectory(convert_out, m, nullptr);
         samples = m.imu.size();
       }
       fmt::print("converted {} ({} IMU samples) into {}\n", convert_src, samples, convert_out);
+    } else if (*export_cmd) {
+      if (export_format != "tum") {
+        throw std::invalid_argument("unknown export format '" + export_format + "' (tum)");
+      }
+      const std::size_t poses = cli::ExportTum(export_source, export_id, export_out);
+      fmt::print("wrote {} poses of {} to {}\n", poses, export_id, export_out);
     } else if (*energy) {
       const auto& e = energy_model;
       fmt::print("landmark: {} mAh, sleep {} uA, send {} mA for {} ms\n", e.battery_mAh,

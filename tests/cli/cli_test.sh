@@ -17,7 +17,7 @@ run_failing() { set +e; "$@" 2> "$dir/err"; rc=$?; set -e; }
 # One version: project(trailmark VERSION ...) is what the CLI says.
 version=$(sed -n 's/^project(trailmark VERSION \([0-9.]*\).*/\1/p' "$(dirname "$0")/../../CMakeLists.txt")
 "$TM" --version | matches "^trailmark $version\$" || fail "--version is not $version"
-for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert energy wayout serve journal; do
+for c in simulate run eval report pipelines demo bench scenarios validate reproduce convert export energy wayout serve journal; do
   "$TM" "$c" --help > /dev/null || fail "$c --help"
 done
 "$TM" simulate office-loop-1lap --seed 5 --out "$dir/m" | matches "crumbs dropped" || fail simulate
@@ -72,6 +72,20 @@ run_failing "$TM" simulate office-loop --vary -3 --out "$dir/x"
 run_failing "$TM" simulate office-loop --vary 1 --family weather --out "$dir/x"
 [ $rc -ne 0 ] && grep -q "unknown variation family 'weather' (known: frame" "$dir/err" || fail "bad --family"
 "$TM" report "$dir/run" --out "$dir/r.html" > /dev/null || fail report
+# TUM trajectories (evo's format) of the estimates and of the truth: one pose per row of ff1.
+"$TM" export tum "$dir/run/estimates.csv" --id ff1 --out "$dir/est.tum" | matches "poses of ff1" || fail "export tum"
+[ "$(grep -vc '^#' "$dir/est.tum")" -eq "$(grep -c ',ff1,' "$dir/run/estimates.csv")" ] || fail "tum pose count"
+awk '!/^#/ && (NF != 8 || $5 != 0 || $8 != 1) { exit 1 }' "$dir/est.tum" || fail "tum line format"
+"$TM" export tum "$dir/m/truth.csv" --id ff1 --out "$dir/truth.tum" > /dev/null || fail "export tum truth"
+run_failing "$TM" export tum "$dir/run/estimates.csv" --id ghost --out "$dir/x.tum"
+[ $rc -eq 2 ] && grep -q "no rows of 'ghost' (ids: .*ff1" "$dir/err" || { cat "$dir/err"; fail "export tum of an unknown id"; }
+# A EuRoC ground-truth file (ASL format) -> truth.csv, and back to TUM.
+mkdir -p "$dir/euroc/mav0/state_groundtruth_estimate0"
+printf '#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n1403636579763555584,4.5,-1.5,0.75,1,0,0,0\n1403636579768555584,4.625,-1.5,0.75,1,0,0,0\n' > "$dir/euroc/mav0/state_groundtruth_estimate0/data.csv"
+"$TM" convert euroc "$dir/euroc" --out "$dir/em" > /dev/null || fail "convert euroc"
+"$TM" validate "$dir/em" > /dev/null || fail "validate a EuRoC mission"
+"$TM" export tum "$dir/em/truth.csv" --id body --out "$dir/em.tum" > /dev/null
+grep -q '^0.005 4.625 -1.5 0.75 0 0 0 1$' "$dir/em.tum" || { cat "$dir/em.tum"; fail "EuRoC -> TUM"; }
 grep -q "new Chart" "$dir/r.html" || fail "report content"
 "$TM" validate "$dir/m" | matches "breadcrumb" || fail "breadcrumb runnable"
 "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/bc" --option state_period_s=0.5 > /dev/null \

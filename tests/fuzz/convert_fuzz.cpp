@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // libFuzzer target (issue 30, item 6): arbitrary bytes as the recorded sets the converters read
 // — OpenShoe's figure-eight text, a PyShoe trial, an LLIO walk and its footprints, the dual-foot
-// set's three files, a WRLD building's main.json and one level — split into files at each
+// set's three files, a WRLD building's main.json and one level, a EuRoC sequence's ground truth
+// and IMU — split into files at each
 // "\n==\n". Any outcome but an InputError (or a clean read) is a bug: crashes, hangs, UB, an
 // exception of another type. A WRLD building that reads is turned into a floor plan, which our
 // own reader must then accept.
@@ -20,6 +21,7 @@
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/io/trajectory_formats.h"
 
 namespace {
 
@@ -71,6 +73,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Write(dir / "imuMeasRight.csv", parts[1]);
   Write(dir / "positionGt.csv", parts[2]);
   Expect([&] { trailmark::ReadDualFoot(dir); });
+  Write(dir / "euroc.csv", text);
+  Expect([&] { trailmark::ReadEuroc(dir / "euroc.csv"); });
+  fs::create_directories(dir / "mav0" / "state_groundtruth_estimate0");
+  fs::create_directories(dir / "mav0" / "imu0");
+  Write(dir / "mav0" / "state_groundtruth_estimate0" / "data.csv", parts[0]);
+  Write(dir / "mav0" / "imu0" / "data.csv", parts[1]);
+  Expect([&] { trailmark::ReadEuroc(dir); });
   Write(dir / "main.json", parts[0]);
   Write(dir / "level.json", parts[1]);
   try {
