@@ -18,6 +18,8 @@
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/trajectory_formats.h"
+#include "trailmark/io/geo.h"
+#include "trailmark/io/csv.h"
 #include "trailmark/ins/height.h"
 #include "trailmark/report/html_report.h"
 #include "trailmark/sim/house_search.h"
@@ -146,6 +148,45 @@ RunResult Run(const std::string& name, const fs::path& mission_dir, const fs::pa
                name, mission_dir.string());
   }
   return result;
+}
+
+GeoOrigin ParseGeoOrigin(const std::string& text) {
+  std::vector<double> v;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = text.find(',', start);
+    const auto x = ParseFiniteDouble(text.substr(start, comma == std::string::npos ? comma : comma - start));
+    if (!x) break;
+    v.push_back(*x);
+    if (comma == std::string::npos) {
+      start = text.size() + 1;
+      break;
+    }
+    start = comma + 1;
+  }
+  if (start != text.size() + 1 || v.size() < 2 || v.size() > 3 || !IsGeodetic(v[0], v[1])) {
+    throw std::invalid_argument("--origin '" + text +
+                                "': expected LAT,LON[,HEIGHT] (WGS 84 degrees, metres)");
+  }
+  return GeoOrigin{v[0], v[1], v.size() == 3 ? v[2] : 0.0};
+}
+
+void ExportFloorPlanWgs84(const fs::path& mission_dir, const fs::path& out) {
+  const MissionDirectory mission(mission_dir);
+  const std::string json = mission.Path("mission.json").string();
+  if (!mission.info().floorplan) throw InputError(json, 0, "no \"floorplan\" to export");
+  if (!mission.info().geo_origin) {
+    throw InputError(json, 0,
+                     "no \"geo_origin\": where the frame lies on the Earth is not known (the "
+                     "converters of geographic data write it)");
+  }
+  mission.Require(*mission.info().floorplan, "export geojson-wgs84");
+  const fs::path plan = mission.Path(*mission.info().floorplan);
+  std::ifstream in(plan, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ofstream f(out, std::ios::binary);
+  f << FloorPlanToWgs84GeoJson(text, plan.string(), *mission.info().geo_origin);
+  if (!f) throw std::runtime_error(out.string() + ": write failed");
 }
 
 std::size_t ExportTum(const fs::path& source, const std::string& id, const fs::path& out) {

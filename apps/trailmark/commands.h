@@ -57,11 +57,16 @@ void Report(const std::vector<std::filesystem::path>& run_dirs,
 /// beacon trail, each with dead reckoning for comparison); print the summary table and write
 /// one HTML report per mission.
 int Demo(const std::string& scenario, std::uint64_t seed, const std::filesystem::path& out);
+/// "LAT,LON[,HEIGHT]" (degrees, metres); std::invalid_argument naming the text otherwise.
+GeoOrigin ParseGeoOrigin(const std::string& text);
 /// `trailmark export tum FILE --id ID --out OUT`: the node's rows of an estimates.csv or a
 /// truth.csv (told apart by their header) as a TUM trajectory; returns the number of poses.
 /// Throws InputError naming the ids the file has when `id` is not among them.
 std::size_t ExportTum(const std::filesystem::path& source, const std::string& id,
                       const std::filesystem::path& out);
+/// `trailmark export geojson-wgs84 MISSION --out FILE`: the mission's floor plan (every level)
+/// in WGS 84 longitude/latitude at its geo_origin. InputError when it has neither.
+void ExportFloorPlanWgs84(const std::filesystem::path& mission, const std::filesystem::path& out);
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);

@@ -23,6 +23,7 @@
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
+#include "trailmark/io/convert_ipin.h"
 #include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/trajectory_formats.h"
 #include "trailmark/io/mission_io.h"
@@ -217,28 +218,43 @@ int main(int argc, char** argv) {
   auto* convert =
       app.add_subcommand("convert",
                          "convert recorded data into a mission directory (formats: pyshoe-vicon, "
-                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor, euroc)");
+                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor, euroc, ipin-logfile)");
   convert
       ->add_option("format", convert_format,
                    "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
                    "(WALK_imu.csv) | zupt-dualfoot (the folder) | wrld-indoor (the folder "
                    "holding main.json: a WRLD indoor map as a multi-floor floor plan) | euroc "
                    "(a EuRoC mav0 folder or its state_groundtruth_estimate0/data.csv: ground "
-                   "truth, and imu0 when present)")
+                   "truth, and imu0 when present) | ipin-logfile (an IPIN competition "
+                   "GetSensorData logfile: IMU, barometer, POSI truth with floors, BLE, WiFi)")
       ->required();
   convert->add_option("source", convert_src, "source file or folder")
       ->required()
       ->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
+  IpinOptions ipin_options;
+  std::string ipin_origin;
+  convert->add_option("--agent", ipin_options.agent, "ipin-logfile: the phone's node id (default phone)");
+  convert->add_option("--origin", ipin_origin,
+                      "ipin-logfile: LAT,LON[,HEIGHT] of the frame's origin (default: the first "
+                      "POSI)");
+  convert->add_option("--max-venue-m", ipin_options.max_venue_m,
+                      "ipin-logfile: a POSI farther from the origin is refused (default 2000 m)")
+      ->check(CLI::PositiveNumber);
 
   std::string export_format, export_source, export_id, export_out;
   auto* export_cmd = app.add_subcommand(
-      "export", "write estimates or truth in a standard trajectory format (tum: for evo_ape / evo_rpe)");
-  export_cmd->add_option("format", export_format, "tum")->required();
-  export_cmd->add_option("source", export_source, "estimates.csv or truth.csv")
+      "export",
+      "write estimates or truth in a standard trajectory format (tum: for evo_ape / evo_rpe), or "
+      "a mission's floor plan as WGS 84 GeoJSON for GIS tools (geojson-wgs84)");
+  export_cmd->add_option("format", export_format, "tum | geojson-wgs84")->required();
+  export_cmd
+      ->add_option("source", export_source,
+                   "tum: estimates.csv or truth.csv; geojson-wgs84: the mission directory (its "
+                   "floor plan and geo_origin)")
       ->required()
-      ->check(CLI::ExistingFile);
-  export_cmd->add_option("--id", export_id, "the node whose trajectory to write")->required();
+      ->check(CLI::ExistingPath);
+  export_cmd->add_option("--id", export_id, "tum: the node whose trajectory to write");
   export_cmd->add_option("--out", export_out, "file to write")->required();
 
   landmarks::EnergyModel energy_model;
@@ -400,6 +416,17 @@ int main(int argc, char** argv) {
                    convert_src, building.levels.size(), convert_out);
         return 0;
       }
+      if (convert_format == "ipin-logfile") {
+        if (!ipin_origin.empty()) ipin_options.origin = cli::ParseGeoOrigin(ipin_origin);
+        const IpinLogfile log = ReadIpinLogfile(convert_src, ipin_options);
+        WriteIpinMission(log, convert_out);
+        for (const auto& [type, count] : log.records) fmt::print("{:>6} {}\n", type, count);
+        for (const auto& note : log.notes) fmt::print("note: {}\n", note);
+        fmt::print("converted {} into {} ({} IMU samples, {} truth positions, {} BLE packets)\n",
+                   convert_src, convert_out, log.mission.imu.size(), log.mission.truth.size(),
+                   log.mission.rssi.size());
+        return 0;
+      }
       if (convert_format == "pyshoe-vicon") {
         const PyShoeTrial trial = ReadPyShoeTrial(convert_src);
         WritePyShoeMission(trial, convert_out);
@@ -421,9 +448,16 @@ int main(int argc, char** argv) {
       }
       fmt::print("converted {} ({} IMU samples) into {}\n", convert_src, samples, convert_out);
     } else if (*export_cmd) {
-      if (export_format != "tum") {
-        throw std::invalid_argument("unknown export format '" + export_format + "' (tum)");
+      if (export_format == "geojson-wgs84") {
+        cli::ExportFloorPlanWgs84(export_source, export_out);
+        fmt::print("wrote the floor plan of {} as WGS 84 GeoJSON to {}\n", export_source, export_out);
+        return 0;
       }
+      if (export_format != "tum") {
+        throw std::invalid_argument("unknown export format '" + export_format +
+                                    "' (tum, geojson-wgs84)");
+      }
+      if (export_id.empty()) throw std::invalid_argument("export tum needs --id ID");
       const std::size_t poses = cli::ExportTum(export_source, export_id, export_out);
       fmt::print("wrote {} poses of {} to {}\n", poses, export_id, export_out);
     } else if (*energy) {

@@ -37,6 +37,9 @@ echo "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\",\"prop
 cp "$dir/wrld/g.geojson" "$dir/wrld/one.geojson"
 "$TM" convert wrld-indoor "$dir/wrld" --out "$dir/wm" | matches "2 levels" || fail "convert wrld-indoor"
 "$TM" validate "$dir/wm" | matches "level 1: 4 walls" || fail "validate a multi-floor plan"
+# Back to WGS 84 for GIS tools: longitude/latitude of the corners, not metres.
+"$TM" export geojson-wgs84 "$dir/wm" --out "$dir/wm.geojson" > /dev/null || fail "export geojson-wgs84"
+grep -q '\[-2.978[0-9]*,56.46' "$dir/wm.geojson" || { head -c 300 "$dir/wm.geojson"; fail "geojson-wgs84 coordinates"; }
 rm "$dir/wrld/one.geojson"
 run_failing "$TM" convert wrld-indoor "$dir/wrld" --out "$dir/wm2"
 [ $rc -ne 0 ] && grep -q "one.geojson: file does not exist" "$dir/err" || fail "wrld missing level file"
@@ -77,6 +80,8 @@ run_failing "$TM" simulate office-loop --vary 1 --family weather --out "$dir/x"
 [ "$(grep -vc '^#' "$dir/est.tum")" -eq "$(grep -c ',ff1,' "$dir/run/estimates.csv")" ] || fail "tum pose count"
 awk '!/^#/ && (NF != 8 || $5 != 0 || $8 != 1) { exit 1 }' "$dir/est.tum" || fail "tum line format"
 "$TM" export tum "$dir/m/truth.csv" --id ff1 --out "$dir/truth.tum" > /dev/null || fail "export tum truth"
+run_failing "$TM" export geojson-wgs84 "$dir/m" --out "$dir/x.geojson"
+[ $rc -eq 2 ] && grep -q 'no "geo_origin"' "$dir/err" || { cat "$dir/err"; fail "geojson-wgs84 without an origin"; }
 run_failing "$TM" export tum "$dir/run/estimates.csv" --id ghost --out "$dir/x.tum"
 [ $rc -eq 2 ] && grep -q "no rows of 'ghost' (ids: .*ff1" "$dir/err" || { cat "$dir/err"; fail "export tum of an unknown id"; }
 # A EuRoC ground-truth file (ASL format) -> truth.csv, and back to TUM.
@@ -86,6 +91,33 @@ printf '#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x 
 "$TM" validate "$dir/em" > /dev/null || fail "validate a EuRoC mission"
 "$TM" export tum "$dir/em/truth.csv" --id body --out "$dir/em.tum" > /dev/null
 grep -q '^0.005 4.625 -1.5 0.75 0 0 0 1$' "$dir/em.tum" || { cat "$dir/em.tum"; fail "EuRoC -> TUM"; }
+# An IPIN logfile (GetSensorData format, written here): 20 s of a phone at rest at 50 Hz, a
+# barometer, two labelled positions, BLE and WiFi; converted, validated and run.
+awk 'BEGIN {
+  print "% LogFile data created by the GetSensorData App for Android."
+  for (k = 0; k < 1000; k++) {
+    t = k * 0.02
+    printf "GYRO;%.3f;%.3f;0.001;-0.002;0.0005;3\n", t, t + 100
+    printf "ACCE;%.3f;%.3f;0.05;0.02;9.81;3\n", t + 0.01, t + 100.01
+    if (k % 10 == 0) printf "PRES;%.3f;%.3f;1013.2;0\n", t + 0.011, t + 100.011
+    if (k % 25 == 0) printf "BLE4;%.3f;iBeacon;F4:B8:5E:DE:4D:F1;-7%d;-59;1;2;e2c56db5\n", t + 0.012, k % 10
+    if (k % 50 == 0) printf "WIFI;%.3f;%.3f;lab;00:0b:86:27:36:c1;2412;-60\n", t + 0.013, t + 100.013
+  }
+  print "POSI;0.500;1;56.4620000;-2.9707000;0;0"
+  print "POSI;19.500;2;56.4620000;-2.9707000;0;0"
+  print "AHRS;19.600;119.6;1;2;3;0.1;0.2;0.3;3"
+}' > "$dir/ipin.txt"
+"$TM" convert ipin-logfile "$dir/ipin.txt" --out "$dir/im" > "$dir/ipin.out" || { cat "$dir/ipin.out"; fail "convert ipin-logfile"; }
+grep -q "record types not converted: AHRS: 1" "$dir/ipin.out" || { cat "$dir/ipin.out"; fail "ipin: unknown records reported"; }
+grep -q '"geo_origin"' "$dir/im/mission.json" || fail "ipin: geo_origin"
+"$TM" validate "$dir/im" | matches "baro.csv" || fail "validate an IPIN mission"
+"$TM" run --pipeline pdr "$dir/im" --out "$dir/im/run" > /dev/null || fail "pdr on an IPIN mission"
+"$TM" eval "$dir/im" "$dir/im/run/estimates.csv" > /dev/null || fail "eval on an IPIN mission"
+printf 'ACCE;0.1;0.1;9.8\n' > "$dir/bad-ipin.txt"
+run_failing "$TM" convert ipin-logfile "$dir/bad-ipin.txt" --out "$dir/bi"
+[ $rc -eq 2 ] && grep -q "bad-ipin.txt:1: ACCE record: expected at least 6 fields" "$dir/err" || { cat "$dir/err"; fail "bad IPIN record"; }
+run_failing "$TM" convert ipin-logfile "$dir/ipin.txt" --out "$dir/bi" --origin 56.4,east
+[ $rc -ne 0 ] && grep -q "expected LAT,LON" "$dir/err" || { cat "$dir/err"; fail "bad --origin"; }
 grep -q "new Chart" "$dir/r.html" || fail "report content"
 "$TM" validate "$dir/m" | matches "breadcrumb" || fail "breadcrumb runnable"
 "$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/bc" --option state_period_s=0.5 > /dev/null \

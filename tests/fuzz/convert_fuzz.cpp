@@ -2,7 +2,7 @@
 // libFuzzer target (issue 30, item 6): arbitrary bytes as the recorded sets the converters read
 // — OpenShoe's figure-eight text, a PyShoe trial, an LLIO walk and its footprints, the dual-foot
 // set's three files, a WRLD building's main.json and one level, a EuRoC sequence's ground truth
-// and IMU — split into files at each
+// and IMU, an IPIN logfile — split into files at each
 // "\n==\n". Any outcome but an InputError (or a clean read) is a bug: crashes, hangs, UB, an
 // exception of another type. A WRLD building that reads is turned into a floor plan, which our
 // own reader must then accept.
@@ -18,9 +18,11 @@
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
+#include "trailmark/io/convert_ipin.h"
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/io/streams.h"
 #include "trailmark/io/trajectory_formats.h"
 
 namespace {
@@ -80,6 +82,25 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Write(dir / "mav0" / "state_groundtruth_estimate0" / "data.csv", parts[0]);
   Write(dir / "mav0" / "imu0" / "data.csv", parts[1]);
   Expect([&] { trailmark::ReadEuroc(dir); });
+  // An IPIN logfile that reads is written as a mission our own readers must accept.
+  Write(dir / "ipin.txt", text);
+  try {
+    const trailmark::IpinLogfile log = trailmark::ReadIpinLogfile(dir / "ipin.txt");
+    fs::remove_all(dir / "ipin-mission");
+    trailmark::WriteIpinMission(log, dir / "ipin-mission");
+    try {
+      const trailmark::MissionDirectory mission(dir / "ipin-mission");
+      const auto* registry = &mission.registry();
+      const auto path = [&](const char* f) { return mission.Path(f).string(); };
+      if (mission.Has("imu.csv")) trailmark::ReadAll<trailmark::ImuSample>(path("imu.csv"), registry);
+      if (mission.Has("baro.csv")) trailmark::ReadAll<trailmark::BaroSample>(path("baro.csv"), registry);
+      if (mission.Has("rssi.csv")) trailmark::ReadAll<trailmark::RssiPacket>(path("rssi.csv"), registry);
+      if (mission.Has("truth.csv")) trailmark::ReadAll<trailmark::TruthSample>(path("truth.csv"), registry);
+    } catch (const trailmark::InputError&) {
+      std::abort();  // the converter wrote a mission our own readers refuse
+    }
+  } catch (const trailmark::InputError&) {
+  }
   Write(dir / "main.json", parts[0]);
   Write(dir / "level.json", parts[1]);
   try {

@@ -7,12 +7,18 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <GeographicLib/Geodesic.hpp>
+
 #include <cmath>
 #include <numbers>
 
 #include "test_util.h"
 #include "trailmark/core/error.h"
+#include "trailmark/io/geo.h"
+#include "trailmark/io/json_input.h"
 #include "trailmark/io/mission_io.h"
+
+#include <nlohmann/json.hpp>
 
 namespace trailmark {
 namespace {
@@ -20,12 +26,15 @@ namespace {
 using ::testing::AllOf;
 using ::testing::HasSubstr;
 
-// 1e-4 degrees of latitude in metres on the mean-radius sphere.
-constexpr double kDegLatM = 6371008.8 * std::numbers::pi / 180;
+// The geodesic distance between two WGS 84 points (GeographicLib's geodesic: the reference).
+double GeodesicM(double lat1, double lon1, double lat2, double lon2) {
+  double s12 = 0;
+  GeographicLib::Geodesic::WGS84().Inverse(lat1, lon1, lat2, lon2, s12);
+  return s12;
+}
 
-// A one-level building at (lon 10, lat 60): a wall square 1e-4 deg on a side, a room, a
-// door polygon (ignored) and a no_geometry item. At lat 60 a degree of longitude is half a
-// degree of latitude long.
+// A one-level building at (lon 10, lat 60): a wall rectangle 2e-4 deg east by 1e-4 deg north,
+// a room, a door polygon (a thin quadrilateral) and a no_geometry item.
 void WriteBuilding(const testing::TempDir& dir, const std::string& level_json) {
   dir.File("main.json", R"({"id":"b","name":"B","location":{"type":"Point","coordinates":[10,60]},
     "levels":[{"id":"b-up","name":"1","z_order":1,"filename":"up.geojson"},
@@ -38,7 +47,8 @@ constexpr const char* kGround = R"({"type":"FeatureCollection","features":[
   {"type":"Feature","properties":{"type":"wall"},"geometry":{"type":"Polygon","coordinates":
     [[[10,60],[10.0002,60],[10.0002,60.0001],[10,60.0001],[10,60]]]}},
   {"type":"Feature","properties":{"type":"door"},"geometry":{"type":"Polygon","coordinates":
-    [[[10,60],[10.00001,60],[10.00001,60.00001],[10,60]]]}},
+    [[[10.00005,59.999999],[10.00007,59.999999],[10.00007,60.000001],[10.00005,60.000001],
+      [10.00005,59.999999]]]}},
   {"type":"Feature","properties":{"type":"room","name":"office"},"geometry":{"type":"Polygon",
     "coordinates":[[[10,60],[10.0001,60],[10.0001,60.0001],[10,60]]]}},
   {"type":"Feature","properties":{"type":"no_geometry"},"geometry":null}]})";
@@ -51,12 +61,19 @@ TEST(WrldConverter, ProjectsLevelsIntoMetresExactly) {
   EXPECT_EQ(b.levels[0].id, "b-g");  // sorted by z_order
   EXPECT_EQ(b.levels[0].z_order, 0);
   const WrldLevel& g = b.levels[0];
-  ASSERT_EQ(g.walls.size(), 4u);  // the square's edges; the door polygon is not a wall
-  const double side_m = 1e-4 * kDegLatM;  // 11.12 m
+  ASSERT_EQ(g.walls.size(), 4u);  // the rectangle's edges; the door polygon is not a wall
+  // Metres on the ellipsoid: the geodesic distances (1 mm; a parallel bends off the east axis
+  // by d^2 tan(lat) / 2N, 0.07 mm here).
   EXPECT_NEAR(g.walls[0].a.norm(), 0, 1e-9);
-  EXPECT_NEAR(g.walls[0].b.x(), 2 * side_m * 0.5, 1e-9);  // cos 60 = 0.5
-  EXPECT_NEAR(g.walls[0].b.y(), 0, 1e-9);
-  EXPECT_NEAR(g.walls[1].b.y(), side_m, 1e-9);
+  EXPECT_NEAR(g.walls[0].b.x(), GeodesicM(60, 10, 60, 10.0002), 1e-3);  // 11.17 m
+  EXPECT_NEAR(g.walls[0].b.y(), 0, 1e-3);
+  EXPECT_NEAR(g.walls[1].b.y(), GeodesicM(60, 10.0002, 60.0001, 10.0002), 1e-3);  // 11.13 m
+  // The door: along its long axis (east-west, 2e-5 deg = 1.12 m) through its centre, on the
+  // south wall.
+  ASSERT_EQ(g.doors.size(), 1u);
+  EXPECT_NEAR((g.doors[0].b - g.doors[0].a).norm(), GeodesicM(60, 10.00005, 60, 10.00007), 1e-3);
+  EXPECT_NEAR(g.doors[0].a.y(), 0, 1e-3);
+  EXPECT_NEAR(std::min(g.doors[0].a.x(), g.doors[0].b.x()), GeodesicM(60, 10, 60, 10.00005), 1e-3);
   ASSERT_EQ(g.rooms.size(), 1u);
   EXPECT_EQ(g.rooms[0].name, "office");
   EXPECT_EQ(g.rooms[0].ring.size(), 3u);  // the closing point dropped
@@ -68,9 +85,27 @@ TEST(WrldConverter, ProjectsLevelsIntoMetresExactly) {
   const auto plan = mission.LoadFloorPlan(std::nullopt, &levels);
   EXPECT_EQ(levels, (std::vector<int>{0}));  // level 1 has no features
   ASSERT_TRUE(plan.has_value());
-  EXPECT_EQ(plan->walls().size(), 4u);
+  EXPECT_EQ(plan->doors().size(), 1u);
   EXPECT_TRUE(plan->Crosses({1, 1}, {1, -1}));
   EXPECT_FALSE(plan->Crosses({1, 1}, {10, 10}));
+  EXPECT_FALSE(plan->Crosses({3.3, 1}, {3.3, -1}));  // through the door, open in the south wall
+  ASSERT_TRUE(mission.info().geo_origin.has_value());
+  EXPECT_EQ(mission.info().geo_origin->lat_deg, 60);
+  // Exported back to WGS 84 for GIS tools: the walls' corners where the WRLD map had them.
+  const nlohmann::json wgs = nlohmann::json::parse(FloorPlanToWgs84GeoJson(
+      io_detail::ReadText(mission.Path("floorplan.geojson")), "floorplan.geojson",
+      *mission.info().geo_origin));
+  std::vector<std::pair<double, double>> corners;
+  for (const auto& f : wgs["features"]) {
+    if (f["properties"]["kind"] != "wall") continue;
+    for (const auto& c : f["geometry"]["coordinates"]) corners.emplace_back(c[0], c[1]);
+  }
+  ASSERT_FALSE(corners.empty());
+  for (const auto& [lon, lat] : corners) {
+    const double lon_corner = lon < 10.0001 ? 10.0 : 10.0002, lat_corner = lat < 60.00005 ? 60.0 : 60.0001;
+    EXPECT_NEAR(lon, lon_corner, 1e-10);
+    EXPECT_NEAR(lat, lat_corner, 1e-10);
+  }
 }
 
 TEST(WrldConverter, BadInputIsNamed) {

@@ -73,6 +73,16 @@ std::pair<double, double> LevelHeightInterval(const std::vector<FloorLevel>& flo
 /// level not in `floors`.
 std::optional<double> LevelElevation(const std::vector<FloorLevel>& floors, int level);
 
+/// Where the navigation frame lies on the Earth, for data converted from or exported to
+/// geographic coordinates: x east, y north, z up of the WGS 84 local tangent frame at this
+/// point (io/geo.h projects through GeographicLib's LocalCartesian). mission.json "geo_origin"
+/// (a trailmark extension of the format; docs/mission-format-notes.md).
+struct GeoOrigin {
+  double lat_deg = 0;
+  double lon_deg = 0;
+  double height_m = 0;  ///< ellipsoidal height of the frame's origin
+};
+
 struct MissionInfo {
   std::string format = "trailmark-mission/1";
   std::string name;
@@ -82,6 +92,8 @@ struct MissionInfo {
   std::optional<std::string> floorplan;  ///< path relative to the mission directory
   /// The building's levels (1.1), sorted by elevation; empty: 3 m storeys, level 0 at z = 0.
   std::vector<FloorLevel> floors;
+  /// Where the frame lies on the Earth (converted geographic data); empty: not known.
+  std::optional<GeoOrigin> geo_origin;
 
   const NodeInfo* Find(const std::string& id) const;
   /// The single base node, or nullptr when there is none or more than one.

@@ -7,10 +7,14 @@
 #include <cmath>
 #include <fstream>
 #include <numbers>
+#include <optional>
+
+#include <Eigen/Eigenvalues>
 #include <set>
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/json_input.h"
+#include "trailmark/io/geo.h"
 #include "trailmark/io/mission_io.h"
 
 namespace trailmark {
@@ -20,8 +24,6 @@ using nlohmann::json;
 using io_detail::Bad;
 using io_detail::Number;
 
-constexpr double kEarthRadiusM = 6371008.8;  // mean radius (IUGG)
-
 const std::set<std::string>& BlockingTypes() {
   static const std::set<std::string> types{"wall",   "window",   "building_outline",
                                            "stairs", "elevator", "inaccessible_space",
@@ -30,17 +32,16 @@ const std::set<std::string>& BlockingTypes() {
 }
 
 struct Projection {
-  double lon0_deg, lat0_deg;
+  LocalFrame frame;
   Vec2 ToMetres(const json& c, const std::string& source, const std::string& where) const {
     if (!c.is_array() || c.size() < 2) Bad(source, where, "expected a position [lon, lat]");
     const double lon = Number(c[0], source, where + "/0");
     const double lat = Number(c[1], source, where + "/1");
-    if (std::abs(lon) > 180 || std::abs(lat) > 90) {
+    if (!IsGeodetic(lat, lon)) {
       Bad(source, where, fmt::format("[{}, {}] is not a WGS84 longitude, latitude", lon, lat));
     }
-    const double deg = std::numbers::pi / 180;
-    const Vec2 p(kEarthRadiusM * std::cos(lat0_deg * deg) * (lon - lon0_deg) * deg,
-                 kEarthRadiusM * (lat - lat0_deg) * deg);
+    const Vec3 enu = frame.ToEnu(lat, lon, frame.origin().height_m);
+    const Vec2 p(enu.x(), enu.y());
     // A building is not tens of kilometres across: a wrong location or swapped coordinates.
     if (p.norm() > 50e3) {
       Bad(source, where,
@@ -50,6 +51,27 @@ struct Projection {
     return p;
   }
 };
+
+/// A door polygon (a thin shape across the gap between two wall polygons) as the segment along
+/// its long axis through its centroid: the opening the door gives, drawn across the gap.
+std::optional<Segment2> DoorSegment(std::vector<Vec2> pts) {
+  if (pts.size() > 2 && (pts.front() - pts.back()).norm() < 1e-9) pts.pop_back();  // closed ring
+  if (pts.size() < 2) return std::nullopt;
+  Vec2 c = Vec2::Zero();
+  for (const Vec2& p : pts) c += p;
+  c /= static_cast<double>(pts.size());
+  Eigen::Matrix2d scatter = Eigen::Matrix2d::Zero();
+  for (const Vec2& p : pts) scatter += (p - c) * (p - c).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(scatter);
+  const Vec2 axis = eig.eigenvectors().col(1);  // the larger eigenvalue's
+  double lo = 0, hi = 0;
+  for (const Vec2& p : pts) {
+    lo = std::min(lo, (p - c).dot(axis));
+    hi = std::max(hi, (p - c).dot(axis));
+  }
+  if (hi - lo < 1e-3) return std::nullopt;
+  return Segment2{c + lo * axis, c + hi * axis};
+}
 
 // The rings of a Polygon or MultiPolygon geometry (JSON pointer of each ring).
 std::vector<std::pair<const json*, std::string>> Rings(const json& g, const std::string& source,
@@ -95,7 +117,8 @@ WrldLevel ReadLevel(const std::filesystem::path& path, const Projection& proj) {
         props.contains("type") && props["type"].is_string() ? props["type"].get<std::string>() : "";
     const bool blocking = BlockingTypes().count(type) > 0;
     const bool room = type == "room" || type == "bathroom";
-    if (!blocking && !room) continue;
+    const bool door = type == "door";
+    if (!blocking && !room && !door) continue;
     if (!f.contains("geometry") || f["geometry"].is_null()) continue;  // "no_geometry" items
     if (!f["geometry"].is_object()) Bad(source, where + "/geometry", "expected an object");
     for (const auto& [ring, w] : Rings(f["geometry"], source, where + "/geometry")) {
@@ -103,7 +126,11 @@ WrldLevel ReadLevel(const std::filesystem::path& path, const Projection& proj) {
       for (std::size_t k = 0; k < ring->size(); ++k) {
         pts.push_back(proj.ToMetres((*ring)[k], source, fmt::format("{}/{}", w, k)));
       }
-      if (blocking) {
+      if (door) {
+        if (w.ends_with("/0")) {
+          if (const auto d = DoorSegment(pts)) level.doors.push_back(*d);
+        }
+      } else if (blocking) {
         for (std::size_t k = 1; k < pts.size(); ++k) {
           if ((pts[k] - pts[k - 1]).norm() > 1e-9) level.walls.push_back({pts[k - 1], pts[k]});
         }
@@ -152,7 +179,7 @@ WrldBuilding ReadWrldBuilding(const std::filesystem::path& dir) {
   if (!main.contains("levels") || !main["levels"].is_array() || main["levels"].empty()) {
     Bad(source, "/levels", "expected a non-empty array of levels");
   }
-  const Projection proj{b.lon0_deg, b.lat0_deg};
+  const Projection proj{LocalFrame(GeoOrigin{b.lat0_deg, b.lon0_deg, 0.0})};
   std::set<int> z_seen;
   const json& levels = main["levels"];
   for (std::size_t i = 0; i < levels.size(); ++i) {
@@ -206,9 +233,8 @@ void WriteWrldMission(const WrldBuilding& b, const std::filesystem::path& out) {
       {"nodes", json::array()},
       {"floorplan", "floorplan.geojson"},
       {"provenance",
-       {{"converted_from", "wrld-indoor"},
-        {"origin_lon_lat_deg", json::array({b.lon0_deg, b.lat0_deg})},
-        {"levels", levels}}}};
+       {{"converted_from", "wrld-indoor"}, {"levels", levels}}},
+      {"geo_origin", {{"lat_deg", b.lat0_deg}, {"lon_deg", b.lon0_deg}, {"height_m", 0.0}}}};
   auto write = [&](const std::filesystem::path& p, const std::string& text) {
     std::ofstream f(p, std::ios::binary);
     f << text;

@@ -3,14 +3,15 @@
 /// Converter: a building in the WRLD Indoor Map Format v1 (wrld3d/wrld-indoor-maps-api:
 /// main.json naming the levels, one GeoJSON FeatureCollection per level in WGS84 lon/lat) into
 /// the mission format's floor plan — metres east/north of the building's location in main.json
-/// (a local tangent plane: equirectangular about that point, under 1 mm of error across a
-/// 200 m building), one `level` per WRLD level (its z_order), walls as LineStrings.
+/// (the WGS 84 local tangent plane at that point, through GeographicLib: io/geo.h; recorded as
+/// mission.json's geo_origin), one `level` per WRLD level (its z_order), walls as LineStrings.
 ///
 /// Walls: the edges of the polygons of the types that cannot be walked through — wall,
 /// window, building_outline, stairs, elevator, inaccessible_space, floor_opening (a lift or a
-/// stairwell is a block on a floor plan; a search goes round it). Doors are the gaps the map
-/// already leaves between wall polygons, so door polygons are not needed. Rooms: the outer
-/// ring of room and bathroom polygons, with their name. Other types are ignored.
+/// stairwell is a block on a floor plan; a search goes round it). Doors: each door polygon (a
+/// thin shape across the gap the map leaves between wall polygons) as a door segment along its
+/// long axis, drawn across the gap (spec 1.1). Rooms: the outer ring of room and bathroom
+/// polygons, with their name. Other types are ignored.
 
 #include <filesystem>
 #include <string>
@@ -24,8 +25,9 @@ struct WrldLevel {
   std::string id, name;
   int z_order = 0;  ///< the mission floor plan's `level`
   std::vector<Segment2> walls;
+  std::vector<Segment2> doors;
   std::vector<Room> rooms;  ///< level = z_order
-  FloorPlan Plan() const { return FloorPlan(walls, {}, rooms); }
+  FloorPlan Plan() const { return FloorPlan(walls, doors, rooms); }
 };
 
 struct WrldBuilding {

@@ -208,6 +208,20 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
       }
     }
   }
+  if (root.contains("geo_origin") && !root["geo_origin"].is_null()) {
+    const json& g = root["geo_origin"];
+    if (!g.is_object()) Bad(source, "/geo_origin", "expected an object {lat_deg, lon_deg, height_m}");
+    const auto lat = OptNumber(g, "lat_deg", source, "/geo_origin");
+    const auto lon = OptNumber(g, "lon_deg", source, "/geo_origin");
+    if (!lat || !lon) Bad(source, "/geo_origin", "missing key 'lat_deg' or 'lon_deg'");
+    if (std::abs(*lat) > 90 || std::abs(*lon) > 180) {
+      Bad(source, "/geo_origin",
+          fmt::format("({:g}, {:g}) is not a WGS 84 latitude, longitude", *lat, *lon));
+    }
+    const double height = OptNumber(g, "height_m", source, "/geo_origin").value_or(0.0);
+    if (std::abs(height) > 1e4) Bad(source, "/geo_origin/height_m", "not a plausible height");
+    info.geo_origin = GeoOrigin{*lat, *lon, height};
+  }
   return info;
 }
 
@@ -247,6 +261,11 @@ std::string MissionInfoToJson(const MissionInfo& info) {
       floors.push_back({{"level", f.level}, {"elevation_m", f.elevation_m}});
     }
     root["floors"] = floors;
+  }
+  if (info.geo_origin) {
+    root["geo_origin"] = {{"lat_deg", info.geo_origin->lat_deg},
+                          {"lon_deg", info.geo_origin->lon_deg},
+                          {"height_m", info.geo_origin->height_m}};
   }
   return root.dump(2) + "\n";
 }
