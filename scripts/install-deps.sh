@@ -14,7 +14,7 @@ PACKAGES=(
   libcpp-httplib-dev curl chromium
   libpaho-mqtt-dev libpaho-mqttpp-dev mosquitto mosquitto-clients openssl libssl-dev
   clang libclang-rt-14-dev
-  pybind11-dev python3-dev python3-numpy python3-pytest libgeographiclib-dev
+  pybind11-dev python3-dev python3-numpy python3-pytest libgeographiclib-dev libzip-dev doxygen
 )
 
 missing=()

@@ -23,6 +23,7 @@
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/io/convert_pyshoe.h"
+#include "trailmark/io/convert_imdf.h"
 #include "trailmark/io/convert_ipin.h"
 #include "trailmark/io/convert_wrld.h"
 #include "trailmark/io/trajectory_formats.h"
@@ -218,7 +219,7 @@ int main(int argc, char** argv) {
   auto* convert =
       app.add_subcommand("convert",
                          "convert recorded data into a mission directory (formats: pyshoe-vicon, "
-                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor, euroc, ipin-logfile)");
+                         "openshoe-figure8, llio-gcp-walk, zupt-dualfoot, wrld-indoor, euroc, ipin-logfile, imdf)");
   convert
       ->add_option("format", convert_format,
                    "pyshoe-vicon (TRIAL.csv) | openshoe-figure8 (imu_820hz.txt) | llio-gcp-walk "
@@ -226,7 +227,8 @@ int main(int argc, char** argv) {
                    "holding main.json: a WRLD indoor map as a multi-floor floor plan) | euroc "
                    "(a EuRoC mav0 folder or its state_groundtruth_estimate0/data.csv: ground "
                    "truth, and imu0 when present) | ipin-logfile (an IPIN competition "
-                   "GetSensorData logfile: IMU, barometer, POSI truth with floors, BLE, WiFi)")
+                   "GetSensorData logfile: IMU, barometer, POSI truth with floors, BLE, WiFi) | "
+                   "imdf (an IMDF venue .zip or its folder: levels, units, openings as doors)")
       ->required();
   convert->add_option("source", convert_src, "source file or folder")
       ->required()
@@ -236,8 +238,8 @@ int main(int argc, char** argv) {
   std::string ipin_origin;
   convert->add_option("--agent", ipin_options.agent, "ipin-logfile: the phone's node id (default phone)");
   convert->add_option("--origin", ipin_origin,
-                      "ipin-logfile: LAT,LON[,HEIGHT] of the frame's origin (default: the first "
-                      "POSI)");
+                      "ipin-logfile, imdf: LAT,LON[,HEIGHT] of the frame's origin (default: the "
+                      "first POSI; the venue's display point)");
   convert->add_option("--max-venue-m", ipin_options.max_venue_m,
                       "ipin-logfile: a POSI farther from the origin is refused (default 2000 m)")
       ->check(CLI::PositiveNumber);
@@ -414,6 +416,20 @@ int main(int argc, char** argv) {
         }
         fmt::print("converted {} ({} levels) into {} (floorplan.geojson, mission.json)\n",
                    convert_src, building.levels.size(), convert_out);
+        return 0;
+      }
+      if (convert_format == "imdf") {
+        const ImdfVenue venue = ReadImdfVenue(
+            convert_src, ipin_origin.empty() ? std::nullopt
+                                             : std::optional<GeoOrigin>(cli::ParseGeoOrigin(ipin_origin)));
+        WriteImdfMission(venue, convert_out);
+        for (const auto& l : venue.levels) {
+          fmt::print("level {:>3} ({}): {} walls, {} doors, {} rooms\n", l.ordinal,
+                     l.name.empty() ? l.ids.front() : l.name, l.walls.size(), l.doors.size(), l.rooms.size());
+        }
+        for (const auto& note : venue.notes) fmt::print("note: {}\n", note);
+        fmt::print("converted {} ({} levels) into {} (floorplan.geojson, mission.json)\n",
+                   convert_src, venue.levels.size(), convert_out);
         return 0;
       }
       if (convert_format == "ipin-logfile") {

@@ -37,6 +37,15 @@ echo "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\",\"prop
 cp "$dir/wrld/g.geojson" "$dir/wrld/one.geojson"
 "$TM" convert wrld-indoor "$dir/wrld" --out "$dir/wm" | matches "2 levels" || fail "convert wrld-indoor"
 "$TM" validate "$dir/wm" | matches "level 1: 4 walls" || fail "validate a multi-floor plan"
+# An IMDF venue (level, unit and opening files): a room and a corridor with a door between.
+mkdir -p "$dir/imdf"
+echo '{"type":"FeatureCollection","features":[{"id":"L0","type":"Feature","feature_type":"level","geometry":null,"properties":{"ordinal":0,"name":{"en":"Ground"}}}]}' > "$dir/imdf/level.geojson"
+echo '{"type":"FeatureCollection","features":[{"id":"u1","type":"Feature","properties":{"category":"room","level_id":"L0","name":{"en":"Kitchen"}},"geometry":{"type":"Polygon","coordinates":[[[2.35,48.85],[2.3501,48.85],[2.3501,48.8501],[2.35,48.8501],[2.35,48.85]]]}},{"id":"u2","type":"Feature","properties":{"category":"walkway","level_id":"L0"},"geometry":{"type":"Polygon","coordinates":[[[2.3501,48.85],[2.3503,48.85],[2.3503,48.8501],[2.3501,48.8501],[2.3501,48.85]]]}}]}' > "$dir/imdf/unit.geojson"
+echo '{"type":"FeatureCollection","features":[{"id":"o1","type":"Feature","properties":{"category":"pedestrian","level_id":"L0"},"geometry":{"type":"LineString","coordinates":[[2.3501,48.85004],[2.3501,48.85006]]}}]}' > "$dir/imdf/opening.geojson"
+"$TM" convert imdf "$dir/imdf" --out "$dir/venue" | matches "level   0 (Ground): 7 walls, 1 doors, 1 rooms" || fail "convert imdf"
+"$TM" validate "$dir/venue" | matches "7 walls, 1 doors, 1 rooms" || fail "validate an IMDF plan"
+"$TM" export geojson-wgs84 "$dir/venue" --out "$dir/venue.geojson" > /dev/null || fail "export an IMDF plan"
+grep -q '\[2.35[0-9]*,48.85' "$dir/venue.geojson" || fail "IMDF round trip to WGS 84"
 # Back to WGS 84 for GIS tools: longitude/latitude of the corners, not metres.
 "$TM" export geojson-wgs84 "$dir/wm" --out "$dir/wm.geojson" > /dev/null || fail "export geojson-wgs84"
 grep -q '\[-2.978[0-9]*,56.46' "$dir/wm.geojson" || { head -c 300 "$dir/wm.geojson"; fail "geojson-wgs84 coordinates"; }

@@ -16,3 +16,12 @@ for site in "$tmp"/prefix/lib*/python3/dist-packages "$tmp"/prefix/lib/*/python3
   (cd "$tmp" && PYTHONPATH="$site" /usr/bin/python3 -c \
     'import trailmark, sys; n = trailmark.pipelines(); assert "pdr" in n, n; print("python:", trailmark.__file__, len(n), "pipelines")')
 done
+# pkg-config: the same consumer compiled and linked by hand from trailmark.pc.
+pc=$(dirname "$(find "$tmp/prefix" -name trailmark.pc | head -1)")
+[ -n "$pc" ] || { echo "no trailmark.pc installed"; exit 1; }
+# shellcheck disable=SC2046
+c++ -std=c++20 -O1 "$src/main.cpp" -o "$tmp/consumer-pc" \
+  $(PKG_CONFIG_PATH="$pc" pkg-config --cflags --libs trailmark) \
+  || { echo "pkg-config build failed"; exit 1; }
+"$tmp/consumer-pc" > /dev/null || { echo "the pkg-config build does not run"; exit 1; }
+echo "pkg-config: built and ran the consumer with $(PKG_CONFIG_PATH="$pc" pkg-config --modversion trailmark)"

@@ -2,7 +2,7 @@
 // libFuzzer target (issue 30, item 6): arbitrary bytes as the recorded sets the converters read
 // — OpenShoe's figure-eight text, a PyShoe trial, an LLIO walk and its footprints, the dual-foot
 // set's three files, a WRLD building's main.json and one level, a EuRoC sequence's ground truth
-// and IMU, an IPIN logfile — split into files at each
+// and IMU, an IPIN logfile, an IMDF venue (folder and zip) — split into files at each
 // "\n==\n". Any outcome but an InputError (or a clean read) is a bug: crashes, hangs, UB, an
 // exception of another type. A WRLD building that reads is turned into a floor plan, which our
 // own reader must then accept.
@@ -18,6 +18,7 @@
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
+#include "trailmark/io/convert_imdf.h"
 #include "trailmark/io/convert_ipin.h"
 #include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/convert_wrld.h"
@@ -82,6 +83,29 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Write(dir / "mav0" / "state_groundtruth_estimate0" / "data.csv", parts[0]);
   Write(dir / "mav0" / "imu0" / "data.csv", parts[1]);
   Expect([&] { trailmark::ReadEuroc(dir); });
+  // An IMDF venue (level, unit and opening files; and the bytes as a zip archive): one that
+  // reads is written as a floor plan our own reader must accept.
+  fs::create_directories(dir / "imdf");
+  Write(dir / "imdf" / "level.geojson", parts[0]);
+  Write(dir / "imdf" / "unit.geojson", parts[1]);
+  Write(dir / "imdf" / "opening.geojson", parts[2]);
+  Write(dir / "venue.zip", text);
+  for (const fs::path& venue_source : {dir / "imdf", dir / "venue.zip"}) {
+    try {
+      const trailmark::ImdfVenue venue = trailmark::ReadImdfVenue(venue_source);
+      fs::remove_all(dir / "imdf-mission");
+      trailmark::WriteImdfMission(venue, dir / "imdf-mission");
+      try {
+        trailmark::MissionDirectory mission(dir / "imdf-mission");
+        std::vector<int> levels;
+        mission.LoadFloorPlan(std::nullopt, &levels);
+        for (int l : levels) mission.LoadFloorPlan(l);
+      } catch (const trailmark::InputError&) {
+        std::abort();  // the converter wrote a plan our own reader refuses
+      }
+    } catch (const trailmark::InputError&) {
+    }
+  }
   // An IPIN logfile that reads is written as a mission our own readers must accept.
   Write(dir / "ipin.txt", text);
   try {

@@ -10,7 +10,7 @@ gen="$OUT/generated"
 mkdir -p "$gen/trailmark_generated"
 printf '#pragma once\n#include <string_view>\nnamespace trailmark::generated {\ninline constexpr std::string_view kChartJsParts[] = {""};\n}\n' \
   > "$gen/trailmark_generated/chartjs_bundle.h"
-sources=(core/types.cpp core/mission.cpp io/csv.cpp io/streams.cpp io/mission_io.cpp io/json_input.cpp
+sources=(core/types.cpp core/mission.cpp io/csv.cpp io/streams.cpp io/mission_io.cpp io/json_input.cpp io/geo.cpp
          geometry/segment.cpp geometry/segment_index.cpp geometry/floor_plan.cpp)
 srcs=()
 for s in "${sources[@]}"; do srcs+=("$SRC/trailmark/$s"); done
@@ -20,11 +20,11 @@ for target in csv_fuzz convert_fuzz; do
     if [ "$target" = convert_fuzz ]; then
       extra=("$SRC/trailmark/io/convert_foot_imu.cpp" "$SRC/trailmark/io/convert_pyshoe.cpp"
              "$SRC/trailmark/io/convert_wrld.cpp" "$SRC/trailmark/io/trajectory_formats.cpp"
-             "$SRC/trailmark/io/convert_ipin.cpp" "$SRC/trailmark/io/geo.cpp" -lGeographicLib)
+             "$SRC/trailmark/io/convert_ipin.cpp" "$SRC/trailmark/io/convert_imdf.cpp" -lzip)
     fi
     "$CXX" -std=c++20 -O1 -g -fsanitize=fuzzer,address,undefined -DFMT_HEADER_ONLY \
       -I"$SRC" -I"$gen" -isystem /usr/include/eigen3 \
-      "$SRC/tests/fuzz/$target.cpp" "${srcs[@]}" "${extra[@]}" -o "$OUT/$target"
+      "$SRC/tests/fuzz/$target.cpp" "${srcs[@]}" "${extra[@]}" -lGeographicLib -o "$OUT/$target"
   fi
 done
 printf 't,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n' > "$OUT/corpus/imu.csv"
@@ -44,6 +44,7 @@ printf 'time_index,acc_x,acc_y,acc_z,gyro_x,gyro_y,gyro_z\n0,0,0,9.8,0,0,0\n\n==
 printf '{"id":"b","location":{"type":"Point","coordinates":[-6.3,53.3]},"levels":[{"id":"l0","filename":"level.json","z_order":0}]}\n==\n{"type":"FeatureCollection","features":[{"type":"Feature","properties":{"type":"wall"},"geometry":{"type":"Polygon","coordinates":[[[-6.3,53.3],[-6.2999,53.3],[-6.2999,53.3001],[-6.3,53.3]]]}},{"type":"Feature","properties":{"type":"room","name":"A"},"geometry":{"type":"Polygon","coordinates":[[[-6.3,53.3],[-6.2999,53.3],[-6.2999,53.3001],[-6.3,53.3]]]}}]}' > "$conv/wrld.json"
 printf '#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []\n1403636579763555584,4.5,-1.5,0.75,1,0,0,0\n==\n#timestamp [ns],w_RS_S_x,w_RS_S_y,w_RS_S_z,a_RS_S_x,a_RS_S_y,a_RS_S_z\n1403636579758555392,0,0,0,9.8,0,0\n' > "$conv/euroc.csv"
 printf '%% GetSensorData\nGYRO;0.01;1.01;0.1;0.2;0.3;3\nACCE;0.015;1.015;9.1;0.1;0.6;3\nGYRO;0.02;1.02;0.3;0.4;0.5;3\nPRES;0.03;1.03;1013.25;0\nPOSI;0.04;1;40.3132;-3.4831;0;0\nWIFI;0.06;1.06;eduroam;00:0b:86:27:36:c1;2412;-55\nBLE4;0.07;iBeacon;F4:B8:5E:DE:4D:F1;-79;-59;1;2;e2c5\nBLE4;0.09;2;15;-90\nPOSI;0.1;3;40.3132;-3.482;1;0\n' > "$conv/ipin.txt"
+printf '{"type":"FeatureCollection","features":[{"id":"L0","type":"Feature","properties":{"ordinal":0,"name":{"en":"G"}},"geometry":null}]}\n==\n{"type":"FeatureCollection","features":[{"id":"u1","type":"Feature","properties":{"category":"room","level_id":"L0","name":{"en":"A"}},"geometry":{"type":"Polygon","coordinates":[[[2.35,48.85],[2.3501,48.85],[2.3501,48.8501],[2.35,48.8501],[2.35,48.85]]]}}]}\n==\n{"type":"FeatureCollection","features":[{"id":"o1","type":"Feature","properties":{"level_id":"L0"},"geometry":{"type":"LineString","coordinates":[[2.3501,48.85004],[2.3501,48.85006]]}}]}\n' > "$conv/imdf.json"
 cd "$OUT"
 ./csv_fuzz -max_total_time="$SECONDS_LIMIT" -max_len=4096 -timeout=10 -print_final_stats=1 corpus 2>&1 | tail -5
 ./convert_fuzz -max_total_time="$SECONDS_LIMIT" -max_len=4096 -timeout=10 -print_final_stats=1 convert-corpus 2>&1 | tail -5

@@ -31,27 +31,6 @@ const std::set<std::string>& BlockingTypes() {
   return types;
 }
 
-struct Projection {
-  LocalFrame frame;
-  Vec2 ToMetres(const json& c, const std::string& source, const std::string& where) const {
-    if (!c.is_array() || c.size() < 2) Bad(source, where, "expected a position [lon, lat]");
-    const double lon = Number(c[0], source, where + "/0");
-    const double lat = Number(c[1], source, where + "/1");
-    if (!IsGeodetic(lat, lon)) {
-      Bad(source, where, fmt::format("[{}, {}] is not a WGS84 longitude, latitude", lon, lat));
-    }
-    const Vec3 enu = frame.ToEnu(lat, lon, frame.origin().height_m);
-    const Vec2 p(enu.x(), enu.y());
-    // A building is not tens of kilometres across: a wrong location or swapped coordinates.
-    if (p.norm() > 50e3) {
-      Bad(source, where,
-          fmt::format("[{}, {}] is {:.0f} km from the building's location in main.json", lon, lat,
-                      p.norm() / 1e3));
-    }
-    return p;
-  }
-};
-
 /// A door polygon (a thin shape across the gap between two wall polygons) as the segment along
 /// its long axis through its centroid: the opening the door gives, drawn across the gap.
 std::optional<Segment2> DoorSegment(std::vector<Vec2> pts) {
@@ -73,33 +52,7 @@ std::optional<Segment2> DoorSegment(std::vector<Vec2> pts) {
   return Segment2{c + lo * axis, c + hi * axis};
 }
 
-// The rings of a Polygon or MultiPolygon geometry (JSON pointer of each ring).
-std::vector<std::pair<const json*, std::string>> Rings(const json& g, const std::string& source,
-                                                       const std::string& where) {
-  std::vector<std::pair<const json*, std::string>> rings;
-  const std::string type = g.value("type", "");
-  if (!g.contains("coordinates") || !g["coordinates"].is_array()) {
-    Bad(source, where + "/coordinates", "expected an array");
-  }
-  const json& c = g["coordinates"];
-  auto polygon = [&](const json& p, const std::string& w) {
-    if (!p.is_array()) Bad(source, w, "expected an array of rings");
-    for (std::size_t r = 0; r < p.size(); ++r) {
-      if (!p[r].is_array()) Bad(source, fmt::format("{}/{}", w, r), "expected a ring");
-      rings.emplace_back(&p[r], fmt::format("{}/{}", w, r));
-    }
-  };
-  if (type == "Polygon") {
-    polygon(c, where + "/coordinates");
-  } else if (type == "MultiPolygon") {
-    for (std::size_t k = 0; k < c.size(); ++k) polygon(c[k], fmt::format("{}/coordinates/{}", where, k));
-  } else if (type == "LineString") {
-    rings.emplace_back(&c, where + "/coordinates");
-  }
-  return rings;
-}
-
-WrldLevel ReadLevel(const std::filesystem::path& path, const Projection& proj) {
+WrldLevel ReadLevel(const std::filesystem::path& path, const LocalFrame& proj) {
   const std::string source = path.string();
   const json root = io_detail::ParseJson(io_detail::ReadText(path), source);
   if (!root.is_object() || !root.contains("features") || !root["features"].is_array()) {
@@ -121,10 +74,11 @@ WrldLevel ReadLevel(const std::filesystem::path& path, const Projection& proj) {
     if (!blocking && !room && !door) continue;
     if (!f.contains("geometry") || f["geometry"].is_null()) continue;  // "no_geometry" items
     if (!f["geometry"].is_object()) Bad(source, where + "/geometry", "expected an object");
-    for (const auto& [ring, w] : Rings(f["geometry"], source, where + "/geometry")) {
+    for (const auto& [ring, w] : io_detail::GeoJsonRings(f["geometry"], source, where + "/geometry")) {
       std::vector<Vec2> pts;
       for (std::size_t k = 0; k < ring->size(); ++k) {
-        pts.push_back(proj.ToMetres((*ring)[k], source, fmt::format("{}/{}", w, k)));
+        pts.push_back(io_detail::LonLatToMetres((*ring)[k], proj, source, fmt::format("{}/{}", w, k),
+                                                "the building's location in main.json"));
       }
       if (door) {
         if (w.ends_with("/0")) {
@@ -179,7 +133,7 @@ WrldBuilding ReadWrldBuilding(const std::filesystem::path& dir) {
   if (!main.contains("levels") || !main["levels"].is_array() || main["levels"].empty()) {
     Bad(source, "/levels", "expected a non-empty array of levels");
   }
-  const Projection proj{LocalFrame(GeoOrigin{b.lat0_deg, b.lon0_deg, 0.0})};
+  const LocalFrame proj(GeoOrigin{b.lat0_deg, b.lon0_deg, 0.0});
   std::set<int> z_seen;
   const json& levels = main["levels"];
   for (std::size_t i = 0; i < levels.size(); ++i) {

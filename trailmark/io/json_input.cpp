@@ -68,4 +68,46 @@ double Number(const nlohmann::json& j, const std::string& source, const std::str
   return v;
 }
 
+Vec2 LonLatToMetres(const nlohmann::json& c, const LocalFrame& frame, const std::string& source,
+                    const std::string& where, const std::string& origin_name) {
+  if (!c.is_array() || c.size() < 2) Bad(source, where, "expected a position [lon, lat]");
+  const double lon = Number(c[0], source, where + "/0");
+  const double lat = Number(c[1], source, where + "/1");
+  if (!IsGeodetic(lat, lon)) {
+    Bad(source, where, fmt::format("[{}, {}] is not a WGS84 longitude, latitude", lon, lat));
+  }
+  const Vec3 enu = frame.ToEnu(lat, lon, frame.origin().height_m);
+  const Vec2 p(enu.x(), enu.y());
+  if (p.norm() > 50e3) {
+    Bad(source, where,
+        fmt::format("[{}, {}] is {:.0f} km from {}", lon, lat, p.norm() / 1e3, origin_name));
+  }
+  return p;
+}
+
+std::vector<std::pair<const nlohmann::json*, std::string>> GeoJsonRings(
+    const nlohmann::json& g, const std::string& source, const std::string& where) {
+  std::vector<std::pair<const nlohmann::json*, std::string>> rings;
+  const std::string type = g.contains("type") && g["type"].is_string() ? g["type"].get<std::string>() : "";
+  if (!g.contains("coordinates") || !g["coordinates"].is_array()) {
+    Bad(source, where + "/coordinates", "expected an array");
+  }
+  const nlohmann::json& c = g["coordinates"];
+  auto polygon = [&](const nlohmann::json& p, const std::string& w) {
+    if (!p.is_array()) Bad(source, w, "expected an array of rings");
+    for (std::size_t r = 0; r < p.size(); ++r) {
+      if (!p[r].is_array()) Bad(source, fmt::format("{}/{}", w, r), "expected a ring");
+      rings.emplace_back(&p[r], fmt::format("{}/{}", w, r));
+    }
+  };
+  if (type == "Polygon") {
+    polygon(c, where + "/coordinates");
+  } else if (type == "MultiPolygon") {
+    for (std::size_t k = 0; k < c.size(); ++k) polygon(c[k], fmt::format("{}/coordinates/{}", where, k));
+  } else if (type == "LineString") {
+    rings.emplace_back(&c, where + "/coordinates");
+  }
+  return rings;
+}
+
 }  // namespace trailmark::io_detail

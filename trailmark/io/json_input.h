@@ -7,6 +7,10 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <utility>
+#include <vector>
+
+#include "trailmark/io/geo.h"
 
 namespace trailmark::io_detail {
 
@@ -19,5 +23,18 @@ nlohmann::json ParseJson(const std::string& text, const std::string& source);
                       const std::string& problem);
 /// A finite number, else InputError naming `where`.
 double Number(const nlohmann::json& j, const std::string& source, const std::string& where);
+
+/// A GeoJSON position [lon, lat] (WGS 84) as metres east/north of `frame`'s origin. InputError
+/// naming `where` for anything but a WGS 84 position, or one more than 50 km from the origin
+/// (named `origin_name` in the message): a building is not tens of kilometres across, so it is
+/// a wrong location or swapped coordinates.
+Vec2 LonLatToMetres(const nlohmann::json& position, const LocalFrame& frame,
+                    const std::string& source, const std::string& where,
+                    const std::string& origin_name);
+
+/// The rings of a Polygon or MultiPolygon geometry (a LineString as one ring), each with its
+/// JSON pointer; none for other types. InputError for coordinates that are not arrays.
+std::vector<std::pair<const nlohmann::json*, std::string>> GeoJsonRings(
+    const nlohmann::json& geometry, const std::string& source, const std::string& where);
 
 }  // namespace trailmark::io_detail
