@@ -8,6 +8,10 @@
 #include <random>
 #include <string>
 
+#include <gtest/gtest.h>
+
+#include "trailmark/core/error.h"
+
 namespace trailmark::testing {
 
 class TempDir {
@@ -49,6 +53,23 @@ inline std::filesystem::path SharedData(const std::string& sub) {
 #endif
   const auto p = base / sub;
   return std::filesystem::exists(p) ? p : std::filesystem::path();
+}
+
+/// Writes `text` to a file named `name` in a fresh directory and expects `read(path)` to throw
+/// InputError naming that file at `line` with `problem` in its message.
+template <class Read>
+void ExpectFileRefused(const std::string& name, const std::string& text, std::size_t line,
+                       const std::string& problem, Read&& read) {
+  TempDir dir;
+  const std::string path = dir.File(name, text);
+  try {
+    read(path);
+    ADD_FAILURE() << "accepted: " << text;
+  } catch (const InputError& e) {
+    EXPECT_EQ(e.file(), path) << e.what();
+    EXPECT_EQ(e.line(), line) << e.what();
+    EXPECT_NE(std::string(e.what()).find(problem), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace trailmark::testing

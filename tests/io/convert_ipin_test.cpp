@@ -117,16 +117,8 @@ TEST(IpinLogfile, AGivenOriginAndAgent) {
 }
 
 void ExpectRefused(const std::string& text, std::size_t line, const std::string& problem) {
-  TempDir dir;
-  const std::string path = dir.File("log.txt", text);
-  try {
-    ReadIpinLogfile(path);
-    FAIL() << "accepted: " << text;
-  } catch (const InputError& e) {
-    EXPECT_EQ(e.file(), path);
-    EXPECT_EQ(e.line(), line) << e.what();
-    EXPECT_NE(std::string(e.what()).find(problem), std::string::npos) << e.what();
-  }
+  testing::ExpectFileRefused("log.txt", text, line, problem,
+                             [](const std::string& path) { ReadIpinLogfile(path); });
 }
 
 TEST(IpinLogfile, BadRecordsAreRefusedWithTheirLine) {

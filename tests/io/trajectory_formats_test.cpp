@@ -76,16 +76,8 @@ TEST(Euroc, GroundTruthAndImuOfAMav0Folder) {
 }
 
 void ExpectRefused(const std::string& rows, std::size_t line, const std::string& problem) {
-  TempDir dir;
-  const std::string path = dir.File("data.csv", std::string(kGroundTruthHeader) + rows);
-  try {
-    ReadEuroc(path);
-    FAIL() << "accepted: " << rows;
-  } catch (const InputError& e) {
-    EXPECT_EQ(e.line(), line) << e.what();
-    EXPECT_NE(std::string(e.what()).find(problem), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
-  }
+  testing::ExpectFileRefused("data.csv", std::string(kGroundTruthHeader) + rows, line, problem,
+                             [](const std::string& path) { ReadEuroc(path); });
 }
 
 TEST(Euroc, BadRowsAreRefusedWithTheirLine) {

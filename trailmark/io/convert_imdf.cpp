@@ -308,7 +308,6 @@ ImdfVenue ReadImdfVenue(const std::filesystem::path& source, std::optional<GeoOr
 }
 
 void WriteImdfMission(const ImdfVenue& venue, const std::filesystem::path& out) {
-  std::filesystem::create_directories(out);
   std::vector<std::pair<int, FloorPlan>> floors;
   json levels = json::array();
   for (const ImdfLevel& l : venue.levels) {
@@ -324,13 +323,7 @@ void WriteImdfMission(const ImdfVenue& venue, const std::filesystem::path& out) 
       {"provenance", {{"converted_from", "imdf"}, {"levels", levels}}},
       {"geo_origin",
        {{"lat_deg", venue.origin.lat_deg}, {"lon_deg", venue.origin.lon_deg}, {"height_m", 0.0}}}};
-  auto write = [&](const std::filesystem::path& p, const std::string& text) {
-    std::ofstream f(p, std::ios::binary);
-    f << text;
-    if (!f) throw std::runtime_error(p.string() + ": write failed");
-  };
-  write(out / "mission.json", mission.dump(2) + "\n");
-  write(out / "floorplan.geojson", FloorPlanToGeoJson(floors));
+  io_detail::WriteFloorPlanMission(out, mission, FloorPlanToGeoJson(floors));
 }
 
 }  // namespace trailmark

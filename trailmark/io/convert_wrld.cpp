@@ -173,7 +173,6 @@ std::string WrldFloorPlanGeoJson(const WrldBuilding& b) {
 }
 
 void WriteWrldMission(const WrldBuilding& b, const std::filesystem::path& out) {
-  std::filesystem::create_directories(out);
   json levels = json::array();
   for (const auto& l : b.levels) {
     levels.push_back({{"level", l.z_order}, {"wrld_id", l.id}, {"name", l.name}});
@@ -189,13 +188,7 @@ void WriteWrldMission(const WrldBuilding& b, const std::filesystem::path& out) {
       {"provenance",
        {{"converted_from", "wrld-indoor"}, {"levels", levels}}},
       {"geo_origin", {{"lat_deg", b.lat0_deg}, {"lon_deg", b.lon0_deg}, {"height_m", 0.0}}}};
-  auto write = [&](const std::filesystem::path& p, const std::string& text) {
-    std::ofstream f(p, std::ios::binary);
-    f << text;
-    if (!f) throw std::runtime_error(p.string() + ": write failed");
-  };
-  write(out / "mission.json", mission.dump(2) + "\n");
-  write(out / "floorplan.geojson", WrldFloorPlanGeoJson(b));
+  io_detail::WriteFloorPlanMission(out, mission, WrldFloorPlanGeoJson(b));
 }
 
 }  // namespace trailmark

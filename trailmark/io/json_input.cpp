@@ -68,6 +68,17 @@ double Number(const nlohmann::json& j, const std::string& source, const std::str
   return v;
 }
 
+void WriteFloorPlanMission(const std::filesystem::path& out, const nlohmann::json& mission,
+                           const std::string& plan_geojson) {
+  std::filesystem::create_directories(out);
+  for (const auto& [name, text] : {std::pair<const char*, std::string>{"mission.json", mission.dump(2) + "\n"},
+                                   {"floorplan.geojson", plan_geojson}}) {
+    std::ofstream f(out / name, std::ios::binary);
+    f << text;
+    if (!f) throw std::runtime_error((out / name).string() + ": write failed");
+  }
+}
+
 Vec2 LonLatToMetres(const nlohmann::json& c, const LocalFrame& frame, const std::string& source,
                     const std::string& where, const std::string& origin_name) {
   if (!c.is_array() || c.size() < 2) Bad(source, where, "expected a position [lon, lat]");

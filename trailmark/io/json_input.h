@@ -24,6 +24,11 @@ nlohmann::json ParseJson(const std::string& text, const std::string& source);
 /// A finite number, else InputError naming `where`.
 double Number(const nlohmann::json& j, const std::string& source, const std::string& where);
 
+/// A mission directory of a converted floor plan: `out`/mission.json (`mission`, pretty-printed)
+/// and `out`/floorplan.geojson (`plan_geojson`); std::runtime_error when a write fails.
+void WriteFloorPlanMission(const std::filesystem::path& out, const nlohmann::json& mission,
+                           const std::string& plan_geojson);
+
 /// A GeoJSON position [lon, lat] (WGS 84) as metres east/north of `frame`'s origin. InputError
 /// naming `where` for anything but a WGS 84 position, or one more than 50 km from the origin
 /// (named `origin_name` in the message): a building is not tens of kilometres across, so it is
