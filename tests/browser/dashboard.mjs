@@ -3,7 +3,9 @@
 // after a few seconds of replay the page lists the right firefighters near the positions the
 // API reports and keeps following them live (server-sent events); a click or the keyboard selects one; the
 // timeline scrubs back to the start of the incident and LIVE returns; on a tablet-sized
-// portrait screen the panel goes below the map; axe-core finds no serious or critical
+// portrait screen the panel goes below the map; the Leaflet map has a scale bar and layers, zooms,
+// pans and keeps its view under live updates, fits all and follows on request, and appends to
+// trails instead of redrawing them; axe-core finds no serious or critical
 // accessibility violation on either layout (WCAG 2.1 AA and AAA colour contrast, a11y.mjs);
 // screenshots are written.
 // usage: node dashboard.mjs URL TOKEN EXPECTED_AGENTS SCREENSHOT.png
@@ -55,6 +57,46 @@ try {
     if (byKey.length !== 1 || byKey[0] !== names[1]) fail(`Enter on ${names[1]} selected ${byKey}`);
     await page.click(`#list .node[data-id="${names[0]}"]`);
   }
+  // The map (Leaflet, issue 28): a scale bar in metres, the layers, zoom and pan that live
+  // updates do not undo, "fit all" and "follow" as buttons, trails appended to (not redrawn)
+  // as rows arrive.
+  const stats = () => page.evaluate(() => window.trailmarkMap);
+  const scaleText = await page.$eval('.leaflet-control-scale-line', (e) => e.textContent);
+  if (!/^\d+ k?m$/.test(scaleText)) fail(`scale bar '${scaleText}'`);
+  await page.click('.leaflet-control-layers');
+  await page.hover('.leaflet-control-layers');
+  const overlays = await page.$$eval('.leaflet-control-layers-overlays label', (els) => els.map((e) => e.textContent.trim()));
+  for (const name of ['Floor plan', 'Trails', 'Ellipses (95 %)', 'Crumbs', 'Landmarks', 'Base']) {
+    if (!overlays.includes(name)) fail(`no '${name}' layer: ${overlays}`);
+  }
+  await page.mouse.move(10, 400);
+  const s0 = await stats();
+  if (!s0.touchZoom) fail('pinch zoom is off');
+  await page.click('.leaflet-control-zoom-in');
+  await page.click('.leaflet-control-zoom-in');
+  await page.waitForTimeout(400);
+  const s1 = await stats();
+  if (!(s1.zoom > s0.zoom)) fail(`zoom in: ${s0.zoom} -> ${s1.zoom}`);
+  const box = await page.$eval('#map', (e) => e.getBoundingClientRect().toJSON());
+  await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(box.x + box.width / 2 + 120, box.y + box.height / 2 + 60, { steps: 8 });
+  await page.mouse.up();
+  await page.waitForTimeout(800);  // the drag's inertia ends
+  const s2 = await stats();
+  if (Math.hypot(s2.center[0] - s1.center[0], s2.center[1] - s1.center[1]) < 1) fail(`drag did not pan: ${s1.center} -> ${s2.center}`);
+  await page.waitForTimeout(1500);  // live messages keep coming: the view stays where the user put it
+  const s3 = await stats();
+  if (s3.zoom !== s2.zoom || Math.hypot(s3.center[0] - s2.center[0], s3.center[1] - s2.center[1]) > 0.01) fail(`a live update moved the view: ${JSON.stringify(s2)} -> ${JSON.stringify(s3)}`);
+  if (!(s3.appends > s2.appends)) fail(`trails did not grow live: ${s2.appends} -> ${s3.appends} appends`);
+  if (s3.rebuilds !== s2.rebuilds) fail(`live rows redrew whole trails: ${s2.rebuilds} -> ${s3.rebuilds} rebuilds`);
+  await page.click('#fit');
+  await page.waitForTimeout(300);
+  const s4 = await stats();
+  if (!(s4.zoom < s3.zoom)) fail(`fit all did not zoom out: ${s3.zoom} -> ${s4.zoom}`);
+  await page.click('#follow');
+  if ((await page.$eval('#follow', (e) => e.getAttribute('aria-pressed'))) !== 'true') fail('follow is not pressed');
+  await page.click('#follow');
   await page.screenshot({ path: shot });
   const minorLaptop = await checkAccessibility(page, 'laptop layout, one firefighter selected', fail);
   // Timeline: back to the start shows the firefighters where they were then (at the entry).

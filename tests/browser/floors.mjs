@@ -47,13 +47,15 @@ try {
   await page.waitForTimeout(300);
   const shownFloor = Number(await page.$eval('#floor', (e) => e.value));
   if (shownFloor < 1) fail(`picking ff1 (floor ${ff1.floor}) shows floor ${shownFloor}`);
-  // Another floor draws other walls: the basement's partitions differ from the upper floors'.
+  // Another floor draws other walls: the basement's plan layer replaces the shown one.
   await page.click('#live');  // stop following a selection change, keep live
-  const before = await page.$eval('#map', (c) => c.toDataURL());
+  const before = await page.evaluate(() => window.trailmarkMap);
   await page.selectOption('#floor', '-1');
-  await page.waitForTimeout(100);
-  const after = await page.$eval('#map', (c) => c.toDataURL());
-  if (before === after) fail('choosing the basement did not redraw the plan');
+  await page.waitForTimeout(200);
+  const after = await page.evaluate(() => window.trailmarkMap);
+  if (after.planLevel !== -1 || before.planLevel === -1) fail(`the plan drawn: level ${before.planLevel} then ${after.planLevel}`);
+  const basement = plan.levels.find((l) => l.level === -1).walls.length;
+  if (after.planSegments !== basement) fail(`the basement has ${basement} walls, the map draws ${after.planSegments}`);
   if ((await page.$eval('#floor', (e) => e.value)) !== '-1') fail('the selector did not keep the basement');
   await page.screenshot({ path: shot });
   const others = await checkAccessibility(page, 'floor selector, another floor shown', fail);

@@ -1,39 +1,42 @@
 // SPDX-License-Identifier: MIT
 // The dashboard's pure helpers (web/dashboard/src/geometry.ts, compiled by run.sh) against
-// hand-made cases: the view fitted from the trails' running bounds is the view fitted from
-// every row; decimation keeps the first and last points and drops only those closer than its
-// pixel limit to the last kept one.
+// hand-made cases: the running box of a long walk is the box of its every row (non-finite rows
+// skipped); the 95 % ellipse of a covariance; the trail row in force at a time.
 // usage: node geometry.mjs DIR_WITH_geometry.js
 import { pathToFileURL } from 'node:url';
 import path from 'node:path';
 
 const dir = process.argv[2];
-const { Bounds, decimate, fitView } = await import(pathToFileURL(path.join(dir, 'geometry.js')).href);
+const { Bounds, ellipse95, rowAt } = await import(pathToFileURL(path.join(dir, 'geometry.js')).href);
 const fail = (msg) => { console.error('FAIL: ' + msg); process.exit(1); };
+const near = (a, b, what) => { if (!(Math.abs(a - b) < 1e-9)) fail(`${what}: ${a} != ${b}`); };
 
-// A long walk 1 km from the origin, with a non-finite row the bounds must skip.
-const xs = [], ys = [];
+// A long walk 1 km from the origin, with a non-finite row the box must skip.
 const bounds = new Bounds();
+let minx = Infinity, maxx = -Infinity, miny = Infinity, maxy = -Infinity;
 for (let i = 0; i < 20000; i++) {
   const x = 1000 + 30 * Math.cos(i / 500), y = -400 + 12 * Math.sin(i / 300);
-  xs.push(x), ys.push(y), bounds.add(x, y);
+  bounds.add(x, y);
+  minx = Math.min(minx, x), maxx = Math.max(maxx, x), miny = Math.min(miny, y), maxy = Math.max(maxy, y);
 }
-xs.push(NaN), ys.push(Infinity), bounds.add(NaN, Infinity);
+bounds.add(NaN, Infinity);
 const bx = [], by = [];
 bounds.corners(bx, by);
-const all = fitView(xs, ys, 1280, 800), fromBounds = fitView(bx, by, 1280, 800);
-for (const k of ['scale', 'ox', 'oy']) {
-  if (Math.abs(all[k] - fromBounds[k]) > 1e-9) fail(`fitView from the bounds: ${k} ${fromBounds[k]} != ${all[k]}`);
-}
+near(bx[0], minx, 'box min x'), near(bx[1], maxx, 'box max x'), near(by[0], miny, 'box min y'), near(by[1], maxy, 'box max y');
 const empty = [], emptyY = [];
 new Bounds().corners(empty, emptyY);
 if (empty.length || emptyY.length) fail('an empty box gives corners');
 
-// Decimation: points 0.5 px apart at 1.5 px keep every third, and the last one (5) always.
-const line = Array.from({ length: 11 }, (_, i) => [0.5 * i, 0]);
-const kept = decimate(line, 1.5).map((p) => p[0]);
-if (kept.join(',') !== '0,1.5,3,4.5,5') fail(`decimate kept ${kept}`);
-const spaced = Array.from({ length: 5 }, (_, i) => [3 * i, 1]);
-if (decimate(spaced, 1.5).length !== 5) fail('decimate dropped points 3 px apart');
-if (decimate([], 1.5).length !== 0 || decimate([[1, 2]], 1.5).length !== 1) fail('decimate of 0 or 1 points');
-console.log('geometry: fitView from running bounds = from every row; decimation as stated');
+// The 95 % ellipse (chi-square 2 dof, 5.991): sxx 4, syy 1 -> semi-axes 2 sqrt(5.991) along x
+// and sqrt(5.991); the same covariance rotated by 30 degrees turns the ellipse by 30 degrees.
+const e = ellipse95(4, 0, 1);
+near(e.a, 2 * Math.sqrt(5.991), 'a'), near(e.b, Math.sqrt(5.991), 'b'), near(e.angle, 0, 'angle');
+const c = Math.cos(Math.PI / 6), s = Math.sin(Math.PI / 6);
+const r = ellipse95(4 * c * c + s * s, 3 * c * s, 4 * s * s + c * c);
+near(r.a, e.a, 'rotated a'), near(r.b, e.b, 'rotated b'), near(r.angle, Math.PI / 6, 'rotated angle');
+
+// The row in force at t: the last at or before it; none before the first.
+const trail = [[0, 0], [1, 1], [2, 2], [5, 5]];
+if (rowAt(trail, -1) !== null) fail('a row before the trail starts');
+if (rowAt(trail, 1)[0] !== 1 || rowAt(trail, 4.9)[0] !== 2 || rowAt(trail, 99)[0] !== 5) fail('rowAt');
+console.log('geometry: running box = box of every row; 95 % ellipse as computed by hand; rowAt');

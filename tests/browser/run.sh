@@ -31,5 +31,6 @@ pid=$!
 for _ in $(seq 100); do grep -q "listening on" "$dir/serve2.log" && break; sleep 0.1; done
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve2.log")
 [ -n "$port" ] || { cat "$dir/serve2.log"; echo "FAIL: serve did not start"; exit 1; }
-node "$here/floors.mjs" "http://127.0.0.1:$port" br0wser "$dir/floors.png"
+shot="${SCREENSHOT:-$dir/dashboard.png}"
+node "$here/floors.mjs" "http://127.0.0.1:$port" br0wser "${shot%.png}-floors.png"
 echo "browser: 3 passed, 0 failed"

@@ -3,19 +3,22 @@
 // trail and name; crumbs, landmarks, the base; status and alerts per firefighter; a timeline
 // to scrub back; in a multi-level building a floor selector draws one level's plan (the
 // selected firefighter's floor when picked), nodes on other floors dimmed with their floor. Live
-// through server-sent events; history from /api/history.
+// through server-sent events; history from /api/history. The map (map.ts) is Leaflet's: pan,
+// zoom, pinch, a scale bar, layers; "fit all" and "follow" as buttons.
 import './style.css';
 import { Api, type Alert, type History, type KnownNode, type LevelWalls, type NodeState, type State, type TrailRow, type Wall } from './api';
-import { Bounds, decimate, ellipse95, fitView, rowAt, toScreen, type View } from './geometry';
+import { Bounds, ellipse95, rowAt } from './geometry';
+import { IncidentMap, type MapStats } from './map';
 
 const token = new URLSearchParams(location.search).get('token') ?? '';
 const api = new Api(token);
 const $ = <T extends HTMLElement>(id: string) => document.getElementById(id) as T;
-const canvas = $<HTMLCanvasElement>('map');
-const ctx = canvas.getContext('2d')!;
 const timeline = $<HTMLInputElement>('timeline');
 const liveButton = $<HTMLButtonElement>('live');
 const floorSelect = $<HTMLSelectElement>('floor');
+const fitButton = $<HTMLButtonElement>('fit');
+const followButton = $<HTMLButtonElement>('follow');
+const incidentMap = new IncidentMap($('map'), (id) => select(id));
 
 let walls: Wall[] = [];
 let levels: LevelWalls[] = [];
@@ -27,7 +30,6 @@ const trailBounds = new Bounds(); // every trail row's extent, kept as rows arri
 let alertLog: Alert[] = [];
 let following = true; // the timeline follows the incident
 let selected: string | null = null;
-let view: View = { scale: 1, ox: 0, oy: 0 };
 const TRAIL_PERIOD_S = 0.5;
 
 const ALERT_LABEL: Record<string, string> = {
@@ -47,9 +49,13 @@ function mergeHistory(h: History): void {
     if (!rows.length) continue;
     const first = rows[0][0];
     const end = rows[rows.length - 1][0];
+    const gap = incidentMap.hasGap(id, first, end); // rows that fill a gap: redraw that trail
     const old = trails[id] ?? [];
     trails[id] = old.filter((r) => r[0] < first).concat(rows, old.filter((r) => r[0] > end));
     for (const r of rows) trailBounds.add(r[1], r[2]);
+    if (!following) continue; // the timeline shows the past: drawn when it returns
+    if (gap) incidentMap.rebuildTrail(id, trails[id]);
+    else incidentMap.appendTrail(id, rows);
   }
   if (h.t !== null) historyEnd = Math.max(historyEnd ?? -Infinity, h.t);
   if (h.since === undefined) {
@@ -76,8 +82,10 @@ function onState(s: State): void {
     const trail = (trails[n.id] ??= []);
     const last = trail[trail.length - 1];
     if (!last || n.t >= last[0] + TRAIL_PERIOD_S) {
-      trail.push([n.t, n.x, n.y, n.sxx, n.sxy, n.syy, n.floor ?? null]);
+      const row: TrailRow = [n.t, n.x, n.y, n.sxx, n.sxy, n.syy, n.floor ?? null];
+      trail.push(row);
       trailBounds.add(n.x, n.y);
+      if (following) incidentMap.appendTrail(n.id, [row]);
     }
   }
   for (const a of s.alerts) {
@@ -137,12 +145,6 @@ function alertsAt(t: number | null): Alert[] {
   return alertLog.filter((a) => a.t <= t && a.t > t - 60);
 }
 
-/** The walls drawn: the shown level's of a multi-level plan, else the plan's. */
-function shownWalls(): Wall[] {
-  if (shownLevel === null) return walls;
-  return levels.find((l) => l.level === shownLevel)?.walls ?? walls;
-}
-
 /** Whether a node is known to be on another floor than the one shown. */
 function offFloor(floor: number | undefined): boolean {
   return shownLevel !== null && floor !== undefined && floor !== shownLevel;
@@ -152,6 +154,7 @@ function showLevel(level: number): void {
   if (shownLevel === null || !levels.some((l) => l.level === level)) return;
   shownLevel = level;
   floorSelect.value = String(level);
+  incidentMap.showLevel(level);
 }
 
 function setUpFloors(plan: { level?: number; levels?: LevelWalls[] }): void {
@@ -173,12 +176,15 @@ function setUpFloors(plan: { level?: number; levels?: LevelWalls[] }): void {
   $('floorbar').hidden = false;
 }
 
-function resize(): void {
-  const r = canvas.getBoundingClientRect();
-  const dpr = window.devicePixelRatio || 1;
-  canvas.width = Math.max(1, Math.round(r.width * dpr));
-  canvas.height = Math.max(1, Math.round(r.height * dpr));
-  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+/** Every trail drawn anew: to the time shown while the timeline is dragged, whole when live. */
+function redrawTrails(): void {
+  const t = following ? null : shownTime();
+  for (const [id, rows] of Object.entries(trails)) incidentMap.rebuildTrail(id, rows, t);
+}
+
+/** Every wall of every level, for "fit all". */
+function allWalls(): Wall[] {
+  return levels.length ? levels.flatMap((l) => l.walls) : walls;
 }
 
 function render(): void {
@@ -191,68 +197,20 @@ function render(): void {
     ...estimated,
     ...known.filter((k) => !estimated.some((n) => n.id === k.id)),
   ];
-  const w = canvas.clientWidth;
-  const h = canvas.clientHeight;
+  const alerted = new Set(alerts.map((a) => a.id));
+  incidentMap.updateStatics(others, offFloor);
+  incidentMap.updateAgents(agents, selected, alerted, offFloor);
+  const points: Array<[number, number]> = [...agents, ...others].map((n) => [n.x, n.y]);
   const xs: number[] = [];
   const ys: number[] = [];
-  // The view fits every level, so that changing the floor shown does not move the map.
-  for (const wl of levels.length ? levels.flatMap((l) => l.walls) : walls) xs.push(wl[0], wl[2]), ys.push(wl[1], wl[3]);
-  for (const n of [...agents, ...others]) xs.push(n.x), ys.push(n.y);
   trailBounds.corners(xs, ys); // the trails' extent, not their every row
-  view = fitView(xs, ys, w, h);
-  (window as unknown as { trailmarkView?: View }).trailmarkView = view; // for the browser test
-  ctx.clearRect(0, 0, w, h);
-  ctx.fillStyle = '#101418';
-  ctx.fillRect(0, 0, w, h);
-  ctx.strokeStyle = '#8a93a0';
-  ctx.lineWidth = 2;
-  for (const wl of shownWalls()) {
-    ctx.beginPath();
-    ctx.moveTo(...toScreen(view, wl[0], wl[1]));
-    ctx.lineTo(...toScreen(view, wl[2], wl[3]));
-    ctx.stroke();
-  }
-  for (const n of others) {
-    ctx.globalAlpha = offFloor(n.floor) ? 0.3 : 1;
-    const [px, py] = toScreen(view, n.x, n.y);
-    ctx.fillStyle = n.kind === 'base' ? '#4aa8ff' : n.kind === 'landmark' ? '#c8a2ff' : '#7fd17f';
-    ctx.fillRect(px - 4, py - 4, 8, 8);
-    ctx.fillStyle = '#9aa4ae';
-    ctx.font = '11px system-ui, sans-serif';
-    ctx.fillText(n.id, px + 6, py + 12);
-  }
-  const alerted = new Set(alerts.map((a) => a.id));
-  for (const n of agents) {
-    const off = offFloor(n.floor);
-    ctx.globalAlpha = off ? 0.3 : 1;
-    const rows = trails[n.id] ?? [];
-    ctx.strokeStyle = n.id === selected ? '#ffe066' : '#5b6470';
-    ctx.lineWidth = n.id === selected ? 2 : 1;
-    ctx.beginPath();
-    const screen: Array<[number, number]> = [];
-    for (const r of rows) {
-      if (t !== null && r[0] > t) break;
-      screen.push(toScreen(view, r[1], r[2]));
-    }
-    const kept = decimate(screen, 1.5);
-    kept.forEach(([px, py], i) => (i === 0 ? ctx.moveTo(px, py) : ctx.lineTo(px, py)));
-    ctx.stroke();
-    const e = ellipse95(n.sxx, n.sxy, n.syy);
-    const [px, py] = toScreen(view, n.x, n.y);
-    ctx.strokeStyle = n.id === selected ? '#ffe066' : '#ff9a3c';
-    ctx.lineWidth = 1.5;
-    ctx.beginPath();
-    ctx.ellipse(px, py, Math.max(1, e.a * view.scale), Math.max(1, e.b * view.scale), -e.angle, 0, 2 * Math.PI);
-    ctx.stroke();
-    ctx.fillStyle = alerted.has(n.id) ? '#ff3b3b' : '#ff6a3c';
-    ctx.beginPath();
-    ctx.arc(px, py, n.id === selected ? 8 : 6, 0, 2 * Math.PI);
-    ctx.fill();
-    ctx.fillStyle = '#ffffff';
-    ctx.font = 'bold 13px system-ui, sans-serif';
-    ctx.fillText(off ? `${n.id} (floor ${n.floor})` : n.id, px + 9, py - 9);
-  }
-  ctx.globalAlpha = 1;
+  xs.forEach((x, i) => points.push([x, ys[i] ?? x]));
+  if (agents.length) incidentMap.fitOnce(points, allWalls());
+  const stats: MapStats & { trailPoints?: (id: string) => number } = incidentMap.stats();
+  stats.trailPoints = (id: string) => incidentMap.trailPoints(id);
+  // For the browser tests: the view's scale (px/m), the plan drawn, appends and rebuilds.
+  (window as unknown as { trailmarkView?: { scale: number } }).trailmarkView = { scale: stats.scale };
+  (window as unknown as { trailmarkMap?: typeof stats }).trailmarkMap = stats;
   renderSide(agents, alerts, t);
 }
 
@@ -344,22 +302,10 @@ function select(id: string): void {
   render();
 }
 
-canvas.addEventListener('pointerdown', (ev) => {
-  const r = canvas.getBoundingClientRect();
-  const x = ev.clientX - r.left;
-  const y = ev.clientY - r.top;
-  let best: string | null = null;
-  let bestD = 24; // px: a finger on a tablet
-  for (const n of agentsAt(shownTime())) {
-    const [px, py] = toScreen(view, n.x, n.y);
-    const d = Math.hypot(px - x, py - y);
-    if (d < bestD) (bestD = d), (best = n.id);
-  }
-  if (best) select(best);
-});
 timeline.addEventListener('input', () => {
   following = Number(timeline.value) >= Number(timeline.max) - 1e-6;
   liveButton.classList.toggle('on', following);
+  redrawTrails();
   render();
 });
 floorSelect.addEventListener('change', () => {
@@ -367,23 +313,39 @@ floorSelect.addEventListener('change', () => {
   render();
 });
 liveButton.addEventListener('click', () => {
+  const was = following;
   following = true;
   liveButton.classList.add('on');
   updateTimeline();
+  if (!was) redrawTrails();
+  render();
+});
+fitButton.addEventListener('click', () => {
+  const points: Array<[number, number]> = live.nodes.map((n) => [n.x, n.y]);
+  const xs: number[] = [];
+  const ys: number[] = [];
+  trailBounds.corners(xs, ys);
+  xs.forEach((x, i) => points.push([x, ys[i] ?? x]));
+  incidentMap.fitAll(points, allWalls());
+});
+followButton.addEventListener('click', () => {
+  incidentMap.follow = !incidentMap.follow;
+  followButton.setAttribute('aria-pressed', String(incidentMap.follow));
+  followButton.classList.toggle('on', incidentMap.follow);
   render();
 });
 window.addEventListener('resize', () => {
-  resize();
+  incidentMap.invalidateSize();
   render();
 });
 
 async function start(): Promise<void> {
-  resize();
   try {
     const plan = await api.floorPlan();
     walls = plan.walls;
     known = plan.nodes;
     setUpFloors(plan);
+    incidentMap.setPlan(walls, levels, shownLevel);
     mergeHistory(await api.history());
     onState(await api.state());
   } catch (e) {
