@@ -23,6 +23,12 @@ port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve
 [ -n "$port" ] || { cat "$dir/serve.log"; echo "FAIL: serve did not start"; exit 1; }
 node "$here/dashboard.mjs" "http://127.0.0.1:$port" br0wser 2 "${SCREENSHOT:-$dir/dashboard.png}"
 kill $pid; wait $pid 2>/dev/null || true
+# The HTML report's map at true scale, zoomable (issue 28, item 5).
+"$TM" run --pipeline pdr "$dir/m" --out "$dir/run-pdr" > /dev/null
+"$TM" run --pipeline breadcrumb "$dir/m" --out "$dir/run-breadcrumb" > /dev/null
+"$TM" report "$dir/run-pdr" "$dir/run-breadcrumb" --out "$dir/report.html" > /dev/null
+report_shot="${SCREENSHOT:+${SCREENSHOT%.png}-report.png}"
+node "$here/report.mjs" "$dir/report.html" $report_shot
 # The floor selector: the multi-floor building drawn in another frame (rotated 224 degrees, the
 # origin 1.2 km away: the view must fit the building, not the origin), replayed at 20x.
 "$TM" simulate multi-floor --seed 3 --vary 1 --family frame --out "$dir/f" > /dev/null
@@ -33,4 +39,4 @@ port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve
 [ -n "$port" ] || { cat "$dir/serve2.log"; echo "FAIL: serve did not start"; exit 1; }
 shot="${SCREENSHOT:-$dir/dashboard.png}"
 node "$here/floors.mjs" "http://127.0.0.1:$port" br0wser "${shot%.png}-floors.png"
-echo "browser: 3 passed, 0 failed"
+echo "browser: 4 passed, 0 failed"

@@ -17,8 +17,19 @@ namespace {
 
 using nlohmann::json;
 
-const char* kPalette[] = {"#d62728", "#1f77b4", "#2ca02c", "#9467bd", "#ff7f0e",
-                          "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f"};
+// One colour per pipeline, legible on the dashboard's dark map and on the white charts alike.
+const char* kPalette[] = {"#ff6a3c", "#4aa8ff", "#51cf66", "#c8a2ff", "#fcc419",
+                          "#22b8cf", "#f06595", "#94d82d", "#ff922b", "#adb5bd"};
+// The dashboard's colours (web/dashboard/src/map.ts): walls, the truth, nodes by kind.
+constexpr const char* kWallColour = "#8a93a0";
+constexpr const char* kTruthColour = "#ffffff";
+const char* NodeColour(NodeKind kind) {
+  switch (kind) {
+    case NodeKind::kBase: return "#4aa8ff";
+    case NodeKind::kLandmark: return "#c8a2ff";
+    default: return "#7fd17f";
+  }
+}
 
 double Round3(double v) { return std::round(v * 1000.0) / 1000.0; }
 
@@ -83,7 +94,7 @@ std::string BuildHtmlReport(const ReportInput& in) {
       box.Extend(w.b);
     }
     datasets.push_back({{"label", "walls"}, {"data", pts}, {"showLine", true}, {"pointRadius", 0},
-                        {"borderColor", "#888"}, {"borderWidth", 1.5}, {"spanGaps", false}});
+                        {"borderColor", kWallColour}, {"borderWidth", 1.5}, {"spanGaps", false}});
   }
   // Truth per node.
   std::map<std::string, std::vector<TruthSample>> truth_by_id;
@@ -104,18 +115,19 @@ std::string BuildHtmlReport(const ReportInput& in) {
       datasets.push_back({{"label", "truth " + id},
                           {"data", Decimated(rows, in.max_points_per_series,
                                              [](const TruthSample& s) { return Point(s.position_n.head<2>()); })},
-                          {"showLine", true}, {"pointRadius", 0}, {"borderColor", "#000"},
+                          {"showLine", true}, {"pointRadius", 0}, {"borderColor", kTruthColour},
                           {"borderWidth", 2}});
     } else {
       json p = Point(rows.back().position_n.head<2>());
       p["id"] = id;
+      p["colour"] = NodeColour(kind_of(id));
       static_truth.push_back(p);
     }
   }
   if (!static_truth.empty()) {
     datasets.push_back({{"label", "truth crumbs/landmarks"}, {"data", static_truth},
-                        {"pointStyle", "rect"}, {"pointRadius", 5}, {"borderColor", "#000"},
-                        {"backgroundColor", "#000"}});
+                        {"pointStyle", "rect"}, {"pointRadius", 5}, {"borderColor", kTruthColour},
+                        {"backgroundColor", kTruthColour}});
   }
   json error_sets = json::array(), cdf_sets = json::array();
   std::string table;
@@ -215,9 +227,16 @@ std::string BuildHtmlReport(const ReportInput& in) {
   html += R"(<style>
 body{font-family:system-ui,sans-serif;margin:1.5em;color:#222;max-width:1200px}
 table{border-collapse:collapse;font-size:0.9em}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
-td:first-child,th:first-child{text-align:left}.sw{display:inline-block;width:10px;height:10px;margin-right:6px}
+td:first-child,th:first-child{text-align:left}.sw{display:inline-block;width:10px;height:10px;margin-right:6px;border:1px solid #555}
 .charts{display:flex;flex-wrap:wrap;gap:1em}.half{flex:1 1 480px;min-width:320px}
 .note{color:#666;font-size:0.85em}
+.mapwrap{position:relative;background:#101418;height:min(75vh,760px);border-radius:4px}
+#map{width:100%;height:100%;touch-action:none;cursor:grab;display:block}
+.mapctl{position:absolute;left:8px;top:8px;display:flex;gap:4px;align-items:center}
+.mapctl button{min-width:32px;min-height:32px;font:bold 15px system-ui;background:#fff;color:#000;border:1px solid #000;border-radius:3px}
+#scalebar{margin-left:8px;background:#fff;color:#000;font-size:12px;padding:1px 4px;display:flex;align-items:center;gap:4px}
+#scaleline{display:inline-block;height:6px;border:2px solid #000;border-top:0}
+#legend{display:flex;flex-wrap:wrap;gap:4px 14px;margin:6px 0 12px;font-size:0.9em}
 </style>
 )";
   html += "<script>\n";
@@ -249,22 +268,105 @@ td:first-child,th:first-child{text-align:left}.sw{display:inline-block;width:10p
             "<th>SE95 m</th><th>vertical mean m</th><th>IPIN score m</th></tr>\n";
     html += floors + "</table>\n";
   }
-  html += "<h2>Trajectories</h2><p class=note>Black: truth. Dashed: 95% ellipses of the final "
-          "estimates. Click a legend entry to hide it.</p>\n";
-  html += "<div><canvas id=map></canvas></div>\n";
+  html += "<h2>Trajectories</h2><p class=note>At true scale (one metre is as long east as "
+          "north). White: truth; squares: true crumbs and landmarks in the dashboard's colours; "
+          "dashed: 95% ellipses of the final estimates. Wheel or +/&minus; to zoom, drag to pan, "
+          "&ldquo;fit&rdquo; to see everything; untick a layer to hide it.</p>\n";
+  html += "<div class=mapwrap><svg id=map role=img aria-label='trajectories on the floor plan, "
+          "at true scale'></svg><div class=mapctl><button type=button id=zin aria-label='zoom in'>+"
+          "</button><button type=button id=zout aria-label='zoom out'>&minus;</button><button "
+          "type=button id=zfit>fit</button><span id=scalebar><span id=scaleline></span><span "
+          "id=scaletext></span></span></div></div>\n<div id=legend></div>\n";
   html += "<div class=charts><div class=half><h2>Error over time</h2><canvas id=err></canvas></div>"
           "<div class=half><h2>Error CDF</h2><canvas id=cdf></canvas></div></div>\n";
   html += "<p class=note>Generated by trailmark. Charts: Chart.js (MIT), embedded.</p>\n";
   html += "<script>\nconst D = " + dump + ";\n";
   html += R"(
-const b = D.bounds;
-new Chart(document.getElementById('map'), {type: 'scatter', data: {datasets: D.map},
-  options: {aspectRatio: Math.max(0.5, Math.min(3, (b.xmax - b.xmin) / (b.ymax - b.ymin))),
-    animation: false, parsing: true,
-    scales: {x: {type: 'linear', min: b.xmin, max: b.xmax, title: {display: true, text: 'x east (m)'}},
-             y: {type: 'linear', min: b.ymin, max: b.ymax, title: {display: true, text: 'y north (m)'}}},
-    plugins: {tooltip: {callbacks: {label: (c) => (c.raw.id ? c.raw.id + ' ' : '') + c.dataset.label +
-      ' (' + c.raw.x + ', ' + c.raw.y + ')'}}}}});
+// The map: SVG in metres (y flipped), so one metre is as long east as north at every zoom.
+const b = D.bounds, NS = 'http://www.w3.org/2000/svg', svg = document.getElementById('map');
+const home = [b.xmin, -b.ymax, b.xmax - b.xmin, b.ymax - b.ymin];
+let vb = home.slice();
+const root = document.createElementNS(NS, 'g');
+root.setAttribute('transform', 'scale(1,-1)');
+svg.appendChild(root);
+const mark = Math.hypot(home[2], home[3]) / 250;  // marker size, m
+const el = (name, attrs) => {
+  const e = document.createElementNS(NS, name);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  return e;
+};
+const legend = document.getElementById('legend');
+D.map.forEach((ds) => {
+  const g = el('g', {'data-label': ds.label});
+  const stroke = {stroke: ds.borderColor, 'stroke-width': ds.borderWidth || 1.5, fill: 'none',
+                  'vector-effect': 'non-scaling-stroke'};
+  if (ds.borderDash) stroke['stroke-dasharray'] = ds.borderDash.join(' ');
+  if (ds.showLine) {
+    let pts = [];
+    const flush = () => { if (pts.length > 1) g.appendChild(el('polyline', {points: pts.join(' '), ...stroke})); pts = []; };
+    for (const p of ds.data) { if (p.x === null) flush(); else pts.push(p.x + ',' + p.y); }
+    flush();
+  } else {
+    for (const p of ds.data) {
+      const fill = p.colour || ds.backgroundColor || ds.borderColor;
+      const shape = ds.pointStyle === 'triangle'
+        ? el('polygon', {points: [[p.x, p.y + mark], [p.x - mark, p.y - mark], [p.x + mark, p.y - mark]].map((q) => q.join(',')).join(' '), fill})
+        : el('rect', {x: p.x - mark * 0.8, y: p.y - mark * 0.8, width: mark * 1.6, height: mark * 1.6, fill});
+      const title = el('title', {});
+      title.textContent = (p.id ? p.id + ' ' : '') + ds.label + ' (' + p.x + ', ' + p.y + ')';
+      shape.appendChild(title);
+      g.appendChild(shape);
+    }
+  }
+  root.appendChild(g);
+  const label = document.createElement('label');
+  const box = document.createElement('input');
+  box.type = 'checkbox';
+  box.checked = true;
+  box.onchange = () => { g.style.display = box.checked ? '' : 'none'; };
+  const sw = document.createElement('span');
+  sw.className = 'sw';
+  sw.style.background = ds.borderColor;
+  label.append(box, sw, ds.label);
+  legend.appendChild(label);
+});
+const scaleline = document.getElementById('scaleline'), scaletext = document.getElementById('scaletext');
+const setView = (v) => {
+  vb = v;
+  svg.setAttribute('viewBox', vb.join(' '));
+  const pxPerM = svg.getScreenCTM() ? svg.getScreenCTM().a : 1;
+  let len = 1;
+  for (const s of [1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000]) if (s * pxPerM <= 120) len = s;
+  scaleline.style.width = Math.round(len * pxPerM) + 'px';
+  scaletext.textContent = len + ' m';
+};
+// Zoom by f about the point (ux, uy) of the view's coordinates.
+const zoom = (f, ux, uy) => setView([ux - (ux - vb[0]) * f, uy - (uy - vb[1]) * f, vb[2] * f, vb[3] * f]);
+const toView = (cx, cy) => {
+  const p = svg.createSVGPoint();
+  p.x = cx; p.y = cy;
+  return p.matrixTransform(svg.getScreenCTM().inverse());
+};
+svg.addEventListener('wheel', (ev) => {
+  ev.preventDefault();
+  const u = toView(ev.clientX, ev.clientY);
+  zoom(Math.exp(ev.deltaY * 0.0015), u.x, u.y);
+}, {passive: false});
+let drag = null;
+svg.addEventListener('pointerdown', (ev) => { drag = {x: ev.clientX, y: ev.clientY, vb: vb.slice()}; svg.setPointerCapture(ev.pointerId); });
+svg.addEventListener('pointermove', (ev) => {
+  if (!drag) return;
+  const a = svg.getScreenCTM().a;  // px per metre
+  setView([drag.vb[0] - (ev.clientX - drag.x) / a, drag.vb[1] - (ev.clientY - drag.y) / a, drag.vb[2], drag.vb[3]]);
+});
+svg.addEventListener('pointerup', () => { drag = null; });
+const centre = () => [vb[0] + vb[2] / 2, vb[1] + vb[3] / 2];
+document.getElementById('zin').onclick = () => zoom(1 / 1.5, ...centre());
+document.getElementById('zout').onclick = () => zoom(1.5, ...centre());
+document.getElementById('zfit').onclick = () => setView(home.slice());
+window.addEventListener('resize', () => setView(vb));
+setView(home.slice());
+window.trailmarkReportMap = {svg, view: () => vb.slice(), setView};
 new Chart(document.getElementById('err'), {type: 'scatter', data: {datasets: D.error},
   options: {animation: false, scales: {x: {title: {display: true, text: 'time (s)'}},
     y: {min: 0, title: {display: true, text: 'horizontal error (m)'}}}}});

@@ -2,7 +2,8 @@
 #pragma once
 /// One self-contained HTML report (works offline: Chart.js is embedded, nothing is fetched):
 /// floor plan, truth and estimated trajectories per pipeline, crumb/landmark estimates with 95 %
-/// ellipses, error over time, error CDF and the metrics table.
+/// ellipses — an SVG map at true scale (a metre as long east as north), zoomable and pannable,
+/// in the dashboard's colours — error over time, error CDF and the metrics table.
 
 #include <optional>
 #include <string>
