@@ -310,10 +310,22 @@ void IncidentServer::Start() {
       }
       since = v;
     }
+    std::size_t max_rows = IncidentState::kHistoryMaxRows;
+    if (req.has_param("max_rows")) {
+      const std::string text = req.get_param_value("max_rows");
+      char* end = nullptr;
+      const long long v = std::strtoll(text.c_str(), &end, 10);
+      if (text.empty() || end != text.c_str() + text.size() || v < 2 || v > 10'000'000) {
+        res.status = 400;
+        json(res, {{"error", "max_rows: expected a whole number from 2 to 10000000, not '" + text + "'"}});
+        return;
+      }
+      max_rows = static_cast<std::size_t>(v);
+    }
     nlohmann::json h;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      h = state_.HistoryJson(since);
+      h = state_.HistoryJson(since, max_rows);
     }
     json(res, h);
   });

@@ -129,9 +129,11 @@ void IncidentState::Advance(TimeS now) {
   }
 }
 
-nlohmann::json IncidentState::HistoryJson(std::optional<double> since) const {
+nlohmann::json IncidentState::HistoryJson(std::optional<double> since, std::size_t max_rows) const {
   const auto after = [&](double t) { return !since || t > *since; };
+  max_rows = std::max<std::size_t>(max_rows, 2);
   nlohmann::json trails = nlohmann::json::object();
+  nlohmann::json decimated = nlohmann::json::object();
   for (const auto& [id, n] : nodes_) {
     if (n.kind != NodeKind::kAgent) continue;
     nlohmann::json rows = nlohmann::json::array();
@@ -140,12 +142,26 @@ nlohmann::json IncidentState::HistoryJson(std::optional<double> since) const {
       return nlohmann::json{e.t,   e.position_n.x(), e.position_n.y(), e.sxx, e.sxy, e.syy,
                             e.floor ? nlohmann::json(*e.floor) : nlohmann::json(nullptr)};
     };
-    for (const Estimate& e : n.history) {
-      if (after(e.t)) rows.push_back(row(e));
+    const std::vector<Estimate>& h = n.history;  // in time order
+    const auto by_time = [](double t, const Estimate& e) { return t < e.t; };
+    const auto first = since ? std::upper_bound(h.begin(), h.end(), *since, by_time) : h.begin();
+    const auto count = static_cast<std::size_t>(h.end() - first);
+    if (count <= max_rows) {
+      for (auto it = first; it != h.end(); ++it) rows.push_back(row(*it));
+    } else {
+      // The recent rows at the full rate (up to half the budget), the older ones thinned.
+      const double recent_from = h.back().t - kHistoryFullRateS;
+      auto recent = std::upper_bound(first, h.end(), recent_from, by_time);
+      recent = std::max(recent, h.end() - static_cast<std::ptrdiff_t>(max_rows / 2));
+      const auto older = static_cast<std::size_t>(recent - first);
+      const std::size_t budget = max_rows - static_cast<std::size_t>(h.end() - recent);
+      const std::size_t stride = (older + budget - 1) / budget;
+      for (std::size_t k = 0; k < older; k += stride) rows.push_back(row(first[static_cast<std::ptrdiff_t>(k)]));
+      for (auto it = recent; it != h.end(); ++it) rows.push_back(row(*it));
+      decimated[id] = {{"stride", stride}, {"full_rate_from", recent->t}};
     }
     // and the latest, so that the timeline ends where the live view is
-    if (!n.history.empty() && n.history.back().t < n.estimate.t && after(n.estimate.t))
-      rows.push_back(row(n.estimate));
+    if (!h.empty() && h.back().t < n.estimate.t && after(n.estimate.t)) rows.push_back(row(n.estimate));
     trails[id] = rows;
   }
   nlohmann::json log = nlohmann::json::array();
@@ -159,6 +175,7 @@ nlohmann::json IncidentState::HistoryJson(std::optional<double> since) const {
   j["trails"] = trails;
   j["alerts"] = log;
   if (since) j["since"] = *since;
+  if (!decimated.empty()) j["decimated"] = decimated;
   return j;
 }
 

@@ -77,7 +77,14 @@ class IncidentState {
   /// GET /api/history: the agents' trails and the alert log, for the dashboard's timeline.
   /// `since`: only trail rows and alerts after that mission time (the dashboard's refresh
   /// fetches what it lacks, not the whole incident); "since" in the JSON says so.
-  nlohmann::json HistoryJson(std::optional<double> since = std::nullopt) const;
+  /// `max_rows`: at most this many rows per agent (a long incident): the last
+  /// kHistoryFullRateS seconds at the full rate when they fit, the older rows thinned evenly
+  /// (each agent's first row kept); "decimated" in the JSON gives each thinned agent's stride.
+  /// The cost is that of the rows sent, not of the incident's length.
+  nlohmann::json HistoryJson(std::optional<double> since = std::nullopt,
+                             std::size_t max_rows = kHistoryMaxRows) const;
+  static constexpr std::size_t kHistoryMaxRows = 3000;
+  static constexpr double kHistoryFullRateS = 600.0;
 
  private:
   MissionInfo info_;

@@ -119,7 +119,9 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     if (!j) throw std::runtime_error((out / "variation.json").string() + ": write failed");
     for (const auto& [key, value] : v.Describe()) fmt::print("  {:<26} {}\n", key, value);
   } else if (sim.levels.empty()) {
-    WriteMissionDirectory(out, sim.data, &sim.plan);
+    // A scenario without a building (the synthetic incident) has no floor plan to write.
+    const bool has_plan = !sim.plan.walls().empty();
+    WriteMissionDirectory(out, sim.data, has_plan ? &sim.plan : nullptr);
   } else {
     WriteMissionDirectory(out, sim.data, sim.levels);  // every level in one file
   }

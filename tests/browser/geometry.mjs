@@ -1,13 +1,14 @@
 // SPDX-License-Identifier: MIT
 // The dashboard's pure helpers (web/dashboard/src/geometry.ts, compiled by run.sh) against
 // hand-made cases: the running box of a long walk is the box of its every row (non-finite rows
-// skipped); the 95 % ellipse of a covariance; the trail row in force at a time.
+// skipped); the 95 % ellipse of a covariance; the trail row in force at a time; a long trail
+// thinned to its limit with its recent rows whole.
 // usage: node geometry.mjs DIR_WITH_geometry.js
 import { pathToFileURL } from 'node:url';
 import path from 'node:path';
 
 const dir = process.argv[2];
-const { Bounds, ellipse95, rowAt } = await import(pathToFileURL(path.join(dir, 'geometry.js')).href);
+const { Bounds, ellipse95, rowAt, thinTrail } = await import(pathToFileURL(path.join(dir, 'geometry.js')).href);
 const fail = (msg) => { console.error('FAIL: ' + msg); process.exit(1); };
 const near = (a, b, what) => { if (!(Math.abs(a - b) < 1e-9)) fail(`${what}: ${a} != ${b}`); };
 
@@ -39,4 +40,11 @@ near(r.a, e.a, 'rotated a'), near(r.b, e.b, 'rotated b'), near(r.angle, Math.PI 
 const trail = [[0, 0], [1, 1], [2, 2], [5, 5]];
 if (rowAt(trail, -1) !== null) fail('a row before the trail starts');
 if (rowAt(trail, 1)[0] !== 1 || rowAt(trail, 4.9)[0] !== 2 || rowAt(trail, 99)[0] !== 5) fail('rowAt');
+// A long trail thinned: within the limit, the recent rows whole, the older every other one.
+const long = Array.from({ length: 5001 }, (_, i) => [i, i, 0]);
+if (thinTrail(long.slice(0, 4000), 4000, 1200) !== null) fail('a trail within the limit was thinned');
+const thin = thinTrail(long, 4000, 1200);
+if (thin.length !== 1901 + 1200) fail(`thinned to ${thin.length} rows`);
+if (thin[0][0] !== 0 || thin[1][0] !== 2 || thin[thin.length - 1][0] !== 5000) fail('thinning kept the wrong rows');
+for (let i = thin.length - 1199; i < thin.length; i++) if (thin[i][0] - thin[i - 1][0] !== 1) fail('the recent rows are not whole');
 console.log('geometry: running box = box of every row; 95 % ellipse as computed by hand; rowAt');

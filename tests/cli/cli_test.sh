@@ -245,6 +245,15 @@ curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/history?sin
   || fail "serve: history since"
 code=$(curl -s -o "$dir/h.json" -w "%{http_code}" -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/history?since=soon")
 [ "$code" = 400 ] && grep -q "not 'soon'" "$dir/h.json" || fail "serve: a bad since gave $code"
+code=$(curl -s -o "$dir/h.json" -w "%{http_code}" -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/history?max_rows=1")
+[ "$code" = 400 ] && grep -q "max_rows: expected a whole number" "$dir/h.json" || fail "serve: a bad max_rows gave $code"
+decimated=no
+for _ in $(seq 100); do  # once an agent has more than 2 history rows (0.5 s of mission time each)
+  curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/history?max_rows=2" | grep -q '"decimated"' \
+    && { decimated=yes; break; }
+  sleep 0.1
+done
+[ $decimated = yes ] || fail "serve: history within 2 rows is not decimated"
 code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=wrong")
 [ "$code" = 401 ] || fail "serve: dashboard with a wrong token gave $code"
 kill $serve_pid; wait $serve_pid || true

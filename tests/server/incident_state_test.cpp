@@ -198,5 +198,33 @@ TEST(IncidentState, HistoryKeepsTheTrailAtItsPeriodAndTheLatestEstimate) {
   EXPECT_TRUE(s.HistoryJson(1e9).at("trails").at("ff1").empty());
 }
 
+TEST(IncidentState, AFourHourHistoryIsDecimatedToItsBudget) {
+  IncidentState s(Info());
+  for (int k = 0; k <= 4 * 3600 * 2; ++k) s.Apply(At("ff1", 0.5 * k, k));  // 28,801 rows
+  const auto h = s.HistoryJson();
+  const auto& rows = h.at("trails").at("ff1");
+  ASSERT_LE(rows.size(), IncidentState::kHistoryMaxRows);
+  ASSERT_GT(rows.size(), IncidentState::kHistoryMaxRows * 9 / 10);  // the stride rounds up
+  EXPECT_EQ(rows.front()[0].get<double>(), 0.0);           // the start kept
+  EXPECT_EQ(rows.back()[0].get<double>(), 4 * 3600.0);     // the end kept
+  // The last ten minutes at the full rate, 0.5 s apart; the older rows evenly thinned.
+  const std::size_t n = rows.size();
+  const std::size_t recent = static_cast<std::size_t>(IncidentState::kHistoryFullRateS / 0.5);
+  for (std::size_t k = n - recent; k < n; ++k) {
+    ASSERT_DOUBLE_EQ(rows[k][0].get<double>() - rows[k - 1][0].get<double>(), 0.5) << k;
+  }
+  const int stride = h.at("decimated").at("ff1").at("stride").get<int>();
+  EXPECT_EQ(stride, 16);  // ceil(27,601 older rows / 1,800 left in the budget)
+  EXPECT_DOUBLE_EQ(rows[1][0].get<double>() - rows[0][0].get<double>(), 0.5 * stride);
+  EXPECT_DOUBLE_EQ(h.at("decimated").at("ff1").at("full_rate_from").get<double>(),
+                   4 * 3600.0 - IncidentState::kHistoryFullRateS + 0.5);
+  EXPECT_EQ(n, 1 + (27601 - 1) / 16 + 1200);  // every 16th older row from the first, the recent
+  // A refresh of the last minute, or a budget that holds everything: not decimated.
+  const auto refresh = s.HistoryJson(4 * 3600.0 - 60);
+  EXPECT_EQ(refresh.at("trails").at("ff1").size(), 120u);
+  EXPECT_FALSE(refresh.contains("decimated"));
+  EXPECT_EQ(s.HistoryJson(std::nullopt, 100000).at("trails").at("ff1").size(), 28801u);
+}
+
 }  // namespace
 }  // namespace trailmark::server

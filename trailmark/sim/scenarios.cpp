@@ -1,6 +1,10 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/sim/scenarios.h"
 
+#include <fmt/format.h>
+
+#include "trailmark/sim/synthetic_incident.h"
+
 #include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/landmark_corridor.h"
@@ -187,6 +191,10 @@ std::vector<ScenarioInfo> Scenarios() {
            "a beacon trail laid out by someone else (issue 22): a U- or L-shaped corridor drawn "
            "from the seed, ranges between trail neighbours only, 3 surveyed beacons away from "
            "the entry, NLOS ranges with a long tail, 15 % bearing outliers"},
+          {"incident-4h",
+           "a long incident for soak and load tests: 20 firefighters for 4 hours, each in a "
+           "30 m sector, 500 breadcrumbs dropped as they go, ~1 million steps and RSSI packets "
+           "(the breadcrumb benchmark's synthetic incident; no floor plan, no truth)"},
           {"multi-floor",
            "floors (issue 26): a basement, a ground floor and two upper floors joined by a "
            "stairwell, storey heights drawn per seed; ff1 searches the upper floors, ff2 the "
@@ -228,6 +236,24 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   }
   if (name == "beacon-neighbour-trail") return SimulateShapedTrail({}, seed);
   if (name == "multi-floor") return SimulateMultiFloor({}, seed);
+  if (name == "incident-4h") {
+    const SyntheticIncident inc = MakeSyntheticIncident({}, seed);
+    SimulatedMission sim;
+    sim.data.info = inc.info;
+    sim.data.info.name = name;
+    sim.data.info.description = fmt::format(
+        "synthetic incident: {} firefighters for 4 h, {} steps, {} RSSI packets, {} crumbs "
+        "dropped; simulated, seed {}",
+        inc.info.nodes.size() - 1, inc.steps, inc.packets, inc.drops, seed);
+    for (const IncidentEvent& e : inc.events) {
+      switch (e.kind) {
+        case IncidentEvent::Kind::kStep: sim.data.steps.push_back(e.step); break;
+        case IncidentEvent::Kind::kRssi: sim.data.rssi.push_back(e.rssi); break;
+        case IncidentEvent::Kind::kDrop: sim.data.events.push_back(e.drop); break;
+      }
+    }
+    return sim;
+  }
   std::string known;
   for (const auto& s : Scenarios()) known += (known.empty() ? "" : ", ") + s.name;
   throw std::invalid_argument("unknown scenario '" + name + "' (known: " + known + ")");

@@ -45,3 +45,16 @@ export function rowAt(trail: TrailRow[], t: number): TrailRow | null {
   }
   return trail[lo];
 }
+
+/** A trail kept within `maxRows` for a long incident: when longer, the rows before the last
+ *  `keepRecent` are halved (every other one, from the first), so older parts grow sparser and
+ *  the recent part stays whole. Null when nothing is to be dropped. Amortized: a trail is
+ *  thinned once every (maxRows - keepRecent) / 2 rows appended. */
+export function thinTrail(rows: TrailRow[], maxRows: number, keepRecent: number): TrailRow[] | null {
+  if (rows.length <= maxRows) return null;
+  const cut = Math.max(0, rows.length - keepRecent);
+  const out: TrailRow[] = [];
+  for (let i = 0; i < cut; i += 2) out.push(rows[i]);
+  for (let i = cut; i < rows.length; i++) out.push(rows[i]);
+  return out;
+}

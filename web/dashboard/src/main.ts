@@ -7,7 +7,7 @@
 // zoom, pinch, a scale bar, layers; "fit all" and "follow" as buttons.
 import './style.css';
 import { Api, type Alert, type History, type KnownNode, type LevelWalls, type NodeState, type State, type TrailRow, type Wall } from './api';
-import { Bounds, ellipse95, rowAt } from './geometry';
+import { Bounds, ellipse95, rowAt, thinTrail } from './geometry';
 import { IncidentMap, type MapStats } from './map';
 
 const token = new URLSearchParams(location.search).get('token') ?? '';
@@ -31,6 +31,17 @@ let alertLog: Alert[] = [];
 let following = true; // the timeline follows the incident
 let selected: string | null = null;
 const TRAIL_PERIOD_S = 0.5;
+// A trail's rows in memory: at most this many; the last ten minutes (at TRAIL_PERIOD_S) whole.
+const MAX_TRAIL_ROWS = 2400;
+const KEEP_RECENT_ROWS = 1200;
+
+/** Thins a long trail (memory and drawing stay bounded over a whole incident). */
+function boundTrail(id: string): void {
+  const thinned = thinTrail(trails[id], MAX_TRAIL_ROWS, KEEP_RECENT_ROWS);
+  if (!thinned) return;
+  trails[id] = thinned;
+  if (following) incidentMap.rebuildTrail(id, thinned);
+}
 
 const ALERT_LABEL: Record<string, string> = {
   'no-data': 'LINK LOST',
@@ -53,9 +64,11 @@ function mergeHistory(h: History): void {
     const old = trails[id] ?? [];
     trails[id] = old.filter((r) => r[0] < first).concat(rows, old.filter((r) => r[0] > end));
     for (const r of rows) trailBounds.add(r[1], r[2]);
-    if (!following) continue; // the timeline shows the past: drawn when it returns
-    if (gap) incidentMap.rebuildTrail(id, trails[id]);
-    else incidentMap.appendTrail(id, rows);
+    if (following) {
+      if (gap) incidentMap.rebuildTrail(id, trails[id]);
+      else incidentMap.appendTrail(id, rows);
+    } // else the timeline shows the past: drawn when it returns
+    boundTrail(id);
   }
   if (h.t !== null) historyEnd = Math.max(historyEnd ?? -Infinity, h.t);
   if (h.since === undefined) {
@@ -86,6 +99,7 @@ function onState(s: State): void {
       trail.push(row);
       trailBounds.add(n.x, n.y);
       if (following) incidentMap.appendTrail(n.id, [row]);
+      boundTrail(n.id);
     }
   }
   for (const a of s.alerts) {

@@ -12,6 +12,11 @@ import { ellipse95 } from './geometry';
 
 /** A trail point is drawn when at least this far from the last one drawn (m). */
 const TRAIL_STEP_M = 0.25;
+/** Points per polyline piece of a trail: Leaflet re-projects a whole polyline when a point is
+ *  added, so a trail is a chain of pieces and an append costs at most one piece's points. A
+ *  full piece moves to a canvas of its own that live updates never redraw: a frame costs the
+ *  growing pieces, the ellipses and the markers, not the incident's history. */
+const CHUNK_POINTS = 128;
 /** A time gap in a drawn trail longer than this (s) is filled when a history fetch covers it. */
 const GAP_S = 2;
 
@@ -30,7 +35,9 @@ const COLOURS = {
 const ll = (x: number, y: number): L.LatLng => L.latLng(y, x);
 
 interface AgentDrawing {
-  trail: L.Polyline;
+  /** The trail's pieces, oldest first; the last one grows. */
+  pieces: L.Polyline[];
+  style: L.PolylineOptions;
   /** Time of the last trail row considered, and the position last drawn. */
   until: number;
   lastX: number;
@@ -59,6 +66,8 @@ export interface MapStats {
 export class IncidentMap {
   readonly map: L.Map;
   private readonly plan = L.layerGroup();
+  /** The finished trail pieces' canvas (below the live one). */
+  private readonly historyRenderer: L.Canvas;
   private readonly trails = L.layerGroup();
   private readonly ellipses = L.layerGroup();
   private readonly crumbs = L.layerGroup();
@@ -88,6 +97,8 @@ export class IncidentMap {
       preferCanvas: true, // one canvas for every vector: thousands of trail points stay fast
     });
     this.map.setView([0, 0], 2);
+    this.map.createPane('trailHistory').style.zIndex = '390';
+    this.historyRenderer = L.canvas({ pane: 'trailHistory' });
     L.control.scale({ imperial: false, maxWidth: 160, position: 'bottomleft' }).addTo(this.map);
     for (const layer of [this.plan, this.trails, this.ellipses, this.crumbs, this.landmarks, this.bases, this.agentsLayer]) {
       layer.addTo(this.map);
@@ -129,15 +140,14 @@ export class IncidentMap {
   private agent(id: string): AgentDrawing {
     let a = this.agents.get(id);
     if (!a) {
-      const trail = L.polyline([], { color: COLOURS.trail, weight: 1.5, opacity: 0.9, interactive: false });
+      const style: L.PolylineOptions = { color: COLOURS.trail, weight: 1.5, opacity: 0.9, interactive: false };
       const ellipse = L.polygon([], { color: COLOURS.ellipse, weight: 1.5, fill: false, interactive: false });
       const marker = L.circleMarker([0, 0], { radius: 6, color: '#ffffff', weight: 1.5, fillColor: COLOURS.agent, fillOpacity: 1 });
       marker.bindTooltip(id, { permanent: true, direction: 'right', offset: [8, -8], className: 'agent-label' });
       marker.on('click', () => this.onPick(id));
-      this.trails.addLayer(trail);
       this.ellipses.addLayer(ellipse);
       this.agentsLayer.addLayer(marker);
-      a = { trail, until: -Infinity, lastX: NaN, lastY: NaN, times: [], ellipse, marker };
+      a = { pieces: [], style, until: -Infinity, lastX: NaN, lastY: NaN, times: [], ellipse, marker };
       this.agents.set(id, a);
     }
     return a;
@@ -150,11 +160,45 @@ export class IncidentMap {
       if (!(r[0] > a.until)) continue;
       a.until = r[0];
       if (Number.isFinite(a.lastX) && Math.hypot(r[1] - a.lastX, r[2] - a.lastY) < TRAIL_STEP_M) continue;
-      a.trail.addLatLng(ll(r[1], r[2]));
+      this.addPoint(a, ll(r[1], r[2]));
       a.times.push(r[0]);
       a.lastX = r[1];
       a.lastY = r[2];
       this.appends++;
+    }
+  }
+
+  /** A trail piece: on the history canvas when finished, else on the live one. */
+  private piece(a: AgentDrawing, points: L.LatLng[], finished: boolean): L.Polyline {
+    const p = L.polyline(points, finished ? { ...a.style, renderer: this.historyRenderer } : a.style);
+    this.trails.addLayer(p);
+    return p;
+  }
+
+  /** One point onto the trail's growing piece; a full piece moves to the history canvas and a
+   *  new one, joined to it, grows. */
+  private addPoint(a: AgentDrawing, p: L.LatLng): void {
+    let last = a.pieces[a.pieces.length - 1];
+    const points = last ? (last.getLatLngs() as L.LatLng[]) : [];
+    if (!last || points.length >= CHUNK_POINTS) {
+      if (last) {
+        this.trails.removeLayer(last);
+        a.pieces[a.pieces.length - 1] = this.piece(a, points, true);
+      }
+      last = this.piece(a, points.length ? [points[points.length - 1]] : [], false);
+      a.pieces.push(last);
+    }
+    last.addLatLng(p);
+  }
+
+  /** The trail's pieces for these points (replacing the old ones). */
+  private setPoints(a: AgentDrawing, points: L.LatLng[]): void {
+    for (const piece of a.pieces) this.trails.removeLayer(piece);
+    a.pieces = [];
+    for (let k = 0; k < points.length; k += CHUNK_POINTS - 1) {
+      const last = k + CHUNK_POINTS >= points.length;
+      a.pieces.push(this.piece(a, points.slice(k, k + CHUNK_POINTS), !last));
+      if (last) break;
     }
   }
 
@@ -175,7 +219,7 @@ export class IncidentMap {
       a.lastX = r[1];
       a.lastY = r[2];
     }
-    a.trail.setLatLngs(points);
+    this.setPoints(a, points);
     this.rebuilds++;
   }
 
@@ -231,7 +275,11 @@ export class IncidentMap {
       }
       a.ellipse.setLatLngs(ring);
       a.ellipse.setStyle({ color: sel ? COLOURS.selected : COLOURS.ellipse, opacity: off ? 0.35 : 1 });
-      a.trail.setStyle({ color: sel ? COLOURS.selected : COLOURS.trail, weight: sel ? 2.5 : 1.5, opacity: off ? 0.35 : 0.9 });
+      const style = { color: sel ? COLOURS.selected : COLOURS.trail, weight: sel ? 2.5 : 1.5, opacity: off ? 0.35 : 0.9 };
+      if (style.color !== a.style.color || style.weight !== a.style.weight || style.opacity !== a.style.opacity) {
+        Object.assign(a.style, style);
+        for (const piece of a.pieces) piece.setStyle(style);
+      }
     }
     if (this.follow) this.keepInView(agents, selected);
   }
@@ -292,10 +340,13 @@ export class IncidentMap {
     };
   }
 
-  /** The trail as drawn (points), for the tests. */
+  /** The trail as drawn (points; the pieces' shared joints counted once), for the tests. */
   trailPoints(id: string): number {
-    const t = this.agents.get(id)?.trail;
-    return t ? (t.getLatLngs() as L.LatLng[]).length : 0;
+    const a = this.agents.get(id);
+    if (!a) return 0;
+    let n = 0;
+    a.pieces.forEach((p, k) => (n += (p.getLatLngs() as L.LatLng[]).length - (k > 0 ? 1 : 0)));
+    return n;
   }
 
   invalidateSize(): void {
