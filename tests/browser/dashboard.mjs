@@ -66,7 +66,7 @@ try {
   await page.click('.leaflet-control-layers');
   await page.hover('.leaflet-control-layers');
   const overlays = await page.$$eval('.leaflet-control-layers-overlays label', (els) => els.map((e) => e.textContent.trim()));
-  for (const name of ['Floor plan', 'Trails', 'Ellipses (95 %)', 'Crumbs', 'Landmarks', 'Base']) {
+  for (const name of ['Floor plan', 'Trails', 'Ellipses (95 %)', 'Crumbs and beacons', 'Landmarks', 'Base']) {
     if (!overlays.includes(name)) fail(`no '${name}' layer: ${overlays}`);
   }
   await page.mouse.move(10, 400);

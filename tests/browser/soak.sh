@@ -11,7 +11,7 @@ trap 'kill $pid 2>/dev/null || true; rm -rf "$dir"' EXIT
 "$TM" simulate incident-4h --seed 11 --out "$dir/m" > /dev/null
 "$TM" serve --replay "$dir/m" --pipeline pdr --speed 120 --port 0 --token s0ak > "$dir/serve.log" 2>&1 &
 pid=$!
-for _ in $(seq 300); do grep -q "listening on" "$dir/serve.log" && break; sleep 0.1; done
+for _ in $(seq 300); do grep -qs "listening on" "$dir/serve.log" && break; sleep 0.1; done
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
 [ -n "$port" ] || { cat "$dir/serve.log"; echo "FAIL: serve did not start"; exit 1; }
 node "$here/soak.mjs" "http://127.0.0.1:$port" s0ak $out

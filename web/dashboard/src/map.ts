@@ -108,7 +108,7 @@ export class IncidentMap {
         'Floor plan': this.plan,
         Trails: this.trails,
         'Ellipses (95 %)': this.ellipses,
-        Crumbs: this.crumbs,
+        'Crumbs and beacons': this.crumbs,
         Landmarks: this.landmarks,
         Base: this.bases,
       }, { collapsed: true, position: 'topright' })
