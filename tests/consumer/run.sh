@@ -11,7 +11,7 @@ cmake -S "$src" -B "$tmp/build" -G Ninja -DCMAKE_PREFIX_PATH="$tmp/prefix" > "$t
 cmake --build "$tmp/build" > "$tmp/build.log" || { cat "$tmp/build.log"; exit 1; }
 "$tmp/build/consumer"
 # The Python package, where the build has it: importable from the install alone.
-for site in "$tmp"/prefix/lib*/python3/dist-packages "$tmp"/prefix/lib/*/python3/dist-packages; do
+for site in "$tmp"/prefix/lib/python3*/dist-packages; do
   [ -f "$site/trailmark/__init__.py" ] || continue
   (cd "$tmp" && PYTHONPATH="$site" /usr/bin/python3 -c \
     'import trailmark, sys; n = trailmark.pipelines(); assert "pdr" in n, n; print("python:", trailmark.__file__, len(n), "pipelines")')

@@ -14,12 +14,16 @@ dpkg-deb --info "$deb" | grep "Depends:.*libgeographiclib" > /dev/null || { dpkg
 contents=$(dpkg-deb -c "$deb")
 for f in ./usr/bin/trailmark ./usr/include/trailmark/core/online_estimator.h \
          /pkgconfig/trailmark.pc /cmake/trailmark/trailmarkConfig.cmake \
-         /python3/dist-packages/trailmark/__init__.py ./usr/share/doc/trailmark/LICENSE; do
+         ./usr/share/doc/trailmark/LICENSE; do
   grep -q -- "$f" <<< "$contents" || { echo "missing from the package: $f"; exit 1; }
 done
+# The Python package where Debian's python3 finds it: /usr/lib/python3.X/dist-packages.
+py=$(/usr/bin/python3 -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')
+grep -q -- "./usr/lib/python$py/dist-packages/trailmark/__init__.py" <<< "$contents" \
+  || { echo "missing from the package: the Python package in /usr/lib/python$py/dist-packages"; exit 1; }
 dpkg-deb -x "$deb" "$tmp/root"
 "$tmp/root/usr/bin/trailmark" --version | grep "^trailmark " > /dev/null || { echo "the packaged CLI does not run"; exit 1; }
-site=$(dirname "$(dirname "$(find "$tmp/root" -name __init__.py -path '*trailmark*' | head -1)")")
+site="$tmp/root/usr/lib/python$py/dist-packages"
 PYTHONPATH="$site" /usr/bin/python3 -c 'import trailmark; assert "pdr" in trailmark.pipelines()' \
   || { echo "the packaged Python module does not import"; exit 1; }
 echo "deb: $(basename "$deb"), $(grep -c . <<< "$contents") entries; CLI and Python package run"
