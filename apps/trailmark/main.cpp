@@ -235,9 +235,9 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingPath);
   convert->add_option("--out", convert_out, "mission directory to write")->required();
   IpinOptions ipin_options;
-  std::string ipin_origin;
+  std::string convert_origin;
   convert->add_option("--agent", ipin_options.agent, "ipin-logfile: the phone's node id (default phone)");
-  convert->add_option("--origin", ipin_origin,
+  convert->add_option("--origin", convert_origin,
                       "ipin-logfile, imdf: LAT,LON[,HEIGHT] of the frame's origin (default: the "
                       "first POSI; the venue's display point)");
   convert->add_option("--max-venue-m", ipin_options.max_venue_m,
@@ -420,8 +420,8 @@ int main(int argc, char** argv) {
       }
       if (convert_format == "imdf") {
         const ImdfVenue venue = ReadImdfVenue(
-            convert_src, ipin_origin.empty() ? std::nullopt
-                                             : std::optional<GeoOrigin>(cli::ParseGeoOrigin(ipin_origin)));
+            convert_src, convert_origin.empty() ? std::nullopt
+                                             : std::optional<GeoOrigin>(cli::ParseGeoOrigin(convert_origin)));
         WriteImdfMission(venue, convert_out);
         for (const auto& l : venue.levels) {
           fmt::print("level {:>3} ({}): {} walls, {} doors, {} rooms\n", l.ordinal,
@@ -433,7 +433,7 @@ int main(int argc, char** argv) {
         return 0;
       }
       if (convert_format == "ipin-logfile") {
-        if (!ipin_origin.empty()) ipin_options.origin = cli::ParseGeoOrigin(ipin_origin);
+        if (!convert_origin.empty()) ipin_options.origin = cli::ParseGeoOrigin(convert_origin);
         const IpinLogfile log = ReadIpinLogfile(convert_src, ipin_options);
         WriteIpinMission(log, convert_out);
         for (const auto& [type, count] : log.records) fmt::print("{:>6} {}\n", type, count);

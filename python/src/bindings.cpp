@@ -205,14 +205,9 @@ class PyOnlineEstimator {
                     const std::map<std::string, std::string>& options, bool live)
       : pipeline_(RequirePipeline(name)), mission_(mission_dir) {
     const OptionValues values = ToOptions(options);
-    if (pipeline_.needs_floor_plan) {
-      RequireCanRunFloor();
-      floor_ = LoadPipelineFloor(pipeline_, mission_, values, nullptr, &levels_);
-      plan_source_ = mission_.Path(*mission_.info().floorplan).string();
-    }
-    const EstimatorInputs inputs{mission_.info(), floor_ ? &*floor_ : nullptr, plan_source_,
-                                 levels_.empty() ? nullptr : &levels_};
-    estimator_ = pipeline_.make(inputs, values, live ? Feed::kLive : Feed::kTimeOrdered);
+    plan_ = LoadPipelinePlan(pipeline_, mission_, values);
+    estimator_ = pipeline_.make(plan_.InputsFor(mission_.info()), values,
+                                live ? Feed::kLive : Feed::kTimeOrdered);
     floor_columns_ = EstimatesHaveFloorColumns(mission_);
     for (Stream s : BatchFeedStreams(pipeline_, mission_, values).List()) {
       streams_.emplace_back(StreamFileName(s));
@@ -273,20 +268,9 @@ class PyOnlineEstimator {
   const std::string& pipeline() const { return pipeline_.name; }
 
  private:
-  void RequireCanRunFloor() const {
-    if (!mission_.info().floorplan) {
-      throw InputError(mission_.Path("mission.json").string(), 0,
-                       "pipeline '" + pipeline_.name +
-                           "' needs a floor plan: mission.json has no \"floorplan\"");
-    }
-    mission_.Require(*mission_.info().floorplan, "pipeline '" + pipeline_.name + "'");
-  }
-
   const PipelineSpec& pipeline_;
   MissionDirectory mission_;
-  std::optional<FloorPlan> floor_;
-  LevelPlans levels_;
-  std::string plan_source_ = "the floor plan";
+  PipelinePlan plan_;
   std::unique_ptr<OnlineEstimator> estimator_;
   VectorSink vector_;
   RestampingSink sink_{vector_};

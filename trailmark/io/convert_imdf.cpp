@@ -125,6 +125,15 @@ std::string LevelId(const json& props, const std::string& source, const std::str
   return props["level_id"];
 }
 
+/// A GeoJSON position [lon, lat] as a frame origin; nullopt for anything else (the fallbacks
+/// for a venue without a display point look for one, they do not judge the data).
+std::optional<GeoOrigin> OriginAt(const json& c) {
+  if (!c.is_array() || c.size() < 2 || !c[0].is_number() || !c[1].is_number()) return std::nullopt;
+  const double lon = c[0].get<double>(), lat = c[1].get<double>();
+  if (!IsGeodetic(lat, lon)) return std::nullopt;
+  return GeoOrigin{lat, lon, 0.0};
+}
+
 /// Unit categories that are not rooms: open circulation, solid material, voids, outdoors.
 bool IsRoomCategory(const std::string& category) {
   static const std::set<std::string> not_rooms{
@@ -202,11 +211,7 @@ ImdfVenue ReadImdfVenue(const std::filesystem::path& source, std::optional<GeoOr
     // Without a venue display point, the first level's.
     if (!origin && props.contains("display_point") && props["display_point"].is_object() &&
         props["display_point"].contains("coordinates")) {
-      const json& c = props["display_point"]["coordinates"];
-      if (c.is_array() && c.size() >= 2 && c[0].is_number() && c[1].is_number() &&
-          IsGeodetic(c[1].get<double>(), c[0].get<double>())) {
-        origin = GeoOrigin{c[1].get<double>(), c[0].get<double>(), 0.0};
-      }
+      origin = OriginAt(props["display_point"]["coordinates"]);
     }
   }
   if (by_ordinal.empty()) throw InputError(level_source, 0, "no levels");
@@ -224,14 +229,8 @@ ImdfVenue ReadImdfVenue(const std::filesystem::path& source, std::optional<GeoOr
     for (const json& f : units) {
       if (f.is_object() && f.contains("geometry") && f["geometry"].is_object()) {
         const auto rings = io_detail::GeoJsonRings(f["geometry"], unit_source, "/features");
-        if (!rings.empty() && !rings[0].first->empty()) {
-          const json& c = (*rings[0].first)[0];
-          if (c.is_array() && c.size() >= 2 && c[0].is_number() && c[1].is_number() &&
-              IsGeodetic(c[1].get<double>(), c[0].get<double>())) {
-            origin = GeoOrigin{c[1].get<double>(), c[0].get<double>(), 0.0};
-            break;
-          }
-        }
+        if (!rings.empty() && !rings[0].first->empty()) origin = OriginAt((*rings[0].first)[0]);
+        if (origin) break;
       }
     }
   }

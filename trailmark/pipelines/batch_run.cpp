@@ -54,13 +54,29 @@ void RequireCanRun(const PipelineSpec& pipeline, const MissionDirectory& mission
     mission.Require(std::string(StreamFileName(list.front())),
                     others.empty() ? who : fmt::format("{} (or {})", who, fmt::join(others, ", ")));
   }
-  if (pipeline.needs_floor_plan && !mission.info().floorplan) {
+  RequireFloorPlan(pipeline, mission);
+  throw InputError(mission.dir().string(), 0,
+                   fmt::format("{} needs {}", who, fmt::join(pipeline.NeedsText(), ", ")));
+}
+
+void RequireFloorPlan(const PipelineSpec& pipeline, const MissionDirectory& mission) {
+  if (!pipeline.needs_floor_plan) return;
+  const std::string who = "pipeline '" + pipeline.name + "'";
+  if (!mission.info().floorplan) {
     throw InputError(mission.Path("mission.json").string(), 0,
                      who + " needs a floor plan: mission.json has no \"floorplan\"");
   }
-  if (pipeline.needs_floor_plan) mission.Require(*mission.info().floorplan, who);
-  throw InputError(mission.dir().string(), 0,
-                   fmt::format("{} needs {}", who, fmt::join(pipeline.NeedsText(), ", ")));
+  mission.Require(*mission.info().floorplan, who);
+}
+
+PipelinePlan LoadPipelinePlan(const PipelineSpec& pipeline, const MissionDirectory& mission,
+                              const OptionValues& options, std::vector<std::string>* notes) {
+  PipelinePlan plan;
+  if (!pipeline.needs_floor_plan) return plan;
+  RequireFloorPlan(pipeline, mission);
+  plan.floor = LoadPipelineFloor(pipeline, mission, options, notes, &plan.levels);
+  plan.source = mission.Path(*mission.info().floorplan).string();
+  return plan;
 }
 
 std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
@@ -159,16 +175,9 @@ EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& c
   RequireCanRun(pipeline, mission);
   EstimatorSummary summary;
   const StreamSet feed = BatchFeedStreams(pipeline, mission, context.options, &summary.notes);
-  std::optional<FloorPlan> floor;
-  LevelPlans levels;
-  std::string plan_source = "the floor plan";
-  if (pipeline.needs_floor_plan) {
-    floor = LoadPipelineFloor(pipeline, mission, context.options, &summary.notes, &levels);
-    plan_source = mission.Path(*mission.info().floorplan).string();
-  }
-  const EstimatorInputs inputs{mission.info(), floor ? &*floor : nullptr, plan_source,
-                               levels.empty() ? nullptr : &levels};
-  const auto estimator = pipeline.make(inputs, context.options, Feed::kTimeOrdered);
+  const PipelinePlan plan = LoadPipelinePlan(pipeline, mission, context.options, &summary.notes);
+  const auto estimator =
+      pipeline.make(plan.InputsFor(mission.info()), context.options, Feed::kTimeOrdered);
   MergedStream stream(mission, feed);
   Drive(*estimator, stream, mission, sink, context.progress);
   summary.Merge(estimator->Summary());

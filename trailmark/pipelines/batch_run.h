@@ -48,6 +48,26 @@ std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
                                            std::vector<std::string>* notes = nullptr,
                                            LevelPlans* all_levels = nullptr);
 
+/// The floor plan an estimator of the pipeline is built with, loaded from the mission: the
+/// floor (or every level), and the name errors give it. Empty when the pipeline needs none.
+struct PipelinePlan {
+  std::optional<FloorPlan> floor;
+  LevelPlans levels;  ///< every level's plan when the pipeline follows the floors
+  std::string source = "the floor plan";
+  /// The estimator's inputs for the mission's incident (refers to this plan: keep it alive).
+  EstimatorInputs InputsFor(const MissionInfo& info) const {
+    return EstimatorInputs{info, floor ? &*floor : nullptr, source,
+                           levels.empty() ? nullptr : &levels};
+  }
+};
+/// Throws InputError when the pipeline needs a floor plan the mission does not have (no
+/// "floorplan" in mission.json, or the file missing); returns otherwise.
+void RequireFloorPlan(const PipelineSpec& pipeline, const MissionDirectory& mission);
+/// The plan of a pipeline that needs one (RequireFloorPlan, then LoadPipelineFloor).
+PipelinePlan LoadPipelinePlan(const PipelineSpec& pipeline, const MissionDirectory& mission,
+                              const OptionValues& options,
+                              std::vector<std::string>* notes = nullptr);
+
 /// The streams of the mission a batch run of the pipeline feeds it: those it uses that the
 /// mission has, except that steps.csv shadows imu.csv for a steps-based pipeline (`notes`, when
 /// given, gets a line saying so).

@@ -196,6 +196,17 @@ function redrawTrails(): void {
   for (const [id, rows] of Object.entries(trails)) incidentMap.rebuildTrail(id, rows, t);
 }
 
+/** The nodes' positions and the corners of the trails' box (not their every row): what
+ *  "fit all" shows besides the walls. */
+function fitPoints(nodes: Array<Pick<NodeState, 'x' | 'y'>>): Array<[number, number]> {
+  const points: Array<[number, number]> = nodes.map((n) => [n.x, n.y]);
+  const xs: number[] = [];
+  const ys: number[] = [];
+  trailBounds.corners(xs, ys);
+  xs.forEach((x, i) => points.push([x, ys[i] ?? x]));
+  return points;
+}
+
 /** Every wall of every level, for "fit all". */
 function allWalls(): Wall[] {
   return levels.length ? levels.flatMap((l) => l.walls) : walls;
@@ -214,12 +225,7 @@ function render(): void {
   const alerted = new Set(alerts.map((a) => a.id));
   incidentMap.updateStatics(others, offFloor);
   incidentMap.updateAgents(agents, selected, alerted, offFloor);
-  const points: Array<[number, number]> = [...agents, ...others].map((n) => [n.x, n.y]);
-  const xs: number[] = [];
-  const ys: number[] = [];
-  trailBounds.corners(xs, ys); // the trails' extent, not their every row
-  xs.forEach((x, i) => points.push([x, ys[i] ?? x]));
-  if (agents.length) incidentMap.fitOnce(points, allWalls());
+  if (agents.length) incidentMap.fitOnce(fitPoints([...agents, ...others]), allWalls());
   const stats: MapStats & { trailPoints?: (id: string) => number } = incidentMap.stats();
   stats.trailPoints = (id: string) => incidentMap.trailPoints(id);
   // For the browser tests: the view's scale (px/m), the plan drawn, appends and rebuilds.
@@ -334,14 +340,7 @@ liveButton.addEventListener('click', () => {
   if (!was) redrawTrails();
   render();
 });
-fitButton.addEventListener('click', () => {
-  const points: Array<[number, number]> = live.nodes.map((n) => [n.x, n.y]);
-  const xs: number[] = [];
-  const ys: number[] = [];
-  trailBounds.corners(xs, ys);
-  xs.forEach((x, i) => points.push([x, ys[i] ?? x]));
-  incidentMap.fitAll(points, allWalls());
-});
+fitButton.addEventListener('click', () => incidentMap.fitAll(fitPoints(live.nodes), allWalls()));
 followButton.addEventListener('click', () => {
   incidentMap.follow = !incidentMap.follow;
   followButton.setAttribute('aria-pressed', String(incidentMap.follow));

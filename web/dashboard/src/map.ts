@@ -158,14 +158,21 @@ export class IncidentMap {
     const a = this.agent(id);
     for (const r of rows) {
       if (!(r[0] > a.until)) continue;
-      a.until = r[0];
-      if (Number.isFinite(a.lastX) && Math.hypot(r[1] - a.lastX, r[2] - a.lastY) < TRAIL_STEP_M) continue;
+      if (!this.accept(a, r)) continue;
       this.addPoint(a, ll(r[1], r[2]));
-      a.times.push(r[0]);
-      a.lastX = r[1];
-      a.lastY = r[2];
       this.appends++;
     }
+  }
+
+  /** A row considered for the trail: drawn (true) when at least TRAIL_STEP_M from the last
+   *  point drawn; its time is the trail's end either way. */
+  private accept(a: AgentDrawing, r: TrailRow): boolean {
+    a.until = r[0];
+    if (Number.isFinite(a.lastX) && Math.hypot(r[1] - a.lastX, r[2] - a.lastY) < TRAIL_STEP_M) return false;
+    a.times.push(r[0]);
+    a.lastX = r[1];
+    a.lastY = r[2];
+    return true;
   }
 
   /** A trail piece: on the history canvas when finished, else on the live one. */
@@ -212,12 +219,7 @@ export class IncidentMap {
     a.until = -Infinity;
     for (const r of rows) {
       if (t !== null && r[0] > t) break;
-      a.until = r[0];
-      if (Number.isFinite(a.lastX) && Math.hypot(r[1] - a.lastX, r[2] - a.lastY) < TRAIL_STEP_M) continue;
-      points.push(ll(r[1], r[2]));
-      a.times.push(r[0]);
-      a.lastX = r[1];
-      a.lastY = r[2];
+      if (this.accept(a, r)) points.push(ll(r[1], r[2]));
     }
     this.setPoints(a, points);
     this.rebuilds++;
