@@ -135,6 +135,8 @@ TEST(IpinLogfile, BadRecordsAreRefusedWithTheirLine) {
   ExpectRefused("", 0, "no records");
   ExpectRefused("AHRS;0.1;0.1;1;2;3\nSOUN;0.2;1;2;3\n", 0, "found only AHRS: 1, SOUN: 1");
   ExpectRefused(std::string("ACCE;0.1;0.1;9.8;0;0\n\0\n", 24), 2, "binary data");
+  // A huge line (a binary file, no line breaks) is refused before it is held whole.
+  ExpectRefused("ACCE;0.1;0.1;9.8;0;0\n" + std::string(3u << 20, '7'), 2, "line longer than");
 }
 
 TEST(LocalFrame, ExactOnTheEllipsoidWhereASphereIsNot) {

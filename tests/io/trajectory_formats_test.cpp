@@ -86,6 +86,7 @@ TEST(Euroc, BadRowsAreRefusedWithTheirLine) {
   ExpectRefused("5,0,0,0,1,0,0,0\n4,0,0,0,1,0,0,0\n", 3, "time goes backwards");
   ExpectRefused("1.5,0,0,0,1,0,0,0\n", 2, "not integer nanoseconds");
   ExpectRefused("", 0, "no rows");
+  ExpectRefused(std::string(3u << 20, '1'), 2, "line longer than");
   TempDir dir;
   EXPECT_THROW(ReadEuroc(dir.path()), InputError);  // a folder without ground truth
 }

@@ -13,6 +13,7 @@
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/csv.h"
+#include "trailmark/io/json_input.h"
 #include "trailmark/io/geo.h"
 #include "trailmark/io/mission_io.h"
 
@@ -128,7 +129,7 @@ IpinLogfile ReadIpinLogfile(const std::filesystem::path& logfile, const IpinOpti
   Clocks clocks;
   std::string line;
   std::size_t n = 0;
-  while (std::getline(in, line)) {
+  while (io_detail::ReadBoundedLine(in, line, file, n + 1)) {
     ++n;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line.front() == '%') continue;

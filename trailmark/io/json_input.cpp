@@ -68,6 +68,22 @@ double Number(const nlohmann::json& j, const std::string& source, const std::str
   return v;
 }
 
+bool ReadBoundedLine(std::istream& in, std::string& line, const std::string& file,
+                     std::size_t line_no, std::size_t max_bytes) {
+  line.clear();
+  std::streambuf* buffer = in.rdbuf();
+  for (int c = buffer->sbumpc(); c != std::char_traits<char>::eof(); c = buffer->sbumpc()) {
+    if (c == '\n') return true;
+    if (line.size() >= max_bytes) {
+      throw InputError(file, line_no,
+                       fmt::format("line longer than {} bytes: not a text file of this format?",
+                                   max_bytes));
+    }
+    line.push_back(static_cast<char>(c));
+  }
+  return !line.empty();
+}
+
 void WriteFloorPlanMission(const std::filesystem::path& out, const nlohmann::json& mission,
                            const std::string& plan_geojson) {
   std::filesystem::create_directories(out);

@@ -5,6 +5,7 @@
 /// (it exposes nlohmann::json).
 
 #include <filesystem>
+#include <istream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
@@ -23,6 +24,12 @@ nlohmann::json ParseJson(const std::string& text, const std::string& source);
                       const std::string& problem);
 /// A finite number, else InputError naming `where`.
 double Number(const nlohmann::json& j, const std::string& source, const std::string& where);
+
+/// The next line of a text file (without its '\n'; a '\r' kept); false at the end. A line
+/// longer than `max_bytes` is an InputError naming `file` and `line_no` before it is held in
+/// memory (a binary file, or a text file with no line breaks).
+bool ReadBoundedLine(std::istream& in, std::string& line, const std::string& file,
+                     std::size_t line_no, std::size_t max_bytes = std::size_t{1} << 20);
 
 /// A mission directory of a converted floor plan: `out`/mission.json (`mission`, pretty-printed)
 /// and `out`/floorplan.geojson (`plan_geojson`); std::runtime_error when a write fails.

@@ -12,6 +12,7 @@
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/csv.h"
+#include "trailmark/io/json_input.h"
 
 namespace trailmark {
 namespace {
@@ -62,7 +63,7 @@ std::vector<std::pair<std::int64_t, std::vector<double>>> ReadAsl(const std::fil
   std::string line;
   std::size_t n = 0;
   std::int64_t last = INT64_MIN;
-  while (std::getline(in, line)) {
+  while (io_detail::ReadBoundedLine(in, line, path.string(), n + 1)) {
     ++n;
     if (line.empty() || line == "\r" || line.front() == '#') continue;
     std::vector<double> v = AslFields(line, min_fields, path.string(), n);
