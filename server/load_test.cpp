@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <fstream>
@@ -97,8 +98,10 @@ double PeakRssMb() {
 }  // namespace
 
 nlohmann::json RunLoadTest(const LoadTestOptions& o) {
-  if (o.firefighters < 1 || !(o.minutes > 0) || !(o.batch_s > 0) || !(o.imu_hz > 0))
-    throw std::invalid_argument("bench load: firefighters >= 1; minutes, batch, rate > 0");
+  if (o.firefighters < 1 || !(o.minutes > 0) || !(o.batch_s > 0) || !(o.imu_hz > 0) ||
+      !(o.stagger_s >= 0) || !std::isfinite(o.stagger_s))
+    throw std::invalid_argument(
+        "bench load: firefighters >= 1; minutes, batch, rate > 0; stagger >= 0");
   // The scenario: the simulated experiment of the pipeline's paper, else the office loop (it
   // ends where it began), with a foot IMU; one walk repeated until the incident time is covered;
   // every firefighter sends it under its own id.
@@ -108,7 +111,10 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   //    firefighter drops its own crumbs (its own beacon trail: "ff3-b01"); each device sends
   //    the rows it is the device of (RowNode: its IMU, its events, what it receives) and those
   //    of its crumbs (ranges between its beacons, bearings from them); rows of the shared nodes'
-  //    own devices go once, with the first firefighter's.
+  //    own devices go once, with the first firefighter's. Each repetition of the walk drops
+  //    new crumbs ("ff3-r2-b01" in the third): a longer incident has more of them, as a real
+  //    one would; the same crumbs dropped again where the dead reckoning has drifted to would
+  //    be a contradiction no incident has.
   const PipelineSpec& spec = RequirePipeline(o.pipeline);
   const bool paper = !spec.paper_scenarios.empty();
   SimulatedMission sim = paper ? SimulateScenario(spec.paper_scenarios.front(), o.seed)
@@ -142,9 +148,11 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   for (int k = 1; k <= o.firefighters; ++k) {
     const std::string ff = fmt::format("ff{}", k);
     ids.push_back(ff);
-    auto id = [&](const std::string& node) {
+    const int repetitions = static_cast<int>(std::ceil(duration_s / span));
+    auto id = [&](const std::string& node, int rep) {
       if (node == agent) return ff;
-      return crumbs.count(node) ? ff + "-" + node : node;
+      if (!crumbs.count(node)) return node;
+      return rep == 0 ? ff + "-" + node : fmt::format("{}-r{}-{}", ff, rep, node);
     };
     // Whether this firefighter's device sends a row whose device is `node` (and, on the
     // office loop, which it receives).
@@ -154,15 +162,17 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
     NodeInfo n = *original;
     n.id = ff;
     info.nodes.push_back(n);
-    for (const NodeInfo& s : sim.data.info.nodes) {
-      if (s.kind == NodeKind::kAgent || (!crumbs.count(s.id) && k > 1)) continue;
-      NodeInfo copy = s;
-      copy.id = id(s.id);
-      info.nodes.push_back(copy);
+    for (int rep = 0; rep < repetitions; ++rep) {
+      for (const NodeInfo& s : sim.data.info.nodes) {
+        if (s.kind == NodeKind::kAgent || (!crumbs.count(s.id) && (k > 1 || rep > 0))) continue;
+        NodeInfo copy = s;
+        copy.id = id(s.id, rep);
+        info.nodes.push_back(copy);
+      }
     }
     DeviceRows d;
-    for (int rep = 0; rep * span < duration_s; ++rep) {
-      const double shift = rep * span;
+    for (int rep = 0; rep < repetitions; ++rep) {
+      const double shift = rep * span + (k - 1) * o.stagger_s;
       auto keep = [&](double t) { return t + shift - t0 < duration_s; };
       for (auto s : sim.data.imu) {
         if (s.agent != agent || !keep(s.t)) continue;
@@ -175,7 +185,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
         for (auto r : rows) {
           if (!keep(RowTime(MissionRow(r))) || !sends(r.*a)) continue;
           r.t += shift;
-          r.*a = id(r.*a), r.*b = id(r.*b);
+          r.*a = id(r.*a, rep), r.*b = id(r.*b, rep);
           out.push_back(r);
         }
       };
@@ -184,7 +194,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       copy(sim.data.bearings, d.bearings, &BearingMeasurement::a, &BearingMeasurement::b);
       for (auto e : sim.data.events) {
         if (!paper || !keep(e.t) || e.agent != agent) continue;
-        e.t += shift, e.agent = ff, e.node = id(e.node);
+        e.t += shift, e.agent = ff, e.node = id(e.node, rep);
         d.events.push_back(e);
       }
     }
@@ -330,7 +340,17 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   // that ran ahead by more than an estimator's reorder window would make the others' rows late).
   std::mutex pace_mutex;
   std::condition_variable pace_cv;
-  std::vector<double> progress(ids.size(), -1e300);  // the last IMU batch time sent
+  // The last IMU batch time sent; before the first, the device's start (a team not yet
+  // entered is not behind the others).
+  std::vector<double> progress(ids.size(), -1e300);
+  for (std::size_t k = 0; k < ids.size(); ++k) {
+    for (const Request& r : requests[k]) {
+      if (r.stream == "imu.csv") {
+        progress[k] = r.t_first - o.batch_s;
+        break;
+      }
+    }
+  }
   auto pace = [&](std::size_t k, const Request& r) {
     if (!(o.max_skew_s > 0) || r.stream != "imu.csv") return;
     std::unique_lock<std::mutex> lock(pace_mutex);
@@ -437,6 +457,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"batch_s", o.batch_s},
           {"pipeline", o.pipeline},
           {"max_skew_s", o.max_skew_s},
+          {"stagger_s", o.stagger_s},
           {"transport", o.mqtt_uri.empty() ? "http" : "mqtt"},
           {"devices_connect_s", connect_s},
           {"requests", requests_total},

@@ -23,6 +23,9 @@ struct LoadTestOptions {
   /// Devices keep within this much mission time of each other (s), as they do in real time;
   /// 0: each sends as fast as it can.
   double max_skew_s = 0.5;
+  /// Firefighter k (1-based) starts its walk (k - 1) x this later (s): teams enter one after
+  /// another; 0: all at once and in step (every drop, turn and stop at the same instants).
+  double stagger_s = 0.0;
   std::string pipeline = "ins";  ///< a name of the registry
   std::map<std::string, std::string> pipeline_options;
   /// Where the journal goes (a real disk: each group commit is an fsync).

@@ -174,6 +174,9 @@ int main(int argc, char** argv) {
   bench->add_option("--pipeline", load.pipeline, "load: the live pipeline (ins, pdr, ...)");
   bench->add_option("--max-skew", load.max_skew_s,
                     "load: devices keep within this many mission seconds of each other (0: free)");
+  bench->add_option("--stagger", load.stagger_s,
+                    "load: firefighter k starts (k-1) x this many seconds later (0: all in step)")
+      ->check(CLI::Range(0.0, 3600.0));
   std::string load_dir = ".";
   bench->add_option("--dir", load_dir, "load: where the journal goes (a real disk)");
   bench->add_option(

@@ -195,9 +195,12 @@ int Serve(const ServeOptions& o) {
 
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out) {
   fmt::print(
-      "bench load: {} firefighters x {:g} min of {:g} Hz IMU + radio, {:g} s per request, "
+      "bench load: {} firefighters x {:g} min of {:g} Hz IMU + radio{}, {:g} s per request, "
       "pipeline {}, {}, journal under {}\n",
-      options.firefighters, options.minutes, options.imu_hz, options.batch_s, options.pipeline,
+      options.firefighters, options.minutes, options.imu_hz,
+      options.stagger_s > 0 ? fmt::format(" (starts {:g} s apart)", options.stagger_s)
+                            : std::string(" (all in step)"),
+      options.batch_s, options.pipeline,
       options.mqtt_uri.empty() ? "HTTP POST" : "MQTT QoS 1 via " + options.mqtt_uri,
       std::filesystem::absolute(options.work_dir).string());
   std::fflush(stdout);

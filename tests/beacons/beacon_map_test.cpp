@@ -5,6 +5,9 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
 
 #include "trailmark/core/random.h"
 
@@ -90,6 +93,158 @@ TEST(BeaconMap, BeaconsWithoutLinksFallBackToTheirHintAndImplausibleRangesAreRef
   EXPECT_EQ(map.Position(a)->position_n, Vec2(1, 2));
   EXPECT_FALSE(map.Position(b).has_value());
   EXPECT_EQ(map.summary().unknown, 1u);
+}
+
+TEST(RunningMedian, EqualsNthElementAtHalfTheCountAfterEveryValue) {
+  // The reference: std::nth_element at n/2 over everything so far (what the map used before).
+  Random rng(7);
+  RunningMedian median;
+  std::vector<double> all;
+  for (int k = 0; k < 2000; ++k) {
+    // Ties and long tails: values on a 5 cm grid, one in ten a long NLOS range.
+    const double x = std::round(rng.Normal(4.0, 0.3) / 0.05) * 0.05 + (k % 10 == 3 ? 6.0 : 0.0);
+    median.Add(x);
+    all.push_back(x);
+    std::vector<double> copy = all;
+    std::nth_element(copy.begin(), copy.begin() + copy.size() / 2, copy.end());
+    ASSERT_EQ(median.Median(), copy[copy.size() / 2]) << k;
+    ASSERT_EQ(median.size(), all.size());
+  }
+}
+
+// Two trails of beacons far apart, each with three surveyed beacons: two parts of the map.
+BeaconMap TwoParts(const std::vector<Vec2>& a, const std::vector<Vec2>& b, Random& rng,
+                   BeaconMap::Options options = {}) {
+  BeaconMap map(options);
+  const int na = static_cast<int>(a.size());
+  for (int i = 0; i < na + static_cast<int>(b.size()); ++i) map.Add("b" + std::to_string(i));
+  for (int part = 0; part < 2; ++part) {
+    const auto& truth = part == 0 ? a : b;
+    const int first = part == 0 ? 0 : na;
+    for (std::size_t i = 0; i < truth.size(); ++i) {
+      for (std::size_t j = i + 1; j < truth.size(); ++j) {
+        const double d = (truth[i] - truth[j]).norm();
+        if (d < 4.5) map.AddRange(first + static_cast<int>(i), first + static_cast<int>(j), d + 0.02 * rng.Normal());
+      }
+    }
+    for (int i : {0, 3, 6}) map.SetSurveyed(first + i, truth[i], 0.05);
+  }
+  return map;
+}
+
+TEST(BeaconMap, OnlyThePartThatChangedIsSolvedAgain) {
+  Random rng(11);
+  std::vector<Vec2> a = Trail(8), b = Trail(8);
+  for (Vec2& p : b) p += Vec2(100, 50);
+  BeaconMap map = TwoParts(a, b, rng);
+  map.Solve();
+  EXPECT_EQ(map.summary().part_solves, 2u);
+  EXPECT_EQ(map.summary().components, 2u);
+  std::vector<BeaconPosition> before;
+  for (int i = 0; i < 16; ++i) before.push_back(*map.Position(i));
+  // A new pair in part b only: part a keeps its solution bit for bit, part b moves.
+  EXPECT_TRUE(map.AddRange(8, 10, (b[0] - b[2]).norm() + 0.5));
+  EXPECT_TRUE(map.dirty());
+  map.Solve();
+  EXPECT_EQ(map.summary().part_solves, 3u);
+  EXPECT_EQ(map.summary().components, 2u);
+  for (int i = 0; i < 8; ++i) {
+    EXPECT_EQ(map.Position(i)->position_n, before[i].position_n) << i;
+    EXPECT_EQ(map.Position(i)->cov, before[i].cov) << i;
+  }
+  double moved = 0;
+  for (int i = 8; i < 16; ++i) moved += (map.Position(i)->position_n - before[i].position_n).norm();
+  EXPECT_GT(moved, 1e-4);
+  // Nothing new: nothing solved, the summary as it was.
+  const BeaconMapSummary last = map.summary();
+  map.Solve();
+  EXPECT_EQ(map.summary().part_solves, 3u);
+  EXPECT_EQ(map.summary().components, last.components);
+  EXPECT_EQ(map.summary().chi2_per_dof, last.chi2_per_dof);
+  EXPECT_EQ(map.summary().anchor_rms_m, last.anchor_rms_m);
+  // A link joining the parts: one part, solved.
+  EXPECT_TRUE(map.AddRange(7, 8, 6.0));
+  map.Solve();
+  EXPECT_EQ(map.summary().part_solves, 4u);
+  EXPECT_EQ(map.summary().components, 1u);
+}
+
+TEST(BeaconMap, TheSamePartSolvedWholeOrStepByStepAgrees) {
+  // The incremental map (a Solve() after each part's ranges) against one Solve() of everything:
+  // the same positions (the least squares converged from different starts: to 1e-6 m).
+  Random rng_a(12), rng_b(12);
+  std::vector<Vec2> a = Trail(8), b = Trail(8);
+  for (Vec2& p : b) p += Vec2(40, -20);
+  BeaconMap whole = TwoParts(a, b, rng_a);
+  whole.Solve();
+  BeaconMap steps = TwoParts(a, b, rng_b);
+  steps.Solve();
+  for (BeaconMap* map : {&whole, &steps}) EXPECT_TRUE(map->AddRange(1, 2, (a[1] - a[2]).norm() + 0.01));
+  steps.Solve();
+  BeaconMap fresh = TwoParts(a, b, rng_a = Random(12));
+  EXPECT_TRUE(fresh.AddRange(1, 2, (a[1] - a[2]).norm() + 0.01));
+  fresh.Solve();
+  for (int i = 0; i < 16; ++i)
+    EXPECT_LT((steps.Position(i)->position_n - fresh.Position(i)->position_n).norm(), 1e-6) << i;
+}
+
+TEST(BeaconMap, RangesThatChangeNothingMaterialWaitForTheNextMaterialOne) {
+  Random rng(13);
+  std::vector<Vec2> a = Trail(8), b = Trail(8);
+  for (Vec2& p : b) p += Vec2(100, 50);
+  const double d01 = (a[0] - a[1]).norm();
+  // Equal ranges on pair (0, 1), which has one: its median stays, so only the count decides,
+  // n >= 1.25 x the count last used: material at 2, 3, 4, 5, 7, 9, 12.
+  {
+    BeaconMap map = TwoParts(a, b, rng);
+    map.Solve();
+    ASSERT_EQ(map.summary().part_solves, 2u);
+    std::vector<int> material;
+    for (int n = 2; n <= 12; ++n) {
+      EXPECT_TRUE(map.AddRange(0, 1, d01));
+      if (map.dirty()) material.push_back(n);
+      map.Solve();
+    }
+    EXPECT_EQ(material, (std::vector<int>{2, 3, 4, 5, 7, 9, 12}));
+    EXPECT_EQ(map.summary().part_solves, 2u + material.size());
+  }
+  // The median's move alone (the count rule off): more than half the median's sigma.
+  {
+    BeaconMap::Options options;
+    options.resolve_count_growth = 1e9;
+    Random rng2(13);
+    BeaconMap map = TwoParts(a, b, rng2, options);
+    map.Solve();
+    const double first = (a[0] - a[3]).norm();  // a pair TwoParts left unlinked (6.3 m)
+    EXPECT_TRUE(map.AddRange(0, 3, first));           // a new pair: material
+    EXPECT_TRUE(map.dirty());
+    map.Solve();
+    EXPECT_TRUE(map.AddRange(0, 3, first + 0.2));     // median (upper of 2) moves 0.2 > 0.05
+    EXPECT_TRUE(map.dirty());
+    map.Solve();
+    EXPECT_TRUE(map.AddRange(0, 3, first));           // back by 0.2 > 0.035
+    EXPECT_TRUE(map.dirty());
+    map.Solve();
+    EXPECT_TRUE(map.AddRange(0, 3, first + 0.01));    // 0.01 < 0.036: waits
+    EXPECT_FALSE(map.dirty());
+  }
+  // Solved again on every range when asked (the thresholds at 1 and 0).
+  BeaconMap::Options every;
+  every.resolve_count_growth = 1;
+  every.resolve_median_shift_sigma = 0;
+  Random rng3(13);
+  BeaconMap eager = TwoParts(a, b, rng3, every);
+  eager.Solve();
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_TRUE(eager.AddRange(0, 1, d01));
+    EXPECT_TRUE(eager.dirty());
+    eager.Solve();
+  }
+  EXPECT_EQ(eager.summary().part_solves, 7u);
+  // Invalid thresholds are refused.
+  BeaconMap::Options bad;
+  bad.resolve_count_growth = 0.5;
+  EXPECT_THROW(BeaconMap{bad}, std::invalid_argument);
 }
 
 TEST(WayOut, FollowsTheSmallestRankHeardToTheEntry) {

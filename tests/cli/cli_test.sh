@@ -357,6 +357,14 @@ run_failing "$TM" bench load --firefighters 1 --minutes 0.1 --pipeline nope --di
 # sent is acknowledged and journaled.
 "$TM" bench load --firefighters 3 --minutes 0.5 --dir "$dir/load" > "$dir/load.log" 2>&1 \
   && grep -q "rows sent and journaled" "$dir/load.log" || { cat "$dir/load.log"; fail "bench load"; }
+# Staggered starts on the beacon trail (firefighter k starts (k-1) x 2 s later, paced against
+# the others from its own start): completes with every row journaled; a negative stagger is refused.
+"$TM" bench load --firefighters 3 --minutes 0.5 --stagger 2 --pipeline beacons-ekf --dir "$dir/load" \
+  --json "$dir/load.json" > "$dir/load.log" 2>&1 \
+  && grep -q "starts 2 s apart" "$dir/load.log" && grep -q '"stagger_s": 2' "$dir/load.json" \
+  || { cat "$dir/load.log"; fail "bench load --stagger"; }
+run_failing "$TM" bench load --stagger -1 --dir "$dir/load"
+[ $rc -ne 0 ] && matches "stagger" "$dir/err" || { cat "$dir/err"; fail "bench load --stagger -1"; }
 "$TM" journal export "$dir/j.db" --mission "$dir/live" --out "$dir/exported" > /dev/null || fail "journal export"
 sort -u "$dir/acked.txt" > "$dir/acked.sorted"
 tail -n +2 "$dir/exported/steps.csv" | sort > "$dir/journal.sorted"

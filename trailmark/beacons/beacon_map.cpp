@@ -20,14 +20,19 @@ bool BeaconMapOptions::IsValid(std::string* why) const {
     if (why) *why = "link_sigma_m and max_link_m must be > 0";
     return false;
   }
+  if (!(resolve_count_growth >= 1) || !(resolve_median_shift_sigma >= 0) ||
+      !std::isfinite(resolve_count_growth) || !std::isfinite(resolve_median_shift_sigma)) {
+    if (why) *why = "resolve_count_growth must be >= 1 and resolve_median_shift_sigma >= 0";
+    return false;
+  }
   return least_squares.IsValid(why);
 }
 
 std::string BeaconMapSummary::BriefReport() const {
   std::string text = fmt::format(
-      "beacon map: {} solves, {} component(s); {} from the map solve, {} surveyed, {} from drop "
-      "estimates, {} unknown; anchoring rms {:.2f} m{}",
-      solves, components, from_mds, from_survey, from_hint, unknown, anchor_rms_m,
+      "beacon map: {} solves ({} of a changed part), {} component(s); {} from the map solve, {} "
+      "surveyed, {} from drop estimates, {} unknown; anchoring rms {:.2f} m{}",
+      solves, part_solves, components, from_mds, from_survey, from_hint, unknown, anchor_rms_m,
       reflected ? " (layout flipped)" : "");
   if (least_squares_parts > 0)
     text += fmt::format("; least squares chi2/dof {:.2f}", chi2_per_dof);
@@ -62,8 +67,24 @@ int BeaconMap::Add(const std::string& id) {
   neighbours_.emplace_back();
   for (auto& row : samples_) row.emplace_back();
   samples_.emplace_back(ids_.size());
-  dirty_ = true;
+  changed_.push_back(false);
+  Touch(static_cast<int>(ids_.size()) - 1);
   return static_cast<int>(ids_.size()) - 1;
+}
+
+void RunningMedian::Add(double x) {
+  if (!upper_.empty() && x < upper_.top())
+    lower_.push(x);
+  else
+    upper_.push(x);
+  // Keep |upper| = ceil(n/2), |lower| = floor(n/2): the median is upper's smallest.
+  if (lower_.size() > upper_.size()) {
+    upper_.push(lower_.top());
+    lower_.pop();
+  } else if (upper_.size() > lower_.size() + 1) {
+    lower_.push(upper_.top());
+    upper_.pop();
+  }
 }
 
 std::optional<int> BeaconMap::Find(const std::string& id) const {
@@ -74,13 +95,13 @@ std::optional<int> BeaconMap::Find(const std::string& id) const {
 
 void BeaconMap::SetSurveyed(int i, const Vec2& p, double sigma_m) {
   surveyed_[i] = BeaconPosition{p, Mat2::Identity() * sigma_m * sigma_m};
-  dirty_ = true;
+  Touch(i);
 }
 
 void BeaconMap::SetAnchorHint(int i, const Vec2& p, const Mat2& cov) {
   hint_[i] = BeaconPosition{p, 0.5 * (cov + cov.transpose())};
   hint_track_[i] = TrackHint{};
-  dirty_ = true;
+  Touch(i);
 }
 
 int BeaconMap::AddTrack(const Mat3& cov) {
@@ -100,7 +121,7 @@ void BeaconMap::SetTrackHint(int i, int track, const Vec2& p, const Mat2& white_
   hint_[i] = BeaconPosition{p, 0.5 * (marginal + marginal.transpose())};
   hint_track_[i] = TrackHint{track, white, along, from,
                              0.5 * (increment_cov + increment_cov.transpose())};
-  dirty_ = true;
+  Touch(i);
 }
 
 bool BeaconMap::AddRange(int i, int j, double range_m) {
@@ -108,15 +129,26 @@ bool BeaconMap::AddRange(int i, int j, double range_m) {
     return false;
   if (i > j) std::swap(i, j);
   auto& s = samples_[i][j];
-  if (s.empty()) {
+  if (s.ranges_m.empty()) {
     neighbours_[i].push_back(j);
     neighbours_[j].push_back(i);
     std::sort(neighbours_[i].begin(), neighbours_[i].end());
     std::sort(neighbours_[j].begin(), neighbours_[j].end());
   }
-  s.push_back(range_m);
-  dirty_ = true;
+  s.ranges_m.Add(range_m);
+  const bool material =
+      s.used_count == 0 ||
+      static_cast<double>(s.ranges_m.size()) >=
+          options_.resolve_count_growth * static_cast<double>(s.used_count) ||
+      std::abs(s.ranges_m.Median() - s.used_median_m) >
+          options_.resolve_median_shift_sigma * MedianSigma(s.used_count);
+  if (material) Touch(i), Touch(j);
   return true;
+}
+
+double BeaconMap::MedianSigma(std::size_t count) const {
+  const double k = static_cast<double>(count);
+  return options_.link_sigma_m * (k >= 3 ? 1.2533 : 1.0) / std::sqrt(k);
 }
 
 std::optional<BeaconPosition> BeaconMap::Position(int i) const {
@@ -131,7 +163,30 @@ void BeaconMap::Solve() {
   ++summary_.solves;
   const int n = static_cast<int>(ids_.size());
   previous_ = solved_;
-  std::fill(solved_.begin(), solved_.end(), std::nullopt);
+  std::map<int, PartResult> parts;
+  std::vector<int> component(n, -1);
+  for (int start = 0; start < n; ++start) {
+    if (component[start] >= 0) continue;
+    std::vector<int> members{start};
+    component[start] = start;
+    bool changed = changed_[start];
+    for (std::size_t k = 0; k < members.size(); ++k) {
+      for (int v : neighbours_[members[k]]) {
+        if (component[v] < 0) component[v] = start, members.push_back(v), changed |= changed_[v];
+      }
+    }
+    // Parts only grow (a link joins two parts and touches both): an untouched part is the one
+    // solved last time, on the same inputs.
+    if (const auto it = parts_.find(start); !changed && it != parts_.end()) {
+      parts.emplace(start, it->second);
+      continue;
+    }
+    for (int i : members) solved_[i].reset();
+    if (members.size() >= 2) parts.emplace(start, SolvePart(members));
+  }
+  parts_ = std::move(parts);
+  std::fill(changed_.begin(), changed_.end(), false);
+  // The summary at this solve: the worst part.
   summary_.components = 0;
   summary_.anchor_rms_m = 0;
   summary_.reflected = false;
@@ -139,87 +194,15 @@ void BeaconMap::Solve() {
   summary_.chi2_per_dof = 0;
   summary_.prior_inflation = 1;
   summary_.track_inflation = 1;
-  // Median range per measured pair (robust to a long NLOS sample).
-  auto median = [](std::vector<double> v) {
-    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-    return v[v.size() / 2];
-  };
-  std::vector<int> component(n, -1);
-  for (int start = 0; start < n; ++start) {
-    if (component[start] >= 0) continue;
-    std::vector<int> members{start};
-    component[start] = start;
-    for (std::size_t k = 0; k < members.size(); ++k) {
-      for (int v : neighbours_[members[k]]) {
-        if (component[v] < 0) component[v] = start, members.push_back(v);
-      }
-    }
-    if (members.size() < 2) continue;
-    const int m = static_cast<int>(members.size());
-    RangeMatrix measured(m, std::vector<std::optional<double>>(m));
-    std::vector<std::size_t> counts(static_cast<std::size_t>(m) * m, 0);
-    for (int a = 0; a < m; ++a) {
-      for (int b = a + 1; b < m; ++b) {
-        const int i = std::min(members[a], members[b]), j = std::max(members[a], members[b]);
-        if (samples_[i][j].empty()) continue;
-        measured[a][b] = measured[b][a] = median(samples_[i][j]);
-        counts[a * m + b] = counts[b * m + a] = samples_[i][j].size();
-      }
-    }
-    // The paper's layout, placed by Procrustes onto the anchors: surveyed beacons when two or
-    // more, else surveyed + drop estimates.
-    std::optional<std::vector<Vec2>> mds_n;
-    double mds_rms = 0;
-    bool mds_reflected = false;
-    if (m >= 3) {
-      std::vector<std::vector<double>> full;
-      FillShortestPaths(measured, &full);
-      std::vector<Vec2> layout = ClassicalMds(full);
-      if (options_.refine) layout = RefineSmacof(measured, layout);
-      std::vector<Vec2> from, to;
-      int surveyed = 0;
-      for (int a = 0; a < m; ++a) surveyed += surveyed_[members[a]].has_value();
-      for (int a = 0; a < m; ++a) {
-        const auto& anchor = surveyed_[members[a]]
-                                 ? surveyed_[members[a]]
-                                 : (surveyed >= 3 ? std::nullopt : hint_[members[a]]);
-        if (anchor) from.push_back(layout[a]), to.push_back(anchor->position_n);
-      }
-      if (from.size() >= 2) {
-        const RigidFit2 fit = FitRigid(from, to, from.size() >= 3);
-        double sq = 0;
-        for (std::size_t k = 0; k < from.size(); ++k)
-          sq += (fit.Apply(from[k]) - to[k]).squaredNorm();
-        mds_rms = std::sqrt(sq / from.size());
-        mds_reflected = fit.rotation.determinant() < 0;
-        for (Vec2& p : layout) p = fit.Apply(p);
-        mds_n = std::move(layout);
-      }
-    }
-    if (options_.solver == MapSolver::kLeastSquares &&
-        SolveLeastSquares(members, measured, counts, mds_n)) {
-      ++summary_.components;
-      continue;
-    }
-    if (!mds_n) continue;
-    ++summary_.components;
-    summary_.anchor_rms_m = std::max(summary_.anchor_rms_m, mds_rms);
-    summary_.reflected = summary_.reflected || mds_reflected;
-    // Covariance: the information of each beacon's measured links (others held fixed), plus the
-    // anchoring residual (the layout's placement in the navigation frame).
-    for (int a = 0; a < m; ++a) {
-      const Vec2& p = (*mds_n)[a];
-      Mat2 info = Mat2::Identity() * 1e-2;
-      for (int b = 0; b < m; ++b) {
-        if (!measured[a][b]) continue;
-        Vec2 u = p - (*mds_n)[b];
-        if (u.norm() < 1e-9) continue;
-        u.normalize();
-        info += u * u.transpose() / (options_.link_sigma_m * options_.link_sigma_m);
-      }
-      const double anchor_var = std::max(mds_rms * mds_rms, 0.01);
-      solved_[members[a]] = BeaconPosition{p, Mat2(info.inverse() + Mat2::Identity() * anchor_var)};
-    }
+  for (const auto& [first, part] : parts_) {
+    summary_.components += part.placed;
+    summary_.least_squares_parts += part.least_squares;
+    summary_.rejected_parts += part.rejected;
+    summary_.reflected = summary_.reflected || part.reflected;
+    summary_.anchor_rms_m = std::max(summary_.anchor_rms_m, part.anchor_rms_m);
+    summary_.chi2_per_dof = std::max(summary_.chi2_per_dof, part.chi2_per_dof);
+    summary_.prior_inflation = std::max(summary_.prior_inflation, part.prior_inflation);
+    summary_.track_inflation = std::max(summary_.track_inflation, part.track_inflation);
   }
   summary_.rejected_solves += summary_.rejected_parts > 0;
   summary_.from_mds = summary_.from_survey = summary_.from_hint = summary_.unknown = 0;
@@ -237,9 +220,85 @@ void BeaconMap::Solve() {
   }
 }
 
+BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
+  PartResult part;
+  ++summary_.part_solves;
+  const int m = static_cast<int>(members.size());
+  // Median range per measured pair (robust to a long NLOS sample).
+  RangeMatrix measured(m, std::vector<std::optional<double>>(m));
+  std::vector<std::size_t> counts(static_cast<std::size_t>(m) * m, 0);
+  for (int a = 0; a < m; ++a) {
+    for (int b = a + 1; b < m; ++b) {
+      const int i = std::min(members[a], members[b]), j = std::max(members[a], members[b]);
+      auto& pair = samples_[i][j];
+      if (pair.ranges_m.empty()) continue;
+      pair.used_median_m = pair.ranges_m.Median();
+      pair.used_count = pair.ranges_m.size();
+      measured[a][b] = measured[b][a] = pair.used_median_m;
+      counts[a * m + b] = counts[b * m + a] = pair.used_count;
+    }
+  }
+  // The paper's layout, placed by Procrustes onto the anchors: surveyed beacons when two or
+  // more, else surveyed + drop estimates.
+  std::optional<std::vector<Vec2>> mds_n;
+  double mds_rms = 0;
+  bool mds_reflected = false;
+  if (m >= 3) {
+    std::vector<std::vector<double>> full;
+    FillShortestPaths(measured, &full);
+    std::vector<Vec2> layout = ClassicalMds(full);
+    if (options_.refine) layout = RefineSmacof(measured, layout);
+    std::vector<Vec2> from, to;
+    int surveyed = 0;
+    for (int a = 0; a < m; ++a) surveyed += surveyed_[members[a]].has_value();
+    for (int a = 0; a < m; ++a) {
+      const auto& anchor = surveyed_[members[a]]
+                               ? surveyed_[members[a]]
+                               : (surveyed >= 3 ? std::nullopt : hint_[members[a]]);
+      if (anchor) from.push_back(layout[a]), to.push_back(anchor->position_n);
+    }
+    if (from.size() >= 2) {
+      const RigidFit2 fit = FitRigid(from, to, from.size() >= 3);
+      double sq = 0;
+      for (std::size_t k = 0; k < from.size(); ++k)
+        sq += (fit.Apply(from[k]) - to[k]).squaredNorm();
+      mds_rms = std::sqrt(sq / from.size());
+      mds_reflected = fit.rotation.determinant() < 0;
+      for (Vec2& p : layout) p = fit.Apply(p);
+      mds_n = std::move(layout);
+    }
+  }
+  if (options_.solver == MapSolver::kLeastSquares &&
+      SolveLeastSquares(members, measured, counts, mds_n, &part)) {
+    part.placed = true;
+    return part;
+  }
+  if (!mds_n) return part;
+  part.placed = true;
+  part.anchor_rms_m = mds_rms;
+  part.reflected = mds_reflected;
+  // Covariance: the information of each beacon's measured links (others held fixed), plus the
+  // anchoring residual (the layout's placement in the navigation frame).
+  for (int a = 0; a < m; ++a) {
+    const Vec2& p = (*mds_n)[a];
+    Mat2 info = Mat2::Identity() * 1e-2;
+    for (int b = 0; b < m; ++b) {
+      if (!measured[a][b]) continue;
+      Vec2 u = p - (*mds_n)[b];
+      if (u.norm() < 1e-9) continue;
+      u.normalize();
+      info += u * u.transpose() / (options_.link_sigma_m * options_.link_sigma_m);
+    }
+    const double anchor_var = std::max(mds_rms * mds_rms, 0.01);
+    solved_[members[a]] = BeaconPosition{p, Mat2(info.inverse() + Mat2::Identity() * anchor_var)};
+  }
+  return part;
+}
+
 bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMatrix& measured,
                                   const std::vector<std::size_t>& counts,
-                                  const std::optional<std::vector<Vec2>>& mds_start) {
+                                  const std::optional<std::vector<Vec2>>& mds_start,
+                                  PartResult* part) {
   const int m = static_cast<int>(members.size());
   MapProblem problem;
   problem.beacons = m;
@@ -276,10 +335,7 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMa
   for (int a = 0; a < m; ++a) {
     for (int b = a + 1; b < m; ++b) {
       if (!measured[a][b]) continue;
-      // The median of n samples: 1.2533 sigma / sqrt(n) for large n (the mean's for n <= 2).
-      const double k = static_cast<double>(counts[a * m + b]);
-      const double sigma = options_.link_sigma_m * (k >= 3 ? 1.2533 : 1.0) / std::sqrt(k);
-      problem.links.push_back({a, b, *measured[a][b], sigma});
+      problem.links.push_back({a, b, *measured[a][b], MedianSigma(counts[a * m + b])});
     }
   }
   // Start 0: the last solution, else the priors, else the MDS layout (the priors' mean when
@@ -307,7 +363,7 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMa
       if (q > limit) {
         const double f = std::min(q / 3.0, 100.0);
         problem.tracks[k].cov *= f;
-        summary_.track_inflation = std::max(summary_.track_inflation, f);
+        part->track_inflation = std::max(part->track_inflation, f);
         again = true;
       }
     }
@@ -340,7 +396,7 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMa
       if (again.ok) {
         again.start = solution.start;
         solution = std::move(again);
-        summary_.prior_inflation = std::max(summary_.prior_inflation, f);
+        part->prior_inflation = f;
         ++summary_.inflated_solves;
       }
     }
@@ -349,16 +405,14 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMa
     summary_.rejected_why = solution.why;
     return false;
   }
-  ++summary_.least_squares_parts;
+  part->least_squares = true;
   summary_.fold_starts_won += solution.start == 1;
   double sq = 0;
   for (const MapPrior& q : problem.priors) sq += (solution.position_n[q.i] - q.position_n).squaredNorm();
-  summary_.anchor_rms_m =
-      std::max(summary_.anchor_rms_m, std::sqrt(sq / static_cast<double>(problem.priors.size())));
-  if (solution.dof > 0)
-    summary_.chi2_per_dof = std::max(summary_.chi2_per_dof, solution.chi2 / solution.dof);
+  part->anchor_rms_m = std::sqrt(sq / static_cast<double>(problem.priors.size()));
+  if (solution.dof > 0) part->chi2_per_dof = solution.chi2 / solution.dof;
   if (!solution.consistent && options_.reject_inconsistent) {
-    ++summary_.rejected_parts;
+    part->rejected = true;
     summary_.rejected_why = fmt::format(
         "{} beacon(s) from {}: chi-square {:.1f} > {:.1f} for {} degrees of freedom",
         m, ids_[members[0]], solution.chi2, solution.chi2_threshold, solution.dof);

@@ -14,7 +14,10 @@
 ///    the least squares, and the answer where fewer than two beacons of a part have priors.
 /// Also the way back out (sec. 4): move towards the smallest id you can hear. No I/O.
 
+#include <functional>
+#include <map>
 #include <optional>
+#include <queue>
 #include <string>
 #include <vector>
 
@@ -26,6 +29,20 @@
 namespace trailmark::beacons {
 
 enum class MapSolver { kLeastSquares, kMds };
+
+/// The median of values as they arrive (two heaps: O(log n) per value, read in O(1)): the upper
+/// median, the element std::nth_element puts at n/2. Median() of an empty one is undefined.
+class RunningMedian {
+ public:
+  void Add(double x);
+  double Median() const { return upper_.top(); }
+  std::size_t size() const { return lower_.size() + upper_.size(); }
+  bool empty() const { return upper_.empty(); }
+
+ private:
+  std::priority_queue<double> lower_;  ///< the smallest floor(n/2)
+  std::priority_queue<double, std::vector<double>, std::greater<double>> upper_;  ///< the rest
+};
 
 struct BeaconMapOptions {
   MapSolver solver = MapSolver::kLeastSquares;  ///< least squares (ours) or MDS (the paper's)
@@ -42,11 +59,19 @@ struct BeaconMapOptions {
   /// Default false: measured on the lab trail, whose PDR turns are less accurate than the dead
   /// reckoning's model says, the displacements rotate the map (docs/beacons.md).
   bool relative_drop_priors = false;
+  /// A part is solved again when a beacon, a pair, a survey or a hint joins or changes, and when
+  /// a pair's ranges have changed what the last solve used: their number grown by this factor
+  /// (the median's sigma down by its square root) or their median moved by more than
+  /// `resolve_median_shift_sigma` of that sigma. Else the new ranges wait (as iSAM2 re-linearizes
+  /// only past a threshold: Kaess et al. 2012). 1 and 0: solved again on every range.
+  double resolve_count_growth = 1.25;
+  double resolve_median_shift_sigma = 0.5;
   bool IsValid(std::string* why) const;
 };
 
 struct BeaconMapSummary {
   std::size_t solves = 0;
+  std::size_t part_solves = 0;  ///< connected parts solved (a part that did not change is not)
   std::size_t components = 0;  ///< at the last solve (with >= 3 beacons)
   std::size_t from_mds = 0, from_survey = 0, from_hint = 0, unknown = 0;
   double anchor_rms_m = 0;  ///< rms of the anchors' residuals at the last solve
@@ -94,7 +119,9 @@ class BeaconMap {
   bool AddRange(int i, int j, double range_m);
   /// True when ranges or hints arrived since the last Solve().
   bool dirty() const { return dirty_; }
-  /// Recomputes every position.
+  /// Recomputes the positions of every connected part that changed since the last Solve() (a
+  /// beacon, range, survey or hint added to one of its members); a part that did not change
+  /// keeps its solution and its share of the summary (its inputs are those it was solved on).
   void Solve();
 
   std::optional<BeaconPosition> Position(int i) const;
@@ -116,11 +143,35 @@ class BeaconMap {
   std::vector<TrackHint> hint_track_;  ///< track -1: the hint's cov is white
   std::vector<Mat3> tracks_;
   std::vector<std::vector<int>> neighbours_;
-  std::vector<std::vector<std::vector<double>>> samples_;  ///< [i][j], i < j
+  struct PairRanges {
+    RunningMedian ranges_m;
+    double used_median_m = 0;    ///< at the last solve of its part
+    std::size_t used_count = 0;  ///< 0: not used yet
+  };
+  std::vector<std::vector<PairRanges>> samples_;  ///< [i][j], i < j
+  /// What one connected part contributes to the summary (BeaconMapSummary: "at the last solve").
+  struct PartResult {
+    bool placed = false;        ///< counted in `components`
+    bool least_squares = false;
+    bool rejected = false;
+    bool reflected = false;
+    double anchor_rms_m = 0, chi2_per_dof = 0, prior_inflation = 1, track_inflation = 1;
+  };
+  /// Solves one connected part (its members' solved_ entries); returns its share of the summary.
+  PartResult SolvePart(const std::vector<int>& members);
+  /// The sigma of the median of `count` ranges (1.2533 sigma / sqrt(n) for large n, the mean's
+  /// for n <= 2).
+  double MedianSigma(std::size_t count) const;
   /// Solves one connected part by least squares; false when its priors do not fix it.
   bool SolveLeastSquares(const std::vector<int>& members, const RangeMatrix& measured,
                          const std::vector<std::size_t>& counts,
-                         const std::optional<std::vector<Vec2>>& mds_start);
+                         const std::optional<std::vector<Vec2>>& mds_start, PartResult* part);
+  void Touch(int i) {
+    changed_[i] = true;
+    dirty_ = true;
+  }
+  std::vector<bool> changed_;          ///< since the last Solve()
+  std::map<int, PartResult> parts_;    ///< by the part's smallest member, at the last Solve()
   bool dirty_ = false;
   BeaconMapSummary summary_;
 };

@@ -65,6 +65,14 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
          "walked without a heading estimate: the PDR's frame is then taken after all");
   t.Real("mds_period_s", &O::mds_period_s, "s", OptionBounds::NonNegative(),
          "the beacon map is re-solved at most this often");
+  t.Real("map_resolve_count_growth", [](O& o) -> double& { return o.map.resolve_count_growth; },
+         "", OptionBounds::AtLeast(1.0),
+         "a part of the map is solved again when a pair's ranges have grown by this factor since "
+         "its last solve (or a beacon, pair or hint joined; 1: on every range)");
+  t.Real("map_resolve_median_shift_sigma",
+         [](O& o) -> double& { return o.map.resolve_median_shift_sigma; }, "",
+         OptionBounds::NonNegative(),
+         "... or a pair's median range moved by more than this many of its sigmas");
 }
 
 }  // namespace
@@ -740,6 +748,7 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["beacons_surveyed"] = static_cast<double>(ms.from_survey);
   num["beacons_unplaced"] = static_cast<double>(ms.unknown);
   num["mds_solves"] = static_cast<double>(ms.solves);
+  num["map_part_solves"] = static_cast<double>(ms.part_solves);
   num["anchor_rms_m"] = ms.anchor_rms_m;
   num["entry_heading_fixes"] = static_cast<double>(entry_fixes_);
   num["beacons_anchored_by_close_pass"] = static_cast<double>(close_pass_anchors_);
