@@ -65,8 +65,7 @@ int BeaconMap::Add(const std::string& id) {
   previous_.emplace_back();
   hint_track_.emplace_back();
   neighbours_.emplace_back();
-  for (auto& row : samples_) row.emplace_back();
-  samples_.emplace_back(ids_.size());
+  samples_.emplace_back();
   changed_.push_back(false);
   Touch(static_cast<int>(ids_.size()) - 1);
   return static_cast<int>(ids_.size()) - 1;
@@ -227,11 +226,11 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
   // Median range per measured pair (robust to a long NLOS sample).
   RangeMatrix measured(m, std::vector<std::optional<double>>(m));
   std::vector<std::size_t> counts(static_cast<std::size_t>(m) * m, 0);
+  std::map<int, int> local;  // beacon -> index in the part
+  for (int a = 0; a < m; ++a) local.emplace(members[a], a);
   for (int a = 0; a < m; ++a) {
-    for (int b = a + 1; b < m; ++b) {
-      const int i = std::min(members[a], members[b]), j = std::max(members[a], members[b]);
-      auto& pair = samples_[i][j];
-      if (pair.ranges_m.empty()) continue;
+    for (auto& [j, pair] : samples_[members[a]]) {
+      const int b = local.at(j);  // a measured pair is in one part
       pair.used_median_m = pair.ranges_m.Median();
       pair.used_count = pair.ranges_m.size();
       measured[a][b] = measured[b][a] = pair.used_median_m;

@@ -148,7 +148,7 @@ class BeaconMap {
     double used_median_m = 0;    ///< at the last solve of its part
     std::size_t used_count = 0;  ///< 0: not used yet
   };
-  std::vector<std::vector<PairRanges>> samples_;  ///< [i][j], i < j
+  std::vector<std::map<int, PairRanges>> samples_;  ///< [i][j], i < j: the measured pairs only
   /// What one connected part contributes to the summary (BeaconMapSummary: "at the last solve").
   struct PartResult {
     bool placed = false;        ///< counted in `components`
