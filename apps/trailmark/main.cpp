@@ -166,7 +166,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 1000000));
   std::vector<std::string> bench_options;
   bench->add_option("--option", bench_options,
-                    "ins: an option of the ins pipeline key=value for both measurements (repeatable)");
+                    "ins, load: an option of the pipeline key=value (ins: for both measurements; "
+                    "repeatable)");
   server::LoadTestOptions load;
   bench->add_option("--firefighters", load.firefighters, "load: firefighters sending at once");
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
@@ -403,6 +404,7 @@ int main(int argc, char** argv) {
       }
       if (bench_what == "load") {
         load.work_dir = load_dir;
+        load.pipeline_options = ParseKeyValues(bench_options);
         return cli::BenchLoad(load, bench_json);
       }
       if (!bench_what.empty())
