@@ -29,6 +29,13 @@ struct IncidentServer::Http {
   GateCore* gate = nullptr;                 ///< the server's connection gate
 };
 
+struct IncidentServer::Pending {
+  Journal::Batch batch;
+  std::vector<MissionRow> rows;
+  std::promise<Journal::AppendResult> done;
+  Journal::AppendResult result;  ///< once committed (Commit)
+};
+
 struct IncidentServer::Live {
   std::unique_ptr<Journal> journal;
   std::filesystem::path work;  ///< the MQTT client's persistence
@@ -36,11 +43,7 @@ struct IncidentServer::Live {
   std::unique_ptr<OnlineEstimator> estimator;
   std::mutex estimator_mutex;  ///< the live loop feeds it; /api/stats reads its summary
   /// Group commit: requests wait here until the committer has journaled them.
-  struct Pending {
-    Journal::Batch batch;
-    std::vector<MissionRow> rows;
-    std::promise<Journal::AppendResult> done;
-  };
+  using Pending = IncidentServer::Pending;
   std::mutex queue_mutex;
   std::condition_variable queue_cv;
   std::vector<Pending*> queue;
@@ -364,45 +367,58 @@ void IncidentServer::Start() {
     // The token is checked on the headers, before a byte of the body is read (a stranger's
     // 200 MB is not read to be refused), and the size limit holds for chunked bodies too
     // (cpp-httplib checks Content-Length only): the body is read here, counted as it comes.
-    svr.Post(R"(/api/ingest/([a-z]+\.csv))", [this, authorized, refuse, json](
-                                                 const httplib::Request& req,
-                                                 httplib::Response& res,
-                                                 const httplib::ContentReader& content_reader) {
-      if (!authorized(req, false)) {
-        res.set_header("Connection", "close");  // its unread body is not a next request
-        return refuse(res);
-      }
-      std::string body;
-      bool too_large = false;
-      const bool read = content_reader([&](const char* data, std::size_t n) {
-        if (body.size() + n > options_.max_request_bytes) {
-          too_large = true;
-          return false;
+    // One stream per request (POST /api/ingest/<stream>) or a device's streams bundled in one
+    // (POST /api/ingest: a JSON object of CSV texts, IngestBundle).
+    auto ingest = [this, authorized, refuse, json](auto handle) {
+      return [this, authorized, refuse, json, handle](const httplib::Request& req,
+                                                      httplib::Response& res,
+                                                      const httplib::ContentReader& content_reader) {
+        if (!authorized(req, false)) {
+          res.set_header("Connection", "close");  // its unread body is not a next request
+          return refuse(res);
         }
-        body.append(data, n);
-        return true;
-      });
-      if (too_large || !read) {
-        res.status = too_large ? 413 : 400;
-        res.set_header("Connection", "close");
-        const std::string why =
-            too_large ? "request body too large (at most " +
-                            std::to_string(options_.max_request_bytes) + " bytes)"
-                      : "request body could not be read";
-        Reject(req.method + " " + req.path + ": " + why);
-        json(res, {{"error", why}});
-        return;
-      }
-      try {
-        json(res, Ingest(req.matches[1], body));
-      } catch (const std::invalid_argument& e) {
-        res.status = 400;
-        json(res, {{"error", e.what()}});
-      } catch (const std::exception& e) {
-        res.status = 503;  // the journal could not commit: not acknowledged, retry
-        json(res, {{"error", e.what()}});
-      }
-    });
+        std::string body;
+        bool too_large = false;
+        const bool read = content_reader([&](const char* data, std::size_t n) {
+          if (body.size() + n > options_.max_request_bytes) {
+            too_large = true;
+            return false;
+          }
+          body.append(data, n);
+          return true;
+        });
+        if (too_large || !read) {
+          res.status = too_large ? 413 : 400;
+          res.set_header("Connection", "close");
+          const std::string why =
+              too_large ? "request body too large (at most " +
+                              std::to_string(options_.max_request_bytes) + " bytes)"
+                        : "request body could not be read";
+          Reject(req.method + " " + req.path + ": " + why);
+          json(res, {{"error", why}});
+          return;
+        }
+        try {
+          nlohmann::json answer = handle(req, body);
+          // A bundle with a section refused for time order: the others are committed.
+          if (answer.contains("error")) res.status = 400;
+          json(res, answer);
+        } catch (const std::invalid_argument& e) {
+          res.status = 400;
+          json(res, {{"error", e.what()}});
+        } catch (const std::exception& e) {
+          res.status = 503;  // the journal could not commit: not acknowledged, retry
+          json(res, {{"error", e.what()}});
+        }
+      };
+    };
+    svr.Post(R"(/api/ingest/([a-z]+\.csv))",
+             ingest([this](const httplib::Request& req, const std::string& body) {
+               return Ingest(req.matches[1], body);
+             }));
+    svr.Post("/api/ingest", ingest([this](const httplib::Request&, const std::string& body) {
+               return IngestBundle(body);
+             }));
   }
   svr.Get("/api/floorplan", [this, authorized, refuse, json](const httplib::Request& req,
                                                               httplib::Response& res) {
@@ -531,18 +547,17 @@ void IncidentServer::ReplayLoop() {
   }
 }
 
-nlohmann::json IncidentServer::Ingest(const std::string& stream, const std::string& body) {
-  if (!live_) throw std::invalid_argument("not a live server");
-  Live::Pending pending;
+void IncidentServer::Prepare(const std::string& stream, const std::string& source,
+                             const std::string& body, Pending& pending) {
   try {
-    ParseStream(stream, "request body", body, pending.batch, pending.rows);
+    ParseStream(stream, source, body, pending.batch, pending.rows);
     // IMU, steps and events come from an agent's own device: it must be one of the incident's
     // agents (radio rows may name crumbs that a later drop event introduces).
     if (stream == "imu.csv" || stream == "steps.csv" || stream == "events.csv") {
       for (std::size_t i = 0; i < pending.rows.size(); ++i) {
         const NodeInfo* n = info_.Find(pending.batch.node[i]);
         if (n == nullptr || n->kind != NodeKind::kAgent) {
-          throw std::invalid_argument("request body:" + std::to_string(pending.batch.lines[i]) +
+          throw std::invalid_argument(source + ":" + std::to_string(pending.batch.lines[i]) +
                                       ": '" + pending.batch.node[i] +
                                       "' is not an agent of this incident (mission.json)");
         }
@@ -552,21 +567,84 @@ nlohmann::json IncidentServer::Ingest(const std::string& stream, const std::stri
     Reject(stream + ": " + e.what());
     throw std::invalid_argument(e.what());
   }
-  std::future<Journal::AppendResult> done = pending.done.get_future();
+}
+
+void IncidentServer::Commit(const std::vector<Pending*>& pending) {
+  std::vector<std::future<Journal::AppendResult>> done;
+  for (Pending* p : pending) done.push_back(p->done.get_future());
   {
+    // Queued together: the commit loop takes them in one group (one transaction).
     std::lock_guard<std::mutex> lock(live_->queue_mutex);
     if (stop_) throw std::runtime_error("the server is stopping");
-    live_->queue.push_back(&pending);
+    live_->queue.insert(live_->queue.end(), pending.begin(), pending.end());
   }
   live_->queue_cv.notify_one();
-  const Journal::AppendResult r = done.get();  // rethrows a journal failure
-  if (!r.error.empty()) {
-    Reject(stream + ": " + r.error);
-    throw std::invalid_argument(r.error);
+  for (std::size_t k = 0; k < pending.size(); ++k) {
+    const Journal::AppendResult& r = pending[k]->result = done[k].get();  // rethrows a failure
+    if (!r.error.empty()) Reject(pending[k]->batch.stream + ": " + r.error);
+    stats_.ingested_rows += r.accepted;
+    stats_.duplicate_rows += r.duplicates;
   }
-  stats_.ingested_rows += r.accepted;
-  stats_.duplicate_rows += r.duplicates;
+}
+
+nlohmann::json IncidentServer::Ingest(const std::string& stream, const std::string& body) {
+  if (!live_) throw std::invalid_argument("not a live server");
+  Pending pending;
+  Prepare(stream, "request body", body, pending);
+  Commit({&pending});
+  const Journal::AppendResult& r = pending.result;
+  if (!r.error.empty()) throw std::invalid_argument(r.error);
   return {{"accepted", r.accepted}, {"duplicates", r.duplicates}};
+}
+
+nlohmann::json IncidentServer::IngestBundle(const std::string& body) {
+  if (!live_) throw std::invalid_argument("not a live server");
+  // {"imu.csv": "t,agent,...\n...", "ranges.csv": "..."}: the sections in the body's order.
+  nlohmann::ordered_json sections;
+  try {
+    sections = nlohmann::ordered_json::parse(body);
+  } catch (const nlohmann::json::parse_error& e) {
+    Reject(std::string("bundle: ") + e.what());
+    throw std::invalid_argument(std::string("request body: not JSON (") + e.what() + ")");
+  }
+  if (!sections.is_object() || sections.empty()) {
+    Reject("bundle: not an object of streams");
+    throw std::invalid_argument(
+        "request body: a bundle is a JSON object {\"<stream>.csv\": \"<CSV text>\", ...} with "
+        "at least one stream");
+  }
+  std::vector<std::unique_ptr<Pending>> pending;
+  for (const auto& [stream, text] : sections.items()) {
+    if (!text.is_string()) {
+      Reject("bundle: " + stream + " is not a string");
+      throw std::invalid_argument("request body: section '" + stream +
+                                  "' must be the stream's CSV text as a JSON string");
+    }
+    pending.push_back(std::make_unique<Pending>());
+    // Every section checked before any is queued: bad input journals nothing.
+    Prepare(stream, "request body " + stream, text.get_ref<const std::string&>(), *pending.back());
+  }
+  std::vector<Pending*> raw;
+  for (auto& p : pending) raw.push_back(p.get());
+  Commit(raw);
+  nlohmann::json out = {{"accepted", 0}, {"duplicates", 0}, {"streams", nlohmann::json::object()}};
+  std::string errors;
+  std::size_t accepted = 0, duplicates = 0;
+  for (const Pending* p : raw) {
+    const Journal::AppendResult& r = p->result;
+    nlohmann::json one = {{"accepted", r.accepted}, {"duplicates", r.duplicates}};
+    if (!r.error.empty()) {
+      one["error"] = r.error;
+      errors += (errors.empty() ? "" : "; ") + r.error;
+    }
+    out["streams"][p->batch.stream] = one;
+    accepted += r.accepted;
+    duplicates += r.duplicates;
+  }
+  out["accepted"] = accepted;
+  out["duplicates"] = duplicates;
+  if (!errors.empty()) out["error"] = errors;
+  return out;
 }
 
 void IncidentServer::CommitLoop() {

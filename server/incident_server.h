@@ -124,6 +124,13 @@ class IncidentServer {
   /// std::invalid_argument for bad input (nothing journaled; the message names the line),
   /// std::runtime_error when the journal cannot commit.
   nlohmann::json Ingest(const std::string& stream, const std::string& body);
+  /// Several streams of one device in one request (POST /api/ingest): a JSON object
+  /// {"imu.csv": "<CSV text>", "ranges.csv": "...", ...}. Every section is checked before any
+  /// is journaled (bad input: std::invalid_argument, nothing journaled); then all are committed
+  /// in one transaction, each as Ingest would (a section refused for time order journals
+  /// nothing of itself: its "error" in the answer). Returns {"accepted", "duplicates",
+  /// "streams": {stream: {"accepted", "duplicates"[, "error"]}}[, "error"]}.
+  nlohmann::json IngestBundle(const std::string& body);
   /// GET /api/stats: counters, the latest rejections, the live estimator's summary numbers.
   nlohmann::json StatsJson();
 
@@ -133,6 +140,13 @@ class IncidentServer {
   void CommitLoop();
   /// Counts and logs a rejection.
   void Reject(const std::string& reason);
+  /// Group commit: a request's rows wait for the committer (defined in the .cpp).
+  struct Pending;
+  /// Parses and checks one stream's CSV (`source` names it in errors) into `pending`.
+  void Prepare(const std::string& stream, const std::string& source, const std::string& body,
+               Pending& pending);
+  /// Queues them together (one transaction), waits, counts; each gets its `result`.
+  void Commit(const std::vector<Pending*>& pending);
   /// The state changed: wake the event streams.
   void Changed();
   /// The event-stream message of the state at `version` (or later): written once per version

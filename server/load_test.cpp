@@ -35,9 +35,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 struct Request {
-  std::string stream, body;
+  std::string stream, body;  ///< stream empty: a bundle of the device's streams (JSON)
   double t_last = 0;   ///< IMU: the batch's last sample time (latency matching)
   double t_first = 0;  ///< IMU: its first sample time
+  bool has_imu = false;
 };
 
 /// One firefighter's rows (its own ids), each stream in time order.
@@ -58,12 +59,13 @@ void AddBody(const std::vector<Row>& rows, std::size_t& next, double until, cons
   if (window.empty()) return;
   std::string body;
   for (const auto& line : FormatAll(window)) body += line + "\n";
-  out.push_back({stream, std::move(body), 0});
+  out.push_back({stream, std::move(body)});
 }
 
 /// One firefighter's requests in send order: IMU batches, each followed by the rows of the
-/// other streams of its time window (one request per stream).
-std::vector<Request> Requests(const DeviceRows& d, double batch_s) {
+/// other streams of its time window — one request per stream, or (`bundle`) the window's
+/// streams in one request (POST /api/ingest).
+std::vector<Request> Requests(const DeviceRows& d, double batch_s, bool bundle) {
   std::vector<Request> out;
   std::size_t r = 0, g = 0, b = 0, e = 0;
   for (std::size_t i = 0; i < d.imu.size();) {
@@ -72,12 +74,20 @@ std::vector<Request> Requests(const DeviceRows& d, double batch_s) {
     for (; i < d.imu.size() && d.imu[i].t <= end; ++i) batch.push_back(d.imu[i]);
     std::string body;
     for (const auto& line : FormatAll(batch)) body += line + "\n";
-    out.push_back({"imu.csv", std::move(body), batch.back().t, batch.front().t});
+    const std::size_t first = out.size();
+    out.push_back({"imu.csv", std::move(body), batch.back().t, batch.front().t, true});
     const double until = batch.back().t;
     AddBody(d.events, e, until, "events.csv", out);
     AddBody(d.ranges, g, until, "ranges.csv", out);
     AddBody(d.bearings, b, until, "bearings.csv", out);
     AddBody(d.rssi, r, until, "rssi.csv", out);
+    if (bundle) {
+      nlohmann::ordered_json sections;
+      for (std::size_t k = first; k < out.size(); ++k) sections[out[k].stream] = out[k].body;
+      Request one{"", sections.dump(), out[first].t_last, out[first].t_first, true};
+      out.resize(first);
+      out.push_back(std::move(one));
+    }
   }
   return out;
 }
@@ -199,7 +209,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       }
     }
     // The requests now: the rows themselves are not kept (peak memory).
-    requests.push_back(Requests(d, o.batch_s));
+    requests.push_back(Requests(d, o.batch_s, o.bundle && o.mqtt_uri.empty()));
     imu_rows += d.imu.size();
     other_rows += d.rssi.size() + d.ranges.size() + d.bearings.size() + d.events.size();
   }
@@ -211,7 +221,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   std::size_t rows_total = imu_rows + other_rows, requests_total = 0, imu_batches = 0;
   for (const auto& device : requests) {
     requests_total += device.size();
-    for (const auto& r : device) imu_batches += r.stream == "imu.csv";
+    for (const auto& r : device) imu_batches += r.has_imu;
   }
 
   ServerOptions so;
@@ -307,7 +317,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
     }
   };
   auto sent = [&](std::size_t k, const Request& r) {
-    if (r.stream == "imu.csv") {
+    if (r.has_imu) {
       std::lock_guard<std::mutex> lock(flight_mutex);
       in_flight[ids[k]].push_back({r.t_first, r.t_last, Clock::now()});
       holding[ids[k]].push_back({r.t_first, r.t_last, Clock::now()});
@@ -345,14 +355,14 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   std::vector<double> progress(ids.size(), -1e300);
   for (std::size_t k = 0; k < ids.size(); ++k) {
     for (const Request& r : requests[k]) {
-      if (r.stream == "imu.csv") {
+      if (r.has_imu) {
         progress[k] = r.t_first - o.batch_s;
         break;
       }
     }
   }
   auto pace = [&](std::size_t k, const Request& r) {
-    if (!(o.max_skew_s > 0) || r.stream != "imu.csv") return;
+    if (!(o.max_skew_s > 0) || !r.has_imu) return;
     std::unique_lock<std::mutex> lock(pace_mutex);
     pace_cv.wait(lock, [&] {
       return *std::min_element(progress.begin(), progress.end()) >= r.t_last - o.max_skew_s ||
@@ -360,7 +370,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
     });
   };
   auto paced = [&](std::size_t k, const Request& r) {
-    if (!(o.max_skew_s > 0) || r.stream != "imu.csv") return;
+    if (!(o.max_skew_s > 0) || !r.has_imu) return;
     {
       std::lock_guard<std::mutex> lock(pace_mutex);
       progress[k] = r.t_last;
@@ -397,7 +407,9 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       for (const Request& r : requests[k]) {
         pace(k, r);
         sent(k, r);
-        const auto res = client.Post("/api/ingest/" + r.stream, auth, r.body, "text/csv");
+        const auto res =
+            r.stream.empty() ? client.Post("/api/ingest", auth, r.body, "application/json")
+                             : client.Post("/api/ingest/" + r.stream, auth, r.body, "text/csv");
         paced(k, r);
         if (!res || res->status != 200) {
           refuse(res ? fmt::format("HTTP {} {}", res->status, res->body)
@@ -458,6 +470,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"pipeline", o.pipeline},
           {"max_skew_s", o.max_skew_s},
           {"stagger_s", o.stagger_s},
+          {"bundled", o.bundle && o.mqtt_uri.empty()},
           {"transport", o.mqtt_uri.empty() ? "http" : "mqtt"},
           {"devices_connect_s", connect_s},
           {"requests", requests_total},

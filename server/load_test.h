@@ -26,6 +26,10 @@ struct LoadTestOptions {
   /// Firefighter k (1-based) starts its walk (k - 1) x this later (s): teams enter one after
   /// another; 0: all at once and in step (every drop, turn and stop at the same instants).
   double stagger_s = 0.0;
+  /// Each device's streams of a batch window in one request (POST /api/ingest, as a device
+  /// should send them); false: one request per stream (POST /api/ingest/<stream>). MQTT: per
+  /// stream always (a topic per stream).
+  bool bundle = true;
   std::string pipeline = "ins";  ///< a name of the registry
   std::map<std::string, std::string> pipeline_options;
   /// Where the journal goes (a real disk: each group commit is an fsync).

@@ -178,6 +178,10 @@ int main(int argc, char** argv) {
   bench->add_option("--stagger", load.stagger_s,
                     "load: firefighter k starts (k-1) x this many seconds later (0: all in step)")
       ->check(CLI::Range(0.0, 3600.0));
+  bool load_per_stream = false;
+  bench->add_flag("--per-stream", load_per_stream,
+                  "load: one request per stream (POST /api/ingest/<stream>) instead of each "
+                  "window's streams in one (POST /api/ingest)");
   std::string load_dir = ".";
   bench->add_option("--dir", load_dir, "load: where the journal goes (a real disk)");
   bench->add_option(
@@ -405,6 +409,7 @@ int main(int argc, char** argv) {
       if (bench_what == "load") {
         load.work_dir = load_dir;
         load.pipeline_options = ParseKeyValues(bench_options);
+        load.bundle = !load_per_stream;
         return cli::BenchLoad(load, bench_json);
       }
       if (!bench_what.empty())

@@ -201,7 +201,9 @@ int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::pat
       options.stagger_s > 0 ? fmt::format(" (starts {:g} s apart)", options.stagger_s)
                             : std::string(" (all in step)"),
       options.batch_s, options.pipeline,
-      options.mqtt_uri.empty() ? "HTTP POST" : "MQTT QoS 1 via " + options.mqtt_uri,
+      !options.mqtt_uri.empty() ? "MQTT QoS 1 via " + options.mqtt_uri
+      : options.bundle          ? std::string("HTTP POST, a window's streams in one request")
+                                : std::string("HTTP POST, one request per stream"),
       std::filesystem::absolute(options.work_dir).string());
   std::fflush(stdout);
   const nlohmann::json r = server::RunLoadTest(options);

@@ -308,6 +308,25 @@ printf 't0,t1,agent,dx,dy\n0.05,0.1,ff1,0.3,0\n' > "$dir/body.csv"
 code=$(curl -s -o "$dir/old.json" -w "%{http_code}" -H "Content-Type: text/csv" -H "Authorization: Bearer T" --data-binary @"$dir/body.csv" \
        "http://127.0.0.1:$lport/api/ingest/steps.csv")
 [ "$code" = 400 ] && grep -q "time order" "$dir/old.json" || { cat "$dir/old.json"; fail "row out of time order across requests"; }
+# A device's streams in one request (POST /api/ingest, a JSON object of CSV texts): a chunk sent
+# again comes back as duplicates; a bad section refuses the whole bundle, naming the section.
+bundle() {  # bundle OUT STREAM FILE [STREAM FILE ...]: the JSON body
+  out="$1"; shift
+  /usr/bin/python3 -c 'import json, sys; a = sys.argv[1:]; print(json.dumps({a[i]: open(a[i + 1]).read() for i in range(0, len(a), 2)}))' "$@" > "$out"
+}
+{ echo "$header"; cat "${chunks[0]}"; } > "$dir/body.csv"
+bundle "$dir/bundle.json" steps.csv "$dir/body.csv"
+code=$(curl -s -o "$dir/bundle_ack.json" -w "%{http_code}" -H "Content-Type: application/json" -H "Authorization: Bearer T" \
+       --data-binary @"$dir/bundle.json" "http://127.0.0.1:$lport/api/ingest")
+[ "$code" = 200 ] && grep -q '"duplicates":20' "$dir/bundle_ack.json" && grep -q '"streams":{"steps.csv"' "$dir/bundle_ack.json" \
+  || { cat "$dir/bundle_ack.json"; fail "bundle redelivery"; }
+printf 't,rx,tx,rssi_dbm\n5,ff1,b1,loud\n' > "$dir/bad_rssi.csv"
+bundle "$dir/bundle.json" steps.csv "$dir/body.csv" rssi.csv "$dir/bad_rssi.csv"
+code=$(curl -s -o "$dir/bundle_bad.json" -w "%{http_code}" -H "Authorization: Bearer T" \
+       --data-binary @"$dir/bundle.json" "http://127.0.0.1:$lport/api/ingest")
+[ "$code" = 400 ] && grep -q "request body rssi.csv:2" "$dir/bundle_bad.json" || { cat "$dir/bundle_bad.json"; fail "bad bundle"; }
+code=$(curl -s -o /dev/null -w "%{http_code}" --data-binary @"$dir/bundle.json" "http://127.0.0.1:$lport/api/ingest")
+[ "$code" = 401 ] || fail "a bundle without the token: HTTP $code"
 curl -s -H "Authorization: Bearer T" "http://127.0.0.1:$lport/api/stats" > "$dir/stats.json"
 grep -q '"recent_rejections":\[{' "$dir/stats.json" && grep -q "time order" "$dir/stats.json" \
   || { cat "$dir/stats.json"; fail "rejection reasons in /api/stats"; }

@@ -45,6 +45,28 @@ void Post(IncidentServer& server, const std::string& stream, const std::vector<R
   for (const auto& [device, batch] : by_device) server.Ingest(stream, Body(batch));
 }
 
+/// Each device's rows of a second in one bundle (POST /api/ingest): its streams in the order
+/// Post sends them, header lines included.
+struct Bundles {
+  std::map<std::string, nlohmann::ordered_json> by_device;
+  template <class Row>
+  void Add(const std::string& stream, const std::vector<Row>& rows, double from, double to) {
+    std::map<std::string, std::vector<Row>> by;
+    for (const Row& r : rows) {
+      const TimeS t = RowTime(MissionRow(r));
+      if (t >= from && t < to) by[RowNode(MissionRow(r))].push_back(r);
+    }
+    for (const auto& [device, batch] : by) by_device[device][stream] = Body(batch);
+  }
+  void Send(IncidentServer& server) {
+    for (const auto& [device, bundle] : by_device) {
+      const nlohmann::json answer = server.IngestBundle(bundle.dump());
+      EXPECT_FALSE(answer.contains("error")) << answer.dump();
+    }
+    by_device.clear();
+  }
+};
+
 std::map<std::string, std::vector<Estimate>> ByNode(const std::vector<Estimate>& rows) {
   std::map<std::string, std::vector<Estimate>> by;
   for (const auto& e : rows) by[e.id].push_back(e);
@@ -61,23 +83,30 @@ MissionDirectory WriteMission(const TempDir& dir, const SimulatedMission& sim) {
   return MissionDirectory(dir.path() / "mission");
 }
 
+/// A live server on the mission in `dir` (WriteMission), its journal beside it, token "t", quiet.
+ServerOptions LiveOptions(const TempDir& dir, const std::string& pipeline) {
+  ServerOptions o;
+  o.live_dir = dir.path() / "mission";
+  o.journal_file = dir.path() / "journal.db";
+  o.pipeline = pipeline;
+  o.port = 0;
+  o.token = "t";
+  o.log = [](const std::string&) {};
+  return o;
+}
+
 /// What a live server running `pipeline` on the mission in `dir` estimated from the mission's
 /// streams posted as its devices would (each device's rows of a second in one body), once every
 /// row was estimated (or a minute passed); `rows_estimated`/`refusals` get the server's counts.
 std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
                               const SimulatedMission& sim, std::size_t* rows_posted,
-                              std::size_t* rows_estimated, std::size_t* refusals) {
-  ServerOptions o;
-  o.live_dir = dir.path() / "mission";
-  o.journal_file = dir.path() / "journal.db";
-  o.pipeline = pipeline;
+                              std::size_t* rows_estimated, std::size_t* refusals,
+                              bool bundled = false) {
+  ServerOptions o = LiveOptions(dir, pipeline);
   if (!sim.levels.empty()) {
     o.floor_plan = sim.plan;  // the ground floor's
     o.floor_levels = sim.levels;
   }
-  o.port = 0;
-  o.token = "t";
-  o.log = [](const std::string&) {};
   std::mutex m;
   std::vector<Estimate> live;
   o.on_estimate = [&](const Estimate& e) {
@@ -88,7 +117,18 @@ std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
   server.Start();
   const MissionData& d = sim.data;
   const TimeS end = d.truth.back().t + 1;
-  for (TimeS t = -5; t < end; t += 1.0) {
+  for (TimeS t = -5; t < end && bundled; t += 1.0) {
+    Bundles b;
+    b.Add("events.csv", d.events, t, t + 1);
+    b.Add("steps.csv", d.steps, t, t + 1);
+    b.Add("imu.csv", d.imu, t, t + 1);
+    b.Add("ranges.csv", d.ranges, t, t + 1);
+    b.Add("bearings.csv", d.bearings, t, t + 1);
+    b.Add("rssi.csv", d.rssi, t, t + 1);
+    b.Add("baro.csv", d.baro, t, t + 1);
+    b.Send(server);
+  }
+  for (TimeS t = -5; t < end && !bundled; t += 1.0) {
     Post(server, "events.csv", d.events, t, t + 1);
     Post(server, "steps.csv", d.steps, t, t + 1);
     Post(server, "imu.csv", d.imu, t, t + 1);
@@ -114,14 +154,15 @@ std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
 /// height then uses the readings received so far, and only its horizontal part is the batch
 /// run's bit for bit.
 void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMission& sim,
-                                bool exact_height = true) {
-  SCOPED_TRACE(pipeline);
+                                bool exact_height = true, bool bundled = false) {
+  SCOPED_TRACE(pipeline + (bundled ? " (bundles)" : ""));
   TempDir dir;
   const MissionDirectory mission = WriteMission(dir, sim);
   VectorSink batch;
   trailmark::testing::RunNamed(pipeline, mission, {}, batch);
   std::size_t rows = 0, estimated = 0, refusals = 0;
-  const std::vector<Estimate> live = RunLive(dir, pipeline, sim, &rows, &estimated, &refusals);
+  const std::vector<Estimate> live =
+      RunLive(dir, pipeline, sim, &rows, &estimated, &refusals, bundled);
   EXPECT_EQ(estimated, rows);
   EXPECT_EQ(refusals, 0u);
 
@@ -164,6 +205,65 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
 
 TEST(LiveServer, BeaconsEkfOnTheJournalIsTheBatchRun) {
   ExpectLiveIsTheBatchPrefix("beacons-ekf", testing::WithFootImuOnly(SimulateScenario("beacon-trail", 4), 3));
+}
+
+TEST(LiveServer, BundlesOfADevicesStreamsGiveTheBatchRunToo) {
+  // POST /api/ingest: each device's streams of a second in one request, one transaction.
+  ExpectLiveIsTheBatchPrefix("beacons-ekf",
+                             testing::WithFootImuOnly(SimulateScenario("beacon-trail", 4), 3),
+                             /*exact_height=*/true, /*bundled=*/true);
+  SimulatedMission sim = SimulateScenario("multi-floor", 3);
+  sim.data.imu.clear();
+  ExpectLiveIsTheBatchPrefix("pdr", sim, /*exact_height=*/false, /*bundled=*/true);
+}
+
+TEST(LiveServer, ABundleIsCheckedWholeBeforeAnyOfItIsJournaled) {
+  TempDir dir;
+  const SimulatedMission sim = SimulateScenario("beacon-trail", 4);
+  WriteMission(dir, sim);
+  IncidentServer server(sim.data.info, {}, LiveOptions(dir, "pdr"));
+  server.Start();
+  const std::string agent = sim.data.steps.front().agent;
+  std::vector<Step> steps;
+  for (const Step& st : sim.data.steps)
+    if (st.agent == agent && steps.size() < 4) steps.push_back(st);
+  const std::string good = Body(std::vector<Step>(steps.begin() + 2, steps.end()));
+  const auto refused = [&](const std::string& body, const std::string& why) {
+    try {
+      server.IngestBundle(body);
+      ADD_FAILURE() << "accepted: " << body;
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  refused("{\"steps.csv\": ", "not JSON");
+  refused("[1, 2]", "a bundle is a JSON object");
+  refused("{}", "a bundle is a JSON object");
+  refused(nlohmann::json{{"steps.csv", good}, {"rssi.csv", 5}}.dump(), "'rssi.csv' must be");
+  // A bad row in the second section: the first is not journaled either; the error names the
+  // section and the line.
+  std::string bad_rssi = "t,rx,tx,rssi_dbm\n0.5," + agent + ",b1,-60\n0.6," + agent + ",b1,loud\n";
+  refused(nlohmann::ordered_json{{"steps.csv", good}, {"rssi.csv", bad_rssi}}.dump(),
+          "request body rssi.csv:3");
+  refused(nlohmann::json{{"nope.csv", "t\n1\n"}}.dump(), "nope.csv");
+  EXPECT_EQ(server.stats().ingested_rows.load(), 0u);
+  // Accepted: both sections, one answer per stream.
+  const nlohmann::json ok = server.IngestBundle(nlohmann::ordered_json{{"steps.csv", good}}.dump());
+  EXPECT_EQ(ok["accepted"], 2u);
+  EXPECT_EQ(ok["streams"]["steps.csv"]["accepted"], 2u);
+  EXPECT_FALSE(ok.contains("error"));
+  // A section out of time order is refused alone: the others of the bundle are committed, and
+  // the answer says which (a resend is idempotent: its rows come back as duplicates).
+  const std::string late = Body(std::vector<Step>(steps.begin(), steps.begin() + 1));
+  const std::string baro = "t,agent,pressure_hpa\n" + std::to_string(steps.back().t1 + 1) + "," + agent + ",1013.0\n";
+  const nlohmann::json partly =
+      server.IngestBundle(nlohmann::ordered_json{{"steps.csv", late}, {"baro.csv", baro}}.dump());
+  ASSERT_TRUE(partly.contains("error")) << partly.dump();
+  EXPECT_NE(partly["streams"]["steps.csv"]["error"].get<std::string>().find("time order"),
+            std::string::npos);
+  EXPECT_EQ(partly["streams"]["baro.csv"]["accepted"], 1u);
+  EXPECT_EQ(server.stats().ingested_rows.load(), 3u);
+  server.Stop();
 }
 
 TEST(LiveServer, LandmarksUkfOnTheJournalIsTheBatchRun) {
