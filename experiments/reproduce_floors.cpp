@@ -2,13 +2,16 @@
 // `trailmark reproduce floors` (issue 26): the multi-floor building, `ins` (foot IMU) and `pdr`
 // (phone steps without height) with and without the barometer, and `mapmatch` on every level's
 // plan (without and with its stairwell veto) and on the ground floor's plan only, and
-// `breadcrumb` with its radio gated by floor and without; the right
+// `breadcrumb` with its radio gated by floor and without, and `landmarks-ukf` on the same
+// building with surveyed radio landmarks on every level (`multi-floor-landmarks`), gated and
+// not; the right
 // floor, vertical and horizontal error and the IPIN score per seed, against the must-hold
 // (right floor >= 95 %).
 
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <map>
 
 #include "experiments/experiments.h"
 #include "trailmark/io/mission_io.h"
@@ -22,6 +25,7 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
   struct Arm {
     std::string label, pipeline;
     OptionValues options;
+    std::string scenario = "multi-floor";
   };
   const std::vector<Arm> arms{
       {"ins (foot IMU) + baro", "ins", {}},
@@ -33,6 +37,9 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
       {"mapmatch, level 0's plan only", "mapmatch", {{"level", "0"}}},
       {"breadcrumb, radio gated by floor", "breadcrumb", {}},
       {"breadcrumb, radio across floors", "breadcrumb", {{"gate_other_floors", "false"}}},
+      {"landmarks-ukf, radio gated by floor", "landmarks-ukf", {}, "multi-floor-landmarks"},
+      {"landmarks-ukf, radio across floors", "landmarks-ukf", {{"gate_other_floors", "false"}},
+       "multi-floor-landmarks"},
   };
   struct Figures {
     std::vector<double> hit, ve95, ipin, ce95, worst_agent, mean_h, in95, vertical_in95, crumbs;
@@ -41,18 +48,25 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
   std::string text = fmt::format(
       "Multi-floor building (simulate multi-floor): basement, ground floor, two upper floors, a "
       "stairwell; storey heights, searches, weather, device offsets and the fan drawn per seed; "
-      "seeds {}..{}.\n\n",
+      "the landmark arms on the same building with 3 surveyed radio landmarks per level "
+      "(simulate multi-floor-landmarks); seeds {}..{}.\n\n",
       first_seed, first_seed + seeds - 1);
   text += "| seed | arm | right floor % (worst agent) | VE95 m | vertical mean m | CE95 m | IPIN score m |\n";
   text += "|---|---|---|---|---|---|---|\n";
   for (int k = 0; k < seeds; ++k) {
     const int seed = first_seed + k;
     const fs::path dir = out / fmt::format("seed-{}", seed);
-    const SimulatedMission sim = SimulateScenario("multi-floor", static_cast<std::uint64_t>(seed));
-    WriteMissionDirectory(dir / "mission", sim.data, sim.levels);
+    std::map<std::string, fs::path> missions;  // scenario -> its mission directory
+    for (const Arm& arm : arms) {
+      if (missions.count(arm.scenario)) continue;
+      const SimulatedMission sim = SimulateScenario(arm.scenario, static_cast<std::uint64_t>(seed));
+      const fs::path mission = dir / (arm.scenario == "multi-floor" ? "mission" : arm.scenario);
+      WriteMissionDirectory(mission, sim.data, sim.levels);
+      missions[arm.scenario] = mission;
+    }
     for (std::size_t a = 0; a < arms.size(); ++a) {
       double wall = 0;
-      const Metrics m = RunAndEvaluate(arms[a].pipeline, dir / "mission",
+      const Metrics m = RunAndEvaluate(arms[a].pipeline, missions.at(arms[a].scenario),
                                        dir / fmt::format("run-{}", a), &wall, arms[a].options);
       if (!m.floors) throw std::runtime_error("multi-floor mission without floor metrics");
       const FloorMetrics& f = *m.floors;
@@ -76,7 +90,7 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
   text += "\nSummary over the seeds (must hold: right floor >= 95 % for ins and for pdr with the "
           "barometer):\n\n";
   text += "| arm | right floor % mean | min | worst agent min | VE95 m mean | IPIN score m mean "
-          "| horizontal mean m | CE95 m mean | in95 % | vertical in95 % | crumbs mean m |\n";
+          "| horizontal mean m | CE95 m mean | in95 % | vertical in95 % | static nodes mean m |\n";
   text += "|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (std::size_t a = 0; a < arms.size(); ++a) {
     const Figures& g = figures[a];

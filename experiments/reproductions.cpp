@@ -207,7 +207,8 @@ const std::vector<Reproduction>& Reproductions() {
          return ReproduceIntegrity(a.seeds, a.out / "integrity", a.first_seed);
        }},
       {"floors",
-       "the multi-floor building: ins and pdr with and without the barometer, the right floor",
+       "the multi-floor building: ins and pdr with and without the barometer, the right floor; "
+       "mapmatch on every level; breadcrumb and landmarks-ukf radio gated by floor and not",
        true, false,
        [](const ReproductionArgs& a) {
          return ReproduceFloors(a.seeds, a.out / "floors", a.first_seed);

@@ -34,6 +34,15 @@ FloorMetrics RunAndScore(const std::string& pipeline, const MissionDirectory& mi
   return m.floors.value_or(FloorMetrics{});
 }
 
+/// The pipeline's metrics on the mission; `summary` gets its summary.
+Metrics RunAndEvaluate(const std::string& pipeline, const MissionDirectory& mission,
+                       const OptionValues& options, EstimatorSummary* summary) {
+  VectorSink sink;
+  *summary = RunNamed(pipeline, mission, options, sink);
+  const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string());
+  return Evaluate(mission.info(), truth, sink.TakeSortedByTime());
+}
+
 // Seed 7: neither a development seed (1-5) nor a held-out one of docs/floors.md (101-120).
 TEST(Floors, TheRightFloorInTheMultiFloorBuilding) {
   TempDir dir;
@@ -111,15 +120,10 @@ TEST(Floors, BreadcrumbRadioIsGatedByFloor) {
     EXPECT_GE(crumb_levels.size(), 3u) << seed;  // crumbs on three levels or more
     WriteMissionDirectory(dir.path(), sim.data, sim.levels);
     const MissionDirectory mission(dir.path());
-    auto run = [&](const OptionValues& options, EstimatorSummary* summary) {
-      VectorSink sink;
-      *summary = RunNamed("breadcrumb", mission, options, sink);
-      const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string());
-      return Evaluate(mission.info(), truth, sink.TakeSortedByTime());
-    };
     EstimatorSummary gated_summary, open_summary;
-    const Metrics gated = run({}, &gated_summary);
-    const Metrics open = run({{"gate_other_floors", "false"}}, &open_summary);
+    const Metrics gated = RunAndEvaluate("breadcrumb", mission, {}, &gated_summary);
+    const Metrics open =
+        RunAndEvaluate("breadcrumb", mission, {{"gate_other_floors", "false"}}, &open_summary);
     EXPECT_GT(gated_summary.numbers.at("radio_other_floor"), 1000.0) << seed;
     EXPECT_EQ(open_summary.numbers.at("radio_other_floor"), 0.0) << seed;
     gated_agents += gated.agents.stats.mean_m;
@@ -142,6 +146,46 @@ TEST(Floors, BreadcrumbRadioIsGatedByFloor) {
 // shifted, doors across gaps on every level, walls as multi-vertex lines, CSV columns shuffled.
 // The height channel sees the same readings: the same floors, row for row; map matching still
 // changes level only in the stairwell, as often as the walk took stairs.
+TEST(Floors, LandmarkRadioIsGatedByFloor) {
+  // The building with surveyed landmarks on every level (issue 26, item 4): each landmark's z
+  // puts it on its own level by the format's rule, and landmarks-ukf gated by floor is better
+  // than the same filter using the packets from the other floors.
+  double gated_agents = 0, open_agents = 0;
+  for (const int seed : {11, 12, 13, 14}) {
+    TempDir dir;
+    const SimulatedMission sim = SimulateScenario("multi-floor-landmarks", seed);
+    std::set<int> levels;
+    for (const NodeInfo& n : sim.data.info.nodes) {
+      if (n.kind != NodeKind::kLandmark) continue;
+      ASSERT_TRUE(n.position.has_value()) << n.id;
+      levels.insert(LevelAt(sim.data.info.floors, n.position->z()));
+      bool truth_found = false;
+      for (const auto& t : sim.data.truth) {
+        if (t.id != n.id) continue;
+        truth_found = true;
+        EXPECT_EQ(t.floor, LevelAt(sim.data.info.floors, n.position->z())) << n.id;
+      }
+      EXPECT_TRUE(truth_found) << n.id;
+    }
+    EXPECT_EQ(levels, (std::set<int>{-1, 0, 1, 2})) << seed;
+    WriteMissionDirectory(dir.path(), sim.data, sim.levels);
+    const MissionDirectory mission(dir.path());
+    EstimatorSummary gated_summary, open_summary;
+    const Metrics gated = RunAndEvaluate("landmarks-ukf", mission, {}, &gated_summary);
+    const Metrics open =
+        RunAndEvaluate("landmarks-ukf", mission, {{"gate_other_floors", "false"}}, &open_summary);
+    EXPECT_GT(gated_summary.numbers.at("radio_other_floor"), 100.0) << seed;
+    EXPECT_EQ(open_summary.numbers.at("radio_other_floor"), 0.0) << seed;
+    gated_agents += gated.agents.stats.mean_m;
+    open_agents += open.agents.stats.mean_m;
+  }
+  // The magnitude on held-out seeds, and this filter's ellipses (which are not honest here:
+  // issue 24), are in docs/floors.md; here only that gating is better.
+  EXPECT_LT(gated_agents, open_agents);
+  std::printf("landmarks-ukf, seeds 11-14, summed agent means: %.2f gated / %.2f not\n",
+              gated_agents, open_agents);
+}
+
 TEST(Floors, AVariantDrawnAnotherWayKeepsItsFloors) {
   const SimulatedMission sim = SimulateScenario("multi-floor", 13);
   Variation v;

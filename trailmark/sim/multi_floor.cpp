@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/sim/multi_floor.h"
 
+#include "trailmark/sim/rssi_channel.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -256,6 +258,59 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
     SimulateCrumbNetwork(sim, Vec3(kBase.x(), kBase.y(), 0.0), floors, net, false, radio_rng,
                          drop_rng, kick_rng);
   }
+  // The landmarks after the crumbs: the random streams above are those without them.
+  if (o.landmarks_per_level > 0) {
+    RssiChannelOptions radio = o.network.radio;
+    radio.floor_loss_db = floor_loss_db > 0 ? floor_loss_db
+                                            : rng.Uniform(o.floor_loss_min_db, o.floor_loss_max_db);
+    floor_loss_db = radio.floor_loss_db;
+    if (!o.radio) {
+      m.info.radio = RadioCalibration{"log-distance", radio.alpha_dbm, radio.path_loss_exponent,
+                                      radio.shadowing_sigma_db};
+    }
+    RssiChannel channel(radio, &sim.plan, {}, rng.Fork());
+    struct Landmark {
+      std::string id;
+      Vec3 position;
+      int level;
+    };
+    std::vector<Landmark> landmarks;
+    for (const FloorLevel& f : floors) {
+      for (int k = 0; k < o.landmarks_per_level; ++k) {
+        const double x = kStairX * (k + 0.5) / o.landmarks_per_level;
+        const Vec3 p(x, 0.5 * (kCorridorLo + kCorridorHi), f.elevation_m + o.landmark_height_m);
+        // lmB1-1 in the basement, lm0-1 on the ground floor, lm2-3 on level 2.
+        const std::string level_name =
+            f.level < 0 ? fmt::format("B{}", -f.level) : fmt::format("{}", f.level);
+        landmarks.push_back({fmt::format("lm{}-{}", level_name, k + 1), p, f.level});
+        NodeInfo n;
+        n.id = landmarks.back().id;
+        n.kind = NodeKind::kLandmark;
+        n.position = p;
+        n.position_sigma_m = 0.2;
+        m.info.nodes.push_back(n);
+        m.truth.push_back({0.0, n.id, p, f.level});
+      }
+    }
+    const FloorPlan* plan_of[4];
+    for (int i = 0; i < 4; ++i) plan_of[i] = &out.levels[i].second;
+    for (const auto& [id, walk] : sim.walks) {
+      for (TimeS t = walk.truth.front().t; t <= walk.truth.back().t + 1e-9;
+           t += 1.0 / o.landmark_rate_hz) {
+        const Walk::Sample s = TruthAt(walk, t);
+        const int level = LevelAt(floors, s.z);
+        for (const Landmark& l : landmarks) {
+          LinkLevels link;
+          link.floors_crossed = std::abs(level - l.level);
+          link.dz_m = s.z + o.phone_height_m - l.position.z();
+          link.plan = plan_of[std::clamp(level + 1, 0, 3)];
+          const auto rssi = channel.Sample(id, s.position, l.id, l.position.head<2>(), std::nullopt,
+                                           std::nullopt, link);
+          if (rssi) m.rssi.push_back({t, id, l.id, *rssi});
+        }
+      }
+    }
+  }
   auto by_time = [](const auto& x, const auto& y) { return x.t < y.t; };
   std::stable_sort(m.events.begin(), m.events.end(), by_time);
   std::stable_sort(m.rssi.begin(), m.rssi.end(), by_time);
@@ -271,9 +326,15 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       "each at {:g} Hz (offset, weather {:+.2f} hPa/h, a ventilation fan from t = {:.0f} s); "
       "{}simulated, seed {}",
       em1, e1, e2, o.imu.rate_hz, o.baro.rate_hz, weather_rate_hpa_per_s * 3600, ppv_start_s,
-      o.radio ? fmt::format("breadcrumbs and a base, RSSI losing {:.1f} dB per floor; ",
-                            floor_loss_db)
-              : std::string(),
+      o.radio || o.landmarks_per_level > 0
+          ? fmt::format("{}{}RSSI losing {:.1f} dB per floor; ",
+                        o.radio ? "breadcrumbs and a base, " : "",
+                        o.landmarks_per_level > 0
+                            ? fmt::format("{} surveyed landmarks on each level, ",
+                                          o.landmarks_per_level)
+                            : std::string(),
+                        floor_loss_db)
+          : std::string(),
       seed);
   return out;
 }

@@ -47,6 +47,17 @@ struct MultiFloorOptions {
   bool radio = true;
   MissionSimOptions network;
   double floor_loss_min_db = 10.0, floor_loss_max_db = 20.0;
+  /// Pre-installed radio landmarks (issue 26, item 4): this many on each level, surveyed, on
+  /// the corridor's wall, each heard by the firefighters' phones through the same channel (a
+  /// floor between costs the building's floor loss); 0: none (the scenario `multi-floor`;
+  /// `multi-floor-landmarks` has 3).
+  int landmarks_per_level = 0;
+  double landmark_rate_hz = 1.0;      ///< packets per second from each landmark
+  /// Above its level's floor. The format gives a node its level from z alone, a point less
+  /// than 1 m below a floor belonging to it (spec 1.1): a ceiling at 2.6 m in a 3.3 m storey
+  /// would put the landmark on the level above. 1.8 m stays on its level in any storey >= 2.8 m.
+  double landmark_height_m = 1.8;
+  double phone_height_m = 1.2;        ///< the receiving phone above the feet
   PdrErrorOptions pdr;
   BaroSimOptions baro;
   ImuSimOptions imu;          ///< the foot IMU (100 Hz, industrial grade by default)

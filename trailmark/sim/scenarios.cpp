@@ -199,25 +199,33 @@ std::vector<ScenarioInfo> Scenarios() {
            "floors (issue 26): a basement, a ground floor and two upper floors joined by a "
            "stairwell, storey heights drawn per seed; ff1 searches the upper floors, ff2 the "
            "ground floor and the basement; phone PDR steps without height, a foot IMU on the "
-           "stairs, a barometer each (offset, weather, a ventilation fan, spikes)"}};
+           "stairs, a barometer each (offset, weather, a ventilation fan, spikes)"},
+          {"multi-floor-landmarks",
+           "the multi-floor building with 3 surveyed radio landmarks at the ceiling of each "
+           "level's corridor, heard by the phones through the floors (the building's floor "
+           "loss, 10-20 dB), for the landmark pipelines' floor gate (issue 26, item 4)"}};
 }
+
+namespace {
+/// A variant of a scenario under the variant's name.
+SimulatedMission Named(SimulatedMission sim, const std::string& name) {
+  sim.data.info.name = name;
+  return sim;
+}
+}  // namespace
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   if (name == "office-loop") return SimulateOfficeLoop({}, seed);
   if (name == "office-loop-1lap") {
     OfficeLoopOptions o;
     o.laps = 1;
-    SimulatedMission sim = SimulateOfficeLoop(o, seed);
-    sim.data.info.name = name;
-    return sim;
+    return Named(SimulateOfficeLoop(o, seed), name);
   }
   if (name == "office-loop-kicked") {
     OfficeLoopOptions o;
     o.sim.kick.probability = 0.5;
     o.sim.kick.max_kicks = 2;
-    SimulatedMission sim = SimulateOfficeLoop(o, seed);
-    sim.data.info.name = name;
-    return sim;
+    return Named(SimulateOfficeLoop(o, seed), name);
   }
   if (name == "training-building") return SimulateTrainingBuilding({}, seed);
   if (name == "landmark-corridor") return SimulateLandmarkMission({}, seed);
@@ -236,6 +244,11 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   }
   if (name == "beacon-neighbour-trail") return SimulateShapedTrail({}, seed);
   if (name == "multi-floor") return SimulateMultiFloor({}, seed);
+  if (name == "multi-floor-landmarks") {
+    MultiFloorOptions o;
+    o.landmarks_per_level = 3;
+    return Named(SimulateMultiFloor(o, seed), name);
+  }
   if (name == "incident-4h") {
     const SyntheticIncident inc = MakeSyntheticIncident({}, seed);
     SimulatedMission sim;
