@@ -15,6 +15,8 @@
 ///                                                        [{"level": L, "walls": [...]}, ...]}
 ///   GET /api/stats (bearer token)                    -> counters and the latest rejection reasons
 ///   POST /api/ingest/<stream> (bearer token; live mode) -> rows journaled, then acknowledged
+///   POST /api/ingest (bearer token; live mode; {"<stream>": "<CSV>", ...}) -> the same, a
+///                                                        device's streams in one transaction
 /// Binds to 127.0.0.1 unless told otherwise. Every request without the right token is refused
 /// and counted; every rejection is counted and logged with its reason. See docs/server.md.
 

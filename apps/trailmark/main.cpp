@@ -306,7 +306,8 @@ int main(int argc, char** argv) {
   auto* replay_opt = serve->add_option("--replay", serve_replay, "mission directory to replay");
   auto* live_opt = serve->add_option("--live", serve_live,
                                      "live incident: directory with its mission.json; "
-                                     "measurements are POSTed to /api/ingest/<stream>");
+                                     "measurements are POSTed to /api/ingest/<stream> (or a "
+                                     "device's streams together to /api/ingest)");
   serve->add_option("--journal", serve_journal,
                     "live mode: the SQLite journal file (created or resumed)");
   serve->add_option("--mqtt", serve_options.mqtt_uri,
