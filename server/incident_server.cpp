@@ -613,36 +613,34 @@ nlohmann::json IncidentServer::IngestBundle(const std::string& body) {
         "request body: a bundle is a JSON object {\"<stream>.csv\": \"<CSV text>\", ...} with "
         "at least one stream");
   }
-  std::vector<std::unique_ptr<Pending>> pending;
+  std::vector<Pending> pending(sections.size());  // not resized: Commit holds their addresses
+  std::vector<Pending*> queued;
   for (const auto& [stream, text] : sections.items()) {
     if (!text.is_string()) {
       Reject("bundle: " + stream + " is not a string");
       throw std::invalid_argument("request body: section '" + stream +
                                   "' must be the stream's CSV text as a JSON string");
     }
-    pending.push_back(std::make_unique<Pending>());
     // Every section checked before any is queued: bad input journals nothing.
-    Prepare(stream, "request body " + stream, text.get_ref<const std::string&>(), *pending.back());
+    queued.push_back(&pending[queued.size()]);
+    Prepare(stream, "request body " + stream, text.get_ref<const std::string&>(), *queued.back());
   }
-  std::vector<Pending*> raw;
-  for (auto& p : pending) raw.push_back(p.get());
-  Commit(raw);
-  nlohmann::json out = {{"accepted", 0}, {"duplicates", 0}, {"streams", nlohmann::json::object()}};
+  Commit(queued);
+  nlohmann::json streams = nlohmann::json::object();
   std::string errors;
   std::size_t accepted = 0, duplicates = 0;
-  for (const Pending* p : raw) {
-    const Journal::AppendResult& r = p->result;
-    nlohmann::json one = {{"accepted", r.accepted}, {"duplicates", r.duplicates}};
+  for (const Pending& p : pending) {
+    const Journal::AppendResult& r = p.result;
+    nlohmann::json& one = streams[p.batch.stream] = {{"accepted", r.accepted},
+                                                     {"duplicates", r.duplicates}};
     if (!r.error.empty()) {
       one["error"] = r.error;
       errors += (errors.empty() ? "" : "; ") + r.error;
     }
-    out["streams"][p->batch.stream] = one;
     accepted += r.accepted;
     duplicates += r.duplicates;
   }
-  out["accepted"] = accepted;
-  out["duplicates"] = duplicates;
+  nlohmann::json out = {{"accepted", accepted}, {"duplicates", duplicates}, {"streams", streams}};
   if (!errors.empty()) out["error"] = errors;
   return out;
 }

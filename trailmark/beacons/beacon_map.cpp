@@ -226,11 +226,11 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
   // Median range per measured pair (robust to a long NLOS sample).
   RangeMatrix measured(m, std::vector<std::optional<double>>(m));
   std::vector<std::size_t> counts(static_cast<std::size_t>(m) * m, 0);
-  std::map<int, int> local;  // beacon -> index in the part
-  for (int a = 0; a < m; ++a) local.emplace(members[a], a);
+  std::vector<int> local(ids_.size(), -1);  // beacon -> index in the part
+  for (int a = 0; a < m; ++a) local[members[a]] = a;
   for (int a = 0; a < m; ++a) {
     for (auto& [j, pair] : samples_[members[a]]) {
-      const int b = local.at(j);  // a measured pair is in one part
+      const int b = local[j];  // a measured pair is in one part
       pair.used_median_m = pair.ranges_m.Median();
       pair.used_count = pair.ranges_m.size();
       measured[a][b] = measured[b][a] = pair.used_median_m;
@@ -268,7 +268,7 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
     }
   }
   if (options_.solver == MapSolver::kLeastSquares &&
-      SolveLeastSquares(members, measured, counts, mds_n, &part)) {
+      SolveLeastSquares(members, local, measured, counts, mds_n, &part)) {
     part.placed = true;
     return part;
   }
@@ -294,7 +294,8 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
   return part;
 }
 
-bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMatrix& measured,
+bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const std::vector<int>& local,
+                                  const RangeMatrix& measured,
                                   const std::vector<std::size_t>& counts,
                                   const std::optional<std::vector<Vec2>>& mds_start,
                                   PartResult* part) {
@@ -304,8 +305,6 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const RangeMa
   Vec2 prior_mean = Vec2::Zero();
   std::vector<const BeaconPosition*> prior(m, nullptr);
   std::map<int, int> track_index;  // the map's track -> the problem's
-  std::vector<int> local(ids_.size(), -1);
-  for (int a = 0; a < m; ++a) local[members[a]] = a;
   for (int a = 0; a < m; ++a) {
     const int i = members[a];
     prior[a] = surveyed_[i] ? &*surveyed_[i] : (hint_[i] ? &*hint_[i] : nullptr);

@@ -163,7 +163,9 @@ class BeaconMap {
   /// for n <= 2).
   double MedianSigma(std::size_t count) const;
   /// Solves one connected part by least squares; false when its priors do not fix it.
-  bool SolveLeastSquares(const std::vector<int>& members, const RangeMatrix& measured,
+  /// `local`: each beacon's index in `members` (-1 outside the part).
+  bool SolveLeastSquares(const std::vector<int>& members, const std::vector<int>& local,
+                         const RangeMatrix& measured,
                          const std::vector<std::size_t>& counts,
                          const std::optional<std::vector<Vec2>>& mds_start, PartResult* part);
   void Touch(int i) {
