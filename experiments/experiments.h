@@ -83,4 +83,10 @@ int ReproduceIntegrity(int seeds, const std::filesystem::path& out, int first_se
 /// first_seed .. first_seed + seeds - 1: the right floor, VE95, the IPIN score.
 int ReproduceFloors(int seeds, const std::filesystem::path& out, int first_seed = 1);
 
+/// landmarks-ukf's error-state tracker, the paper's UKF and dead reckoning on the office of
+/// issue 24, the multi-floor building's landmarks and the paper's corridor, seeds first_seed ..
+/// first_seed + seeds - 1; `options` go to the default tracker's arm.
+int ReproduceLandmarkTracking(int seeds, const std::filesystem::path& out, int first_seed = 1,
+                              const OptionValues& options = {});
+
 }  // namespace trailmark::experiments

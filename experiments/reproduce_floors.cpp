@@ -40,6 +40,8 @@ int ReproduceFloors(int seeds, const fs::path& out, int first_seed) {
       {"landmarks-ukf, radio gated by floor", "landmarks-ukf", {}, "multi-floor-landmarks"},
       {"landmarks-ukf, radio across floors", "landmarks-ukf", {{"gate_other_floors", "false"}},
        "multi-floor-landmarks"},
+      {"landmarks-ukf filter=paper (the paper's UKF), gated", "landmarks-ukf",
+       {{"filter", "paper"}}, "multi-floor-landmarks"},
   };
   struct Figures {
     std::vector<double> hit, ve95, ipin, ce95, worst_agent, mean_h, in95, vertical_in95, crumbs;

@@ -206,6 +206,14 @@ const std::vector<Reproduction>& Reproductions() {
        [](const ReproductionArgs& a) {
          return ReproduceIntegrity(a.seeds, a.out / "integrity", a.first_seed);
        }},
+      {"landmark-tracking",
+       "landmarks-ukf's error-state tracker against the paper's UKF and dead reckoning: the "
+       "office without radio model or events, the multi-floor building, the corridor (issue 24)",
+       true, true,
+       [](const ReproductionArgs& a) {
+         return ReproduceLandmarkTracking(a.seeds, a.out / "landmark-tracking", a.first_seed,
+                                          a.options);
+       }},
       {"floors",
        "the multi-floor building: ins and pdr with and without the barometer, the right floor; "
        "mapmatch on every level; breadcrumb and landmarks-ukf radio gated by floor and not",

@@ -146,6 +146,33 @@ TEST(Floors, BreadcrumbRadioIsGatedByFloor) {
 // shifted, doors across gaps on every level, walls as multi-vertex lines, CSV columns shuffled.
 // The height channel sees the same readings: the same floors, row for row; map matching still
 // changes level only in the stairwell, as often as the walk took stairs.
+TEST(Floors, AMountedDeviceIsOnTheStoreyBelowItsCeiling) {
+  // The spec's rule is for a person's z (feet or belt, 1 m tolerance): a landmark 2.7 m up a
+  // 3 m storey would be on the level above. A mounted device's storey is the one whose floor is
+  // at or below it (0.1 m for a survey's error).
+  const std::vector<FloorLevel> floors = {{-1, -3.0}, {0, 0.0}, {1, 3.0}};
+  EXPECT_EQ(LevelAt(floors, 2.7), 1);
+  EXPECT_EQ(MountedLevelAt(floors, 2.7), 0);
+  EXPECT_EQ(MountedLevelAt(floors, -0.05), 0);
+  EXPECT_EQ(MountedLevelAt(floors, -0.3), -1);
+  EXPECT_EQ(MountedLevelAt(floors, 3.0), 1);
+  EXPECT_EQ(MountedLevelAt({}, 2.7), 0);  // default 3 m storeys
+  EXPECT_EQ(MountedLevelAt({}, 5.5), 1);
+  // NodeLevelOf uses it for the static nodes of mission.json.
+  MissionInfo info;
+  info.floors = floors;
+  NodeInfo lm;
+  lm.id = "lm";
+  lm.kind = NodeKind::kLandmark;
+  lm.position = Vec3(0, 0, 2.7);
+  info.nodes.push_back(lm);
+  lm.id = "lm-up";
+  lm.position = Vec3(0, 0, 3.2);
+  info.nodes.push_back(lm);
+  EXPECT_EQ(NodeLevelOf(nullptr, info, "lm"), 0);
+  EXPECT_EQ(NodeLevelOf(nullptr, info, "lm-up"), 1);
+}
+
 TEST(Floors, LandmarkRadioIsGatedByFloor) {
   // The building with surveyed landmarks on every level (issue 26, item 4): each landmark's z
   // puts it on its own level by the format's rule, and landmarks-ukf gated by floor is better

@@ -102,6 +102,15 @@ TEST(Metamorphic, RadioLandmarksDoNotDependOnTheFramesRotation) {
   }
 }
 
+TEST(Metamorphic, TheLandmarkTrackerOnTheOfficeDoesNotDependOnTheFrame) {
+  // The error-state tracker's unknown landmarks are fitted on a grid in their positions' own
+  // frame; the rest is an EKF (equivariant). Seeds 11-12 of the office, rotated and shifted.
+  for (int seed : {11, 12}) {
+    const SimulatedMission sim = SimulateScenario("landmark-office", seed);
+    EXPECT_LT(LargestDifference("landmarks-ukf", sim, kRotatedShifted), 0.01) << seed;
+  }
+}
+
 TEST(Metamorphic, RadioLandmarksDoNotDependOnTheFramesOrigin) {
   const SimulatedMission sim = SimulateScenario("landmark-corridor", 2);
   const Frame shifted{0.0, kRotatedShifted.shift_m};

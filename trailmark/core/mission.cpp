@@ -41,6 +41,10 @@ int LevelAt(const std::vector<FloorLevel>& floors, double z_m) {
   return best->level;
 }
 
+int MountedLevelAt(const std::vector<FloorLevel>& floors, double z_m) {
+  return LevelAt(floors, z_m - kFloorTolerance_m + kMountedTolerance_m);
+}
+
 std::pair<double, double> LevelHeightInterval(const std::vector<FloorLevel>& floors, int level) {
   constexpr double kInf = std::numeric_limits<double>::infinity();
   if (floors.empty()) {

@@ -66,6 +66,12 @@ struct FloorLevel {
 inline constexpr double kFloorTolerance_m = 1.0;
 inline constexpr double kDefaultStoreyM = 3.0;
 int LevelAt(const std::vector<FloorLevel>& floors, double z_m);
+/// Ours: the storey a mounted device (a landmark on the ceiling, a beacon on a wall) is in:
+/// the level whose floor is at or below its z, within kMountedTolerance_m (a survey's error).
+/// The spec's 1 m tolerance is for a person's z at the feet or belt; with it a ceiling device
+/// 2.7 m above a 3 m storey's floor would be on the level above.
+inline constexpr double kMountedTolerance_m = 0.1;
+int MountedLevelAt(const std::vector<FloorLevel>& floors, double z_m);
 /// The z interval [lower, upper) of heights that LevelAt maps to `level` (infinite at the ends;
 /// empty, lower == upper, for a level not in `floors`).
 std::pair<double, double> LevelHeightInterval(const std::vector<FloorLevel>& floors, int level);

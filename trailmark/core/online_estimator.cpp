@@ -98,7 +98,11 @@ std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& inf
     if (const auto b = levels->NodeLevel(node)) return b->level;
   }
   const NodeInfo* n = info.Find(node);
-  if (n != nullptr && n->position) return LevelAt(info.floors, n->position->z());
+  if (n != nullptr && n->position) {
+    // A person's start by the spec's rule; a static node is mounted somewhere in its storey.
+    return n->kind == NodeKind::kAgent ? LevelAt(info.floors, n->position->z())
+                                       : MountedLevelAt(info.floors, n->position->z());
+  }
   return std::nullopt;
 }
 

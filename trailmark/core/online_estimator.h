@@ -134,7 +134,8 @@ class LevelSource {
 struct MissionInfo;
 
 /// The level of a node: the source's (null: none), else for a node of known position in
-/// mission.json its z's by the spec's rule (MissionInfo::floors); nullopt when neither knows.
+/// mission.json its z's — an agent's by the spec's rule (LevelAt), a static node's as a mounted
+/// device's (MountedLevelAt: a ceiling landmark stays on its storey); nullopt when neither knows.
 std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& info,
                                const std::string& node);
 /// Whether two nodes are known to be on different levels (radio estimators leave such

@@ -5,6 +5,7 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace trailmark::landmarks {
@@ -14,6 +15,8 @@ namespace {
 constexpr double kCovarianceFloorM2 = 1e-4;
 /// Added to a step's drift variance so that it is never zero: (0.1 mm)^2.
 constexpr double kStepVarianceFloorM2 = 1e-8;
+/// Unknown landmarks placed by the trackers are written at most this often (s).
+constexpr double kLandmarkEmitPeriodS = 5.0;
 /// A position fix needs ranges to three landmarks (two leave a mirror ambiguity).
 constexpr int kRangesForFix = 3;
 }  // namespace
@@ -32,7 +35,11 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "fix_fusion=intersection is for stop-and-go tracking (landmarks-stopgo)";
     return false;
   }
-  return calibration.IsValid(why) && integrity.IsValid(why);
+  if (tracking != Tracking::kUkf && filter != TrackingFilter::kPaper) {
+    if (why) *why = "filter=error-state is the continuous tracker of landmarks-ukf";
+    return false;
+  }
+  return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why);
 }
 
 const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
@@ -57,6 +64,27 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
                  {"intersection", FixFusion::kIntersection}},
              "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
              "intersection: shared PDR errors and covariance intersection, honest)");
+    t.Choice("filter", [](O& o) -> TrackingFilter& { return o.filter; },
+             std::vector<std::pair<std::string, TrackingFilter>>{
+                 {"paper", TrackingFilter::kPaper}, {"error-state", TrackingFilter::kErrorState}},
+             "landmarks-ukf's tracker (paper: the UKF of sec. 5.4; error-state: heading, drift, "
+             "turn and step scale, path-loss and shadowing states, iterated robust 3-D updates, "
+             "unknown landmarks placed from the walk)");
+    t.Real("shadowing_length_m", [](O& o) -> double& { return o.tracker.shadowing_length_m; }, "m",
+           OptionBounds::Positive(), "error-state: shadowing decorrelation distance");
+    t.Real("shadowing_variance_share",
+           [](O& o) -> double& { return o.tracker.shadowing_variance_share; }, "",
+           OptionBounds::Between(0, 0.99), "error-state: share of the RSSI variance that is shadowing");
+    t.Real("handheld_height_m", [](O& o) -> double& { return o.tracker.handheld_height_m; }, "m",
+           OptionBounds::Any(), "error-state: the handheld above the agent's z");
+    t.Integer("tracker_iterations", [](O& o) -> int& { return o.tracker.iterations; },
+              OptionBounds::AtLeast(1), "error-state: Gauss-Newton iterations of one packet's update");
+    t.Real("turn_scale_sigma", [](O& o) -> double& { return o.tracker.turn_scale_sigma; }, "",
+           OptionBounds::Positive(), "error-state: prior sigma of the PDR's turn-scale error");
+    t.Flag("slam", &O::slam,
+           "error-state: unknown landmarks placed from moving packets and tracked jointly");
+    t.Flag("track_with_estimated_landmarks", &O::track_with_estimated_landmarks,
+           "error-state: also fuse landmarks placed from this dead reckoning's stops");
     t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
     t.Flag("gate_other_floors", &O::gate_other_floors,
            "packets between an agent and a landmark on another level are not used");
@@ -85,11 +113,19 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     ids_.push_back(n.id);
     known_.push_back(n.position.has_value());
     estimate_.push_back(n.position ? std::optional<Vec2>(n.position->head<2>()) : std::nullopt);
+    landmark_z_.push_back(n.position ? std::optional<double>(n.position->z()) : std::nullopt);
     const double s = n.position_sigma_m.value_or(options_.surveyed_sigma_m);
     estimate_cov_.push_back(Mat2::Identity() * s * s);
     estimate_t_.push_back(0);
     grid_heard_.push_back(0);
   }
+  // Unknown landmarks are taken at the surveyed ones' mean height (mounted alike), if any.
+  double z_sum = 0;
+  int z_count = 0;
+  for (const auto& z : landmark_z_) {
+    if (z) z_sum += *z, ++z_count;
+  }
+  if (z_count > 0) unknown_landmark_z_m_ = z_sum / z_count;
   if (ids_.size() < 3) {
     throw std::invalid_argument("the radio-landmark estimators need at least 3 landmarks");
   }
@@ -103,6 +139,7 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
                            : options_.unknown_start_sigma_m;
     a.cov = Mat2::Identity() * s * s;
     a.pdr_position = a.position;
+    a.z_m = start ? start->z() : 0.0;
     if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kIntersection) {
       a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
                    n.start_heading_sigma_rad);
@@ -117,26 +154,74 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
       LandmarkUkfOptions uo;
       uo.initial_sigma_m = s;
       uo.rssi_sigma_db = options_.rssi_sigma_db;
-      a.ukf.emplace(a.position, model_, uo);
+      if (options_.filter == TrackingFilter::kErrorState) {
+        // One packet's sigma: the calibration's shadowing, at least rssi_sigma_db (a packet
+        // also carries what a calibration does not: NLOS, a body, the antenna's angle).
+        std::optional<radio::LogDistanceModel> given;
+        if (calibrated_) {
+          given = model_;
+          given->sigma_db = std::max(model_.sigma_db, options_.rssi_sigma_db);
+        }
+        LandmarkTrackerOptions to = options_.tracker;
+        to.default_sigma_db = std::max(to.default_sigma_db, options_.rssi_sigma_db);
+        a.tracker.emplace(Vec3(a.position.x(), a.position.y(), a.z_m), s, n.start_heading_sigma_rad,
+                          given, to);
+      } else {
+        a.ukf.emplace(a.position, model_, uo);
+      }
     }
     agents_[n.id] = std::move(a);
   }
 }
 
+Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {
+  if (a.tracker) return a.tracker->position();
+  return a.ukf ? a.ukf->position() : a.position;
+}
+
+Mat2 LandmarkEstimator::CovarianceOf(const Agent& a) const {
+  if (a.tracker) return a.tracker->position_cov();
+  return a.ukf ? a.ukf->position_cov() : a.cov;
+}
+
+double LandmarkEstimator::HeightOf(const std::string& id, const Agent& a) const {
+  if (levels_) {
+    if (const auto b = levels_->NodeLevel(id)) return b->z_m;
+  }
+  return a.z_m;
+}
+
 void LandmarkEstimator::EmitAgent(TimeS t, const std::string& id, const Agent& a,
                                   EstimateSink& sink) {
-  const Vec2 p = a.ukf ? a.ukf->position() : a.position;
-  const Mat2 c = a.ukf ? a.ukf->position_cov() : a.cov;
+  const Vec2 p = PositionOf(a);
+  const Mat2 c = CovarianceOf(a);
   sink.Add({t, id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
 }
 
-void LandmarkEstimator::EmitLandmarks(TimeS t, EstimateSink& sink) {
-  for (std::size_t j = 0; j < ids_.size(); ++j) {
-    if (!estimate_[j]) continue;
-    estimate_t_[j] = t;
-    const Mat2& c = estimate_cov_[j];
-    sink.Add({t, ids_[j], Vec3(estimate_[j]->x(), estimate_[j]->y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+std::optional<std::pair<Vec2, Mat2>> LandmarkEstimator::LandmarkOf(std::size_t j) const {
+  // An unknown landmark placed by the agents' trackers (SLAM): the most certain agent's.
+  std::optional<std::pair<Vec2, Mat2>> best;
+  if (!known_[j]) {
+    for (const auto& [id, a] : agents_) {
+      if (!a.tracker) continue;
+      const auto e = a.tracker->LandmarkEstimate(static_cast<int>(j));
+      if (e && (!best || e->second.trace() < best->second.trace())) best = e;
+    }
   }
+  if (!best && estimate_[j]) best = std::make_pair(*estimate_[j], estimate_cov_[j]);
+  return best;
+}
+
+void LandmarkEstimator::EmitLandmark(TimeS t, std::size_t j, EstimateSink& sink) {
+  const auto e = LandmarkOf(j);
+  if (!e) return;
+  estimate_t_[j] = t;
+  const Mat2& c = e->second;
+  sink.Add({t, ids_[j], Vec3(e->first.x(), e->first.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+}
+
+void LandmarkEstimator::EmitLandmarks(TimeS t, EstimateSink& sink) {
+  for (std::size_t j = 0; j < ids_.size(); ++j) EmitLandmark(t, j, sink);
 }
 
 void LandmarkEstimator::RangesOf(const Stop& s, std::vector<std::optional<double>>* r,
@@ -244,7 +329,7 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
     // confident as if the estimated landmarks were surveyed).
     if (r[j]) sg[j] = std::sqrt(sg[j] * sg[j] + 0.5 * estimate_cov_[j].trace());
   }
-  if (usable >= kRangesForFix && !a.ukf) {
+  if (usable >= kRangesForFix && !a.ukf && !a.tracker) {
     fix.standing = {a.position};
     fix.standing_known = {false};
     fix.range_m = {r};
@@ -290,6 +375,8 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   t_last_ = std::max(t_last_, t);
   if (const auto* step = std::get_if<Step>(&row)) {
     Agent& a = agents_.at(step->agent);
+    if (a.tracker && !a.stepped) EmitAgent(step->t0, step->agent, a, sink);  // the start, first
+    a.stepped = true;
     const Vec2 d = step->delta_n.head<2>();
     const double s = options_.drift_per_m * d.norm();
     a.pdr_position += d;
@@ -302,6 +389,8 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       a.cov += Mat2::Identity() * (s * s + kStepVarianceFloorM2);
     }
     if (a.ukf) a.ukf->PredictWithDisplacement(d, Mat2::Identity() * (s * s + kStepVarianceFloorM2));
+    if (a.tracker) a.tracker->AddStep(*step);
+    a.z_m += step->delta_n.z();
     a.t = step->t1;
     EmitAgent(step->t1, step->agent, a, sink);
   } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
@@ -324,6 +413,24 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     if (a.ukf && estimate_[j]) {
       const auto admit = [&](double nis) { return landmark_integrity_.Record(other, p->t, nis, 1); };
       if (a.ukf->UpdateRssi(*estimate_[j], estimate_cov_[j], p->rssi_dbm, admit)) ++ukf_updates_;
+    }
+    if (a.tracker) {
+      const auto admit = [&](double nis) { return landmark_integrity_.Record(other, p->t, nis, 1); };
+      if (known_[j] || (estimate_[j] && options_.track_with_estimated_landmarks)) {
+        if (a.tracker->UpdateRssi(p->t, j, *estimate_[j], landmark_z_[j], estimate_cov_[j],
+                                  HeightOf(agent, a), p->rssi_dbm, admit)) {
+          ++ukf_updates_;
+        }
+      } else if (options_.slam) {
+        const bool placed = a.tracker->LandmarkEstimate(j).has_value();
+        const double dz = unknown_landmark_z_m_.value_or(HeightOf(agent, a) + options_.tracker.handheld_height_m) -
+                          (HeightOf(agent, a) + options_.tracker.handheld_height_m);
+        if (a.tracker->UpdateRssiUnknown(p->t, j, dz, p->rssi_dbm, admit)) ++ukf_updates_;
+        // A landmark just placed, and then every 5 s: its estimate.
+        if (!placed || p->t - estimate_t_[j] >= kLandmarkEmitPeriodS) {
+          if (a.tracker->LandmarkEstimate(j)) EmitLandmark(p->t, j, sink);
+        }
+      }
     }
   } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
     auto ait = agents_.find(e->agent);
@@ -348,14 +455,15 @@ void LandmarkEstimator::Finish(EstimateSink& sink) {
 std::optional<Estimate> LandmarkEstimator::Current(const std::string& node) const {
   if (const auto it = agents_.find(node); it != agents_.end()) {
     const Agent& a = it->second;
-    const Vec2 p = a.ukf ? a.ukf->position() : a.position;
-    const Mat2 c = a.ukf ? a.ukf->position_cov() : a.cov;
+    const Vec2 p = PositionOf(a);
+    const Mat2 c = CovarianceOf(a);
     return Estimate{a.t, node, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
   }
-  if (const auto it = index_.find(node); it != index_.end() && estimate_[it->second]) {
-    const int j = it->second;
-    const Mat2& c = estimate_cov_[j];
-    return Estimate{estimate_t_[j], node, Vec3(estimate_[j]->x(), estimate_[j]->y(), 0), c(0, 0),
+  if (const auto it = index_.find(node); it != index_.end()) {
+    const auto e = LandmarkOf(static_cast<std::size_t>(it->second));
+    if (!e) return std::nullopt;
+    const Mat2& c = e->second;
+    return Estimate{estimate_t_[it->second], node, Vec3(e->first.x(), e->first.y(), 0), c(0, 0),
                     c(0, 1), c(1, 1)};
   }
   return std::nullopt;
@@ -379,6 +487,27 @@ EstimatorSummary LandmarkEstimator::Summary() const {
   summary.numbers["radio_alpha_dbm"] = model_.alpha_dbm;
   summary.numbers["rows_ignored"] = static_cast<double>(ignored_);
   if (options_.tracking == Tracking::kUkf) landmark_integrity_.Report(summary);
+  // The error-state tracker's own estimates of each agent's motion and radio errors.
+  std::size_t gated = 0, calibration_only = 0;
+  for (const auto& [id, a] : agents_) {
+    if (!a.tracker) continue;
+    const LandmarkTracker& k = *a.tracker;
+    gated += k.gated();
+    calibration_only += k.calibration_only();
+    summary.numbers[id + ".heading_correction_deg"] = k.heading_correction_rad() * 180 / M_PI;
+    summary.numbers[id + ".heading_rate_deg_per_min"] = k.heading_rate_rad_per_s() * 180 / M_PI * 60;
+    summary.numbers[id + ".step_scale_correction"] = k.scale_correction();
+    summary.numbers[id + ".turn_scale_correction"] = k.turn_scale_correction();
+    summary.numbers[id + ".radio_alpha_dbm"] = k.alpha_dbm();
+    summary.numbers[id + ".radio_alpha_sigma_db"] = k.alpha_sigma_db();
+    summary.numbers[id + ".radio_path_loss_exponent"] = k.exponent();
+    summary.numbers[id + ".radio_exponent_sigma"] = k.exponent_sigma();
+    summary.numbers[id + ".radio_mean_nis"] = k.mean_nis();
+  }
+  if (options_.filter == TrackingFilter::kErrorState) {
+    summary.numbers["rssi_gated"] = static_cast<double>(gated);
+    summary.numbers["rssi_calibration_only"] = static_cast<double>(calibration_only);
+  }
   return summary;
 }
 

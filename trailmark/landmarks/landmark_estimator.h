@@ -26,6 +26,7 @@
 #include "trailmark/core/options.h"
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/integrity/consistency.h"
+#include "trailmark/landmarks/landmark_tracker.h"
 #include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/landmarks/stop_and_go.h"
 #include "trailmark/radio/path_loss.h"
@@ -45,8 +46,28 @@ enum class FixFusion {
   kIntersection,
 };
 
+/// The continuous tracker of `landmarks-ukf`.
+enum class TrackingFilter {
+  /// The paper's UKF (sec. 5.4): position, velocity, acceleration; white PDR drift; every packet
+  /// an independent update at the model's sigma; the radio model as calibrated.
+  kPaper,
+  /// Ours (issue 24, landmark_tracker.h): the PDR's heading, heading-rate and scale errors, the
+  /// path-loss model and each link's shadowing as states; iterated, robust updates in 3-D.
+  kErrorState,
+};
+
 struct LandmarkEstimatorOptions {
   Tracking tracking = Tracking::kStopAndGo;
+  TrackingFilter filter = TrackingFilter::kErrorState;
+  LandmarkTrackerOptions tracker;  ///< TrackingFilter::kErrorState
+  /// Error-state: also fuse landmarks placed by the stop-and-go solver. Off: they were placed
+  /// from this dead reckoning's standing positions, so they share its heading and scale errors,
+  /// which their covariance does not say; fused as independent, they turn the heading onto the
+  /// dead reckoning's own error (measured on the corridor's `start` variants, docs/landmarks.md).
+  bool track_with_estimated_landmarks = false;
+  /// Error-state: unknown landmarks placed by each agent's tracker from its moving packets and
+  /// then estimated jointly with its track (LandmarkTracker::UpdateRssiUnknown; issue 24 item 3).
+  bool slam = true;
   FixFusion fix_fusion = FixFusion::kIndependent;
   /// PDR drift, 1 sigma per metre walked (ours: 5 %); not used by FixFusion::kIntersection,
   /// which propagates the dead reckoning's own error model (`pdr`'s defaults and the agent's
@@ -120,6 +141,9 @@ class LandmarkEstimator : public OnlineEstimator {
     std::vector<double> sum;
     std::vector<int> count;
     std::optional<LandmarkUkf> ukf;
+    std::optional<LandmarkTracker> tracker;
+    double z_m = 0;  ///< the start's z plus every step's dz (when no height channel)
+    bool stepped = false;  ///< a step was seen (the error-state tracker writes its start first)
   };
   struct Stop {
     Vec2 standing = Vec2::Zero();
@@ -127,9 +151,15 @@ class LandmarkEstimator : public OnlineEstimator {
   };
   void EmitAgent(TimeS t, const std::string& id, const Agent& a, EstimateSink& sink);
   void EmitLandmarks(TimeS t, EstimateSink& sink);
+  void EmitLandmark(TimeS t, std::size_t j, EstimateSink& sink);
+  /// A landmark's estimate: surveyed, stop-and-go's, or (unknown) the most certain tracker's.
+  std::optional<std::pair<Vec2, Mat2>> LandmarkOf(std::size_t j) const;
   void RangesOf(const Stop& s, std::vector<std::optional<double>>* r, std::vector<double>* sg) const;
   void EndOfStop(TimeS t, const std::string& id, Agent& a, EstimateSink& sink);
   void Refit();
+  Vec2 PositionOf(const Agent& a) const;
+  Mat2 CovarianceOf(const Agent& a) const;
+  double HeightOf(const std::string& id, const Agent& a) const;
 
   LandmarkEstimatorOptions options_;
   radio::LogDistanceModel model_;
@@ -139,6 +169,8 @@ class LandmarkEstimator : public OnlineEstimator {
   std::vector<bool> known_;
   std::vector<std::optional<Vec2>> estimate_;
   std::vector<Mat2> estimate_cov_;
+  std::vector<std::optional<double>> landmark_z_;  ///< surveyed landmarks' z
+  std::optional<double> unknown_landmark_z_m_;     ///< the surveyed ones' mean z
   std::vector<TimeS> estimate_t_;
   std::vector<int> grid_heard_;  ///< stops that had heard each landmark at its last grid search
   std::map<std::string, Agent> agents_;

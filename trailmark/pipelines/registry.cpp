@@ -180,8 +180,10 @@ std::vector<PipelineSpec> BuildRegistry() {
     PipelineSpec s;
     s.name = ukf ? "landmarks-ukf" : "landmarks-stopgo";
     s.description =
-        ukf ? "radio-landmarks paper: landmarks from stop-and-go, responder by a UKF of PDR/INS "
-              "motion and every RSSI answer (sec. 5.4)"
+        ukf ? "radio-landmarks paper, continuous tracking with every RSSI answer: by default an "
+              "error-state filter (ours, issue 24: PDR heading, drift, turn and step scale, each "
+              "phone's path loss and each link's shadowing as states, unknown landmarks placed "
+              "from the walk); filter=paper: the paper's UKF (sec. 5.4)"
             : "radio-landmarks paper: stop-and-go localization of landmarks and stops, dead "
               "reckoning re-anchored at each stop (sec. 5.3, 6.2)";
     s.needs = {kStepStreams, {Stream::kRssi}};
@@ -192,6 +194,7 @@ std::vector<PipelineSpec> BuildRegistry() {
     s.paper_scenarios = {"landmark-corridor"};
     landmarks::LandmarkEstimatorOptions defaults;
     defaults.tracking = ukf ? landmarks::Tracking::kUkf : landmarks::Tracking::kStopAndGo;
+    if (!ukf) defaults.filter = landmarks::TrackingFilter::kPaper;  // no continuous tracker
     out.push_back(Make<landmarks::LandmarkEstimatorOptions>(
         s, defaults, landmarks::LandmarkOptionTable(), Front::kGlobal,
         [](const EstimatorInputs& in, const landmarks::LandmarkEstimatorOptions& o) {

@@ -74,7 +74,7 @@ SimulatedMission SimulateLandmarkMission(const LandmarkCorridorOptions& o, std::
     n.id = "lm" + std::to_string(j + 1);
     n.kind = NodeKind::kLandmark;
     if (j == 0) {  // one surveyed landmark (e.g. the smoke detector at the entrance)
-      n.position = Vec3(c.landmarks[0].x(), c.landmarks[0].y(), 0);
+      n.position = Vec3(c.landmarks[0].x(), c.landmarks[0].y(), o.landmark_height_m);
       n.position_sigma_m = 0.2;
     }
     m.info.nodes.push_back(n);
@@ -104,7 +104,7 @@ SimulatedMission SimulateLandmarkMission(const LandmarkCorridorOptions& o, std::
   for (const auto& s : walk.truth) m.truth.push_back({s.t, "ff1", Vec3(s.position.x(), s.position.y(), 0)});
   for (int j = 0; j < o.landmarks; ++j) {
     m.truth.push_back({walk.truth.front().t, "lm" + std::to_string(j + 1),
-                       Vec3(c.landmarks[j].x(), c.landmarks[j].y(), 0)});
+                       Vec3(c.landmarks[j].x(), c.landmarks[j].y(), o.landmark_height_m)});
   }
   m.events.push_back({walk.truth.front().t, "ff1", "enter", ""});
   for (const auto& st : walk.stops) {

@@ -29,6 +29,9 @@ struct LandmarkCorridorOptions {
   double nlos_probability = 0.1;
   double nlos_loss_db = 8.0;
   double standing_sigma_m = 0.1;        ///< how well the IMU knows the stops (sec. 6.2)
+  /// The landmarks' z in the mission: mounted at the handheld's height, so that the simulated
+  /// channel (horizontal distance) is also the 3-D one (the format's agent z is at the feet).
+  double landmark_height_m = 1.2;
 };
 
 struct LandmarkCorridor {

@@ -8,6 +8,7 @@
 #include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/landmark_corridor.h"
+#include "trailmark/sim/landmark_office.h"
 #include "trailmark/sim/multi_floor.h"
 
 #include <algorithm>
@@ -171,6 +172,10 @@ std::vector<ScenarioInfo> Scenarios() {
           {"landmark-corridor",
            "radio-landmarks paper: 5 wake-up landmarks in a corridor (4 to be localized), a "
            "stop-and-go walk with 7 stops, wake-ups every 3 s while walking"},
+          {"landmark-office",
+           "issue 24: an office with 16 ceiling BLE landmarks (10 surveyed, 6 unknown), two "
+           "firefighters searching its rooms with drifting PDR; no radio calibration, no stop/go "
+           "events, walls, correlated shadowing, landmark and phone offsets, censoring"},
           {"training-building",
            "two firefighters search the rooms of a fire-training floor from the right entrance, "
            "a fire zone, kicked crumbs (sec. V-B)"},
@@ -229,6 +234,7 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   }
   if (name == "training-building") return SimulateTrainingBuilding({}, seed);
   if (name == "landmark-corridor") return SimulateLandmarkMission({}, seed);
+  if (name == "landmark-office") return SimulateLandmarkOffice({}, seed);
   if (name == "beacon-lab") return SimulateBeaconLab({}, seed);
   if (name == "house1-search" || name == "house2-search") {
     HouseSearchOptions o;
