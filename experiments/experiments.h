@@ -85,8 +85,10 @@ int ReproduceFloors(int seeds, const std::filesystem::path& out, int first_seed 
 
 /// landmarks-ukf's error-state tracker, the paper's UKF and dead reckoning on the office of
 /// issue 24, the multi-floor building's landmarks and the paper's corridor, seeds first_seed ..
-/// first_seed + seeds - 1; `options` go to the default tracker's arm.
+/// first_seed + seeds - 1; `options` go to the default tracker's arm; and the recorded BLE
+/// flat under data_dir (recorded RSSI, odometry errors drawn per seed).
 int ReproduceLandmarkTracking(int seeds, const std::filesystem::path& out, int first_seed = 1,
-                              const OptionValues& options = {});
+                              const OptionValues& options = {},
+                              const std::filesystem::path& data_dir = "../shared/data");
 
 }  // namespace trailmark::experiments

@@ -212,7 +212,7 @@ const std::vector<Reproduction>& Reproductions() {
        true, true,
        [](const ReproductionArgs& a) {
          return ReproduceLandmarkTracking(a.seeds, a.out / "landmark-tracking", a.first_seed,
-                                          a.options);
+                                          a.options, a.data_dir);
        }},
       {"floors",
        "the multi-floor building: ins and pdr with and without the barometer, the right floor; "

@@ -239,6 +239,45 @@ TEST(LandmarkTracker, DoesNotPlaceALandmarkHeardOnlyAlongAStraightLine) {
   EXPECT_FALSE(tracker.LandmarkEstimate(99).has_value());
 }
 
+/// The square of RecoversATurnScaleErrorFromSurveyedLandmarks walked once with a perfect PDR,
+/// RSSI with white noise of `noise_db` against a stated 4 dB.
+LandmarkTracker SquareWithNoise(double noise_db, bool adapt) {
+  Random rng(6);
+  LandmarkTrackerOptions o;
+  o.adapt_noise = adapt;
+  LandmarkTracker tracker(Vec3(0, 0, 0), 0.1, 0.02, radio::LogDistanceModel{-60, 2.0, 4.0}, o);
+  Vec2 at(0, 0);
+  double heading = 0;
+  TimeS t = 0;
+  for (int lap = 0; lap < 3; ++lap) {
+    for (int side = 0; side < 4; ++side, heading += M_PI / 2) {
+      for (int k = 0; k < 14; ++k) {
+        const Vec2 d(0.7 * std::cos(heading), 0.7 * std::sin(heading));
+        at += d;
+        tracker.AddStep(MakeStep(t += 0.55, d));
+        for (int j = 0; j < 8; ++j) {
+          const Vec2 l(5 + 8 * std::cos(j * M_PI / 4), 5 + 8 * std::sin(j * M_PI / 4));
+          tracker.UpdateRssi(t, j, l, 2.7, Mat2::Zero(), 0.0,
+                             -60 - 20 * std::log10(std::hypot((at - l).norm(), 1.5)) +
+                                 rng.Normal(0, noise_db));
+        }
+      }
+    }
+  }
+  return tracker;
+}
+
+TEST(LandmarkTracker, ScalesItsRadioNoiseUpWhenThePacketsSayMoreThanStated) {
+  // Stated 4 dB, heard with 9 dB: the packets' mean NIS is far above 1; the variances grow.
+  const LandmarkTracker noisy = SquareWithNoise(9.0, true);
+  EXPECT_GT(noisy.noise_scale(), 2.0);
+  // Heard with 2 dB: never below the stated noise.
+  EXPECT_EQ(SquareWithNoise(2.0, true).noise_scale(), 1.0);
+  // Off: as stated.
+  EXPECT_EQ(SquareWithNoise(9.0, false).noise_scale(), 1.0);
+  EXPECT_TRUE(SymmetricPositiveDefinite(noisy.covariance()));
+}
+
 TEST(LandmarkTracker, RefusesInvalidOptionsAndStarts) {
   LandmarkTrackerOptions o;
   o.shadowing_variance_share = 1.0;

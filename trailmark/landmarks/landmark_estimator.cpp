@@ -81,6 +81,8 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
               OptionBounds::AtLeast(1), "error-state: Gauss-Newton iterations of one packet's update");
     t.Real("turn_scale_sigma", [](O& o) -> double& { return o.tracker.turn_scale_sigma; }, "",
            OptionBounds::Positive(), "error-state: prior sigma of the PDR's turn-scale error");
+    t.Flag("adapt_noise", [](O& o) -> bool& { return o.tracker.adapt_noise; },
+           "error-state: the RSSI variances scaled up while the packets' mean NIS is above 1");
     t.Flag("slam", &O::slam,
            "error-state: unknown landmarks placed from moving packets and tracked jointly");
     t.Flag("track_with_estimated_landmarks", &O::track_with_estimated_landmarks,
@@ -503,6 +505,7 @@ EstimatorSummary LandmarkEstimator::Summary() const {
     summary.numbers[id + ".radio_path_loss_exponent"] = k.exponent();
     summary.numbers[id + ".radio_exponent_sigma"] = k.exponent_sigma();
     summary.numbers[id + ".radio_mean_nis"] = k.mean_nis();
+    summary.numbers[id + ".radio_noise_scale"] = k.noise_scale();
   }
   if (options_.filter == TrackingFilter::kErrorState) {
     summary.numbers["rssi_gated"] = static_cast<double>(gated);

@@ -14,10 +14,17 @@ namespace {
 /// marginalized out (its correlation with the rest has decayed below exp(-5) < 1 %).
 constexpr double kStaleLengths = 5.0;
 constexpr double kLn10 = 2.302585092994046;
+/// The radio noise check: an exponential average over about 100 packets, used from 50 on.
+constexpr double kNoiseEmaWeight = 0.01;
+constexpr std::size_t kNoiseWarmPackets = 50;
 }  // namespace
 
 bool LandmarkTrackerOptions::IsValid(std::string* why) const {
   if (!pdr.IsValid(why)) return false;
+  if (!(noise_scale_max >= 1) || !std::isfinite(noise_scale_max)) {
+    if (why) *why = "landmark tracker: noise_scale_max must be finite and >= 1";
+    return false;
+  }
   if (slam_max_packets < slam_min_packets || slam_grid_packets < 3 || !(slam_min_width_m >= 0) || !(slam_ambiguity_m > 0) || !(slam_decisive_chi2 >= 0) ||
       slam_min_packets < 2 || !(slam_min_spread_m >= 0) || !(slam_search_margin_m >= 0) ||
       !(slam_grid_m > 0)) {
@@ -94,7 +101,7 @@ void LandmarkTracker::DecayShadowing(double distance_m, double dt_s) {
   // Gauss-Markov: b <- rho b + w, Var(w) = (1 - rho^2) sigma^2 (stationary at sigma^2).
   const double rho = std::exp(-distance_m / options_.shadowing_length_m -
                               dt_s / options_.shadowing_time_s);
-  const double q = (1 - rho * rho) * sigma_shadow_db_ * sigma_shadow_db_;
+  const double q = (1 - rho * rho) * VarShadow();
   const int n = static_cast<int>(x_.size());
   for (int i = kFixed; i < n; ++i) {
     if (extra_kind_[i - kFixed] != 'b') continue;
@@ -143,7 +150,7 @@ int LandmarkTracker::BiasState(int landmark) {
   P_.conservativeResize(n + 1, n + 1);
   P_.row(n).setZero();
   P_.col(n).setZero();
-  P_(n, n) = std::max(sigma_shadow_db_ * sigma_shadow_db_, 1e-6);
+  P_(n, n) = std::max(VarShadow(), 1e-6);
   extra_kind_.push_back('b');
   extra_landmark_.push_back(landmark);
   extra_walked_m_.push_back(walked_m_);
@@ -293,8 +300,8 @@ void LandmarkTracker::PlaceLandmark(int landmark) {
   // shadowing shared by these packets; prior N(0, sigma_shadow^2)): a common offset scales
   // every distance, and only a walk around the landmark separates it from the position.
   const double alpha = x_(kAlpha), n = x_(kExponent);
-  const double var_shadow = std::max(sigma_shadow_db_ * sigma_shadow_db_, 1e-6);
-  const double var_fast = std::max(sigma_fast_db_ * sigma_fast_db_, 1e-6);
+  const double var_shadow = std::max(VarShadow(), 1e-6);
+  const double var_fast = std::max(VarFast(), 1e-6);
   const double huber = options_.huber_k * std::sqrt(var_fast);
   auto distance = [&](const Heard& h, const Vec2& l) {
     return std::max(std::sqrt((h.position - l).squaredNorm() + h.dz_m * h.dz_m), options_.min_distance_m);
@@ -453,7 +460,7 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
   Lin l = linearize(x0);
   const Vec2 rel0 = x0.head<2>() - landmark_at(x0);
   const Vec2 u = rel0.norm() > 1e-9 ? Vec2(rel0 / rel0.norm()) : Vec2(1, 0);
-  double R = sigma_fast_db_ * sigma_fast_db_ + l.slope * l.slope * u.dot(landmark_cov * u);
+  double R = VarFast() + l.slope * l.slope * u.dot(landmark_cov * u);
   Eigen::VectorXd ph = times_p(l);
   const double s0 = dot_h(l, ph) + R;
   const double nu0 = rssi_dbm - l.h;
@@ -469,8 +476,20 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
   // elsewhere or offset is explained away by its bias and never looks inconsistent.
   if (admit) {
     const double nu_link = nu0 + x0(b);
-    const double s_link = s0 - 2 * ph(b) + P_(b, b) + sigma_shadow_db_ * sigma_shadow_db_;
+    const double s_link = s0 - 2 * ph(b) + P_(b, b) + VarShadow();
     if (!admit(nu_link * nu_link / std::max(s_link, 1e-9))) return false;
+  }
+  // The radio's noise checked against its stated sigma (issue 21): an exponential average of
+  // the used packets' NIS (about 100; gated packets and excluded landmarks do not count); once
+  // warm, the RSSI variances (shadowing and fading) are scaled by a factor that grows while that
+  // mean is above 1 and shrinks while below, between 1 (never below the stated noise) and
+  // noise_scale_max.
+  if (options_.adapt_noise) {
+    nis_ema_ += kNoiseEmaWeight * (std::min(e * e, options_.gate_sigma * options_.gate_sigma) - nis_ema_);
+    if (nis_count_ >= kNoiseWarmPackets) {  // integral control toward a mean NIS of 1
+      noise_scale_ = std::clamp(noise_scale_ * std::pow(std::max(nis_ema_, 1e-3), kNoiseEmaWeight),
+                                1.0, options_.noise_scale_max);
+    }
   }
   // Huber: beyond k sigma the packet's weight falls as k / e (its variance grows as e / k).
   if (e > options_.huber_k) R *= e / options_.huber_k;

@@ -25,8 +25,10 @@
 /// normalized innovation) and gated. Until the agent's motion has started and its radio model is
 /// known to `calibrated_*`, the packet updates only the radio states (alpha, n, b): the motion
 /// states are consider states (Schmidt-Kalman), so that packets while the handheld is held still
-/// before the walk cannot move the start. Covariances are kept symmetric positive definite
-/// (Joseph-form updates). No I/O.
+/// before the walk cannot move the start. The used packets' NIS is watched: while its mean is
+/// above 1 the RSSI variances are scaled up (never below the stated ones). Unknown landmarks are
+/// placed from the walk and then estimated jointly (UpdateRssiUnknown). Covariances are kept
+/// symmetric positive definite (Joseph-form updates). No I/O.
 
 #include <Eigen/Core>
 #include <functional>
@@ -66,6 +68,10 @@ struct LandmarkTrackerOptions {
   double shadowing_time_s = 30.0;    ///< and time (people and doors move)
   double handheld_height_m = 1.2;    ///< the receiving handheld above the agent's z
   double min_distance_m = 0.3;       ///< d3 is taken at least this
+  /// The radio's noise checked against its stated sigma: while the packets' mean NIS is above 1
+  /// the RSSI variances are scaled up (at most noise_scale_max), back toward 1 when below.
+  bool adapt_noise = true;
+  double noise_scale_max = 4.0;
   int iterations = 4;                ///< Gauss-Newton iterations of one packet's update
   double huber_k = 2.0;              ///< normalized innovation beyond which weights fall
   double gate_sigma = 4.0;           ///< a packet beyond this many sigmas is not used (the paper UKF's)
@@ -145,6 +151,8 @@ class LandmarkTracker {
   std::size_t gated() const { return gated_; }
   /// Packets that only calibrated (the motion not started or the radio not yet known).
   std::size_t calibration_only() const { return calibration_only_; }
+  /// The factor on the stated RSSI variances (adapt_noise; 1: as stated).
+  double noise_scale() const { return noise_scale_; }
   /// Mean normalized innovation squared of the packets so far (1 when the stated noise holds).
   double mean_nis() const { return nis_count_ ? nis_sum_ / nis_count_ : 0.0; }
 
@@ -160,6 +168,8 @@ class LandmarkTracker {
   void DecayShadowing(double distance_m, double dt_s);
   void DropStaleBiases();
   void Symmetrize();
+  double VarShadow() const { return noise_scale_ * sigma_shadow_db_ * sigma_shadow_db_; }
+  double VarFast() const { return noise_scale_ * sigma_fast_db_ * sigma_fast_db_; }
 
   LandmarkTrackerOptions options_;
   double sigma_shadow_db_ = 0, sigma_fast_db_ = 0;
@@ -187,6 +197,8 @@ class LandmarkTracker {
   std::optional<double> direction_rad_;  ///< the PDR's walking direction at the last long step
   bool moving_ = false;                   ///< a step that moved was seen
   std::size_t gated_ = 0, calibration_only_ = 0;
+  double noise_scale_ = 1.0;  ///< the RSSI variances' factor (adapt_noise)
+  double nis_ema_ = 1.0;
   double nis_sum_ = 0;
   std::size_t nis_count_ = 0;
 };
