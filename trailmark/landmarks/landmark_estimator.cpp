@@ -17,6 +17,11 @@ constexpr double kCovarianceFloorM2 = 1e-4;
 constexpr double kStepVarianceFloorM2 = 1e-8;
 /// Unknown landmarks placed by the trackers are written at most this often (s).
 constexpr double kLandmarkEmitPeriodS = 5.0;
+/// The error-state tracker writes an agent's estimate after radio updates at most this often (s).
+constexpr double kRadioEmitPeriodS = 0.5;
+/// Periods are compared with this slack: packets exactly a period apart must count as such
+/// whatever the mission's time origin (round-off; the time-shift test).
+constexpr double kTimeTolS = 1e-6;
 /// A position fix needs ranges to three landmarks (two leave a mirror ambiguity).
 constexpr int kRangesForFix = 3;
 }  // namespace
@@ -418,20 +423,26 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     if (a.tracker) {
       const auto admit = [&](double nis) { return landmark_integrity_.Record(other, p->t, nis, 1); };
+      bool used = false;
       if (known_[j] || (estimate_[j] && options_.track_with_estimated_landmarks)) {
-        if (a.tracker->UpdateRssi(p->t, j, *estimate_[j], landmark_z_[j], estimate_cov_[j],
-                                  HeightOf(agent, a), p->rssi_dbm, admit)) {
-          ++ukf_updates_;
-        }
+        used = a.tracker->UpdateRssi(p->t, j, *estimate_[j], landmark_z_[j], estimate_cov_[j],
+                                     HeightOf(agent, a), p->rssi_dbm, admit);
       } else if (options_.slam) {
         const bool placed = a.tracker->LandmarkEstimate(j).has_value();
-        const double dz = unknown_landmark_z_m_.value_or(HeightOf(agent, a) + options_.tracker.handheld_height_m) -
-                          (HeightOf(agent, a) + options_.tracker.handheld_height_m);
-        if (a.tracker->UpdateRssiUnknown(p->t, j, dz, p->rssi_dbm, admit)) ++ukf_updates_;
+        const double handheld_z = HeightOf(agent, a) + options_.tracker.handheld_height_m;
+        const double dz = unknown_landmark_z_m_.value_or(handheld_z) - handheld_z;
+        used = a.tracker->UpdateRssiUnknown(p->t, j, dz, p->rssi_dbm, admit);
         // A landmark just placed, and then every 5 s: its estimate.
-        if (!placed || p->t - estimate_t_[j] >= kLandmarkEmitPeriodS) {
+        if (!placed || p->t - estimate_t_[j] >= kLandmarkEmitPeriodS - kTimeTolS) {
           if (a.tracker->LandmarkEstimate(j)) EmitLandmark(p->t, j, sink);
         }
+      }
+      ukf_updates_ += used;
+      // Radio moves a responder who stands still too: an estimate after a used packet, at most
+      // every kRadioEmitPeriodS, once the walk has started (a live view between steps).
+      if (used && a.stepped && p->t - a.t >= kRadioEmitPeriodS - kTimeTolS) {
+        a.t = p->t;
+        EmitAgent(p->t, agent, a, sink);
       }
     }
   } else if (const auto* e = std::get_if<MissionEvent>(&row)) {
