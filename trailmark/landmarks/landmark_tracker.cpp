@@ -460,9 +460,9 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
   Lin l = linearize(x0);
   const Vec2 rel0 = x0.head<2>() - landmark_at(x0);
   const Vec2 u = rel0.norm() > 1e-9 ? Vec2(rel0 / rel0.norm()) : Vec2(1, 0);
-  double R = VarFast() + l.slope * l.slope * u.dot(landmark_cov * u);
+  const double r0 = VarFast() + l.slope * l.slope * u.dot(landmark_cov * u);
   Eigen::VectorXd ph = times_p(l);
-  const double s0 = dot_h(l, ph) + R;
+  const double s0 = dot_h(l, ph) + r0;
   const double nu0 = rssi_dbm - l.h;
   const double e = std::abs(nu0) / std::sqrt(s0);
   nis_sum_ += e * e;
@@ -492,15 +492,16 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
     }
   }
   // Huber: beyond k sigma the packet's weight falls as k / e (its variance grows as e / k).
-  if (e > options_.huber_k) R *= e / options_.huber_k;
+  const double R = e > options_.huber_k ? r0 * e / options_.huber_k : r0;
   const bool consider_motion = !RadioMovesPosition();
   if (consider_motion) ++calibration_only_;
   auto mask = [&](Eigen::VectorXd& k) {
     if (consider_motion) k.head<kAlpha>().setZero();  // Schmidt: motion states not updated
   };
-  // Iterated update: x_{i+1} = x0 + K_i (z - h(x_i) - H_i (x0 - x_i)).
+  // Iterated update: x_{i+1} = x0 + K_i (z - h(x_i) - H_i (x0 - x_i)), with the robust R from
+  // the first iteration on.
   Eigen::VectorXd xi = x0, k(n);
-  double s = s0;
+  double s = s0 - r0 + R;
   for (int it = 0; it < options_.iterations; ++it) {
     if (it > 0) {
       l = linearize(xi);
