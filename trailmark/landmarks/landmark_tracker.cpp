@@ -113,22 +113,24 @@ void LandmarkTracker::DecayShadowing(double distance_m, double dt_s) {
 }
 
 void LandmarkTracker::DropStaleBiases() {
+  const double stale_m = kStaleLengths * options_.shadowing_length_m;
+  bool any = false;
+  for (std::size_t e = 0; e < extra_kind_.size() && !any; ++e) {
+    any = extra_kind_[e] == 'b' && walked_m_ - extra_walked_m_[e] > stale_m;
+  }
+  if (!any) return;  // every step: no allocation unless a bias goes
   std::vector<int> keep;
   for (int i = 0; i < kFixed; ++i) keep.push_back(i);
   std::vector<char> kind;
   std::vector<int> landmark;
   std::vector<double> walked;
   for (std::size_t e = 0; e < extra_kind_.size(); ++e) {
-    if (extra_kind_[e] == 'b' &&
-        walked_m_ - extra_walked_m_[e] > kStaleLengths * options_.shadowing_length_m) {
-      continue;
-    }
+    if (extra_kind_[e] == 'b' && walked_m_ - extra_walked_m_[e] > stale_m) continue;
     keep.push_back(kFixed + static_cast<int>(e));
     kind.push_back(extra_kind_[e]);
     landmark.push_back(extra_landmark_[e]);
     walked.push_back(extra_walked_m_[e]);
   }
-  if (kind.size() == extra_kind_.size()) return;
   // Marginalizing a Gaussian: drop its rows and columns.
   x_ = Eigen::VectorXd(x_(keep));
   P_ = Eigen::MatrixXd(P_(keep, keep));
