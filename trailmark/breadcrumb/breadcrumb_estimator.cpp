@@ -61,6 +61,8 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "packets of a link are correlated: sigma = this x the calibrated sigma");
     t.Flag("calibrate", &L::calibrate_online,
            "fit the path-loss model online from local geometry (else mission.json's model)");
+    t.Flag("truncated_rssi", &L::model_rssi_truncation,
+           "packets >= min_rssi_dbm only: fitted and predicted as a truncated sample (issue 25)");
     t.Real("calibration_timeout_s", &L::calibration_timeout_s, "s", nonneg,
            "> 0: use mission.json's model when no fit after this long (0: never)");
     t.Real("rssi_nlos_k", &L::rssi_nlos_k, "", pos,

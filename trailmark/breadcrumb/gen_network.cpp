@@ -6,23 +6,28 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "trailmark/radio/path_loss.h"
+
 namespace trailmark::breadcrumb {
 
 namespace {
 constexpr double kLn10 = 2.302585092994046;
 }
 
-double ScalarModel::Predict(double d) const {
+ScalarModel::Linear ScalarModel::Linearize(double d) const {
   d = std::max(d, min_distance_m);
-  if (kind == Kind::kRange) return d;
-  return alpha_dbm - 10.0 * path_loss_exponent * std::log10(d);
+  if (kind == Kind::kRange) return {d, 1.0};
+  const double mu = alpha_dbm - 10.0 * path_loss_exponent * std::log10(d);
+  const double slope = -10.0 * path_loss_exponent / (kLn10 * d);
+  // Beyond 8 sigma above the truncation the kept packets' mean is the channel's (to 5e-15 dB).
+  if (!(mu < truncation_dbm + 8.0 * sigma_db)) return {mu, slope};
+  const radio::TruncatedMean m = radio::TruncatedNormalMean(mu, sigma_db, truncation_dbm);
+  return {m.mean, slope * m.d_mean_d_mu};
 }
 
-double ScalarModel::Slope(double d) const {
-  d = std::max(d, min_distance_m);
-  if (kind == Kind::kRange) return 1.0;
-  return -10.0 * path_loss_exponent / (kLn10 * d);
-}
+double ScalarModel::Predict(double d) const { return Linearize(d).predicted; }
+
+double ScalarModel::Slope(double d) const { return Linearize(d).slope; }
 
 GenNetwork::GenNetwork(GenOptions options) : options_(options) {}
 
@@ -125,15 +130,16 @@ void GenNetwork::AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& ancho
   // h_ij = (x_i - x_j)^T / (|x_i - x_j| + eps_ij), breadcrumb paper after eq. (19)
   const Vec2 bias_hat = bias >= 0 ? nodes_[bias].x_hat : Vec2::Zero();
   const double gain = 1.0 + bias_hat.y();
-  const Vec2 h = gain * model.Slope(d) * u;  // dh/dx_i; dh/dx_j = -h
+  const ScalarModel::Linear lin = model.Linearize(d);
+  const Vec2 h = gain * lin.slope * u;  // dh/dx_i; dh/dx_j = -h
   NodeIndex nodes[3];
   Vec2 rows[3];
   int n = 0;
   nodes[n] = i, rows[n++] = h;
   if (j >= 0) nodes[n] = j, rows[n++] = -h;
-  if (bias >= 0) nodes[n] = bias, rows[n++] = Vec2(1.0, model.Predict(d));  // d/d(offset, scale)
+  if (bias >= 0) nodes[n] = bias, rows[n++] = Vec2(1.0, lin.predicted);  // d/d(offset, scale)
   // eq. (19): b += H^T P^-1 (z - h(x_hat) + H x_hat); eq. (18): L += H^T P^-1 H
-  const double predicted = gain * model.Predict(d) + bias_hat.x();
+  const double predicted = gain * lin.predicted + bias_hat.x();
   double hx = 0;
   for (int k = 0; k < n; ++k) hx += rows[k].dot(nodes_[nodes[k]].x_hat);
   const double w = 1.0 / variance;
@@ -230,8 +236,9 @@ GenNetwork::Linearized GenNetwork::LinearizePersistent(const Persistent& e) cons
   const Vec2 diff = xi - xj;
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
-  const Vec2 h = e.model.Slope(d) * u;
-  return {h, 1.0 / e.Variance(), e.Mean() - e.model.Predict(d) + h.dot(diff)};  // eq. (19)
+  const ScalarModel::Linear lin = e.model.Linearize(d);
+  const Vec2 h = lin.slope * u;
+  return {h, 1.0 / e.Variance(), e.Mean() - lin.predicted + h.dot(diff)};  // eq. (19)
 }
 
 void GenNetwork::DeleteNode(NodeIndex k) { Marginalize<1>({k}); }

@@ -32,6 +32,7 @@
 #include <Eigen/SparseCore>
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <optional>
 #include <vector>
 
@@ -48,10 +49,21 @@ struct ScalarModel {
   double alpha_dbm = -40.0;  ///< kRssiDb: rssi = alpha - 10 n log10(d)
   double path_loss_exponent = 2.3;
   double min_distance_m = 0.3;  ///< linearization guard (eq. (19)'s epsilon_ij in h_ij)
+  /// kRssiDb of a receiver that keeps only packets >= truncation_dbm: h is the mean of the kept
+  /// ones, the truncated normal's (radio::TruncatedNormalMean with sigma_db, one packet's
+  /// shadowing), not alpha - 10 n log10(d) (issue 25). -inf: every packet kept.
+  double truncation_dbm = -std::numeric_limits<double>::infinity();
+  double sigma_db = 0;
 
   double Predict(double distance_m) const;
   /// dh/dd at distance_m.
   double Slope(double distance_m) const;
+  /// Both at once (one evaluation of the truncated mean).
+  struct Linear {
+    double predicted;
+    double slope;
+  };
+  Linear Linearize(double distance_m) const;
 };
 
 struct GenOptions {

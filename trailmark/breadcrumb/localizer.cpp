@@ -31,6 +31,10 @@ ScalarModel BreadcrumbLocalizer::RssiModel() const {
   m.kind = ScalarModel::Kind::kRssiDb;
   m.alpha_dbm = options_.radio.alpha_dbm;
   m.path_loss_exponent = options_.radio.path_loss_exponent;
+  if (options_.model_rssi_truncation) {
+    m.truncation_dbm = options_.min_rssi_dbm;
+    m.sigma_db = options_.radio.sigma_db;
+  }
   return m;
 }
 
@@ -55,8 +59,11 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
     return;
   }
   next_calibration_ = t + options_.calibration_period_s;
-  const radio::PathLossCalibration c =
-      radio::CalibratePathLoss(calibration_pairs_, options_.calibration);
+  radio::PathLossCalibrationOptions fit_options = options_.calibration;
+  if (options_.model_rssi_truncation) fit_options.truncation_dbm = options_.min_rssi_dbm;
+  const radio::PathLossCalibration c = radio::CalibratePathLoss(
+      calibration_pairs_, fit_options,
+      summary_.calibration && calibrated_ ? &summary_.calibration->model : nullptr);
   if (c.status != radio::CalibrationStatus::kOk) return;
   options_.radio = c.fit.model;
   for (auto& [key, link] : links_) {
@@ -457,10 +464,11 @@ void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& 
   const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
-  const double slope = model.Slope(d);
+  const ScalarModel::Linear lin = model.Linearize(d);
+  const double slope = lin.slope;
   const double S = variance + slope * slope * u.dot((cov_i + cov_j) * u);
   const Vec2 bias_hat = bias >= 0 ? gen_.Estimate(bias) : Vec2::Zero();
-  const double nu = z - (1.0 + bias_hat.y()) * model.Predict(d) - bias_hat.x();
+  const double nu = z - (1.0 + bias_hat.y()) * lin.predicted - bias_hat.x();
   const double normalized = std::abs(nu) / std::sqrt(S);
   if (source != nullptr && !node_integrity_.Record(*source, t, nu * nu / S, 1)) {
     ++summary_.refused;

@@ -93,6 +93,11 @@ struct LocalizerOptions {
   double calibration_min_distance_m = 1.0;
   /// The fit (radio/path_loss.h): 5 % trimmed per 1 m bin, with the body-shadowing term.
   radio::PathLossCalibrationOptions calibration = {0.05, 1.0, true};
+  /// The packets kept are those >= min_rssi_dbm only: a truncated sample. Calibrated as one
+  /// (the likelihood fit of path_loss.h), and an RSSI edge predicts the mean of the kept packets
+  /// (ScalarModel::truncation_dbm), not the channel's mean (issue 25: least squares fitted an
+  /// exponent of 1.97 where the truth was 2.8).
+  bool model_rssi_truncation = false;
   /// > 0: without enough local pairs after this long (no encounters, say), the given model is
   /// used. 0 (default): agent RSSI ranges wait for a fit (a mission.json model made in line of
   /// sight misleads in walled rooms: measured on training-building).

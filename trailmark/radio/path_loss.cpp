@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/radio/path_loss.h"
 
+#include <ceres/gradient_problem.h>
+#include <ceres/gradient_problem_solver.h>
+
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
@@ -126,7 +129,144 @@ FitProblem TryFit(const std::vector<CalibrationPair>& pairs, double trim_fractio
   return nullptr;
 }
 
+/// log Phi(a) and the inverse Mills ratio phi(a) / Phi(a) of the standard normal, with the
+/// asymptotic series below a = -30 where Phi underflows.
+void LogPhiAndMills(double a, double* log_phi, double* mills) {
+  constexpr double kSqrt2 = 1.4142135623730951, kSqrt2Pi = 2.5066282746310002;
+  if (a > -30.0) {
+    const double phi_cdf = 0.5 * std::erfc(-a / kSqrt2);
+    *log_phi = std::log(phi_cdf);
+    *mills = std::exp(-0.5 * a * a) / kSqrt2Pi / phi_cdf;
+    return;
+  }
+  const double a2 = a * a, series = 1.0 - 1.0 / a2 + 3.0 / (a2 * a2);
+  *log_phi = -0.5 * a2 - std::log(-a) - std::log(kSqrt2Pi) + std::log(series);
+  *mills = -a / series;
+}
+
+/// TruncatedNegLogLikelihood for Ceres: parameters (alpha, n, log sigma[, body loss]).
+class TruncatedNll final : public ceres::FirstOrderFunction {
+ public:
+  TruncatedNll(const std::vector<CalibrationPair>* pairs, double truncation_dbm, bool body)
+      : pairs_(pairs), c_(truncation_dbm), body_(body) {}
+  int NumParameters() const override { return body_ ? 4 : 3; }
+  bool Evaluate(const double* x, double* cost, double* gradient) const override {
+    const double p[4] = {x[0], x[1], x[2], body_ ? x[3] : 0.0};
+    double g[4];
+    *cost = TruncatedNegLogLikelihood(*pairs_, c_, p, g);
+    if (gradient != nullptr) std::copy(g, g + NumParameters(), gradient);
+    return std::isfinite(*cost);
+  }
+
+ private:
+  const std::vector<CalibrationPair>* pairs_;
+  double c_;
+  bool body_;
+};
+
+/// Minimizes the truncated likelihood from x (in place); false when it did not end finite.
+bool MinimizeTruncated(const std::vector<CalibrationPair>& pairs, double truncation_dbm, bool body,
+                       double x[4]) {
+  ceres::GradientProblem problem(new TruncatedNll(&pairs, truncation_dbm, body));
+  ceres::GradientProblemSolver::Options o;
+  o.max_num_iterations = 200;
+  o.function_tolerance = 1e-12;
+  o.gradient_tolerance = 1e-10;
+  o.parameter_tolerance = 1e-12;
+  o.logging_type = ceres::SILENT;
+  ceres::GradientProblemSolver::Summary summary;
+  ceres::Solve(o, problem, x, &summary);
+  return summary.IsSolutionUsable() && std::isfinite(x[0]) && std::isfinite(x[1]) &&
+         std::isfinite(x[2]) && std::isfinite(x[3]);
+}
+
+/// The fit's status: kOk when its exponent is a plausible indoor channel.
+PathLossCalibration Plausible(PathLossCalibration out, const PathLossCalibrationOptions& options) {
+  const double n = out.fit.model.path_loss_exponent;
+  if (!(n >= options.min_exponent && n <= options.max_exponent)) {
+    out.status = CalibrationStatus::kImplausible;
+    out.why = "path-loss exponent " + std::to_string(n) + " outside the plausible indoor range";
+    return out;
+  }
+  out.status = CalibrationStatus::kOk;
+  out.why.clear();
+  return out;
+}
+
 }  // namespace
+
+TruncatedMean TruncatedNormalMean(double mu, double sigma, double c) {
+  if (!std::isfinite(c) || !(sigma > 0)) return {mu, 1.0};
+  const double a = (mu - c) / sigma;
+  double log_phi = 0, mills = 0;
+  LogPhiAndMills(a, &log_phi, &mills);
+  return {mu + sigma * mills, std::clamp(1.0 - mills * (a + mills), 0.0, 1.0)};
+}
+
+double TruncatedNegLogLikelihood(const std::vector<CalibrationPair>& pairs, double truncation_dbm,
+                                 const double params[4], double gradient[4]) {
+  const double alpha = params[0], n = params[1], s = params[2], body_loss = params[3];
+  const double sigma = std::exp(s);
+  const bool truncated = std::isfinite(truncation_dbm);
+  double sum = 0;
+  double g[4] = {0, 0, 0, 0};
+  for (const auto& p : pairs) {
+    const double lg = -10.0 * std::log10(p.distance_m);
+    const double mu = alpha + n * lg - body_loss * p.body_factor;
+    const double z = (p.rssi_dbm - mu) / sigma;
+    double log_phi = 0, mills = 0, a = 0;
+    if (truncated) {
+      a = (mu - truncation_dbm) / sigma;
+      LogPhiAndMills(a, &log_phi, &mills);
+    }
+    // -log of phi(z) / sigma / Phi(a), without the constant log sqrt(2 pi)
+    sum += 0.5 * z * z + s + log_phi;
+    const double d_mu = (-z + mills) / sigma;
+    g[0] += d_mu;
+    g[1] += d_mu * lg;
+    g[2] += -z * z + 1.0 - mills * a;
+    g[3] += -d_mu * p.body_factor;
+  }
+  const double count = std::max<double>(1.0, static_cast<double>(pairs.size()));
+  if (gradient != nullptr) {
+    for (int k = 0; k < 4; ++k) gradient[k] = g[k] / count;
+  }
+  return sum / count;
+}
+
+bool TruncatedPathLossFit(const std::vector<CalibrationPair>& pairs, double truncation_dbm,
+                          bool body, const LogDistanceModel& start, std::size_t max_pairs,
+                          PathLossFit* fit) {
+  std::vector<CalibrationPair> kept;
+  std::size_t usable = 0;
+  for (const auto& p : pairs) usable += p.rssi_dbm >= truncation_dbm && p.distance_m > 0;
+  const std::size_t stride = std::max<std::size_t>(1, (usable + max_pairs - 1) / std::max<std::size_t>(1, max_pairs));
+  std::size_t k = 0;
+  for (const auto& p : pairs) {
+    if (!(p.rssi_dbm >= truncation_dbm && p.distance_m > 0)) continue;
+    if (k++ % stride == 0) kept.push_back(p);
+  }
+  if (kept.size() < (body ? 10u : 3u)) return false;
+  double x[4] = {start.alpha_dbm, start.path_loss_exponent,
+                 std::log(std::max(start.sigma_db, 0.5)), body ? start.body_loss_db : 0.0};
+  if (!MinimizeTruncated(kept, truncation_dbm, body, x)) return false;
+  // Once more without the pairs beyond 4 sigma of that fit (gross outliers: a wall, a body).
+  const double sigma = std::exp(x[2]);
+  const std::size_t before = kept.size();
+  kept.erase(std::remove_if(kept.begin(), kept.end(),
+                            [&](const CalibrationPair& p) {
+                              const double mu = x[0] - 10.0 * x[1] * std::log10(p.distance_m) -
+                                                x[3] * p.body_factor;
+                              return std::abs(p.rssi_dbm - mu) > 4.0 * sigma;
+                            }),
+             kept.end());
+  if (kept.size() < before && !MinimizeTruncated(kept, truncation_dbm, body, x)) return false;
+  fit->model = {x[0], x[1], std::exp(x[2]), x[3]};
+  fit->residual_sigma_db = fit->model.sigma_db;
+  fit->pairs_used = kept.size();
+  fit->pairs_trimmed = before - kept.size();
+  return true;
+}
 
 PathLossFit FitLogDistanceWithBody(const std::vector<CalibrationPair>& pairs,
                                    double trim_fraction, double bin_width_m) {
@@ -146,15 +286,31 @@ PathLossFit FitLogDistance(const std::vector<CalibrationPair>& pairs, double tri
 
 bool PathLossCalibrationOptions::IsValid(std::string* why) const {
   if (trim_fraction >= 0 && trim_fraction < 0.5 && bin_width_m > 0 && min_exponent > 0 &&
-      max_exponent > min_exponent && max_body_loss_db >= 0)
+      max_exponent > min_exponent && max_body_loss_db >= 0 && !std::isnan(truncation_dbm) &&
+      truncation_dbm < std::numeric_limits<double>::infinity() && max_likelihood_pairs >= 10)
     return true;
-  if (why) *why = "trim in [0, 0.5), bin width > 0, 0 < min exponent < max exponent";
+  if (why) {
+    *why = "trim in [0, 0.5), bin width > 0, 0 < min exponent < max exponent, truncation a "
+           "level in dBm or -inf, at least 10 likelihood pairs";
+  }
   return false;
 }
 
 PathLossCalibration CalibratePathLoss(const std::vector<CalibrationPair>& pairs,
-                                      const PathLossCalibrationOptions& options) {
+                                      const PathLossCalibrationOptions& options,
+                                      const LogDistanceModel* previous) {
   PathLossCalibration out;
+  if (previous != nullptr && std::isfinite(options.truncation_dbm)) {
+    // The last fit of a growing set of pairs starts the likelihood fit (no least squares).
+    const bool body = previous->body_loss_db != 0.0;
+    PathLossFit ml;
+    if (TruncatedPathLossFit(pairs, options.truncation_dbm, body, *previous,
+                             options.max_likelihood_pairs, &ml) &&
+        ml.model.body_loss_db >= 0 && ml.model.body_loss_db <= options.max_body_loss_db) {
+      out.fit = ml;
+      return Plausible(out, options);
+    }
+  }
   bool have = false;
   if (options.body_shadowing) {
     PathLossFit fit;
@@ -172,14 +328,21 @@ PathLossCalibration CalibratePathLoss(const std::vector<CalibrationPair>& pairs,
       return out;
     }
   }
-  const double n = out.fit.model.path_loss_exponent;
-  if (!(n >= options.min_exponent && n <= options.max_exponent)) {
-    out.status = CalibrationStatus::kImplausible;
-    out.why = "path-loss exponent " + std::to_string(n) + " outside the plausible indoor range";
-    return out;
+  if (std::isfinite(options.truncation_dbm)) {
+    // The least-squares fit of a truncated sample is biased flat: it starts the likelihood fit.
+    const bool body = out.fit.model.body_loss_db != 0.0;
+    PathLossFit ml;
+    const bool ok = TruncatedPathLossFit(pairs, options.truncation_dbm, body, out.fit.model,
+                                         options.max_likelihood_pairs, &ml);
+    if (ok && (!body || (ml.model.body_loss_db >= 0 &&
+                         ml.model.body_loss_db <= options.max_body_loss_db))) {
+      out.fit = ml;
+    } else if (TruncatedPathLossFit(pairs, options.truncation_dbm, false, out.fit.model,
+                                    options.max_likelihood_pairs, &ml)) {
+      out.fit = ml;
+    }
   }
-  out.status = CalibrationStatus::kOk;
-  return out;
+  return Plausible(out, options);
 }
 
 std::optional<TimeS> EncounterDetector::Add(TimeS t, double rssi_dbm) {

@@ -7,6 +7,7 @@
 /// No I/O.
 
 #include <deque>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -84,6 +85,16 @@ struct PathLossCalibrationOptions {
   /// missions that neither estimator's result moves with the one set).
   double min_exponent = 1.2, max_exponent = 8.0;
   double max_body_loss_db = 20.0;  ///< dB; a body shadows 5-15 dB at 2.4 GHz
+  /// dBm; the pairs are a truncated sample: packets weaker than this were never kept (a
+  /// receiver's sensitivity, or a caller's own floor such as the breadcrumb localizer's
+  /// min_rssi_dbm). Then the trimmed least-squares fit is only the start of a maximum-likelihood
+  /// fit of the truncated normal (TruncatedPathLossFit): least squares on a truncated sample reads
+  /// the missing weak packets at long range as a flat channel (exponent 1.97 where the truth
+  /// was 2.8, issue 25). -inf: no truncation, the least-squares fit as it is.
+  double truncation_dbm = -std::numeric_limits<double>::infinity();
+  /// The likelihood fit uses at most this many pairs (an even stride over them): its cost is
+  /// per pair and iteration, and 5,000 pairs fix the exponent to ~0.05.
+  std::size_t max_likelihood_pairs = 5000;
   bool IsValid(std::string* why) const;
 };
 enum class CalibrationStatus { kOk, kNoFit, kImplausible };
@@ -92,10 +103,38 @@ struct PathLossCalibration {
   PathLossFit fit;  ///< the fit (also when implausible, for the record)
   std::string why;  ///< when not kOk
 };
+/// The maximum-likelihood log-distance fit of a sample truncated below `truncation_dbm`: each
+/// pair's RSSI is N(mu(d), sigma^2) conditioned on being >= truncation_dbm, with mu(d) = alpha -
+/// 10 n log10(d) [- body_loss_db * body_factor when `body`]; alpha, n, sigma (and the body loss)
+/// maximize sum log phi(z) - log sigma - log Phi((mu - c) / sigma) (the truncated regression
+/// model; Ceres' L-BFGS from `start`). Pairs beyond 4 sigma of the first fit are dropped and the
+/// fit repeated once (counted in pairs_trimmed). Returns false when it does not converge to a
+/// finite model.
+bool TruncatedPathLossFit(const std::vector<CalibrationPair>& pairs, double truncation_dbm,
+                          bool body, const LogDistanceModel& start, std::size_t max_pairs,
+                          PathLossFit* fit);
+/// The negative log-likelihood per pair of that model and its gradient in (alpha, n, log sigma,
+/// body loss) (for the test against numerical differences).
+double TruncatedNegLogLikelihood(const std::vector<CalibrationPair>& pairs, double truncation_dbm,
+                                 const double params[4], double gradient[4]);
+
+/// The mean of N(mu, sigma^2) conditioned on being >= c (what a receiver that keeps only the
+/// packets >= c hears on average), mu + sigma lambda(a) with a = (mu - c) / sigma and lambda the
+/// inverse Mills ratio, and its derivative in mu, 1 - lambda (a + lambda) (in (0, 1): far below
+/// c the kept packets no longer follow the distance). c = -inf: mu and 1.
+struct TruncatedMean {
+  double mean = 0;
+  double d_mean_d_mu = 1;
+};
+TruncatedMean TruncatedNormalMean(double mu, double sigma, double c);
+
 /// Never throws for data that cannot be fitted: the status says so (too few pairs, a single
 /// distance, a degenerate body geometry, an implausible exponent).
+/// With a truncation, `previous` (the last accepted fit of a growing set of pairs) starts the
+/// likelihood fit instead of the least-squares one: a few iterations instead of tens.
 PathLossCalibration CalibratePathLoss(const std::vector<CalibrationPair>& pairs,
-                                      const PathLossCalibrationOptions& options);
+                                      const PathLossCalibrationOptions& options,
+                                      const LogDistanceModel* previous = nullptr);
 
 /// Encounter detection (breadcrumb paper sec. V-A, Fig. 7; their ref. [31]): a local maximum of
 /// a link's RSSI above a threshold means the agent passed within about a metre of the node.
