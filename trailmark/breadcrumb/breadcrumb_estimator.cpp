@@ -41,6 +41,10 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "heading random walk per turn, fraction of its angle");
     t.Flag("gyro_scale", &L::estimate_gyro_scale,
            "estimate each agent's gyro scale-factor error (ours)");
+    t.Flag("heading_rate", &L::estimate_heading_rate,
+           "estimate each agent's PDR heading drift rate, walking or standing (issue 25)");
+    t.Real("heading_rate_sigma0", &L::heading_rate_sigma0_rad_per_s, "rad/s", nonneg,
+           "prior sigma of the heading drift rate");
     t.Real("heading_rw", &L::heading_rw_rad_per_sqrt_s, "rad/sqrt(s)", nonneg,
            "heading random walk over time");
     t.Real("min_rssi_dbm", &L::min_rssi_dbm, "dBm", OptionBounds::Any(),
@@ -273,6 +277,18 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["unusable"] = static_cast<double>(s.unusable);
   num["factorizations"] = static_cast<double>(s.factorizations);
   num["rows_ignored"] = static_cast<double>(ignored_);
+  // Per agent: the PDR corrections estimated (heading offset and scale, gyro scale and drift).
+  constexpr double kDeg = 180.0 / 3.14159265358979323846;
+  for (const std::string& id : loc_->AgentIds()) {
+    if (const auto hs = loc_->HeadingScale(id)) {
+      num[id + ".heading_correction_deg"] = hs->x() * kDeg;
+      num[id + ".step_scale_error"] = hs->y();
+    }
+    if (const auto kb = loc_->GyroScaleRate(id)) {
+      num[id + ".gyro_scale_error"] = kb->x();
+      num[id + ".heading_rate_deg_per_min"] = kb->y() * kDeg * 60.0;
+    }
+  }
   num["radio_other_floor"] = static_cast<double>(other_floor_);
   if (!latency_us_.empty()) {
     std::vector<float> l = latency_us_;

@@ -116,10 +116,13 @@ void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Ve
     a.theta = gen_.AddNode(Vec2::Zero());
     gen_.AddPrior(a.theta, Vec2::Zero(),
                   Vec2(sh * sh, options_.scale_sigma0 * options_.scale_sigma0).asDiagonal());
-    if (options_.estimate_gyro_scale) {
+    if (options_.estimate_gyro_scale || options_.estimate_heading_rate) {
+      // (k, b): a component not estimated is held at 0 by a prior of 1e-12.
       a.gyro = gen_.AddNode(Vec2::Zero());
-      const double g = options_.gyro_scale_sigma0;
-      gen_.AddPrior(a.gyro, Vec2::Zero(), Vec2(g * g, 1.0).asDiagonal());
+      const double g = options_.estimate_gyro_scale ? options_.gyro_scale_sigma0 : 1e-6;
+      // b unconnected when not estimated (G below): its prior then does not matter
+      const double b = options_.estimate_heading_rate ? options_.heading_rate_sigma0_rad_per_s : 1.0;
+      gen_.AddPrior(a.gyro, Vec2::Zero(), Vec2(g * g, b * b).asDiagonal());
     }
   }
   agents_[id] = std::move(a);
@@ -201,6 +204,18 @@ std::optional<Vec2> BreadcrumbLocalizer::HeadingScale(const std::string& id) con
   return gen_.Estimate(it->second.theta);
 }
 
+std::optional<Vec2> BreadcrumbLocalizer::GyroScaleRate(const std::string& id) const {
+  auto it = agents_.find(id);
+  if (it == agents_.end() || it->second.gyro < 0) return std::nullopt;
+  return gen_.Estimate(it->second.gyro);
+}
+
+std::vector<std::string> BreadcrumbLocalizer::AgentIds() const {
+  std::vector<std::string> ids;
+  for (const auto& [id, a] : agents_) ids.push_back(id);
+  return ids;
+}
+
 Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn,
                                 double* cum_turn_signed) const {
   const auto& k = a.knots;
@@ -249,6 +264,13 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   if (t0 > last.t) {  // stationary gap
     a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn, last.heading,
                        last.cum_turn_signed});
+  }
+  if (a.gyro >= 0 && options_.estimate_heading_rate &&
+      t0 >= a.state_t + options_.heading_rate_state_period_s) {
+    // A state before this step, so that the heading drift of the time since the last one (a
+    // standstill, or a walk without radio) turns this step and the next, not only the next state.
+    ProcessAgent(a, t0);
+    AttachState(a, t0);
   }
   double turn = 0, turn_signed = 0;
   if (d.norm() > 0.2) {
@@ -425,13 +447,17 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
                          std::pow(options_.heading_per_turn_sigma * turn, 2);
     const double q_s = options_.scale_rw_per_sqrt_s * options_.scale_rw_per_sqrt_s * dt;
     const double turned = turn_signed_t - a.state_cum_turn_signed;
-    const double k_hat = a.gyro >= 0 ? gen_.Estimate(a.gyro).x() : 0.0;
-    const NodeIndex next_theta = gen_.AddNode(th + Vec2(k_hat * turned, 0.0));
+    const Vec2 kb_hat = a.gyro >= 0 ? gen_.Estimate(a.gyro) : Vec2::Zero();
+    const double rate_dt = options_.estimate_heading_rate ? dt : 0.0;
+    const NodeIndex next_theta =
+        gen_.AddNode(th + Vec2(kb_hat.x() * turned + kb_hat.y() * rate_dt, 0.0));
     const Mat2 Q_theta = Vec2(std::max(q_psi, 1e-12), std::max(q_s, 1e-14)).asDiagonal();
     if (a.gyro >= 0) {
-      // theta_new - theta_old - (k Delta, 0) = 0: the gyro scale factor turns psi at each turn
+      // theta_new - theta_old - (k Delta + b dt, 0) = 0: the gyro scale factor turns psi at each
+      // turn, the gyro bias with time (standing included)
       Mat2 G = Mat2::Zero();
       G(0, 0) = turned;
+      G(0, 1) = rate_dt;
       gen_.AddLinear({next_theta, a.theta, a.gyro}, {Mat2::Identity(), -Mat2::Identity(), -G},
                      Vec2::Zero(), Q_theta);
     } else {

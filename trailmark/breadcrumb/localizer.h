@@ -67,6 +67,18 @@ struct LocalizerOptions {
   /// (rad, signed, as the PDR measured it) adds k Delta to psi. MEMS gyros: 1-3 % (sigma0 5 %).
   bool estimate_gyro_scale = true;
   double gyro_scale_sigma0 = 0.05;
+  /// The PDR heading's drift rate as a constant per agent (issue 25, item 1): the gyro bias a
+  /// foot or phone PDR leaves, which turns its heading at b rad/s whether the agent walks or
+  /// stands (the second component of the gyro node (k, b)): psi_new - psi_old = k Delta + b dt
+  /// + w. A random walk alone (heading_rw) cannot follow a drift over minutes, least of all
+  /// across a standstill, where no step says anything. sigma0: a MEMS PDR's residual heading
+  /// drift of a few degrees per minute (1e-3 rad/s = 3.4 deg/min). Off by default: better
+  /// ellipses but mixed accuracy on held-out variants (docs/breadcrumb.md).
+  bool estimate_heading_rate = false;
+  double heading_rate_sigma0_rad_per_s = 1e-3;
+  /// With the rate: a new agent state at least this often (s) at a step's start, so that dead
+  /// reckoning between radio measurements turns with the drift (3 deg/min: 0.25 deg in 5 s).
+  double heading_rate_state_period_s = 5.0;
   // mobile states, IV-E
   double state_period_s = 0.4;
   double max_latency_s = 2.0;
@@ -187,6 +199,10 @@ class BreadcrumbLocalizer {
                 std::optional<double> start_heading_sigma_rad = std::nullopt);
   /// Estimated PDR heading correction (rad) and scale error of an agent.
   std::optional<Vec2> HeadingScale(const std::string& id) const;
+  /// Estimated gyro scale-factor error and PDR heading drift rate (rad/s) of an agent.
+  std::optional<Vec2> GyroScaleRate(const std::string& id) const;
+  /// The agents, by id.
+  std::vector<std::string> AgentIds() const;
 
   /// Inputs, each stream in non-decreasing time (steps by t1); streams interleaved by time.
   void AddStep(const Step& step);
@@ -238,7 +254,7 @@ class BreadcrumbLocalizer {
     std::string id;
     NodeIndex state = -1;
     NodeIndex theta = -1;  ///< heading/scale node (-1 when not estimated)
-    NodeIndex gyro = -1;   ///< gyro scale-factor node (-1 when not estimated)
+    NodeIndex gyro = -1;   ///< gyro node (scale factor k, heading rate b); -1 when neither
     std::optional<double> last_heading;
     double state_cum_turn = 0;
     double state_cum_turn_signed = 0;
