@@ -208,5 +208,30 @@ TEST(LinkChange, DetectsALastingStepNotNoise) {
   EXPECT_LT(*change, -3.0);
 }
 
+// Issue 25, item 4: a fixed 3 dB shift of 5-packet means is noise on a link whose packets
+// spread by 8 dB; with min_z the shift must also be significant for the link's own spread.
+TEST(LinkChange, AShiftMustAlsoBeSignificantForTheLinksOwnSpread) {
+  Random rng(21);
+  LinkChangeDetector db_only({8, 5, 3.0, 0.0}), with_z({8, 5, 3.0, 5.0});
+  int false_db = 0, false_z = 0;
+  for (int k = 0; k < 2000; ++k) {
+    const double rssi = -70 + rng.Normal(0, 8.0);
+    false_db += db_only.Add(rssi).has_value();
+    false_z += with_z.Add(rssi).has_value();
+  }
+  EXPECT_GT(false_db, 10);  // the old test on this link
+  EXPECT_EQ(false_z, 0);
+  // A step of 25 dB on that link is still found, and 6 dB on a quiet (1 dB) one.
+  std::optional<double> big;
+  for (int k = 0; k < 10 && !big; ++k) big = with_z.Add(-95 + rng.Normal(0, 8.0));
+  ASSERT_TRUE(big);
+  EXPECT_LT(*big, -3.0);
+  LinkChangeDetector quiet({8, 5, 3.0, 5.0});
+  for (int k = 0; k < 30; ++k) EXPECT_FALSE(quiet.Add(-70 + rng.Normal(0, 1.0)));
+  std::optional<double> step;
+  for (int k = 0; k < 10 && !step; ++k) step = quiet.Add(-76 + rng.Normal(0, 1.0));
+  ASSERT_TRUE(step);
+}
+
 }  // namespace
 }  // namespace trailmark::radio

@@ -77,6 +77,8 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "estimate a range offset (and scale) per range kind");
     t.Real("range_scale_sigma", &L::range_scale_sigma0, "", nonneg,
            "prior sigma of the range scale (0: scale fixed at 1)");
+    t.Real("moved_min_z", [](L& o) -> double& { return o.link_change.min_z; }, "", nonneg,
+           "a link's RSSI shift must also be this many of its own standard errors (0: dB only)");
     t.Real("gate_sigma", &L::gate_sigma, "", pos,
            "reject a measurement whose innovation exceeds this many sigma (IV-F)");
     t.Real("huber_k", &L::huber_k, "", pos, "Huber down-weighting beyond this many sigma");

@@ -370,13 +370,21 @@ std::optional<double> LinkChangeDetector::Add(double rssi_dbm) {
   recent_.push_back(rssi_dbm);
   if (static_cast<int>(recent_.size()) > options_.recent) {
     reference_sum_ += recent_.front();
+    reference_sum_sq_ += recent_.front() * recent_.front();
     ++reference_count_;
     recent_.pop_front();
   }
   if (!Ready()) return std::nullopt;
   const double change = CurrentChange();
-  if (std::abs(change) > options_.threshold_db) return change;
-  return std::nullopt;
+  if (!(std::abs(change) > options_.threshold_db)) return std::nullopt;
+  if (options_.min_z > 0) {
+    // Welch-style z of the shift with the reference window's sample variance for both windows.
+    const double n = reference_count_, mean = reference_sum_ / n;
+    const double var = std::max(0.0, (reference_sum_sq_ - n * mean * mean) / std::max(1.0, n - 1));
+    const double se = std::sqrt(std::max(var, 1e-6) * (1.0 / options_.recent + 1.0 / n));
+    if (std::abs(change) < options_.min_z * se) return std::nullopt;
+  }
+  return change;
 }
 
 double LinkChangeDetector::CurrentChange() const {
@@ -389,6 +397,7 @@ double LinkChangeDetector::CurrentChange() const {
 void LinkChangeDetector::Reset() {
   recent_.clear();
   reference_sum_ = 0;
+  reference_sum_sq_ = 0;
   reference_count_ = 0;
 }
 
