@@ -63,25 +63,51 @@ TEST(Registry, EveryDefaultIsAValueItsParserAccepts) {
   }
 }
 
+/// The error of making a pipeline with these options ("" when it is made).
+std::string MakeError(const std::string& name, const EstimatorInputs& in, const OptionValues& o) {
+  try {
+    RequirePipeline(name).make(in, o, Feed::kTimeOrdered);
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
 TEST(Registry, OutOfRangeAndUnknownOptionsAreErrorsNamingTheKey) {
   const SimulatedMission sim = SimulateScenario("house1-search", 1);
   const EstimatorInputs in{sim.data.info, &sim.plan};
-  try {
-    RequirePipeline("mapmatch").make(in, {{"particles", "3"}}, Feed::kTimeOrdered);
-    FAIL();
-  } catch (const std::invalid_argument& e) {
-    EXPECT_THAT(e.what(), HasSubstr("pipeline mapmatch: option particles='3'"));
-    EXPECT_THAT(e.what(), HasSubstr("within 10 .. 1e+06"));
-  }
-  try {
-    RequirePipeline("ins").make(in, {{"zupt_sigma_mps", "1"}}, Feed::kTimeOrdered);
-    FAIL();
-  } catch (const std::invalid_argument& e) {
-    EXPECT_THAT(e.what(), HasSubstr("unknown option 'zupt_sigma_mps'"));
-    EXPECT_THAT(e.what(), HasSubstr("zupt_sigma"));
-  }
+  const std::string particles = MakeError("mapmatch", in, {{"particles", "3"}});
+  EXPECT_THAT(particles, HasSubstr("pipeline mapmatch: option particles='3'"));
+  EXPECT_THAT(particles, HasSubstr("within 10 .. 1e+06"));
+  const std::string unknown = MakeError("ins", in, {{"zupt_sigma_mps", "1"}});
+  EXPECT_THAT(unknown, HasSubstr("unknown option 'zupt_sigma_mps'"));
+  EXPECT_THAT(unknown, HasSubstr("zupt_sigma"));
   EXPECT_THROW(RequirePipeline("pdr").make(in, {{"ins.window", "0"}}, Feed::kTimeOrdered),
                std::invalid_argument);
+}
+
+// landmarks-stopgo has no continuous tracker: its options do not list the tracker's, and a
+// tracker key given to it is refused instead of being ignored.
+TEST(Registry, EachLandmarkPipelineListsAndTakesOnlyTheOptionsItReads) {
+  auto keys = [](const std::string& name) {
+    std::set<std::string> k;
+    for (const auto& o : RequirePipeline(name).options) k.insert(o.key);
+    return k;
+  };
+  const auto stopgo = keys("landmarks-stopgo"), ukf = keys("landmarks-ukf");
+  for (const char* tracker : {"filter", "slam", "adapt_noise", "shadowing_length_m"}) {
+    EXPECT_EQ(stopgo.count(tracker), 0u) << tracker;
+    EXPECT_EQ(ukf.count(tracker), 1u) << tracker;
+  }
+  for (const char* both : {"drift_per_m", "loss", "fix_fusion", "gate_other_floors"}) {
+    EXPECT_EQ(stopgo.count(both), 1u) << both;
+    EXPECT_EQ(ukf.count(both), 1u) << both;
+  }
+  const SimulatedMission sim = SimulateScenario("landmark-corridor", 1);
+  const EstimatorInputs in{sim.data.info, &sim.plan};
+  EXPECT_THAT(MakeError("landmarks-stopgo", in, {{"slam", "false"}}),
+              HasSubstr("unknown option 'slam'"));
+  EXPECT_EQ(MakeError("landmarks-ukf", in, {{"slam", "false"}}), "");
 }
 
 TEST(Registry, JsonListsNameNeedsUsesLiveAndOptions) {

@@ -47,28 +47,33 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
   return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why);
 }
 
-const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
-  static const OptionTable<LandmarkEstimatorOptions> table = [] {
-    using O = LandmarkEstimatorOptions;
-    OptionTable<O> t;
-    t.Real("drift_per_m", &O::drift_per_m, "", OptionBounds::Positive(),
-           "PDR drift, 1 sigma per metre walked");
-    t.Real("rssi_sigma_db", &O::rssi_sigma_db, "dB", OptionBounds::Positive(),
-           "UKF: sigma of one RSSI answer");
-    t.Integer("regrid_below_stops", &O::regrid_below_stops, OptionBounds::NonNegative(),
-              "a landmark heard at up to this many stops is grid-searched at every solve");
-    t.Real("regrid_growth", &O::regrid_growth, "", OptionBounds::AtLeast(1),
-           "beyond, it is grid-searched again when its stops grew by this factor (1: always)");
-    t.Choice("loss", [](O& o) -> Loss& { return o.stop_and_go.loss; },
-             std::vector<std::pair<std::string, Loss>>{
-                 {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
-             "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
-    t.Choice("fix_fusion", [](O& o) -> FixFusion& { return o.fix_fusion; },
-             std::vector<std::pair<std::string, FixFusion>>{
-                 {"independent", FixFusion::kIndependent},
-                 {"intersection", FixFusion::kIntersection}},
-             "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
-             "intersection: shared PDR errors and covariance intersection, honest)");
+namespace {
+
+/// Both landmark pipelines' options, and with `tracker` those that only landmarks-ukf's
+/// continuous tracker reads (a key of the tracker given to landmarks-stopgo is refused as
+/// unknown instead of being ignored).
+OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
+  using O = LandmarkEstimatorOptions;
+  OptionTable<O> t;
+  t.Real("drift_per_m", &O::drift_per_m, "", OptionBounds::Positive(),
+         "PDR drift, 1 sigma per metre walked");
+  t.Real("rssi_sigma_db", &O::rssi_sigma_db, "dB", OptionBounds::Positive(),
+         "UKF: sigma of one RSSI answer");
+  t.Integer("regrid_below_stops", &O::regrid_below_stops, OptionBounds::NonNegative(),
+            "a landmark heard at up to this many stops is grid-searched at every solve");
+  t.Real("regrid_growth", &O::regrid_growth, "", OptionBounds::AtLeast(1),
+         "beyond, it is grid-searched again when its stops grew by this factor (1: always)");
+  t.Choice("loss", [](O& o) -> Loss& { return o.stop_and_go.loss; },
+           std::vector<std::pair<std::string, Loss>>{
+               {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
+           "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
+  t.Choice("fix_fusion", [](O& o) -> FixFusion& { return o.fix_fusion; },
+           std::vector<std::pair<std::string, FixFusion>>{
+               {"independent", FixFusion::kIndependent},
+               {"intersection", FixFusion::kIntersection}},
+           "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
+           "intersection: shared PDR errors and covariance intersection, honest)");
+  if (tracker) {
     t.Choice("filter", [](O& o) -> TrackingFilter& { return o.filter; },
              std::vector<std::pair<std::string, TrackingFilter>>{
                  {"paper", TrackingFilter::kPaper}, {"error-state", TrackingFilter::kErrorState}},
@@ -92,12 +97,19 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable() {
            "error-state: unknown landmarks placed from moving packets and tracked jointly");
     t.Flag("track_with_estimated_landmarks", &O::track_with_estimated_landmarks,
            "error-state: also fuse landmarks placed from this dead reckoning's stops");
-    t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
-    t.Flag("gate_other_floors", &O::gate_other_floors,
-           "packets between an agent and a landmark on another level are not used");
-    return t;
-  }();
-  return table;
+  }
+  t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
+  t.Flag("gate_other_floors", &O::gate_other_floors,
+         "packets between an agent and a landmark on another level are not used");
+  return t;
+}
+
+}  // namespace
+
+const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable(Tracking tracking) {
+  static const OptionTable<LandmarkEstimatorOptions> stop_and_go = MakeLandmarkOptionTable(false);
+  static const OptionTable<LandmarkEstimatorOptions> ukf = MakeLandmarkOptionTable(true);
+  return tracking == Tracking::kUkf ? ukf : stop_and_go;
 }
 
 LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorOptions options)

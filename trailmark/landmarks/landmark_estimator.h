@@ -111,7 +111,8 @@ struct LandmarkEstimatorOptions {
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
-const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable();
+/// The options of landmarks-stopgo (kStopAndGo) or landmarks-ukf (kUkf: also its tracker's).
+const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable(Tracking tracking);
 
 class LandmarkEstimator : public OnlineEstimator {
  public:

@@ -196,7 +196,7 @@ std::vector<PipelineSpec> BuildRegistry() {
     defaults.tracking = ukf ? landmarks::Tracking::kUkf : landmarks::Tracking::kStopAndGo;
     if (!ukf) defaults.filter = landmarks::TrackingFilter::kPaper;  // no continuous tracker
     out.push_back(Make<landmarks::LandmarkEstimatorOptions>(
-        s, defaults, landmarks::LandmarkOptionTable(), Front::kGlobal,
+        s, defaults, landmarks::LandmarkOptionTable(defaults.tracking), Front::kGlobal,
         [](const EstimatorInputs& in, const landmarks::LandmarkEstimatorOptions& o) {
           return std::make_unique<landmarks::LandmarkEstimator>(in.info, o);
         }));
