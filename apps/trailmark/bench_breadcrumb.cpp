@@ -15,6 +15,7 @@
 
 #include "commands.h"
 #include "trailmark/breadcrumb/batch_reference.h"
+#include "trailmark/breadcrumb/breadcrumb_estimator.h"
 #include "trailmark/breadcrumb/localizer.h"
 #include "trailmark/sim/synthetic_incident.h"
 
@@ -131,7 +132,22 @@ double BatchSolveSeconds(int steps, std::uint64_t seed) {
 }  // namespace
 
 int BenchBreadcrumb(const IncidentOptions& o, double solve_period_s, double covariance_period_s,
-                    const std::filesystem::path& json_out) {
+                    const std::filesystem::path& json_out,
+                    const std::map<std::string, std::string>& localizer_options) {
+  breadcrumb::LocalizerOptions options;
+  options.calibrate_online = false;  // the synthetic channel is the log-distance model itself
+  options.radio = {o.alpha_dbm, o.path_loss_exponent, o.sigma_db, 0.0};
+  options.solve_period_s = solve_period_s;
+  options.covariance_period_s = covariance_period_s;
+  if (!localizer_options.empty()) {  // the pipeline's keys, e.g. heading_rate=1 (an ablation)
+    breadcrumb::BreadcrumbEstimatorOptions e;
+    e.localizer = options;
+    std::string why;
+    if (!breadcrumb::BreadcrumbOptionTable().Apply(localizer_options, &e, &why)) {
+      throw std::invalid_argument("bench breadcrumb: " + why);
+    }
+    options = e.localizer;
+  }
   auto t0 = Clock::now();
   const SyntheticIncident inc = MakeSyntheticIncident(o, 1);
   const double gen_s = std::chrono::duration<double>(Clock::now() - t0).count();
@@ -139,11 +155,7 @@ int BenchBreadcrumb(const IncidentOptions& o, double solve_period_s, double cova
              "packets + {} drops = {} measurements (generated in {:.1f} s, {:.0f} MB resident)\n",
              o.agents, inc.drops, o.duration_s / 3600, inc.steps, inc.packets, inc.drops,
              inc.events.size(), gen_s, ResidentMb());
-  breadcrumb::LocalizerOptions options;
-  options.calibrate_online = false;  // the synthetic channel is the log-distance model itself
-  options.radio = {o.alpha_dbm, o.path_loss_exponent, o.sigma_db, 0.0};
-  options.solve_period_s = solve_period_s;
-  options.covariance_period_s = covariance_period_s;
+  for (const auto& [key, value] : localizer_options) fmt::print("option {}={}\n", key, value);
   const IncidentRun run = RunIncident(inc, options);
   const double p50 = Percentile(run.latency_us, 50), p99 = Percentile(run.latency_us, 99);
   const double max = *std::max_element(run.latency_us.begin(), run.latency_us.end());

@@ -70,9 +70,11 @@ void ExportFloorPlanWgs84(const std::filesystem::path& mission, const std::files
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);
-/// `trailmark bench breadcrumb`: the large-incident benchmark of the breadcrumb localizer.
+/// `trailmark bench breadcrumb`: the large-incident benchmark of the breadcrumb localizer;
+/// `localizer_options`: breadcrumb pipeline options (key=value) on top of the benchmark's own.
 int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
-                    double covariance_period_s, const std::filesystem::path& json_out);
+                    double covariance_period_s, const std::filesystem::path& json_out,
+                    const std::map<std::string, std::string>& localizer_options = {});
 /// `trailmark bench ins --mission DIR`: the INS core on the samples in memory and the whole
 /// `run --pipeline ins`, samples/s, best of `runs`.
 int BenchIns(const std::filesystem::path& mission_dir, int runs,

@@ -166,8 +166,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 1000000));
   std::vector<std::string> bench_options;
   bench->add_option("--option", bench_options,
-                    "ins, load: an option of the pipeline key=value (ins: for both measurements; "
-                    "repeatable)");
+                    "ins, load, breadcrumb: an option of the pipeline key=value (ins: for both "
+                    "measurements; breadcrumb: on top of the benchmark's; repeatable)");
   server::LoadTestOptions load;
   bench->add_option("--firefighters", load.firefighters, "load: firefighters sending at once");
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
@@ -401,7 +401,8 @@ int main(int argc, char** argv) {
       return cli::Demo(scenario, seed, demo_out);
     } else if (*bench) {
       if (bench_what == "breadcrumb") {
-        return cli::BenchBreadcrumb(incident, solve_period, covariance_period, bench_json);
+        return cli::BenchBreadcrumb(incident, solve_period, covariance_period, bench_json,
+                                    ParseKeyValues(bench_options));
       }
       if (bench_what == "ins") {
         if (bench_mission.empty()) throw std::invalid_argument("bench ins needs --mission DIR");

@@ -382,6 +382,9 @@ run_failing "$TM" bench load --firefighters 1 --minutes 0.1 --pipeline nope --di
   --json "$dir/load.json" > "$dir/load.log" 2>&1 \
   && grep -q "starts 2 s apart" "$dir/load.log" && grep -q '"stagger_s": 2' "$dir/load.json" \
   || { cat "$dir/load.log"; fail "bench load --stagger"; }
+# bench breadcrumb takes the pipeline's options; a wrong one is refused before the incident is made
+run_failing "$TM" bench breadcrumb --option heading_rate=maybe
+[ $rc -ne 0 ] && matches "heading_rate" "$dir/err" || { cat "$dir/err"; fail "bench breadcrumb --option heading_rate=maybe"; }
 run_failing "$TM" bench load --stagger -1 --dir "$dir/load"
 [ $rc -ne 0 ] && matches "stagger" "$dir/err" || { cat "$dir/err"; fail "bench load --stagger -1"; }
 "$TM" journal export "$dir/j.db" --mission "$dir/live" --out "$dir/exported" > /dev/null || fail "journal export"
