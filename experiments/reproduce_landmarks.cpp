@@ -9,6 +9,7 @@
 #include <optional>
 #include <fstream>
 
+#include "experiments/ble_flat.h"
 #include "experiments/experiments.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/geometry/segment.h"
@@ -40,33 +41,9 @@ double DistanceToPath(const Vec2& p, const std::vector<Segment2>& path) {
 std::string BleFlat(const fs::path& dir) {
   if (!fs::exists(dir / "anchors.csv")) return "\n(ble-rss-flat not present)\n";
   std::vector<Vec2> anchors;
-  {
-    CsvReader r((dir / "anchors.csv").string());
-    const int cx = r.RequireColumn("x"), cy = r.RequireColumn("y");
-    while (r.Next()) anchors.emplace_back(r.Double(cx), r.Double(cy));
-  }
-  struct Row {
-    double t;
-    std::optional<Vec2> xy;
-    std::vector<std::optional<double>> rssi;
-  };
-  auto read = [&](const char* file) {
-    std::vector<Row> rows;
-    CsvReaderOptions unnamed;
-    unnamed.allow_unnamed_columns = true;  // a pandas index column
-    CsvReader r((dir / file).string(), unnamed);
-    const int ct = r.RequireColumn("ts"), cx = r.Column("x"), cy = r.Column("y");
-    std::vector<int> cr;
-    for (std::size_t k = 0; k < anchors.size(); ++k) cr.push_back(r.RequireColumn("rssi_" + std::to_string(k + 1)));
-    while (r.Next()) {
-      Row row;
-      row.t = r.Double(ct) * 1e-9;
-      if (cx >= 0 && cy >= 0) row.xy = Vec2(r.Double(cx), r.Double(cy));
-      for (int c : cr) row.rssi.push_back(r.OptionalDouble(c));
-      rows.push_back(std::move(row));
-    }
-    return rows;
-  };
+  for (const Vec3& a : ReadBleFlatAnchors(dir)) anchors.push_back(a.head<2>());
+  using Row = BleFlatRow;
+  auto read = [&](const char* file) { return ReadBleFlatRows(dir / file, anchors.size()); };
   const auto calib = read("calibration_df.csv");
   const auto robot = read("test_robot_df.csv");
   const auto walk = read("test_walk_df.csv");
@@ -79,7 +56,7 @@ std::string BleFlat(const fs::path& dir) {
   std::vector<radio::CalibrationPair> pairs;
   for (const auto& row : calib) {
     for (std::size_t k = 0; k < anchors.size(); ++k) {
-      if (row.rssi[k]) pairs.push_back({std::max((*row.xy - anchors[k]).norm(), 0.1), *row.rssi[k]});
+      if (row.rssi_dbm[k]) pairs.push_back({std::max((*row.xy - anchors[k]).norm(), 0.1), *row.rssi_dbm[k]});
     }
   }
   const radio::PathLossFit fit = radio::FitLogDistance(pairs, 0.05, 0.5);
@@ -92,7 +69,7 @@ std::string BleFlat(const fs::path& dir) {
     std::vector<std::optional<double>> r;
     std::vector<double> s;
     int heard = 0;
-    for (const auto& v : row.rssi) {
+    for (const auto& v : row.rssi_dbm) {
       if (v) {
         const auto range = radio::ToRange(fit.model, *v);
         r.push_back(range.range_m);
@@ -125,12 +102,12 @@ std::string BleFlat(const fs::path& dir) {
         uo.rssi_sigma_db = fit.residual_sigma_db;
         uo.tau = 0.5;
         ukf.emplace(*f, fit.model, uo);
-        last_t = row.t;
+        last_t = row.t_s;
       }
-      ukf->Predict(row.t - last_t);
-      last_t = row.t;
+      ukf->Predict(row.t_s - last_t);
+      last_t = row.t_s;
       for (std::size_t k = 0; k < anchors.size(); ++k) {
-        if (row.rssi[k]) ukf->UpdateRssi(anchors[k], Mat2::Zero(), *row.rssi[k]);
+        if (row.rssi_dbm[k]) ukf->UpdateRssi(anchors[k], Mat2::Zero(), *row.rssi_dbm[k]);
       }
       ukf_err.push_back(error_of(ukf->position(), row));
     }

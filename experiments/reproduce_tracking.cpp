@@ -10,10 +10,12 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <stdexcept>
+#include <string>
 
+#include "experiments/ble_flat.h"
 #include "experiments/experiments.h"
 #include "trailmark/core/random.h"
-#include "trailmark/io/csv.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/scenarios.h"
@@ -34,30 +36,14 @@ namespace {
 std::vector<MissionData> BleFlatRuns(const fs::path& dir, std::uint64_t seed) {
   std::vector<MissionData> runs;
   if (!fs::exists(dir / "anchors.csv")) return runs;
-  std::vector<Vec3> anchors;
-  {
-    CsvReader r((dir / "anchors.csv").string());
-    const int cx = r.RequireColumn("x"), cy = r.RequireColumn("y"), cz = r.RequireColumn("z");
-    while (r.Next()) anchors.emplace_back(r.Double(cx), r.Double(cy), r.Double(cz));
-  }
-  struct Row {
-    double t;
-    Vec2 xy;
-    std::vector<std::optional<double>> rssi;
-  };
+  const std::vector<Vec3> anchors = ReadBleFlatAnchors(dir);
+  using Row = BleFlatRow;
   std::vector<std::vector<Row>> sessions;
   for (const char* file : {"calibration_df.csv", "test_robot_df.csv"}) {
-    CsvReaderOptions unnamed;
-    unnamed.allow_unnamed_columns = true;  // a pandas index column
-    CsvReader r((dir / file).string(), unnamed);
-    const int ct = r.RequireColumn("ts"), cx = r.RequireColumn("x"), cy = r.RequireColumn("y");
-    std::vector<int> cr;
-    for (std::size_t k = 0; k < anchors.size(); ++k) cr.push_back(r.RequireColumn("rssi_" + std::to_string(k + 1)));
     std::vector<Row> rows;
-    while (r.Next()) {
-      Row row{r.Double(ct) * 1e-9, Vec2(r.Double(cx), r.Double(cy)), {}};
-      for (int c : cr) row.rssi.push_back(r.OptionalDouble(c));
-      if (!rows.empty() && row.t - rows.back().t > 60.0) {
+    for (Row& row : ReadBleFlatRows(dir / file, anchors.size())) {
+      if (!row.xy) throw std::invalid_argument(std::string(file) + ": no x/y columns");
+      if (!rows.empty() && row.t_s - rows.back().t_s > 60.0) {
         sessions.push_back(std::move(rows));
         rows.clear();
       }
@@ -71,9 +57,9 @@ std::vector<MissionData> BleFlatRuns(const fs::path& dir, std::uint64_t seed) {
     if (rows.size() < 20) continue;
     MissionData m;
     m.info.name = fmt::format("ble-rss-flat-run{}", k + 1);
-    const double t0 = rows.front().t;
-    const Vec2 start = rows.front().xy;
-    const Vec2 first_move = rows[std::min<std::size_t>(5, rows.size() - 1)].xy - start;
+    const double t0 = rows.front().t_s;
+    const Vec2 start = *rows.front().xy;
+    const Vec2 first_move = *rows[std::min<std::size_t>(5, rows.size() - 1)].xy - start;
     m.info.nodes.push_back(NodeInfo::Agent("robot", Vec3(start.x(), start.y(), 0.1), 0.1,
                                            std::atan2(first_move.y(), first_move.x()), 0.05));
     for (std::size_t a = 0; a < anchors.size(); ++a) {
@@ -87,16 +73,16 @@ std::vector<MissionData> BleFlatRuns(const fs::path& dir, std::uint64_t seed) {
     }
     PdrErrorModel pdr(PdrErrorOptions{}, rng.Fork());
     for (std::size_t i = 0; i < rows.size(); ++i) {
-      const double t = rows[i].t - t0;
-      m.truth.push_back({t, "robot", Vec3(rows[i].xy.x(), rows[i].xy.y(), 0.1)});
+      const double t = rows[i].t_s - t0;
+      m.truth.push_back({t, "robot", Vec3(rows[i].xy->x(), rows[i].xy->y(), 0.1)});
       for (std::size_t a = 0; a < anchors.size(); ++a) {
-        if (rows[i].rssi[a]) m.rssi.push_back({t, fmt::format("a{}", a + 1), "robot", *rows[i].rssi[a]});
+        if (rows[i].rssi_dbm[a]) m.rssi.push_back({t, fmt::format("a{}", a + 1), "robot", *rows[i].rssi_dbm[a]});
       }
       if (i == 0) continue;
-      const Vec2 d_true = rows[i].xy - rows[i - 1].xy;
-      const Vec2 d = pdr.Apply(d_true, t - (rows[i - 1].t - t0));
+      const Vec2 d_true = *rows[i].xy - *rows[i - 1].xy;
+      const Vec2 d = pdr.Apply(d_true, t - (rows[i - 1].t_s - t0));
       const double var = pdr.ReportedVariance(d_true.norm());
-      m.steps.push_back({rows[i - 1].t - t0, t, "robot", Vec3(d.x(), d.y(), 0.0), Vec3(var, var, 1e-4)});
+      m.steps.push_back({rows[i - 1].t_s - t0, t, "robot", Vec3(d.x(), d.y(), 0.0), Vec3(var, var, 1e-4)});
     }
     std::stable_sort(m.truth.begin(), m.truth.end(), [](const auto& x, const auto& y) { return x.t < y.t; });
     runs.push_back(std::move(m));
