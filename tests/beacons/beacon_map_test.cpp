@@ -169,6 +169,54 @@ TEST(BeaconMap, OnlyThePartThatChangedIsSolvedAgain) {
   EXPECT_EQ(map.summary().components, 1u);
 }
 
+TEST(BeaconMap, ASolveOnAWorkerGivesTheSameMapAndTakesWhatArrivesMeanwhileForTheNext) {
+  // Solve() against BeginSolve(on a worker) ... EndSolve() on the same calls: bit for bit. In
+  // between, the previous solution stands and new ranges wait for the next solve.
+  std::vector<Vec2> a = Trail(8), b = Trail(8);
+  for (Vec2& p : b) p += Vec2(100, 50);
+  Random rng_a(14), rng_b(14);
+  BeaconMap inline_map = TwoParts(a, b, rng_a);
+  BeaconMap worker_map = TwoParts(a, b, rng_b);
+  inline_map.Solve();
+  worker_map.BeginSolve(/*on_worker=*/true);
+  EXPECT_TRUE(worker_map.solving());
+  EXPECT_FALSE(worker_map.dirty());
+  EXPECT_EQ(worker_map.summary().solves, 0u);  // nothing in place yet
+  EXPECT_FALSE(worker_map.Position(1));  // not surveyed, no hint: placed by the solve only
+  // A range of part b arrives while the worker solves: not in this solve, in the next.
+  const double r = (b[0] - b[2]).norm() + 0.5;
+  EXPECT_TRUE(worker_map.AddRange(8, 10, r));
+  EXPECT_TRUE(worker_map.dirty());
+  worker_map.EndSolve();
+  ASSERT_TRUE(worker_map.Position(1));
+  EXPECT_FALSE(worker_map.solving());
+  EXPECT_TRUE(worker_map.dirty());
+  for (int i = 0; i < 16; ++i) {
+    EXPECT_EQ(worker_map.Position(i)->position_n, inline_map.Position(i)->position_n) << i;
+    EXPECT_EQ(worker_map.Position(i)->cov, inline_map.Position(i)->cov) << i;
+  }
+  EXPECT_EQ(worker_map.summary().part_solves, inline_map.summary().part_solves);
+  EXPECT_EQ(worker_map.summary().chi2_per_dof, inline_map.summary().chi2_per_dof);
+  // The next solve, on a worker again, takes the range: as the inline map given it now.
+  EXPECT_TRUE(inline_map.AddRange(8, 10, r));
+  inline_map.Solve();
+  const BeaconPosition first_solution = *worker_map.Position(9);
+  worker_map.BeginSolve(true);
+  EXPECT_EQ(worker_map.Position(9)->position_n, first_solution.position_n);  // until EndSolve
+  worker_map.EndSolve();
+  EXPECT_NE(worker_map.Position(9)->position_n, first_solution.position_n);
+  EXPECT_EQ(worker_map.summary().part_solves, 3u);  // part b only
+  for (int i = 0; i < 16; ++i)
+    EXPECT_EQ(worker_map.Position(i)->position_n, inline_map.Position(i)->position_n) << i;
+  // A solve begun while one is pending puts that one in place first.
+  EXPECT_TRUE(worker_map.AddRange(7, 8, 6.0));
+  worker_map.BeginSolve(true);
+  worker_map.BeginSolve(true);
+  worker_map.EndSolve();
+  EXPECT_EQ(worker_map.summary().solves, 4u);
+  EXPECT_EQ(worker_map.summary().components, 1u);
+}
+
 TEST(BeaconMap, TheSamePartSolvedWholeOrStepByStepAgrees) {
   // The incremental map (a Solve() after each part's ranges) against one Solve() of everything:
   // the same positions (the least squares converged from different starts: to 1e-6 m).

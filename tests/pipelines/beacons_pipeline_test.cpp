@@ -116,6 +116,37 @@ TEST(BeaconsPipeline, DroppedTrailIsLocalizedByMdsAndLeadsBackOut) {
   for (const auto& p : w.route_positions_n) EXPECT_TRUE(p.has_value());
 }
 
+TEST(BeaconsPipeline, AMapSolvedOnAWorkerIsPutInPlaceItsLagLaterAndEndsTheSame) {
+  // map_lag_s: each solve is put in place that much mission time after its tick (issue 20):
+  // the first map is written a lag later, and the map at the end is the same map.
+  const SimulatedMission sim = SimulateScenario("beacon-trail", 2);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const PipelineSpec& mds = RequirePipeline("beacons-mds");
+  std::map<std::string, std::pair<TimeS, Estimate>> at_once, lagged;  // first time, last row
+  for (const auto& [lag, out] : {std::pair{"0", &at_once}, std::pair{"1", &lagged}}) {
+    VectorSink sink;
+    RunBatch(mds, {mission, {{"map_lag_s", lag}}}, sink);
+    for (const Estimate& e : sink.rows) {
+      auto [it, fresh] = out->emplace(e.id, std::pair{e.t, e});
+      if (!fresh) it->second.second = e;
+    }
+  }
+  ASSERT_GE(at_once.size(), 18u);
+  ASSERT_EQ(lagged.size(), at_once.size());
+  TimeS first_at_once = 1e300, first_lagged = 1e300;
+  for (const auto& [id, first] : at_once) {
+    SCOPED_TRACE(id);
+    const auto& later = lagged.at(id);
+    first_at_once = std::min(first_at_once, first.first);
+    first_lagged = std::min(first_lagged, later.first);
+    EXPECT_LT((later.second.position_n - first.second.position_n).norm(), 1e-4);
+  }
+  EXPECT_GE(first_lagged, first_at_once + 1.0 - 1e-9);
+  EXPECT_LT(first_lagged, first_at_once + 1.5);
+}
+
 TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClosely) {
   // Recorded data may not log the drops: each beacon is then anchored at the responder's
   // estimate the first time a range to it is at most 1.5 m.

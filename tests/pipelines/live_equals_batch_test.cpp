@@ -215,6 +215,10 @@ TEST(LiveEqualsBatch, Beacons) {
     CheckCase({p, "beacon trail, steps", SimulateScenario("beacon-trail", 2), {}});
     CheckCase({p, "beacon trail, foot IMU", WithImuOnly(SimulateScenario("beacon-trail", 2), 3),
                {}});
+    // The map solved on a worker and put in place 1 s later: the same map however long the
+    // worker takes (a live feed and a batch run at different speeds).
+    CheckCase({p, "beacon trail, steps, map on a worker", SimulateScenario("beacon-trail", 2),
+               {{"map_lag_s", "1"}}});
   }
 }
 

@@ -14,6 +14,16 @@
 #include "trailmark/integrity/consistency.h"
 
 namespace trailmark::beacons {
+namespace {
+
+// The sigma of the median of `count` ranges (1.2533 sigma / sqrt(n) for large n, the mean's for
+// n <= 2).
+double MedianSigma(const BeaconMapOptions& options, std::size_t count) {
+  const double k = static_cast<double>(count);
+  return options.link_sigma_m * (k >= 3 ? 1.2533 : 1.0) / std::sqrt(k);
+}
+
+}  // namespace
 
 bool BeaconMapOptions::IsValid(std::string* why) const {
   if (!(link_sigma_m > 0) || !(max_link_m > 0)) {
@@ -62,7 +72,6 @@ int BeaconMap::Add(const std::string& id) {
   surveyed_.emplace_back();
   hint_.emplace_back();
   solved_.emplace_back();
-  previous_.emplace_back();
   hint_track_.emplace_back();
   neighbours_.emplace_back();
   samples_.emplace_back();
@@ -140,14 +149,9 @@ bool BeaconMap::AddRange(int i, int j, double range_m) {
       static_cast<double>(s.ranges_m.size()) >=
           options_.resolve_count_growth * static_cast<double>(s.used_count) ||
       std::abs(s.ranges_m.Median() - s.used_median_m) >
-          options_.resolve_median_shift_sigma * MedianSigma(s.used_count);
+          options_.resolve_median_shift_sigma * MedianSigma(options_, s.used_count);
   if (material) Touch(i), Touch(j);
   return true;
-}
-
-double BeaconMap::MedianSigma(std::size_t count) const {
-  const double k = static_cast<double>(count);
-  return options_.link_sigma_m * (k >= 3 ? 1.2533 : 1.0) / std::sqrt(k);
 }
 
 std::optional<BeaconPosition> BeaconMap::Position(int i) const {
@@ -158,11 +162,16 @@ std::optional<BeaconPosition> BeaconMap::Position(int i) const {
 }
 
 void BeaconMap::Solve() {
+  BeginSolve(false);
+  EndSolve();
+}
+
+void BeaconMap::BeginSolve(bool on_worker) {
+  if (pending_) EndSolve();
   dirty_ = false;
-  ++summary_.solves;
+  auto pending = std::make_unique<Pending>();
+  pending->tracks = tracks_;
   const int n = static_cast<int>(ids_.size());
-  previous_ = solved_;
-  std::map<int, PartResult> parts;
   std::vector<int> component(n, -1);
   for (int start = 0; start < n; ++start) {
     if (component[start] >= 0) continue;
@@ -177,14 +186,75 @@ void BeaconMap::Solve() {
     // Parts only grow (a link joins two parts and touches both): an untouched part is the one
     // solved last time, on the same inputs.
     if (const auto it = parts_.find(start); !changed && it != parts_.end()) {
-      parts.emplace(start, it->second);
+      pending->kept.emplace(start, it->second);
       continue;
     }
-    for (int i : members) solved_[i].reset();
-    if (members.size() >= 2) parts.emplace(start, SolvePart(members));
+    pending->reset.insert(pending->reset.end(), members.begin(), members.end());
+    if (members.size() < 2) continue;
+    // The snapshot of this part: median range per measured pair (robust to a long NLOS
+    // sample), its priors, its last solution.
+    PartInput in;
+    const int m = static_cast<int>(members.size());
+    in.first_id = ids_[members[0]];
+    in.measured.assign(m, std::vector<std::optional<double>>(m));
+    in.counts.assign(static_cast<std::size_t>(m) * m, 0);
+    std::vector<int> local(n, -1);  // beacon -> index in the part
+    for (int a = 0; a < m; ++a) local[members[a]] = a;
+    for (int a = 0; a < m; ++a) {
+      const int i = members[a];
+      for (auto& [j, pair] : samples_[i]) {
+        const int b = local[j];  // a measured pair is in one part
+        pair.used_median_m = pair.ranges_m.Median();
+        pair.used_count = pair.ranges_m.size();
+        in.measured[a][b] = in.measured[b][a] = pair.used_median_m;
+        in.counts[a * m + b] = in.counts[b * m + a] = pair.used_count;
+      }
+      in.surveyed.push_back(surveyed_[i]);
+      in.hint.push_back(hint_[i]);
+      in.previous.push_back(solved_[i]);
+      TrackHint h = hint_track_[i];
+      h.from = h.from >= 0 ? local[h.from] : -1;
+      in.hint_track.push_back(h);
+    }
+    in.members = std::move(members);
+    pending->firsts.push_back(start);
+    pending->inputs.push_back(std::move(in));
   }
-  parts_ = std::move(parts);
   std::fill(changed_.begin(), changed_.end(), false);
+  if (on_worker && !pending->inputs.empty()) {
+    pending->outputs = std::async(std::launch::async, [p = pending.get(), o = options_] {
+      std::vector<PartOutput> out;
+      for (const PartInput& in : p->inputs) out.push_back(SolvePart(in, p->tracks, o));
+      return out;
+    });
+  }
+  pending_ = std::move(pending);
+}
+
+void BeaconMap::EndSolve() {
+  if (!pending_) return;
+  std::unique_ptr<Pending> pending = std::move(pending_);
+  std::vector<PartOutput> outputs;
+  if (pending->outputs.valid()) {
+    outputs = pending->outputs.get();
+  } else {
+    for (const PartInput& in : pending->inputs)
+      outputs.push_back(SolvePart(in, pending->tracks, options_));
+  }
+  ++summary_.solves;
+  for (int i : pending->reset) solved_[i].reset();
+  parts_ = std::move(pending->kept);
+  for (std::size_t k = 0; k < outputs.size(); ++k) {
+    const PartInput& in = pending->inputs[k];
+    PartOutput& out = outputs[k];
+    for (std::size_t a = 0; a < in.members.size(); ++a) solved_[in.members[a]] = out.solved[a];
+    parts_.emplace(pending->firsts[k], out.part);
+    ++summary_.part_solves;
+    summary_.track_inflated_solves += out.track_inflated_solves;
+    summary_.inflated_solves += out.inflated_solves;
+    summary_.fold_starts_won += out.fold_starts_won;
+    if (out.rejected_why) summary_.rejected_why = std::move(*out.rejected_why);
+  }
   // The summary at this solve: the worst part.
   summary_.components = 0;
   summary_.anchor_rms_m = 0;
@@ -205,7 +275,7 @@ void BeaconMap::Solve() {
   }
   summary_.rejected_solves += summary_.rejected_parts > 0;
   summary_.from_mds = summary_.from_survey = summary_.from_hint = summary_.unknown = 0;
-  for (int i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < ids_.size(); ++i) {
     if (surveyed_[i] && !options_.mds_for_surveyed)
       ++summary_.from_survey;
     else if (solved_[i])
@@ -219,24 +289,12 @@ void BeaconMap::Solve() {
   }
 }
 
-BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
-  PartResult part;
-  ++summary_.part_solves;
-  const int m = static_cast<int>(members.size());
-  // Median range per measured pair (robust to a long NLOS sample).
-  RangeMatrix measured(m, std::vector<std::optional<double>>(m));
-  std::vector<std::size_t> counts(static_cast<std::size_t>(m) * m, 0);
-  std::vector<int> local(ids_.size(), -1);  // beacon -> index in the part
-  for (int a = 0; a < m; ++a) local[members[a]] = a;
-  for (int a = 0; a < m; ++a) {
-    for (auto& [j, pair] : samples_[members[a]]) {
-      const int b = local[j];  // a measured pair is in one part
-      pair.used_median_m = pair.ranges_m.Median();
-      pair.used_count = pair.ranges_m.size();
-      measured[a][b] = measured[b][a] = pair.used_median_m;
-      counts[a * m + b] = counts[b * m + a] = pair.used_count;
-    }
-  }
+BeaconMap::PartOutput BeaconMap::SolvePart(const PartInput& in, const std::vector<Mat3>& tracks,
+                                           const Options& options) {
+  PartOutput out;
+  const int m = static_cast<int>(in.members.size());
+  out.solved.resize(m);
+  const RangeMatrix& measured = in.measured;
   // The paper's layout, placed by Procrustes onto the anchors: surveyed beacons when two or
   // more, else surveyed + drop estimates.
   std::optional<std::vector<Vec2>> mds_n;
@@ -246,14 +304,13 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
     std::vector<std::vector<double>> full;
     FillShortestPaths(measured, &full);
     std::vector<Vec2> layout = ClassicalMds(full);
-    if (options_.refine) layout = RefineSmacof(measured, layout);
+    if (options.refine) layout = RefineSmacof(measured, layout);
     std::vector<Vec2> from, to;
     int surveyed = 0;
-    for (int a = 0; a < m; ++a) surveyed += surveyed_[members[a]].has_value();
+    for (int a = 0; a < m; ++a) surveyed += in.surveyed[a].has_value();
     for (int a = 0; a < m; ++a) {
-      const auto& anchor = surveyed_[members[a]]
-                               ? surveyed_[members[a]]
-                               : (surveyed >= 3 ? std::nullopt : hint_[members[a]]);
+      const auto& anchor =
+          in.surveyed[a] ? in.surveyed[a] : (surveyed >= 3 ? std::nullopt : in.hint[a]);
       if (anchor) from.push_back(layout[a]), to.push_back(anchor->position_n);
     }
     if (from.size() >= 2) {
@@ -267,15 +324,15 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
       mds_n = std::move(layout);
     }
   }
-  if (options_.solver == MapSolver::kLeastSquares &&
-      SolveLeastSquares(members, local, measured, counts, mds_n, &part)) {
-    part.placed = true;
-    return part;
+  if (options.solver == MapSolver::kLeastSquares &&
+      SolveLeastSquares(in, tracks, options, mds_n, &out)) {
+    out.part.placed = true;
+    return out;
   }
-  if (!mds_n) return part;
-  part.placed = true;
-  part.anchor_rms_m = mds_rms;
-  part.reflected = mds_reflected;
+  if (!mds_n) return out;
+  out.part.placed = true;
+  out.part.anchor_rms_m = mds_rms;
+  out.part.reflected = mds_reflected;
   // Covariance: the information of each beacon's measured links (others held fixed), plus the
   // anchoring residual (the layout's placement in the navigation frame).
   for (int a = 0; a < m; ++a) {
@@ -286,45 +343,44 @@ BeaconMap::PartResult BeaconMap::SolvePart(const std::vector<int>& members) {
       Vec2 u = p - (*mds_n)[b];
       if (u.norm() < 1e-9) continue;
       u.normalize();
-      info += u * u.transpose() / (options_.link_sigma_m * options_.link_sigma_m);
+      info += u * u.transpose() / (options.link_sigma_m * options.link_sigma_m);
     }
     const double anchor_var = std::max(mds_rms * mds_rms, 0.01);
-    solved_[members[a]] = BeaconPosition{p, Mat2(info.inverse() + Mat2::Identity() * anchor_var)};
+    out.solved[a] = BeaconPosition{p, Mat2(info.inverse() + Mat2::Identity() * anchor_var)};
   }
-  return part;
+  return out;
 }
 
-bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const std::vector<int>& local,
-                                  const RangeMatrix& measured,
-                                  const std::vector<std::size_t>& counts,
+bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& tracks,
+                                  const Options& options,
                                   const std::optional<std::vector<Vec2>>& mds_start,
-                                  PartResult* part) {
-  const int m = static_cast<int>(members.size());
+                                  PartOutput* out) {
+  const int m = static_cast<int>(in.members.size());
+  PartResult* part = &out->part;
   MapProblem problem;
   problem.beacons = m;
   Vec2 prior_mean = Vec2::Zero();
   std::vector<const BeaconPosition*> prior(m, nullptr);
   std::map<int, int> track_index;  // the map's track -> the problem's
   for (int a = 0; a < m; ++a) {
-    const int i = members[a];
-    prior[a] = surveyed_[i] ? &*surveyed_[i] : (hint_[i] ? &*hint_[i] : nullptr);
+    prior[a] = in.surveyed[a] ? &*in.surveyed[a] : (in.hint[a] ? &*in.hint[a] : nullptr);
     if (!prior[a]) continue;
     prior_mean += prior[a]->position_n;
-    const TrackHint& h = hint_track_[i];
-    if (surveyed_[i] || h.track < 0) {
+    const TrackHint& h = in.hint_track[a];
+    if (in.surveyed[a] || h.track < 0) {
       problem.priors.push_back({a, prior[a]->position_n, prior[a]->cov});
       continue;
     }
     const auto [it, added] = track_index.emplace(h.track, static_cast<int>(problem.tracks.size()));
-    if (added) problem.tracks.push_back({tracks_[h.track]});
+    if (added) problem.tracks.push_back({tracks[h.track]});
     MapPrior q{a, prior[a]->position_n, h.white_cov, it->second, h.along};
     // The displacement from the track's previous drop when that one is in this part too.
-    if (options_.relative_drop_priors && h.from >= 0 && local[h.from] >= 0 && !surveyed_[h.from] && hint_[h.from] &&
-        hint_track_[h.from].track == h.track) {
+    if (options.relative_drop_priors && h.from >= 0 && !in.surveyed[h.from] && in.hint[h.from] &&
+        in.hint_track[h.from].track == h.track) {
       q.cov = h.increment_cov;
-      q.from = local[h.from];
-      q.from_position_n = hint_[h.from]->position_n;
-      q.from_along = hint_track_[h.from].along;
+      q.from = h.from;
+      q.from_position_n = in.hint[h.from]->position_n;
+      q.from_along = in.hint_track[h.from].along;
     }
     problem.priors.push_back(q);
   }
@@ -332,28 +388,28 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const std::ve
   prior_mean /= static_cast<double>(problem.priors.size());
   for (int a = 0; a < m; ++a) {
     for (int b = a + 1; b < m; ++b) {
-      if (!measured[a][b]) continue;
-      problem.links.push_back({a, b, *measured[a][b], MedianSigma(counts[a * m + b])});
+      if (!in.measured[a][b]) continue;
+      problem.links.push_back(
+          {a, b, *in.measured[a][b], MedianSigma(options, in.counts[a * m + b])});
     }
   }
   // Start 0: the last solution, else the priors, else the MDS layout (the priors' mean when
   // there is none); start 1: the MDS layout. The lower cost wins (the fold the priors favour).
   std::vector<std::vector<Vec2>> starts(1, std::vector<Vec2>(m));
   for (int a = 0; a < m; ++a) {
-    const int i = members[a];
-    starts[0][a] = previous_[i]  ? previous_[i]->position_n
-                   : prior[a]    ? prior[a]->position_n
-                   : mds_start   ? (*mds_start)[a]
-                                 : Vec2(prior_mean + Vec2(0.1 * a, 0.05 * a));
+    starts[0][a] = in.previous[a] ? in.previous[a]->position_n
+                   : prior[a]     ? prior[a]->position_n
+                   : mds_start    ? (*mds_start)[a]
+                                  : Vec2(prior_mean + Vec2(0.1 * a, 0.05 * a));
   }
   if (mds_start) starts.push_back(*mds_start);
-  MapSolution solution = SolveMapLeastSquares(problem, starts, options_.least_squares);
+  MapSolution solution = SolveMapLeastSquares(problem, starts, options.least_squares);
   // A track whose shared errors came out beyond their stated sigma (eq. of a chi-square test
   // with 3 dof): its dead reckoning drifts more than assumed a priori (another PDR, a
   // magnetically disturbed heading). Its covariance is scaled to what was found, the map solved
   // again from there (so the map follows the links, not the tighter prior).
   if (solution.ok) {
-    const double limit = integrity::ChiSquareQuantile(3, 1 - options_.least_squares.false_alarm);
+    const double limit = integrity::ChiSquareQuantile(3, 1 - options.least_squares.false_alarm);
     bool again = false;
     for (std::size_t k = 0; k < problem.tracks.size(); ++k) {
       const Vec3& e = solution.track_errors[k];
@@ -367,11 +423,11 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const std::ve
     }
     if (again) {
       starts = {solution.position_n};
-      MapSolution next = SolveMapLeastSquares(problem, starts, options_.least_squares);
+      MapSolution next = SolveMapLeastSquares(problem, starts, options.least_squares);
       if (next.ok) {
         next.start = solution.start;
         solution = std::move(next);
-        ++summary_.track_inflated_solves;
+        ++out->track_inflated_solves;
       }
     }
   }
@@ -383,41 +439,40 @@ bool BeaconMap::SolveLeastSquares(const std::vector<int>& members, const std::ve
     const bool links_ok =
         link_dof <= 0 ||
         solution.chi2_links <= integrity::ChiSquareQuantile(
-                                   link_dof, 1 - options_.least_squares.false_alarm);
+                                   link_dof, 1 - options.least_squares.false_alarm);
     const double f =
         solution.chi2_priors / std::max(1.0, solution.prior_residuals - 3.0);
     if (links_ok && f > 1) {
       for (MapPrior& q : problem.priors) q.cov *= f;
       for (MapTrack& t : problem.tracks) t.cov *= f;
       starts = {solution.position_n};
-      MapSolution again = SolveMapLeastSquares(problem, starts, options_.least_squares);
+      MapSolution again = SolveMapLeastSquares(problem, starts, options.least_squares);
       if (again.ok) {
         again.start = solution.start;
         solution = std::move(again);
         part->prior_inflation = f;
-        ++summary_.inflated_solves;
+        ++out->inflated_solves;
       }
     }
   }
   if (!solution.ok) {
-    summary_.rejected_why = solution.why;
+    out->rejected_why = solution.why;
     return false;
   }
   part->least_squares = true;
-  summary_.fold_starts_won += solution.start == 1;
+  out->fold_starts_won += solution.start == 1;
   double sq = 0;
   for (const MapPrior& q : problem.priors) sq += (solution.position_n[q.i] - q.position_n).squaredNorm();
   part->anchor_rms_m = std::sqrt(sq / static_cast<double>(problem.priors.size()));
   if (solution.dof > 0) part->chi2_per_dof = solution.chi2 / solution.dof;
-  if (!solution.consistent && options_.reject_inconsistent) {
+  if (!solution.consistent && options.reject_inconsistent) {
     part->rejected = true;
-    summary_.rejected_why = fmt::format(
+    out->rejected_why = fmt::format(
         "{} beacon(s) from {}: chi-square {:.1f} > {:.1f} for {} degrees of freedom",
-        m, ids_[members[0]], solution.chi2, solution.chi2_threshold, solution.dof);
+        m, in.first_id, solution.chi2, solution.chi2_threshold, solution.dof);
     return true;  // the part keeps its priors (Position() falls back to them)
   }
-  for (int a = 0; a < m; ++a)
-    solved_[members[a]] = BeaconPosition{solution.position_n[a], solution.cov[a]};
+  for (int a = 0; a < m; ++a) out->solved[a] = BeaconPosition{solution.position_n[a], solution.cov[a]};
   return true;
 }
 

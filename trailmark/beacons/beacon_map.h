@@ -15,7 +15,9 @@
 /// Also the way back out (sec. 4): move towards the smallest id you can hear. No I/O.
 
 #include <functional>
+#include <future>
 #include <map>
+#include <memory>
 #include <optional>
 #include <queue>
 #include <string>
@@ -122,7 +124,19 @@ class BeaconMap {
   /// Recomputes the positions of every connected part that changed since the last Solve() (a
   /// beacon, range, survey or hint added to one of its members); a part that did not change
   /// keeps its solution and its share of the summary (its inputs are those it was solved on).
+  /// BeginSolve(false) then EndSolve().
   void Solve();
+  /// Solve() in two halves, so that a live incident's rows are not held up by it (issue 20):
+  /// BeginSolve() takes what every changed part needs (a snapshot: its ranges' medians, priors
+  /// and last solution) and returns; the parts are solved from the snapshot alone, on a worker
+  /// thread when `on_worker`, else in EndSolve(); EndSolve() waits for them and puts their
+  /// solution in place. Until then Position() and summary() are the previous solve's, and the
+  /// map takes new beacons, ranges and hints for the next solve. The solution depends on the
+  /// snapshot only: the same calls give the same map however long the worker takes.
+  void BeginSolve(bool on_worker);
+  void EndSolve();
+  /// Between BeginSolve() and EndSolve().
+  bool solving() const { return pending_ != nullptr; }
 
   std::optional<BeaconPosition> Position(int i) const;
   /// Beacons with a measured link to `i`.
@@ -132,7 +146,7 @@ class BeaconMap {
  private:
   Options options_;
   std::vector<std::string> ids_;
-  std::vector<std::optional<BeaconPosition>> surveyed_, hint_, solved_, previous_;
+  std::vector<std::optional<BeaconPosition>> surveyed_, hint_, solved_;
   struct TrackHint {
     int track = -1;
     Mat2 white_cov = Mat2::Identity();
@@ -157,25 +171,48 @@ class BeaconMap {
     bool reflected = false;
     double anchor_rms_m = 0, chi2_per_dof = 0, prior_inflation = 1, track_inflation = 1;
   };
-  /// Solves one connected part (its members' solved_ entries); returns its share of the summary.
-  PartResult SolvePart(const std::vector<int>& members);
-  /// The sigma of the median of `count` ranges (1.2533 sigma / sqrt(n) for large n, the mean's
-  /// for n <= 2).
-  double MedianSigma(std::size_t count) const;
+  /// What solving one connected part needs, copied at BeginSolve() (indices are the part's
+  /// own: member a is beacon members[a]).
+  struct PartInput {
+    std::vector<int> members;
+    std::string first_id;  ///< the id of members[0] (for the summary's notes)
+    RangeMatrix measured;  ///< median range per measured pair
+    std::vector<std::size_t> counts;  ///< ranges behind each median, [a * m + b]
+    std::vector<std::optional<BeaconPosition>> surveyed, hint, previous;
+    std::vector<TrackHint> hint_track;  ///< `from` as a member index (-1: not in the part)
+  };
+  /// A part's solution and its share of the summary.
+  struct PartOutput {
+    PartResult part;
+    std::vector<std::optional<BeaconPosition>> solved;  ///< per member
+    std::size_t track_inflated_solves = 0, inflated_solves = 0, fold_starts_won = 0;
+    std::optional<std::string> rejected_why;
+  };
+  struct Pending {
+    std::map<int, PartResult> kept;  ///< the parts that did not change
+    std::vector<int> reset;          ///< members of every changed part
+    std::vector<int> firsts;         ///< each input's smallest member
+    std::vector<PartInput> inputs;
+    std::vector<Mat3> tracks;        ///< tracks_ at the snapshot
+    std::future<std::vector<PartOutput>> outputs;  ///< on a worker
+  };
+  /// Solves one connected part (pure: the snapshot and the options only).
+  static PartOutput SolvePart(const PartInput& in, const std::vector<Mat3>& tracks,
+                              const Options& options);
   /// Solves one connected part by least squares; false when its priors do not fix it.
-  /// `local`: each beacon's index in `members` (-1 outside the part).
-  bool SolveLeastSquares(const std::vector<int>& members, const std::vector<int>& local,
-                         const RangeMatrix& measured,
-                         const std::vector<std::size_t>& counts,
-                         const std::optional<std::vector<Vec2>>& mds_start, PartResult* part);
+  static bool SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& tracks,
+                                const Options& options,
+                                const std::optional<std::vector<Vec2>>& mds_start,
+                                PartOutput* out);
   void Touch(int i) {
     changed_[i] = true;
     dirty_ = true;
   }
-  std::vector<bool> changed_;          ///< since the last Solve()
-  std::map<int, PartResult> parts_;    ///< by the part's smallest member, at the last Solve()
+  std::vector<bool> changed_;          ///< since the last BeginSolve()
+  std::map<int, PartResult> parts_;    ///< by the part's smallest member, at the last solve
   bool dirty_ = false;
   BeaconMapSummary summary_;
+  std::unique_ptr<Pending> pending_;  ///< between BeginSolve() and EndSolve()
 };
 
 /// The way back out (sec. 4; Souryal et al. 2007): from the beacon of smallest deployment rank

@@ -17,6 +17,10 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
     if (why) *why = "entry_track_m and mds_period_s must be >= 0";
     return false;
   }
+  if (!(map_lag_s >= 0)) {
+    if (why) *why = "map_lag_s must be >= 0";
+    return false;
+  }
   if (!(drop_sigma_m > 0) || !(close_pass_m >= 0) || !(pdr_drift_per_m >= 0) ||
       !(way_out_window_s >= 0) || !(measurement_hold_s >= 0) ||
       !(entry_heading_fallback_m >= 0)) {
@@ -65,6 +69,9 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
          "walked without a heading estimate: the PDR's frame is then taken after all");
   t.Real("mds_period_s", &O::mds_period_s, "s", OptionBounds::NonNegative(),
          "the beacon map is re-solved at most this often");
+  t.Real("map_lag_s", &O::map_lag_s, "s", OptionBounds::NonNegative(),
+         "the map solved at a tick is put in place this much later (at most mds_period_s), "
+         "solved on a worker meanwhile (0: at once, holding up the rows behind it)");
   t.Real("map_resolve_count_growth", [](O& o) -> double& { return o.map.resolve_count_growth; },
          "", OptionBounds::AtLeast(1.0),
          "a part of the map is solved again when a pair's ranges have grown by this factor since "
@@ -455,7 +462,9 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     Measure(it->second, t, beacon, range, b->bearing_rad, b->sigma_rad.value_or(0.0), sink);
   }
   if (options_.measurement_hold_s > 0) ApplyStanding(t - options_.measurement_hold_s, t, sink);
-  if (map_.dirty() && t - last_solve_ >= options_.mds_period_s) SolveAndEmit(t, sink);
+  if (map_.solving() && t - last_solve_ >= MapLag())
+    SolveAndEmit(t, sink, /*begin=*/false);
+  if (map_.dirty() && t - last_solve_ >= options_.mds_period_s) SolveAndEmit(t, sink, true);
 }
 
 void BeaconTrailEstimator::PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1, const Vec2& d,
@@ -500,10 +509,10 @@ void BeaconTrailEstimator::ApplyStanding(TimeS before, TimeS now, EstimateSink& 
 void BeaconTrailEstimator::Finish(EstimateSink& sink) {
   FlushPending(sink);
   ApplyStanding(std::numeric_limits<double>::infinity(), last_t_, sink);
-  if (map_.dirty())
-    SolveAndEmit(last_t_, sink);
-  else
-    EmitBeacons(last_t_, sink);
+  // The last solve in place and the map of every range at the end.
+  map_.EndSolve();
+  if (map_.dirty()) map_.Solve();
+  SolveAndEmit(last_t_, sink, /*begin=*/false);
 }
 
 void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
@@ -635,9 +644,14 @@ bool BeaconTrailEstimator::Apply(Agent& a, const Deferred& m) {
   return accepted;
 }
 
-void BeaconTrailEstimator::SolveAndEmit(TimeS t, EstimateSink& sink) {
-  map_.Solve();
-  last_solve_ = t;
+void BeaconTrailEstimator::SolveAndEmit(TimeS t, EstimateSink& sink, bool begin) {
+  if (begin) {
+    last_solve_ = t;
+    const bool lag = MapLag() > 0;
+    map_.BeginSolve(/*on_worker=*/lag);
+    if (lag) return;  // put in place map_lag_s later
+  }
+  map_.EndSolve();
   // A map that disagrees with its noise is not used: say so once, and when it agrees again.
   const auto& ms = map_.summary();
   if (const bool rejected = ms.rejected_parts > 0; rejected != map_rejected_) {

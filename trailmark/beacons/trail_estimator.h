@@ -40,6 +40,12 @@ struct BeaconTrailOptions {
   UpdateMode update = UpdateMode::kRangeBearing;
   bool init_from_ultrasound = false;  ///< ignore mission starts: initialize from ultrasound
   double mds_period_s = 2.0;          ///< s; the map is re-solved at most this often
+  /// s; the map solved at a tick is put in place this much mission time later, solved on a
+  /// worker thread meanwhile (ours, issue 20: a live incident's rows and estimates are not held
+  /// up by the solve; BeaconMap::BeginSolve). Deterministic: batch and live give the same map.
+  /// 0: solved and put in place at its tick, on the estimator's thread. At most mds_period_s
+  /// (a longer lag is taken as mds_period_s).
+  double map_lag_s = 0.0;
   double drop_sigma_m = 0.3;   ///< m; where a dropped beacon lands around the dropper's estimate
   /// The drop priors of agents with a start come from their own dead reckoning (rotated by
   /// the entry-heading fix), with its covariance of shared errors (heading, drift rate, scale):
@@ -199,7 +205,10 @@ class BeaconTrailEstimator : public OnlineEstimator {
   void FlushPending(EstimateSink& sink);
   void Measure(Agent& a, TimeS t, int beacon, const std::optional<PendingRange>& range,
                std::optional<double> bearing, double bearing_sigma, EstimateSink& sink);
-  void SolveAndEmit(TimeS t, EstimateSink& sink);
+  /// The map's solve begun at its last tick is put in place and every beacon written (with
+  /// `begin`: a new solve begun first, put in place now when map_lag_s is 0).
+  void SolveAndEmit(TimeS t, EstimateSink& sink, bool begin);
+  double MapLag() const { return std::min(options_.map_lag_s, options_.mds_period_s); }
   void EmitBeacons(TimeS t, EstimateSink& sink);
   void Emit(TimeS t, Agent& a, EstimateSink& sink);
   /// The position at `t` ahead of the last step by its velocity (options.extrapolate).
@@ -219,7 +228,7 @@ class BeaconTrailEstimator : public OnlineEstimator {
   std::vector<TimeS> beacon_t_;  ///< when each beacon was last emitted
   TimeS pending_t_ = std::numeric_limits<double>::infinity();
   TimeS last_t_ = 0;
-  TimeS last_solve_ = -std::numeric_limits<double>::infinity();
+  TimeS last_solve_ = -std::numeric_limits<double>::infinity();  ///< the last solve's tick
   std::size_t implausible_links_ = 0, no_position_ = 0;
   integrity::ConsistencyMonitor beacon_integrity_;
   /// Whether the last map solve rejected a part (issue 22: the fallback to drop priors and
