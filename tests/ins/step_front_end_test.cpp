@@ -83,6 +83,40 @@ TEST(DeadReckoning, PositionFixIsACovarianceIntersection) {
   EXPECT_EQ(dr.position_n(), before);
 }
 
+// A fix taken whole (the stop-and-go paper's update): the position and its covariance are the
+// fix's, the heading error keeps its variance but no longer its correlation with the position,
+// and grows the error again over the walk after the fix. Exact reference (a heading offset
+// only): C + sigma_psi^2 perp(D) perp(D)^T + the steps' own variances, D the walk since the fix.
+TEST(DeadReckoning, SetPositionKeepsTheSharedErrorsForTheWalkAfter) {
+  PdrOptions o = WhiteOnly();
+  o.start_heading_sigma_rad = 0.05;
+  DeadReckoning dr(Vec3::Zero(), 0.1, o);
+  TimeS t = 0;
+  for (int k = 0; k < 40; ++k, t += 0.5) dr.AddStep({t, t + 0.5, "a", Vec3(0.7, 0, 0), Vec3(1e-6, 1e-6, 0)});
+  EXPECT_GT(dr.covariance()(1, 1), 0.05 * 0.05 * 28 * 28 * 0.99);  // the heading across the walk
+  const auto shared_before = dr.error_covariance().bottomRightCorner<3, 3>().eval();
+  Mat2 C;
+  C << 0.2, 0.05, 0.05, 0.1;
+  dr.SetPosition(Vec2(27.5, 0.4), C);
+  EXPECT_EQ(dr.position_n().head<2>(), Vec2(27.5, 0.4));
+  EXPECT_EQ(dr.covariance(), C);
+  const auto& P = dr.error_covariance();
+  EXPECT_EQ((P.bottomRightCorner<3, 3>() - shared_before).norm(), 0.0);
+  const double cross = P.topRightCorner<2, 3>().norm() + P.bottomLeftCorner<3, 2>().norm();
+  EXPECT_EQ(cross, 0.0);
+  for (int k = 0; k < 20; ++k, t += 0.5) dr.AddStep({t, t + 0.5, "a", Vec3(0, 0.7, 0), Vec3(1e-6, 1e-6, 0)});
+  Mat2 expected = C;
+  expected(0, 0) += 0.05 * 0.05 * 14 * 14;  // perp((0, 14)) = (-14, 0)
+  expected += Mat2::Identity() * 20 * 1e-6;
+  EXPECT_LT((dr.covariance() - expected).norm(), 1e-9);
+  EXPECT_TRUE(dr.position_n().head<2>().isApprox(Vec2(27.5, 14.4)));
+  // A fix that is not one is refused, and changes nothing.
+  const Vec3 before = dr.position_n();
+  EXPECT_THROW(dr.SetPosition(Vec2(NAN, 0), C), std::invalid_argument);
+  EXPECT_THROW(dr.SetPosition(Vec2(1, 0), -C), std::invalid_argument);
+  EXPECT_EQ(dr.position_n(), before);
+}
+
 TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
   // Exact reference: the covariance of the position over many walks whose steps are turned by
   // a heading offset + drift x time + a random walk and stretched by one scale error, all

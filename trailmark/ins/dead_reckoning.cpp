@@ -66,17 +66,35 @@ void DeadReckoning::AddStep(const Step& step) {
   position_n_ += step.delta_n;
 }
 
-double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
-  // Symmetric to rounding (a solver's covariance is), then made exactly so.
-  const bool symmetric = std::abs(fix_cov_in(0, 1) - fix_cov_in(1, 0)) <=
-                         1e-9 * (std::abs(fix_cov_in(0, 0)) + std::abs(fix_cov_in(1, 1)));
-  const Mat2 fix_cov = 0.5 * (fix_cov_in + fix_cov_in.transpose());
-  if (!fix_n.allFinite() || !fix_cov_in.allFinite() || !symmetric ||
-      Eigen::LLT<Mat2>(fix_cov).info() != Eigen::Success) {
-    throw std::invalid_argument(
-        "DeadReckoning::FusePosition: the fix and its covariance must be finite, the covariance "
-        "symmetric positive definite");
+namespace {
+
+// A fix and its covariance, checked: finite, symmetric to rounding (a solver's covariance is),
+// positive definite; returned exactly symmetric.
+Mat2 CheckedFixCovariance(const char* what, const Vec2& fix_n, const Mat2& cov) {
+  const bool symmetric =
+      std::abs(cov(0, 1) - cov(1, 0)) <= 1e-9 * (std::abs(cov(0, 0)) + std::abs(cov(1, 1)));
+  const Mat2 sym = 0.5 * (cov + cov.transpose());
+  if (!fix_n.allFinite() || !cov.allFinite() || !symmetric ||
+      Eigen::LLT<Mat2>(sym).info() != Eigen::Success) {
+    throw std::invalid_argument(std::string("DeadReckoning::") + what +
+                                ": the fix and its covariance must be finite, the covariance "
+                                "symmetric positive definite");
   }
+  return sym;
+}
+
+}  // namespace
+
+void DeadReckoning::SetPosition(const Vec2& position_n, const Mat2& cov) {
+  const Mat2 c = CheckedFixCovariance("SetPosition", position_n, cov);
+  position_n_.head<2>() = position_n;
+  error_cov_.topLeftCorner<2, 2>() = c;
+  error_cov_.block<2, 3>(kX, kHeading).setZero();
+  error_cov_.block<3, 2>(kHeading, kX).setZero();
+}
+
+double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
+  const Mat2 fix_cov = CheckedFixCovariance("FusePosition", fix_n, fix_cov_in);
   const Mat2 P = covariance();
   // The trace (mean squared error) of the intersection's position covariance,
   // (omega P^-1 + (1 - omega) R^-1)^-1; its minimum over (0, 1) by golden-section search (the

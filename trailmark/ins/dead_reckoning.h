@@ -56,6 +56,11 @@ class DeadReckoning {
   /// Returns omega (1: the fix was not used). Throws std::invalid_argument for a fix that is not
   /// finite or a covariance that is not symmetric positive definite (nothing changes then).
   double FusePosition(const Vec2& fix_n, const Mat2& fix_cov);
+  /// The position and its covariance replaced (a fix taken whole, e.g. the paper's stop-and-go
+  /// update): the shared heading, drift-rate and scale errors keep their covariance, their
+  /// correlation with the new position error is dropped (the fix's error is not the dead
+  /// reckoning's). Throws std::invalid_argument as FusePosition does.
+  void SetPosition(const Vec2& position_n, const Mat2& cov);
   /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale].
   const Eigen::Matrix<double, 5, 5>& error_covariance() const { return error_cov_; }
   const Vec3& position_n() const { return position_n_; }

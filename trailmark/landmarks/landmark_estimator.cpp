@@ -73,6 +73,14 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
                {"intersection", FixFusion::kIntersection}},
            "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
            "intersection: shared PDR errors and covariance intersection, honest)");
+  if (!tracker) {
+    t.Choice("drift", [](O& o) -> DriftModel& { return o.drift; },
+             std::vector<std::pair<std::string, DriftModel>>{
+                 {"white", DriftModel::kWhite}, {"dead-reckoning", DriftModel::kDeadReckoning}},
+             "fix_fusion=independent: the covariance reported between fixes (white: "
+             "drift_per_m, the paper; dead-reckoning: the PDR's shared heading, rate and scale "
+             "errors, set at each fix; the estimate is the same)");
+  }
   if (tracker) {
     t.Choice("filter", [](O& o) -> TrackingFilter& { return o.filter; },
              std::vector<std::pair<std::string, TrackingFilter>>{
@@ -159,7 +167,9 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     a.cov = Mat2::Identity() * s * s;
     a.pdr_position = a.position;
     a.z_m = start ? start->z() : 0.0;
-    if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kIntersection) {
+    if (options_.tracking != Tracking::kUkf &&
+        (options_.fix_fusion == FixFusion::kIntersection ||
+         options_.drift == DriftModel::kDeadReckoning)) {
       a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
                    n.start_heading_sigma_rad);
     }
@@ -200,7 +210,12 @@ Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {
 
 Mat2 LandmarkEstimator::CovarianceOf(const Agent& a) const {
   if (a.tracker) return a.tracker->position_cov();
-  return a.ukf ? a.ukf->position_cov() : a.cov;
+  if (a.ukf) return a.ukf->position_cov();
+  // Independent fixes, DriftModel::kDeadReckoning: the estimate is the paper's, its covariance
+  // the dead reckoning's since the last fix (set there to the fused one).
+  if (a.dr && options_.fix_fusion == FixFusion::kIndependent)
+    return a.dr->covariance() + Mat2::Identity() * kStepVarianceFloorM2;
+  return a.cov;
 }
 
 double LandmarkEstimator::HeightOf(const std::string& id, const Agent& a) const {
@@ -280,7 +295,7 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
   const int B = static_cast<int>(ids_.size());
   a.stopped = false;
   Stop s;
-  s.standing = a.dr ? a.pdr_position : a.position;
+  s.standing = options_.fix_fusion == FixFusion::kIntersection ? a.pdr_position : a.position;
   for (int j = 0; j < B; ++j) {
     s.rssi.push_back(a.count[j] ? std::optional<double>(a.sum[j] / a.count[j]) : std::nullopt);
   }
@@ -359,7 +374,7 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
     // landmarks were placed from this dead reckoning's standing positions, and the fix reuses
     // this stop's RSSI): fix_fusion=intersection does covariance intersection; the paper's
     // independent update makes the ellipse a third of the error (issue 21, docs/landmarks.md).
-    if (a.dr) {
+    if (options_.fix_fusion == FixFusion::kIntersection) {
       a.dr->FusePosition(fr.standing[0], c_fix);
       a.position = a.dr->position_n().head<2>();
       a.cov = a.dr->covariance();
@@ -369,6 +384,7 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
       a.position += K * (fr.standing[0] - a.position);
       a.cov = (Mat2::Identity() - K) * a.cov;
       a.cov = 0.5 * (a.cov + a.cov.transpose());
+      if (a.dr) a.dr->SetPosition(a.position, a.cov);
     }
     ++fixes_;
     a.t = t;
@@ -399,8 +415,8 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     const Vec2 d = step->delta_n.head<2>();
     const double s = options_.drift_per_m * d.norm();
     a.pdr_position += d;
-    if (a.dr) {
-      a.dr->AddStep(*step);
+    if (a.dr) a.dr->AddStep(*step);
+    if (options_.fix_fusion == FixFusion::kIntersection) {
       a.position = a.dr->position_n().head<2>();
       a.cov = a.dr->covariance() + Mat2::Identity() * kStepVarianceFloorM2;
     } else {

@@ -46,6 +46,18 @@ enum class FixFusion {
   kIntersection,
 };
 
+/// The covariance stop-and-go tracking reports between fixes (FixFusion::kIndependent). Both
+/// fuse each fix with the paper's weights (white drift, `drift_per_m`): the estimate is the same.
+enum class DriftModel {
+  /// The paper's: white drift, `drift_per_m` sigma per metre walked.
+  kWhite,
+  /// The dead reckoning's own error model (its shared heading, drift-rate and scale errors,
+  /// ins/dead_reckoning.h, as `pdr` reports them), set to the fused covariance at each fix: a
+  /// track without a fix is as honest as `pdr`'s, and a fix's error grows with the heading
+  /// error over the distance walked since (ours, issue 21).
+  kDeadReckoning,
+};
+
 /// The continuous tracker of `landmarks-ukf`.
 enum class TrackingFilter {
   /// The paper's UKF (sec. 5.4): position, velocity, acceleration; white PDR drift; every packet
@@ -69,6 +81,7 @@ struct LandmarkEstimatorOptions {
   /// then estimated jointly with its track (LandmarkTracker::UpdateRssiUnknown; issue 24 item 3).
   bool slam = true;
   FixFusion fix_fusion = FixFusion::kIndependent;
+  DriftModel drift = DriftModel::kDeadReckoning;
   /// PDR drift, 1 sigma per metre walked (ours: 5 %); not used by FixFusion::kIntersection,
   /// which propagates the dead reckoning's own error model (`pdr`'s defaults and the agent's
   /// start_heading_sigma).
@@ -133,8 +146,9 @@ class LandmarkEstimator : public OnlineEstimator {
   struct Agent {
     Vec2 position = Vec2::Zero();
     Mat2 cov = Mat2::Identity();
-    /// FixFusion::kIntersection: the dead reckoning with its shared errors (heading, drift
-    /// rate, scale: issue 21), into which each stop's fix is fused.
+    /// Stop-and-go, FixFusion::kIntersection or DriftModel::kDeadReckoning: the dead reckoning
+    /// with its shared errors (heading, drift rate, scale: issue 21), into which each stop's
+    /// fix is fused (intersection) or set (independent).
     std::optional<DeadReckoning> dr;
     Vec2 pdr_position = Vec2::Zero();  ///< the start plus every step, no fix (the map's frame)
     bool stopped = false;
