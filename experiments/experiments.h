@@ -24,6 +24,8 @@ struct ReproductionArgs {
   OptionValues options;               ///< passed to the reproduced pipeline (ablations)
   std::filesystem::path data_dir = "../shared/data";  ///< recorded data
   int first_seed = 1;
+  /// Reproductions over several pipelines: only these (empty: all of them).
+  std::vector<std::string> pipelines;
 };
 
 struct Reproduction {
@@ -32,6 +34,7 @@ struct Reproduction {
   bool takes_first_seed = false;  ///< --first-seed: figures on seeds a setting was not chosen on
   bool takes_options = false;     ///< --option goes to its pipeline
   std::function<int(const ReproductionArgs&)> run;
+  bool takes_pipelines = false;   ///< --pipeline chooses which of its pipelines run
 };
 
 /// Every reproduction, in a stable order.
@@ -71,7 +74,12 @@ int ReproduceMapMatch(int seeds, const std::filesystem::path& out, const OptionV
 
 /// Every pipeline x every variation family on its paper's scenario, against dead reckoning on
 /// the same variant (issue 21, item 5): variants K = first_seed .. first_seed + variants - 1.
-int ReproduceRobustness(int variants, const std::filesystem::path& out, int first_seed = 1);
+/// `pipelines`: only these (empty: every pipeline but the baseline and ins); `options` go to
+/// each of them (not to the dead reckoning they are compared with) and need `pipelines`.
+/// Throws std::invalid_argument for a pipeline not in the table or an option one of them refuses.
+int ReproduceRobustness(int variants, const std::filesystem::path& out, int first_seed = 1,
+                        const std::vector<std::string>& pipelines = {},
+                        const OptionValues& options = {});
 
 /// The kinds of lie of the integrity mechanism (sim/lies.h) x magnitudes, on seeds
 /// first_seed .. first_seed + seeds - 1 (issue 21, item 3): how often the lying source is named,

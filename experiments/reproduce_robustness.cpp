@@ -31,7 +31,8 @@ struct Outcome {
   ErrorStatistics statics;
 };
 
-Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs::path& out) {
+Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs::path& out,
+              const OptionValues& options = {}) {
   Outcome o;
   try {
     const MissionDirectory mission(mission_dir);
@@ -39,7 +40,7 @@ Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs
       o.refusal = "cannot run (streams or nodes missing)";
       return o;
     }
-    const Metrics m = RunAndEvaluate(pipeline, mission_dir, out, nullptr);
+    const Metrics m = RunAndEvaluate(pipeline, mission_dir, out, nullptr, options);
     o.ran = true;
     o.agents = m.agents.stats;
     o.statics = m.static_nodes.stats;
@@ -55,13 +56,35 @@ std::string Scenario(const PipelineSpec& p) {
 
 }  // namespace
 
-int ReproduceRobustness(int variants, const fs::path& out, int first_seed) {
+int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
+                        const std::vector<std::string>& only, const OptionValues& options) {
   // Scenario seeds 100 + K and variants K = first_seed .. first_seed + variants - 1: no default
   // of any estimator was chosen on a variant (the families are newer than every default).
   std::vector<const PipelineSpec*> pipelines;
+  std::string in_table;
   for (const PipelineSpec& p : Pipelines()) {
     if (p.baseline || p.name == "ins") continue;  // ins: a foot-IMU run, compared in reproduce ins
-    pipelines.push_back(&p);
+    in_table += (in_table.empty() ? "" : ", ") + p.name;
+    if (only.empty() || std::find(only.begin(), only.end(), p.name) != only.end())
+      pipelines.push_back(&p);
+  }
+  for (const std::string& name : only) {
+    if (std::none_of(pipelines.begin(), pipelines.end(),
+                     [&](const PipelineSpec* p) { return p->name == name; }))
+      throw std::invalid_argument(fmt::format(
+          "robustness: '{}' is not one of its pipelines ({})", name, in_table));
+  }
+  if (!options.empty() && only.empty())
+    throw std::invalid_argument("robustness: --option needs --pipeline (options are a pipeline's)");
+  // An option a pipeline refuses is an error now, not a column of refused runs.
+  for (const PipelineSpec* p : pipelines) {
+    if (options.empty()) break;
+    const SimulatedMission sim = SimulateScenario(Scenario(*p), 100 + first_seed);
+    try {
+      p->make({sim.data.info, &sim.plan}, options, Feed::kTimeOrdered);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(fmt::format("robustness: {}", e.what()));
+    }
   }
   std::map<std::string, std::vector<std::string>> by_scenario;
   for (const PipelineSpec* p : pipelines) by_scenario[Scenario(*p)].push_back(p->name);
@@ -89,7 +112,7 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed) {
         for (const std::string& name : names) {
           Cell& c = cells[{name, family_name}];
           ++c.runs;
-          const Outcome o = RunOn(name, dir / "mission", dir / name);
+          const Outcome o = RunOn(name, dir / "mission", dir / name, options);
           if (!o.ran) {
             ++c.refused;
             if (c.first_refusal.empty()) c.first_refusal = o.refusal;
@@ -122,6 +145,11 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed) {
       "variant; worse: variants where p75 > 1.1 x DR's p75 (goal 0); refused: variants the "
       "pipeline would not run (with the first reason).\n\n",
       variants, first_seed, first_seed + variants - 1);
+  if (!options.empty()) {
+    std::string given;
+    for (const auto& [k, v] : options) given += fmt::format("{}`{}={}`", given.empty() ? "" : ", ", k, v);
+    text += fmt::format("Options (the pipelines', not dead reckoning's): {}.\n\n", given);
+  }
   text +=
       "| pipeline | scenario | family | p50 m | p75 m | max m | in95 % | DR p75 m | DR in95 % | "
       "worse than DR | refused |\n|---|---|---|---|---|---|---|---|---|---|---|\n";

@@ -196,10 +196,12 @@ const std::vector<Reproduction>& Reproductions() {
        }},
       {"robustness",
        "every pipeline x every variation family (simulate --vary) against dead reckoning",
-       true, false,
+       true, true,
        [](const ReproductionArgs& a) {
-         return ReproduceRobustness(a.seeds, a.out / "robustness", a.first_seed);
-       }},
+         return ReproduceRobustness(a.seeds, a.out / "robustness", a.first_seed, a.pipelines,
+                                    a.options);
+       },
+       /*takes_pipelines=*/true},
       {"integrity",
        "the kinds of lie the integrity mechanism must catch x magnitudes: named, excluded, p75",
        true, false,
@@ -234,6 +236,8 @@ int Reproduce(const std::string& name, const ReproductionArgs& args) {
       throw std::invalid_argument("--first-seed does not apply to the " + name + " reproduction");
     if (!args.options.empty() && !r.takes_options)
       throw std::invalid_argument("the " + name + " reproduction takes no --option");
+    if (!args.pipelines.empty() && !r.takes_pipelines)
+      throw std::invalid_argument("the " + name + " reproduction takes no --pipeline");
     return r.run(args);
   }
   throw std::invalid_argument("unknown reproduction '" + name + "' (known: " + known + ")");

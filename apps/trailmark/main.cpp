@@ -222,6 +222,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> reproduce_options;
   reproduce->add_option("--option", reproduce_options,
                         "key=value passed to the reproduced pipeline (ablations)");
+  std::vector<std::string> reproduce_pipelines;
+  reproduce->add_option("--pipeline", reproduce_pipelines,
+                        "robustness: only this pipeline (repeatable; needed with --option)");
 
   std::string convert_format, convert_src, convert_out;
   auto* convert =
@@ -544,6 +547,7 @@ int main(int argc, char** argv) {
       args.options = ParseKeyValues(reproduce_options);
       args.data_dir = reproduce_data;
       args.first_seed = reproduce_first_seed;
+      args.pipelines = reproduce_pipelines;
       return experiments::Reproduce(reproduce_name, args);
     }
   } catch (const InputError& e) {

@@ -186,6 +186,21 @@ run_failing "$TM" run --pipeline landmarks-ukf "$dir/lc" --out "$dir/x" --option
 "$TM" reproduce beacons --seeds 1 --out "$dir/rep" > "$dir/repb.txt" || fail "reproduce beacons"
 grep -q "1,000 beacons" "$dir/repb.txt" && grep -q "| \*\*overall\*\* | 1.93 / 3.70 |" "$dir/repb.txt" \
   || fail "reproduce beacons tables"
+# reproduce robustness for one pipeline with its options (an ablation over the families); a
+# pipeline not in its table, options without --pipeline or refused by the pipeline are errors.
+"$TM" reproduce robustness --pipeline beacons-mds --option map_lag_s=1 --seeds 1 --out "$dir/rob" \
+  > "$dir/rob.txt" || fail "reproduce robustness --pipeline"
+grep -q "Options (the pipelines', not dead reckoning's): \`map_lag_s=1\`" "$dir/rob.txt" \
+  && grep -q "^| beacons-mds | beacon-trail | frame |" "$dir/rob.txt" \
+  && ! grep -q "^| beacons-ekf " "$dir/rob.txt" || fail "reproduce robustness, one pipeline"
+run_failing "$TM" reproduce robustness --option map_lag_s=1 --seeds 1 --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "option needs --pipeline" "$dir/err" || fail "robustness option alone"
+run_failing "$TM" reproduce robustness --pipeline pdr --seeds 1 --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "'pdr' is not one of its pipelines" "$dir/err" || fail "robustness pdr"
+run_failing "$TM" reproduce robustness --pipeline landmarks-stopgo --option map_lag_s=1 --seeds 1 --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "unknown option 'map_lag_s'" "$dir/err" || fail "robustness refused option"
+run_failing "$TM" reproduce beacons --pipeline beacons-ekf --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "takes no --pipeline" "$dir/err" || fail "reproduce beacons --pipeline"
 # The ultrasound beacon trail: MDS, the SCAAT EKF, the way back out.
 "$TM" simulate beacon-trail --seed 3 --out "$dir/bt" | matches "crumbs dropped" || fail "simulate beacon-trail"
 "$TM" validate "$dir/bt" | matches "beacons-mds beacons-ekf" || fail "beacon pipelines runnable"
