@@ -11,7 +11,7 @@ PACKAGES=(
   build-essential cmake ninja-build ccache pkg-config git
   libeigen3-dev libcli11-dev nlohmann-json3-dev libfmt-dev libspdlog-dev
   libgtest-dev libgmock-dev libbenchmark-dev libnanoflann-dev libboost-dev libspectra-dev libceres-dev libsqlite3-dev
-  libcpp-httplib-dev curl chromium
+  libcpp-httplib-dev libbrotli-dev zlib1g-dev curl chromium
   libpaho-mqtt-dev libpaho-mqttpp-dev mosquitto mosquitto-clients openssl libssl-dev
   clang libclang-rt-14-dev
   pybind11-dev python3-dev python3-numpy python3-pytest libgeographiclib-dev libzip-dev doxygen

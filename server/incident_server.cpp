@@ -14,6 +14,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "server/compressed_asset.h"
 #include "server/gated_http_server.h"
 #include "server/journal.h"
 #include "trailmark_generated/version.h"
@@ -58,6 +59,17 @@ namespace {
 
 /// The type of every JSON reply (why the charset: where the replies are made).
 constexpr const char* kJsonType = "application/json; charset=utf-8";
+
+// An embedded asset in an encoding, compressed at its first request and kept.
+const std::string& CompressedAsset(const std::string& path, const WebAsset& asset,
+                                   ContentEncoding encoding) {
+  static std::mutex mutex;
+  static std::map<std::pair<std::string, ContentEncoding>, std::string> cache;
+  std::lock_guard<std::mutex> lock(mutex);
+  auto it = cache.find({path, encoding});
+  if (it == cache.end()) it = cache.emplace(std::pair{path, encoding}, Compress(asset.content, encoding)).first;
+  return it->second;
+}
 
 /// Parses a CSV document of one stream into typed rows and its journal batch (canonical text,
 /// times, nodes, lines). Throws InputError naming `name` and the line.
@@ -471,6 +483,15 @@ void IncidentServer::Start() {
     const WebAsset* a = FindWebAsset(req.path);
     if (a == nullptr) {
       res.status = 404;
+      return;
+    }
+    if (a->mime.rfind("text/javascript", 0) == 0) {
+      // The script (most of the page's bytes) compressed once, in the encoding the browser
+      // takes, under a type the HTTP library does not compress again (compressed_asset.h).
+      const ContentEncoding e = PreferredEncoding(req.get_header_value("Accept-Encoding"));
+      res.set_header("Vary", "Accept-Encoding");
+      if (e != ContentEncoding::kIdentity) res.set_header("Content-Encoding", ContentEncodingName(e));
+      res.set_content(CompressedAsset(req.path, *a, e), "application/javascript; charset=utf-8");
       return;
     }
     res.set_content(std::string(a->content), std::string(a->mime));
