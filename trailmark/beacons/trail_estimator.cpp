@@ -17,6 +17,10 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
     if (why) *why = "entry_track_m and mds_period_s must be >= 0";
     return false;
   }
+  if (!(output_period_s == 0 || (output_period_s >= 0.01 && std::isfinite(output_period_s)))) {
+    if (why) *why = "output_period_s must be 0 or at least 0.01 s";
+    return false;
+  }
   if (!(map_lag_s >= 0)) {
     if (why) *why = "map_lag_s must be >= 0";
     return false;
@@ -33,6 +37,9 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
 }
 
 namespace {
+
+/// Output instants this close to a row's time are the row's own (round-off).
+constexpr double kTickTolS = 1e-9;
 
 // A surveyed crumb or landmark (a node that can be a beacon; not the base, which stays at the
 // entry) more than 2 m from `start_n`: with the start it fixes the navigation frame's heading
@@ -116,6 +123,9 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
            "a measurement waits this long for the step spanning its time (0: at once)");
     t.Flag("extrapolate", &O::extrapolate,
            "between steps, emit the position ahead of the last step by its velocity");
+    t.Real("output_period_s", &O::output_period_s, "s", OptionBounds::NonNegative(),
+           "with extrapolate: an agent's estimate is never older than this at the next row "
+           "(0: at steps and measurements only)");
     t.Choice("outliers", [](O& o) -> bool& { return o.ekf.mixture_updates; },
              std::vector<std::pair<std::string, bool>>{{"mixture", true}, {"gate", false}},
              "mixture: ranges and bearings weighed by their inlier probability under a "
@@ -363,6 +373,17 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     throw std::invalid_argument("'" + step->agent + "' has steps but is not an agent");
   }
   if (t > pending_t_) FlushPending(sink);
+  // The view between rows: each agent's estimate extrapolated every output_period_s up to this
+  // row (from the rows before it only).
+  if (options_.extrapolate && options_.measurement_hold_s > 0 && options_.output_period_s > 0) {
+    for (auto& [id, a] : agents_) {
+      if (!a.ekf) continue;
+      for (TimeS tk = a.t + options_.output_period_s; tk < t - kTickTolS;
+           tk = a.t + options_.output_period_s) {
+        if (!EmitAhead(tk, a, sink)) break;
+      }
+    }
+  }
   last_t_ = t;
   if (const auto* e = std::get_if<MissionEvent>(&row)) {
     if (e->event == "drop" && !e->node.empty()) {
@@ -687,8 +708,8 @@ void BeaconTrailEstimator::Emit(TimeS t, Agent& a, EstimateSink& sink) {
   sink.Add({t, a.id, Vec3(p->x(), p->y(), 0), (*c)(0, 0), (*c)(0, 1), (*c)(1, 1)});
 }
 
-void BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
-  if (!a.ekf || !std::isfinite(a.step_t1) || !(t > a.step_t1) || t <= a.t) return;
+bool BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
+  if (!a.ekf || !std::isfinite(a.step_t1) || !(t > a.step_t1) || t <= a.t) return false;
   const double ahead_s = std::min(t - a.step_t1, a.step_t1 - a.step_t0);
   const double speed = a.step_velocity_n.norm();
   const Vec2 p = a.ekf->position() + a.step_velocity_n * ahead_s;
@@ -696,6 +717,7 @@ void BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
   const Mat2 c = a.ekf->position_cov() + Mat2::Identity() * s * s;
   a.t = t;
   sink.Add({t, a.id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
+  return true;
 }
 
 std::optional<Estimate> BeaconTrailEstimator::Current(const std::string& node) const {

@@ -81,6 +81,13 @@ struct BeaconTrailOptions {
   /// slowing, stopping): what is known online then. false: the last step's estimate only.
   bool extrapolate = true;
   double extrapolation_speed_sigma = 0.5;
+  /// s; with `extrapolate` and a hold: an agent's estimate is never older than this when the
+  /// next row comes (ours, issue 22): before a row at t, every `output_period_s` after the
+  /// agent's last estimate and before t gets the extrapolated one (steps-only missions give the
+  /// estimator rows at ~3 Hz; a view held for 0.3 s of walking was outside its own ellipse).
+  /// Deterministic in the rows, so live = batch; each from the rows before it only. 0: at steps
+  /// and measurements only (as before 2026-12-03). 0.1: a 10 Hz display (a priori).
+  double output_period_s = 0.1;
   ScaatEkfOptions ekf;
   UltrasoundOnlyKfOptions us_kf;
   BeaconMapOptions map;
@@ -212,7 +219,9 @@ class BeaconTrailEstimator : public OnlineEstimator {
   void EmitBeacons(TimeS t, EstimateSink& sink);
   void Emit(TimeS t, Agent& a, EstimateSink& sink);
   /// The position at `t` ahead of the last step by its velocity (options.extrapolate).
-  void EmitAhead(TimeS t, Agent& a, EstimateSink& sink);
+  /// The agent's position ahead of its last step end at t (false, nothing written: no step yet,
+  /// t not after the step end or not after its last estimate).
+  bool EmitAhead(TimeS t, Agent& a, EstimateSink& sink);
   bool Apply(Agent& a, const Deferred& m);
   /// The step (t0, t1, d) with the measurements it spans applied at their instants.
   void PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1, const Vec2& d, const Mat2& cov);
