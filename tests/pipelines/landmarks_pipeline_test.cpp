@@ -68,8 +68,8 @@ TEST(LandmarksPipeline, CorridorMissionLocalizesTheLandmarks) {
 // 86 % against 32 %; docs/landmarks.md).
 //
 // drift=dead-reckoning (the default since 2026-12-03): the paper's update, the same estimate to
-// the bit, reporting the dead reckoning's covariance between fixes (set to the fused one at
-// each): more honest than the paper's white drift, not yet as honest as the intersection.
+// the bit, reporting the dead reckoning's covariance between fixes, set at each fix to the
+// intersection's plus the paper's offset from it (corridor seeds 1-5: in95 88 % against 32 %).
 TEST(LandmarksPipeline, IntersectionFusionKeepsTheEllipseHonest) {
   const std::vector<std::map<std::string, std::string>> arms{
       {{"fix_fusion", "intersection"}},
@@ -102,7 +102,7 @@ TEST(LandmarksPipeline, IntersectionFusionKeepsTheEllipseHonest) {
   }
   EXPECT_GT(in95[0], 0.80);
   EXPECT_LT(in95[1], 0.60);  // the paper's update and drift are still what they were
-  EXPECT_GT(in95[2], in95[1] + 0.10);
+  EXPECT_GT(in95[2], 0.80);
   // The UKF tracks otherwise: the option is refused there, not silently ignored.
   const SimulatedMission sim = SimulateScenario("landmark-corridor", 1);
   EXPECT_THAT([&] {

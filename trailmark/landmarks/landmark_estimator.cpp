@@ -77,9 +77,9 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
     t.Choice("drift", [](O& o) -> DriftModel& { return o.drift; },
              std::vector<std::pair<std::string, DriftModel>>{
                  {"white", DriftModel::kWhite}, {"dead-reckoning", DriftModel::kDeadReckoning}},
-             "fix_fusion=independent: the covariance reported between fixes (white: "
-             "drift_per_m, the paper; dead-reckoning: the PDR's shared heading, rate and scale "
-             "errors, set at each fix; the estimate is the same)");
+             "fix_fusion=independent: the covariance reported (white: drift_per_m, the paper; "
+             "dead-reckoning: the PDR's shared heading, rate and scale errors, at each fix the "
+             "intersection's bound; the estimate is the same)");
   }
   if (tracker) {
     t.Choice("filter", [](O& o) -> TrackingFilter& { return o.filter; },
@@ -384,7 +384,16 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
       a.position += K * (fr.standing[0] - a.position);
       a.cov = (Mat2::Identity() - K) * a.cov;
       a.cov = 0.5 * (a.cov + a.cov.transpose());
-      if (a.dr) a.dr->SetPosition(a.position, a.cov);
+      if (a.dr) {
+        // DriftModel::kDeadReckoning: what the paper's estimate can claim whatever the fix's
+        // correlation with the dead reckoning: the covariance intersection of the two
+        // (consistent for any correlation) and the paper's offset from the intersection's
+        // estimate, whose error is the intersection's plus that offset.
+        DeadReckoning intersection = *a.dr;
+        intersection.FusePosition(fr.standing[0], c_fix);
+        const Vec2 offset = a.position - intersection.position_n().head<2>();
+        a.dr->SetPosition(a.position, intersection.covariance() + offset * offset.transpose());
+      }
     }
     ++fixes_;
     a.t = t;

@@ -52,9 +52,11 @@ enum class DriftModel {
   /// The paper's: white drift, `drift_per_m` sigma per metre walked.
   kWhite,
   /// The dead reckoning's own error model (its shared heading, drift-rate and scale errors,
-  /// ins/dead_reckoning.h, as `pdr` reports them), set to the fused covariance at each fix: a
-  /// track without a fix is as honest as `pdr`'s, and a fix's error grows with the heading
-  /// error over the distance walked since (ours, issue 21).
+  /// ins/dead_reckoning.h, as `pdr` reports them), set at each fix to what the paper's
+  /// estimate can claim whatever the fix's correlation with the dead reckoning: the covariance
+  /// intersection's covariance plus the paper's offset from the intersection's estimate. A
+  /// track without a fix is as honest as `pdr`'s; a fix's error grows with the heading error
+  /// over the distance walked since (ours, issue 21).
   kDeadReckoning,
 };
 
