@@ -29,6 +29,14 @@ struct Outcome {
   std::vector<double> agent_errors;
 };
 
+// A simulated mission written to a temporary directory and opened as the pipelines read it.
+struct OnDisk {
+  OnDisk(const MissionData& data, const FloorPlan& plan)
+      : mission((WriteMissionDirectory(dir.path(), data, &plan), dir.path())) {}
+  testing::TempDir dir;
+  MissionDirectory mission;
+};
+
 Outcome RunOn(const PipelineSpec& pipeline, const MissionDirectory& mission, const MissionData& data,
               std::map<std::string, std::string> options = {}) {
   VectorSink sink;
@@ -49,9 +57,8 @@ TEST(BeaconsPipeline, TracksTheLabTraceWithinTheIssueTargets) {
   BeaconLabOptions lab;
   lab.trace = LabTrace::kC;
   const SimulatedMission sim = SimulateBeaconLab(lab, 3);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(sim.data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const PipelineSpec& ekf = RequirePipeline("beacons-ekf");
   ASSERT_TRUE(CanRun(ekf, mission));
   const Outcome ours = RunOn(ekf, mission, sim.data);
@@ -71,9 +78,8 @@ TEST(BeaconsPipeline, TracksTheLabTraceWithinTheIssueTargets) {
 
 TEST(BeaconsPipeline, StartsWithoutASurveyedStartFromTheFirstUltrasound) {
   const SimulatedMission sim = SimulateBeaconLab({}, 5);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(sim.data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const Outcome o = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data, {{"init", "ultrasound"}});
   ASSERT_TRUE(o.summary.numbers.count("ff1.initialized_at_s"));
   EXPECT_LT(o.summary.numbers.at("ff1.initialized_at_s"), 20.0);
@@ -84,9 +90,8 @@ TEST(BeaconsPipeline, StartsWithoutASurveyedStartFromTheFirstUltrasound) {
 
 TEST(BeaconsPipeline, DroppedTrailIsLocalizedByMdsAndLeadsBackOut) {
   const SimulatedMission sim = SimulateScenario("beacon-trail", 2);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(sim.data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const Outcome mds = RunOn(RequirePipeline("beacons-mds"), mission, sim.data);
   EXPECT_TRUE(mds.agent_errors.empty());  // beacons only
   EXPECT_EQ(mds.summary.numbers.at("beacons_from_mds"), mds.summary.numbers.at("beacons"));
@@ -120,9 +125,8 @@ TEST(BeaconsPipeline, AMapSolvedOnAWorkerIsPutInPlaceItsLagLaterAndEndsTheSame) 
   // map_lag_s: each solve is put in place that much mission time after its tick (issue 20):
   // the first map is written a lag later, and the map at the end is the same map.
   const SimulatedMission sim = SimulateScenario("beacon-trail", 2);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(sim.data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const PipelineSpec& mds = RequirePipeline("beacons-mds");
   std::map<std::string, std::pair<TimeS, Estimate>> at_once, lagged;  // first time, last row
   for (const auto& [lag, out] : {std::pair{"0", &at_once}, std::pair{"1", &lagged}}) {
@@ -152,9 +156,8 @@ TEST(BeaconsPipeline, TheViewIsNeverOlderThanTheOutputPeriodAndHeldItStaysHonest
   // estimate extrapolated every 0.1 s. Held until the next (the eval's online semantics), the
   // view then keeps the truth in its ellipse (seed 2: in95 85 -> 93 %, mean 0.47 -> 0.44 m).
   const SimulatedMission sim = SimulateScenario("beacon-trail", 2);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(sim.data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const PipelineSpec& ekf = RequirePipeline("beacons-ekf");
   const Outcome sparse = RunOn(ekf, mission, sim.data, {{"output_period_s", "0"}});
   const Outcome ticked = RunOn(ekf, mission, sim.data);
@@ -179,9 +182,8 @@ TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClose
   // estimate the first time a range to it is at most 1.5 m.
   SimulatedMission sim = SimulateScenario("beacon-trail", 2);
   sim.data.events.clear();
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(sim.data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const Outcome ekf = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
   const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
   EXPECT_EQ(ekf.summary.numbers.at("beacons_from_mds"), ekf.summary.numbers.at("beacons"));
@@ -203,9 +205,9 @@ TEST(BeaconsPipeline, HoldsOnANeighbourOnlyTrailWithImplausibleLinks) {
   data.ranges.insert(data.ranges.begin() + static_cast<long>(k) + 1,
                      {{t, "b02", "b03", 0.0, 0.1, "ultrasound"},
                       {t, "b02", "b04", 5e3, 0.1, "ultrasound"}});
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
+  const auto& dir = disk.dir;
   const Outcome ours = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
   const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
   EXPECT_GE(ours.summary.numbers.at("implausible_beacon_links"), 2.0);
@@ -248,9 +250,8 @@ TEST(BeaconsPipeline, AMapThatDisagreesWithItsNoiseIsNotUsedAndSaysSo) {
     }
   }
   ASSERT_EQ(moved, 1);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), data, &sim.plan);
-  const MissionDirectory mission(dir.path());
+  const OnDisk disk(data, sim.plan);
+  const MissionDirectory& mission = disk.mission;
   const Outcome ours = RunOn(RequirePipeline("beacons-ekf"), mission, sim.data);
   const Outcome pdr = RunOn(RequirePipeline("pdr"), mission, sim.data);
   const auto fallback = std::find_if(ours.summary.integrity.begin(), ours.summary.integrity.end(),

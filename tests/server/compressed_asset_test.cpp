@@ -3,12 +3,7 @@
 // Accept-Encoding, and the bytes decoded by the reference decoders (brotli's, zlib's) equal to
 // the embedded file; served so by a live server.
 
-#include <arpa/inet.h>
 #include <brotli/decode.h>
-#include <netinet/in.h>
-#include <poll.h>
-#include <sys/socket.h>
-#include <unistd.h>
 #include <zlib.h>
 
 #include <gtest/gtest.h>
@@ -18,9 +13,7 @@
 
 #include "server/compressed_asset.h"
 #include "server/incident_server.h"
-#include "test_util.h"
-#include "trailmark/io/mission_io.h"
-#include "trailmark/sim/scenarios.h"
+#include "server/live_server_fixture.h"
 
 namespace trailmark::server {
 namespace {
@@ -74,64 +67,36 @@ TEST(CompressedAsset, TheReferenceDecodersGiveTheFileBack) {
   EXPECT_EQ(GzipDecoded(Compress("", ContentEncoding::kGzip)), "");
 }
 
-// One GET on a raw socket; the reply's headers and body.
+// One GET on a raw socket; the reply's head and body.
 std::pair<std::string, std::string> Get(int port, const std::string& path,
                                         const std::string& accept_encoding) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_port = htons(static_cast<uint16_t>(port));
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  EXPECT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+  Connection c(port);
+  EXPECT_TRUE(c.connected());
   std::string request = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n";
   if (!accept_encoding.empty()) request += "Accept-Encoding: " + accept_encoding + "\r\n";
-  request += "\r\n";
-  EXPECT_EQ(send(fd, request.data(), request.size(), 0), static_cast<ssize_t>(request.size()));
-  std::string reply;
-  char buffer[65536];
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  while (std::chrono::steady_clock::now() < give_up) {
-    pollfd p{fd, POLLIN, 0};
-    if (poll(&p, 1, 1000) <= 0) continue;
-    const ssize_t n = recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) break;
-    reply.append(buffer, static_cast<std::size_t>(n));
-  }
-  close(fd);
+  EXPECT_TRUE(c.Send(request + "\r\n"));
+  const std::string reply = c.ReceiveAll(std::chrono::seconds(10));
   const std::size_t end = reply.find("\r\n\r\n");
   EXPECT_NE(end, std::string::npos) << reply.substr(0, 200);
   if (end == std::string::npos) return {reply, ""};
   return {reply.substr(0, end), reply.substr(end + 4)};
 }
 
-TEST(CompressedAsset, TheServerSendsTheScriptCompressedOnceInTheEncodingAsked) {
-  testing::TempDir dir;
-  const SimulatedMission sim = SimulateScenario("office-loop", 1);
-  WriteMissionDirectory(dir.path() / "mission", sim.data, &sim.plan);
-  ServerOptions o;
-  o.live_dir = dir.path() / "mission";
-  o.journal_file = dir.path() / "journal.db";
-  o.pipeline = "pdr";
-  o.port = 0;
-  o.token = "t";
-  o.log = [](const std::string&) {};
-  IncidentServer server(sim.data.info, std::vector<Estimate>{}, o);
-  server.Start();
+TEST_F(LiveServerFixture, TheDashboardScriptIsSentCompressedOnceInTheEncodingAsked) {
   const std::string file(FindWebAsset("/assets/app.js")->content);
   for (int round = 0; round < 2; ++round) {  // the second from the cache
-    const auto [h_br, b_br] = Get(server.port(), "/assets/app.js", "gzip, deflate, br");
+    const auto [h_br, b_br] = Get(server_->port(), "/assets/app.js", "gzip, deflate, br");
     EXPECT_NE(h_br.find("Content-Encoding: br"), std::string::npos) << h_br;
     EXPECT_NE(h_br.find("Content-Type: application/javascript; charset=utf-8"), std::string::npos);
     EXPECT_NE(h_br.find("Vary: Accept-Encoding"), std::string::npos);
     EXPECT_EQ(BrotliDecoded(b_br), file);  // once, not twice
-    const auto [h_gz, b_gz] = Get(server.port(), "/assets/app.js", "gzip");
+    const auto [h_gz, b_gz] = Get(server_->port(), "/assets/app.js", "gzip");
     EXPECT_NE(h_gz.find("Content-Encoding: gzip"), std::string::npos) << h_gz;
     EXPECT_EQ(GzipDecoded(b_gz), file);
-    const auto [h_id, b_id] = Get(server.port(), "/assets/app.js", "");
+    const auto [h_id, b_id] = Get(server_->port(), "/assets/app.js", "");
     EXPECT_EQ(h_id.find("Content-Encoding"), std::string::npos) << h_id;
     EXPECT_EQ(b_id, file);
   }
-  server.Stop();
 }
 
 }  // namespace

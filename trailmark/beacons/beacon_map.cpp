@@ -217,7 +217,6 @@ void BeaconMap::BeginSolve(bool on_worker) {
       in.hint_track.push_back(h);
     }
     in.members = std::move(members);
-    pending->firsts.push_back(start);
     pending->inputs.push_back(std::move(in));
   }
   std::fill(changed_.begin(), changed_.end(), false);
@@ -248,7 +247,7 @@ void BeaconMap::EndSolve() {
     const PartInput& in = pending->inputs[k];
     PartOutput& out = outputs[k];
     for (std::size_t a = 0; a < in.members.size(); ++a) solved_[in.members[a]] = out.solved[a];
-    parts_.emplace(pending->firsts[k], out.part);
+    parts_.emplace(in.members.front(), out.part);
     ++summary_.part_solves;
     summary_.track_inflated_solves += out.track_inflated_solves;
     summary_.inflated_solves += out.inflated_solves;

@@ -172,7 +172,7 @@ class BeaconMap {
     double anchor_rms_m = 0, chi2_per_dof = 0, prior_inflation = 1, track_inflation = 1;
   };
   /// What solving one connected part needs, copied at BeginSolve() (indices are the part's
-  /// own: member a is beacon members[a]).
+  /// own: member a is beacon members[a]; members[0] is the smallest, the part's key).
   struct PartInput {
     std::vector<int> members;
     std::string first_id;  ///< the id of members[0] (for the summary's notes)
@@ -191,7 +191,6 @@ class BeaconMap {
   struct Pending {
     std::map<int, PartResult> kept;  ///< the parts that did not change
     std::vector<int> reset;          ///< members of every changed part
-    std::vector<int> firsts;         ///< each input's smallest member
     std::vector<PartInput> inputs;
     std::vector<Mat3> tracks;        ///< tracks_ at the snapshot
     std::future<std::vector<PartOutput>> outputs;  ///< on a worker
