@@ -6,13 +6,17 @@
 #include <fmt/format.h>
 
 #include <chrono>
+#include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "experiments/experiments.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/pipelines/batch_run.h"
 #include "trailmark/sim/house_search.h"
+#include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/variation.h"
 
 namespace trailmark::experiments {
 
@@ -178,6 +182,59 @@ int ReproduceMapMatch(int seeds, const fs::path& out,
       t +=
           fmt::format(" {} | {:.2f} | {} of {} | {} |\n", settle, mean / std::max(n_mean, 1), gross,
                       counted, sets ? fmt::format("{} of {}", sets_met, sets) : std::string("-"));
+    }
+  }
+  // Every drawing of the same house (issue 23): each search as simulated, the same search drawn
+  // by the `frame` family (rotated by any angle, moved up to 2 km, doors across gaps in half,
+  // connected walls as polylines in half: variant K = the seed) and by the `start` family (a
+  // start up to 10 m outside, no start heading), from an unknown start with our defaults: the
+  // p75 of the error after 3 minutes per search (the issue's must-hold: <= 1.0 m on every
+  // drawing), and the share of truth inside the reported 95 % ellipse over the whole search.
+  t += fmt::format(
+      "\nEvery drawing of the same house (issue 23): unknown start, ours (default), seeds {} to "
+      "{}; per search the p75 of the error after 3 min, and in95 over the whole search:\n\n"
+      "| house | drawing | searches with p75 after 3 min <= 1.0 m | p75 after 3 min: median / "
+      "largest | in95 % |\n|---|---|---|---|---|\n",
+      first_seed, first_seed + seeds - 1);
+  for (int house : {1, 2}) {
+    for (const auto& [family, name] :
+         std::vector<std::pair<std::optional<VariationFamily>, std::string>>{
+             {std::nullopt, "as simulated (along the axes, doors along walls)"},
+             {VariationFamily::kFrame, "`frame`: rotated, moved, door convention, polylines"},
+             {VariationFamily::kStart, "`start`: up to 10 m outside, no start heading"}}) {
+      std::vector<double> p75s;
+      double inside = 0, scored = 0;
+      for (int seed = first_seed; seed < first_seed + seeds; ++seed) {
+        SimulatedMission sim = SimulateScenario(house == 1 ? "house1-search" : "house2-search",
+                                                static_cast<std::uint64_t>(seed));
+        MissionWriteStyle style;
+        if (family) {
+          const Variation v = DrawVariation(*family, static_cast<std::uint64_t>(seed));
+          ApplyVariation(v, sim);
+          style = v.write;
+        }
+        const fs::path dir = out / "missions" / fmt::format("drawn-{}-{}", house, seed);
+        WriteMissionDirectory(dir, sim.data, &sim.plan, style);
+        std::map<std::string, std::string> options{{"init", "uniform"},
+                                                   {"seed", std::to_string(seed)}};
+        for (const auto& [k, v] : extra) options[k] = v;
+        VectorSink sink;
+        RunBatch(RequirePipeline("mapmatch"), {MissionDirectory(dir), options}, sink);
+        const Metrics m = Evaluate(sim.data.info, sim.data.truth, sink.rows);
+        std::vector<double> late;
+        for (const auto& e : m.agents.series) {
+          if (e.t >= 180) late.push_back(e.error_m);
+        }
+        p75s.push_back(late.empty() ? std::nan("") : Percentile(late, 75));
+        inside += m.agents.stats.in95 * static_cast<double>(m.agents.series.size());
+        scored += static_cast<double>(m.agents.series.size());
+        fs::remove_all(dir);
+      }
+      int met = 0;
+      for (double v : p75s) met += v <= 1.0;
+      t += fmt::format("| {} | {} | {} of {} | {:.2f} / {:.2f} m | {:.0f} |\n", house, name, met,
+                       seeds, Percentile(p75s, 50),
+                       *std::max_element(p75s.begin(), p75s.end()), 100 * inside / scored);
     }
   }
   // The map error (sec. V-E): the hall door drawn 2 m from where it is; the same searches with

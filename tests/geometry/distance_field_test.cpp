@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 
 #include "trailmark/core/random.h"
@@ -38,6 +39,34 @@ TEST(DistanceField, MatchesTheExactDistanceWithinHalfACellDiagonalAndIsClamped) 
   EXPECT_LE(field.At({4, 0.0}), half_diagonal);
   EXPECT_DOUBLE_EQ(field.At({100, 100}), o.max_distance_m);
   EXPECT_DOUBLE_EQ(field.At({std::nan(""), 1}), o.max_distance_m);
+}
+
+TEST(DistanceField, ARasterAlongTheWallsGivesTheSameValuesWhereverThePlanIsDrawn) {
+  // Issue 23: the same room drawn rotated by 33 degrees and moved a kilometre, its raster along
+  // the rotated axes, reads what the room drawn along the axes reads at the same places (the
+  // cells count from the walls' box, not from the frame's origin); with the raster along the
+  // frame's axes the values differ by up to a cell diagonal.
+  const std::vector<Segment2> walls = {{{0, 0}, {8, 0}}, {{8, 0}, {8, 6}}, {{8, 6}, {0, 6}},
+                                       {{0, 6}, {0, 0}}, {{3, 0}, {3, 2.5}}};
+  const double angle = 33.0 * std::acos(-1.0) / 180.0;
+  const Mat2 R = Eigen::Rotation2Dd(angle).toRotationMatrix();
+  const Vec2 shift(1000.0, -500.0);
+  std::vector<Segment2> moved;
+  for (const auto& w : walls) moved.push_back({R * w.a + shift, R * w.b + shift});
+  DistanceField::Options along;
+  along.axis_rad = angle;
+  const DistanceField a(walls), b(moved, along), c(moved);
+  Random rng(3);
+  double largest_along = 0, largest_frame = 0;
+  for (int k = 0; k < 5000; ++k) {
+    // Away from cell boundaries of the first raster (a point on one may round either way).
+    const Vec2 x(std::floor(rng.Uniform(-1.5, 9.5) * 10) / 10 + 0.05 + rng.Uniform(-0.04, 0.04),
+                 std::floor(rng.Uniform(-1.5, 7.5) * 10) / 10 + 0.05 + rng.Uniform(-0.04, 0.04));
+    largest_along = std::max(largest_along, std::abs(a.At(x) - b.At(R * x + shift)));
+    largest_frame = std::max(largest_frame, std::abs(a.At(x) - c.At(R * x + shift)));
+  }
+  EXPECT_LT(largest_along, 1e-5);  // float storage
+  EXPECT_GT(largest_frame, 0.03);
 }
 
 TEST(DistanceField, NoWallsIsFarEverywhereAndBadOptionsOrHugePlansAreRefused) {

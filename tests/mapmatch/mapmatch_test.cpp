@@ -67,6 +67,86 @@ TEST(SearchSequences, ClosedOffRoomsAndTJunctions) {
   EXPECT_EQ(WallGraph::Build(plan.solid_walls()).components, 1);
 }
 
+TEST(SearchSequences, APlanDrawnRotatedAndShiftedGetsTheSameGridAndSequences) {
+  // Issue 23: the grid lies along the walls' dominant direction, turned by the quarter turn the
+  // plan defines (GridAxis), its offsets counted from the plan's corner: the same room with an
+  // inner wall drawn rotated by any angle and moved gives the same inside and the same
+  // sequences, node for node, rotated and moved. Along the map's axes (the paper) a room at 33
+  // degrees gives other ones.
+  const FloorPlan plan = Room(6, 4, {{{3, 0}, {3, 2.5}}});
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  const SearchGrid grid(plan);
+  for (const double deg : {0.0, 33.0, 90.0, 137.0, 251.0}) {
+    const Mat2 R = Rot(deg * std::numbers::pi / 180.0);
+    const Vec2 shift(1234.5, -987.6);
+    auto move = [&](const Vec2& p) { return Vec2(R * p + shift); };
+    std::vector<Segment2> walls, doors;
+    for (const auto& w : plan.walls()) walls.push_back({move(w.a), move(w.b)});
+    for (const auto& d : plan.doors()) doors.push_back({move(d.a), move(d.b)});
+    const FloorPlan moved(walls, doors, {});
+    const SearchGrid moved_grid(moved);
+    EXPECT_EQ(moved_grid.inside_count(), grid.inside_count()) << deg;
+    const auto moved_seqs = ExtractSearchSequences(moved, move(Vec2(0, 1.5)));
+    ASSERT_EQ(moved_seqs.size(), seqs.size()) << deg;
+    for (std::size_t m = 0; m < seqs.size(); ++m) {
+      ASSERT_EQ(moved_seqs[m].nodes.size(), seqs[m].nodes.size()) << deg;
+      for (std::size_t n = 0; n < seqs[m].nodes.size(); ++n)
+        EXPECT_LT((moved_seqs[m].nodes[n] - move(seqs[m].nodes[n])).norm(), 1e-9) << deg;
+    }
+    if (deg == 33.0) {
+      SearchSequenceOptions map_axes;
+      map_axes.grid.align_to_walls = false;
+      const auto other = ExtractSearchSequences(moved, move(Vec2(0, 1.5)), map_axes);
+      bool same = other.size() == seqs.size() && other[0].nodes.size() == seqs[0].nodes.size();
+      for (std::size_t n = 0; same && n < seqs[0].nodes.size(); ++n)
+        same = (other[0].nodes[n] - move(seqs[0].nodes[n])).norm() < 1e-6;
+      EXPECT_FALSE(same);
+    }
+  }
+  // The dominant direction modulo a quarter turn, whatever the walls' lengths and order.
+  EXPECT_NEAR(DominantWallAxis({{{0, 0}, {Rot(0.3) * Vec2(5, 0)}}, {{0, 0}, {Rot(0.3) * Vec2(0, 2)}}}),
+              0.3, 1e-12);
+  EXPECT_NEAR(DominantWallAxis({{{0, 0}, {Rot(1.2) * Vec2(5, 0)}}}), 1.2 - std::numbers::pi / 2,
+              1e-12);
+}
+
+TEST(SearchGrid, ContainsIsThePointInPolygonTestNotTheCellsRounding) {
+  // Issue 23: a room with a 45-degree corner cut (no grid fits every wall) and a door on its
+  // west wall. Contains (a point reaches an inside node near it without crossing a wall or the
+  // closed door) agrees with the exact point-in-polygon test at every point more than 5 cm from
+  // a wall; the 1 m cells (the paper's test, Inside(CellOf(p))) misjudge a share of them.
+  const std::vector<Vec2> ring = {{0, 0}, {9, 0}, {9, 4}, {6, 7}, {0, 7}};
+  std::vector<Segment2> walls;
+  for (std::size_t k = 0; k < ring.size(); ++k) walls.push_back({ring[k], ring[(k + 1) % ring.size()]});
+  const FloorPlan plan(walls, {{{0, 1}, {0, 2}}}, {});
+  const SearchGrid grid(plan);
+  auto in_polygon = [&](const Vec2& p) {  // crossing number
+    bool in = false;
+    for (std::size_t k = 0, j = ring.size() - 1; k < ring.size(); j = k++) {
+      if ((ring[k].y() > p.y()) != (ring[j].y() > p.y()) &&
+          p.x() < (ring[j].x() - ring[k].x()) * (p.y() - ring[k].y()) / (ring[j].y() - ring[k].y()) +
+                      ring[k].x())
+        in = !in;
+    }
+    return in;
+  };
+  Random rng(5);
+  int tested = 0, wrong = 0, cells_wrong = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const Vec2 p(rng.Uniform(-2, 11), rng.Uniform(-2, 9));
+    double to_wall = 1e9;
+    for (const auto& w : walls) to_wall = std::min(to_wall, DistanceToSegment(p, w));
+    if (to_wall < 0.05) continue;
+    ++tested;
+    wrong += grid.Contains(p) != in_polygon(p);
+    cells_wrong += grid.Inside(grid.CellOf(p)) != in_polygon(p);
+  }
+  EXPECT_GT(tested, 15000);
+  EXPECT_EQ(wrong, 0);
+  EXPECT_GT(cells_wrong, tested / 200);  // measured: 177 (0.9 %)
+  EXPECT_FALSE(grid.Contains({std::nan(""), 1}));
+}
+
 TEST(FloorPlanChecks, BadPlansAreReportedClearly) {
   EXPECT_TRUE(CheckFloorPlan(FloorPlan({}, {}, {})).front().fatal);
   const FloorPlan odd({{{0, 0}, {4, 0}},
@@ -443,6 +523,70 @@ TEST(MapParticleFilter, OnceTheTrackIsFoundComparisonsWeighWithTheTrackingSigma)
   EXPECT_FALSE(bad.IsValid(nullptr));
 }
 
+TEST(MapParticleFilter, OnlyADistinctiveComparisonConfirmsAndUntilThenTheEllipseCoversTheBuilding) {
+  // Issue 23: a 30 x 10 m hall, unknown start. Five comparisons whose best matches lie at two
+  // places 26 m apart (a corridor that repeats) do not confirm a place, and the reported
+  // covariance includes the hall's spread; five whose best matches lie at one place (two
+  // neighbouring nodes) do, and then the reported covariance is the particles' own. With
+  // confirm_distinct_m = 0 the ambiguous ones confirm too (the rule before issue 23).
+  const FloorPlan plan = Room(30, 10);
+  const SearchGrid grid(plan);
+  const auto seqs = ExtractSearchSequences(plan, Vec2(0, 1.5));
+  ASSERT_EQ(seqs.size(), 1u);
+  const auto& nodes = seqs[0].nodes;
+  auto nearest = [&](const Vec2& p) {
+    return static_cast<std::size_t>(
+        std::min_element(nodes.begin(), nodes.end(),
+                         [&](const Vec2& a, const Vec2& b) {
+                           return (a - p).squaredNorm() < (b - p).squaredNorm();
+                         }) -
+        nodes.begin());
+  };
+  const std::size_t west = nearest({2, 2}), east = nearest({28, 8});
+  ASSERT_GT((nodes[west] - nodes[east]).norm(), 25);
+  auto comparison = [&](std::vector<std::pair<std::size_t, double>> good) {
+    PatternComparison pc;
+    SequenceComparison sc;
+    const double inf = std::numeric_limits<double>::infinity();
+    sc.rmse_m.assign(nodes.size(), {inf, inf});
+    sc.heading_rad.assign(nodes.size(), {0.0, 0.0});
+    sc.last_node.assign(nodes.size(), 0);
+    for (std::size_t n = 0; n < nodes.size(); ++n) sc.position_n.push_back({nodes[n], nodes[n]});
+    for (const auto& [n, e] : good) sc.rmse_m[n] = {e, inf};
+    pc.sequences.push_back(sc);
+    return pc;
+  };
+  const PatternComparison twice = comparison({{west, 0.10}, {east, 0.10}});
+  const PatternComparison once = comparison({{west, 0.10}, {(west + 1) % nodes.size(), 0.11}});
+  // The hall's spread: the variance of a uniform 30 x 10 m rectangle, about 83 m^2.
+  const double hall = (30.0 * 30.0 + 10.0 * 10.0) / 12.0;
+  for (const double distinct_m : {3.0, 0.0}) {
+    for (const bool ambiguous : {true, false}) {
+      MapParticleFilterOptions o;
+      o.wall_follow = false;
+      o.confirm_distinct_m = distinct_m;
+      MapParticleFilter pf(grid, seqs, o);
+      pf.InitializeUniform();
+      ASSERT_TRUE(pf.Unconfirmed());
+      EXPECT_GT(pf.ReportedCovariance().trace(), pf.Covariance().trace() + 0.8 * hall);
+      for (int k = 0; k < o.confirm_pattern_updates; ++k)
+        pf.UpdatePatterns(ambiguous ? twice : once, 0.0);
+      const bool confirmed = !ambiguous || distinct_m == 0;
+      EXPECT_EQ(pf.Unconfirmed(), !confirmed) << distinct_m << " " << ambiguous;
+      EXPECT_EQ(pf.summary().ambiguous_updates,
+                confirmed ? 0u : static_cast<std::size_t>(o.confirm_pattern_updates));
+      if (confirmed) {
+        EXPECT_EQ(pf.ReportedCovariance(), pf.Covariance());
+      } else {
+        EXPECT_GT(pf.ReportedCovariance().trace(), pf.Covariance().trace() + 0.8 * hall);
+      }
+    }
+  }
+  MapParticleFilterOptions bad;
+  bad.confirm_distinct_m = -1;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+}
+
 TEST(MapParticleFilter, AKnownStartComparesAgainOnlyWhenClearlyLost) {
   // A 30 x 30 m hall; a known start (converged at once); wide odometry noise spreads the belief
   // to a variance between the pattern level (2 m^2) and the known start's (8 m^2): a known
@@ -472,11 +616,13 @@ TEST(MapParticleFilter, AKnownStartComparesAgainOnlyWhenClearlyLost) {
 }
 
 TEST(WallFollowing, StepLikelihoodIsTheForwardRecursionOfTheOnOffChain) {
-  // Walls along y = 0.05 and y = 3.05: the field's cell centres lie at (k + 1/2) 0.1 m, so
-  // it is exact at the side points used below.
+  // Walls along y = 0.05 and y = 3.05, and a short one 10 m south (beyond the 2 m clamp): the
+  // field's cells count from the walls' box grown by 2 m, (-2, -12), so their centres lie at
+  // (k + 1/2) 0.1 m and the field is exact at the side points used below.
   DistanceField::Options fo;
   fo.cell_m = 0.1;
-  const DistanceField walls({{{0, 0.05}, {10, 0.05}}, {{0, 3.05}, {10, 3.05}}}, fo);
+  const DistanceField walls(
+      {{{0, 0.05}, {10, 0.05}}, {{0, 3.05}, {10, 3.05}}, {{0, -10}, {0.1, -10}}}, fo);
   MapParticleFilterOptions o;  // leave 0.05, return 0.15, off-wall likelihood 0.6, s 0.25 m
   const double c = o.wall_follow_off_likelihood;
   const Vec2 on_left(5.05, -0.5);  // heading east: the side point (5.05, 0.05) is on the wall

@@ -98,6 +98,8 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
     real("wall_follow_converged_power",
          [](O& o) -> double& { return o.filter.wall_follow_converged_power; }, "", any,
          "wall-following weight once converged (0: only while uncertain)");
+    real("confirm_distinct_m", [](O& o) -> double& { return o.filter.confirm_distinct_m; }, "m",
+         any, "a comparison confirms only if its best matches lie within this of each other (0: all)");
     real("grid_m", [](O& o) -> double& { return o.sequences.grid.spacing_m; }, "m", any,
          "search-pattern grid spacing");
     real("pattern_length_m", [](O& o) -> double& { return o.comparison.pattern_length_m; }, "m",
@@ -126,6 +128,8 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
            "particles outside the building are eliminated");
     t.Flag("wall_follow", [](O& o) -> bool& { return o.filter.wall_follow; },
            "the directional search as a motion model (ours)");
+    t.Flag("grid_align", [](O& o) -> bool& { return o.sequences.grid.align_to_walls; },
+           "search grid along the walls' dominant direction (ours; false: the map's x/y axes)");
     return t;
   }();
   return table;
@@ -317,7 +321,10 @@ MapMatchEstimator::MapMatchEstimator(const MissionInfo& info, LevelPlans levels,
       }
       try {
         l.sequences = ExtractSearchSequences(l.plan, *entry, m.o.sequences);
-        if (m.o.filter.wall_follow) l.wall_distance = MakeWallDistanceField(l.plan);
+        if (m.o.filter.wall_follow) {
+          l.wall_distance = MakeWallDistanceField(
+              l.plan, l.sequences.empty() ? 0.0 : l.sequences.front().grid_axis_rad);
+        }
       } catch (const std::invalid_argument& e) {
         throw InputError(plan_source, 0, prefix + e.what());
       }
@@ -367,7 +374,7 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   }
   auto emit = [&](TimeS t, const std::string& id, AgentTrack& a) {
     const Vec2 mean = a.filter->Mean();
-    const Mat2 c = a.filter->Covariance();
+    const Mat2 c = a.filter->ReportedCovariance();
     a.t = t;
     Estimate e{t, id, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
     if (m.levels.size() > 1) e.floor = m.levels[a.level].level;
@@ -479,7 +486,7 @@ std::optional<Estimate> MapMatchEstimator::Current(const std::string& node) cons
   const auto it = impl_->agents.find(node);
   if (it == impl_->agents.end()) return std::nullopt;
   const Vec2 mean = it->second.filter->Mean();
-  const Mat2 c = it->second.filter->Covariance();
+  const Mat2 c = it->second.filter->ReportedCovariance();
   Estimate e{it->second.t, node, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
   if (impl_->levels.size() > 1) e.floor = impl_->levels[it->second.level].level;
   return e;

@@ -66,6 +66,7 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
     return fail(
         "recovery spreads, recover_pattern_updates and confirm_pattern_updates must be >= 0");
   if (!(max_match_rmse_m > 0)) return fail("max_match_rmse_m must be > 0");
+  if (!(confirm_distinct_m >= 0)) return fail("confirm_distinct_m must be >= 0 (0: off)");
   if (!(wall_follow_offset_m >= 0 && wall_follow_offset_m <= 2) || !(wall_follow_sigma_m > 0))
     return fail("wall_follow_offset_m must be within [0, 2] and wall_follow_sigma_m > 0");
   if (!(wall_follow_leave > 0 && wall_follow_leave < 1) ||
@@ -80,12 +81,14 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
 
 std::string MapParticleFilterSummary::BriefReport() const {
   return fmt::format(
-      "map particle filter: {} time / {} pattern updates ({} uninformative), {} wall eliminations, "
+      "map particle filter: {} time / {} pattern updates ({} uninformative, {} not distinctive), "
+      "{} wall eliminations, "
       "{} floor "
       "replacements, {} particles from patterns, {} systematic resamples, {} backtracks, {} "
       "restarts; {} "
       "comparisons skipped while converged; {} left the building",
-      time_updates, pattern_updates, uninformative_updates, wall_eliminations, floor_replacements,
+      time_updates, pattern_updates, uninformative_updates, ambiguous_updates, wall_eliminations,
+      floor_replacements,
       pattern_resamples, systematic_resamples, backtracks, restarts, skipped_converged,
       outside_eliminations);
 }
@@ -104,6 +107,9 @@ MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
   inside_centers_ = grid.InsideCenters();
   if (inside_centers_.empty())
     throw std::invalid_argument("MapParticleFilter: the floor plan encloses no area");
+  for (const Vec2& c : inside_centers_) inside_mean_ += c, inside_second_ += c * c.transpose();
+  inside_mean_ /= static_cast<double>(inside_centers_.size());
+  inside_second_ /= static_cast<double>(inside_centers_.size());
   std::map<std::pair<long, long>, int> unique;
   for (int m = 0; m < static_cast<int>(sequences.size()); ++m) {
     for (int n = 0; n < static_cast<int>(sequences[m].nodes.size()); ++n) {
@@ -121,20 +127,20 @@ MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
   nodes_->tree =
       std::make_unique<NodeIndex::Tree>(2, *nodes_, nanoflann::KDTreeSingleIndexAdaptorParams(8));
   particles_.resize(options_.particles);
-  if (options_.wall_follow && !wall_distance_) wall_distance_ = MakeWallDistanceField(grid.plan());
+  if (options_.wall_follow && !wall_distance_) wall_distance_ = MakeWallDistanceField(grid.plan(), grid.axis_rad());
 }
 
 MapParticleFilter::~MapParticleFilter() = default;
 
 bool MapParticleFilter::InsideBuilding(const Vec2& p) const {
-  return std::isfinite(p.x()) && std::isfinite(p.y()) && grid_.Inside(grid_.CellOf(p));
+  return grid_.Contains(p);
 }
 
 Vec2 MapParticleFilter::RandomInsidePoint() {
   const Vec2& c = inside_centers_[std::min(
       inside_centers_.size() - 1, static_cast<std::size_t>(Uniform() * inside_centers_.size()))];
   const double h = 0.5 * grid_.spacing();
-  return c + Vec2(rng_.Uniform(-h, h), rng_.Uniform(-h, h));
+  return c + grid_.ToNavigation(Vec2(rng_.Uniform(-h, h), rng_.Uniform(-h, h)));
 }
 
 void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
@@ -144,7 +150,7 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
   wall_cusum_ = 0;
   forced_pattern_updates_ = 0;
   for (auto& q : particles_) {
-    q.position_n = p + Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
+    q.position_n = p + grid_.ToNavigation(Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps)));
     q.heading_offset_rad = offset + rng_.Normal(0, hs);
     q.hand = RandomHand();
     q.p_off_wall = 0;
@@ -226,7 +232,7 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
     const Vec2 mean = Mean();
     for (auto& q : particles_) {
       q.position_n = uniform_start_ ? RandomInsidePoint()
-                                    : mean + Vec2(rng_.Normal(0, 1.0), rng_.Normal(0, 1.0));
+                                    : mean + grid_.ToNavigation(Vec2(rng_.Normal(0, 1.0), rng_.Normal(0, 1.0)));
       q.step_from_n = q.position_n;  // a new particle, not a step
       if (uniform_start_) {
         q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
@@ -293,7 +299,7 @@ void MapParticleFilter::Predict(const Vec2& d) {
       q.step_from_n = q.position_n;
       const double ps = widen * options_.position_noise_m;
       const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d +
-                        Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps));
+                        grid_.ToNavigation(Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps)));
       q.heading_offset_rad = WrapAngle(
           q.heading_offset_rad + rng_.Normal(0, widen * options_.heading_noise_rad_per_m * len));
       if (plan.Crosses(q.position_n, next)) {
@@ -394,7 +400,11 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
     ++summary_.uninformative_updates;  // not a search pattern: no weights, no new particles
     return;
   }
-  ++pattern_updates_applied_;
+  if (Distinctive(pc, best_anywhere)) {
+    ++pattern_updates_applied_;
+  } else {
+    ++summary_.ambiguous_updates;
+  }
   if (!std::isfinite(e_min)) {
     ++summary_.uninformative_updates;
   } else if (reweight) {
@@ -463,8 +473,8 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
         const Obs& o = it == obs.end() ? obs.back() : *it;
         Particle& q = particles_[order[k]];
         for (int attempt = 0; attempt < 10; ++attempt) {
-          q.position_n = o.p + Vec2(rng_.Normal(0, options_.resample_position_sigma_m),
-                                    rng_.Normal(0, options_.resample_position_sigma_m));
+          q.position_n = o.p + grid_.ToNavigation(Vec2(rng_.Normal(0, options_.resample_position_sigma_m),
+                                    rng_.Normal(0, options_.resample_position_sigma_m)));
           if (InsideBuilding(q.position_n)) break;
           q.position_n = o.p;
         }
@@ -485,6 +495,32 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
 bool MapParticleFilter::WantsPatterns() const {
   return options_.pseudo_observations && (forced_pattern_updates_ > 0 || Unconfirmed() ||
                                           Covariance().trace() > PatternThreshold());
+}
+
+bool MapParticleFilter::Distinctive(const PatternComparison& pc, double best_rmse_m) const {
+  if (!(options_.confirm_distinct_m > 0)) return true;
+  // The matches within 3 sigma^2 of the best, about their mean (not about the best one: two
+  // matches equal to the last bits would make the answer depend on rounding).
+  const double within = best_rmse_m + 3 * options_.likelihood_sigma * options_.likelihood_sigma;
+  Vec2 sum = Vec2::Zero();
+  std::size_t count = 0;
+  auto for_each_good = [&](auto&& f) {
+    for (const auto& sc : pc.sequences) {
+      for (std::size_t n = 0; n < sc.rmse_m.size(); ++n) {
+        for (int end = 0; end < 2; ++end) {
+          if (sc.rmse_m[n][end] <= within) f(sc.position_n[n][end]);
+        }
+      }
+    }
+  };
+  for_each_good([&](const Vec2& p) { sum += p, ++count; });
+  if (count == 0) return false;
+  const Vec2 mean = sum / static_cast<double>(count);
+  bool close = true;
+  for_each_good([&](const Vec2& p) {
+    close = close && (p - mean).norm() <= options_.confirm_distinct_m;
+  });
+  return close;
 }
 
 bool MapParticleFilter::Unconfirmed() const {
@@ -509,8 +545,10 @@ double WallFollowingLikelihood(const DistanceField& walls, const Vec2& position_
   return l;
 }
 
-std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan) {
+std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan,
+                                                           double axis_rad) {
   DistanceField::Options o;
+  o.axis_rad = axis_rad;
   o.cell_m = 0.1;
   o.max_distance_m = 2.0;
   return std::make_shared<const DistanceField>(plan.solid_walls(), o);
@@ -530,8 +568,8 @@ void MapParticleFilter::WeighWallFollowing(double step_heading_odometry_rad, dou
 void MapParticleFilter::Recover() {
   ++summary_.recoveries;
   for (auto& q : particles_) {
-    const Vec2 p = q.position_n + Vec2(rng_.Normal(0, options_.recover_position_sigma_m),
-                                       rng_.Normal(0, options_.recover_position_sigma_m));
+    const Vec2 p = q.position_n + grid_.ToNavigation(Vec2(rng_.Normal(0, options_.recover_position_sigma_m),
+                                       rng_.Normal(0, options_.recover_position_sigma_m)));
     if (InsideBuilding(p)) q.position_n = p;
     q.step_from_n = q.position_n;  // moved by the recovery, not by a step
     q.heading_offset_rad =
@@ -556,6 +594,19 @@ void MapParticleFilter::NoteConvergence() {
     converged_ = true;
     tracking_ = true;
   }
+}
+
+Mat2 MapParticleFilter::ReportedCovariance() const {
+  Mat2 c = Covariance();
+  if (Unconfirmed()) {
+    const Vec2 m = Mean();
+    // E[(p - m)(p - m)^T] over the inside: E[p p^T] - m E[p]^T - E[p] m^T + m m^T.
+    Mat2 spread = inside_second_ - m * inside_mean_.transpose() - inside_mean_ * m.transpose() +
+                  m * m.transpose();
+    spread = 0.5 * (spread + spread.transpose());
+    c += spread;
+  }
+  return c;
 }
 
 Vec2 MapParticleFilter::Mean() const {

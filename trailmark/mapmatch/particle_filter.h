@@ -75,6 +75,13 @@ struct MapParticleFilterOptions {
   /// after this many pattern comparisons have been used: walls and the wall-following model
   /// alone can settle a confident belief in the wrong corridor of a large building.
   int confirm_pattern_updates = 5;
+  /// Ours (issue 23): only a distinctive comparison confirms — every match whose RMSE is within
+  /// 3 sigma^2 of the best (a likelihood ratio of e^-3 or more by eq. 2) lies within this
+  /// distance of those matches' mean position. On a large floor with repeating corridors a straight stretch
+  /// matches equally well in a hundred places 50 m apart; such a comparison still weights and
+  /// draws particles (the paper), but it does not tell the filter where it is. 0: every
+  /// comparison confirms (as before).
+  double confirm_distinct_m = 3.0;
   /// Ours: map-error and lost-track evidence — the share of the belief that a step drives into
   /// walls (LastBlockedMass) accumulated as a one-sided CUSUM with reference k; above h, a
   /// wall alarm: the walk keeps crossing the map's walls (a map error, or a converged filter
@@ -137,6 +144,7 @@ struct MapParticleFilterOptions {
 
 struct MapParticleFilterSummary {
   std::size_t time_updates = 0, pattern_updates = 0, uninformative_updates = 0;
+  std::size_t ambiguous_updates = 0;  ///< used, but not distinctive (confirm_distinct_m)
   std::size_t wall_eliminations = 0, floor_replacements = 0, pattern_resamples = 0;
   std::size_t systematic_resamples = 0, backtracks = 0, restarts = 0, skipped_converged = 0;
   std::size_t wall_alarms = 0, recoveries = 0, outside_eliminations = 0;
@@ -152,8 +160,10 @@ double WallFollowingLikelihood(const DistanceField& walls, const Vec2& position_
                                double heading_n_rad, bool left_hand,
                                const MapParticleFilterOptions& options, float& p_off_wall);
 
-/// The distance field the wall-following model reads (0.1 m cells, clamped at 2 m).
-std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan);
+/// The distance field the wall-following model reads (0.1 m cells, clamped at 2 m), its raster
+/// along `axis_rad` (the search grid's axes: a plan drawn rotated reads the same distances).
+std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan,
+                                                           double axis_rad = 0);
 
 class MapParticleFilter {
  public:
@@ -205,7 +215,17 @@ class MapParticleFilter {
   bool LastStepRaisedWallAlarm() const { return last_step_alarm_; }
 
   Vec2 Mean() const;
+  /// The particles' covariance (what the filter's own rules read).
   Mat2 Covariance() const;
+  /// The covariance to report (ours, issue 23): the particles' covariance, plus, from an unknown
+  /// start until distinctive comparisons have confirmed the place (confirm_pattern_updates,
+  /// confirm_distinct_m), the building's own spread about the mean (the second moment of its
+  /// inside about it). Walls and the wall-following model alone can gather every particle in
+  /// the wrong corridor of a large floor with a spread of a few decimetres; until a comparison
+  /// has said where the walker is, the ellipse says "somewhere in the building".
+  Mat2 ReportedCovariance() const;
+  /// Whether the place from an unknown start is not yet confirmed (see ReportedCovariance).
+  bool Unconfirmed() const;
   double MeanHeadingOffset() const;
   const std::vector<Particle>& particles() const { return particles_; }
   const MapParticleFilterSummary& summary() const { return summary_; }
@@ -229,6 +249,8 @@ class MapParticleFilter {
   Random rng_;
   std::vector<Particle> particles_;
   std::vector<Vec2> inside_centers_;
+  Vec2 inside_mean_ = Vec2::Zero();          ///< of the inside centres
+  Mat2 inside_second_ = Mat2::Zero();        ///< their mean of p p^T
   bool uniform_start_ = false;
   // Unique node positions (nanoflann k-d tree) and the (sequence, node) pairs at each.
   struct NodeIndex;
@@ -241,7 +263,8 @@ class MapParticleFilter {
   bool last_step_alarm_ = false;
   int forced_pattern_updates_ = 0;
   int pattern_updates_applied_ = 0;
-  bool Unconfirmed() const;
+  /// Whether a comparison whose best RMSE is best_rmse_m is distinctive (confirm_distinct_m).
+  bool Distinctive(const PatternComparison& pc, double best_rmse_m) const;
   void Recover();
   void WeighWallFollowing(double step_heading_odometry_rad, double power);
   std::shared_ptr<const DistanceField> wall_distance_;

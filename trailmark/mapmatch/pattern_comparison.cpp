@@ -224,7 +224,9 @@ PatternComparison ComparePatterns(const std::vector<Vec2>& trajectory,
       if (dn < 2 || total < 0.5 * length) continue;
       const Vec2 cp = Centroid(pattern);
       for (int i = 0; i < 4; ++i) {
-        const Mat2 Ri = Rot(i * kPi / 2);
+        // The four initial rotations put the odometry's principal directions on the grid's
+        // axes (the map's own axes in the paper; the walls' dominant direction in ours).
+        const Mat2 Ri = Rot(seq.grid_axis_rad + i * kPi / 2);
         const IcpResult r = Icp(x, pattern, Ri, cp - Ri * cx, o.icp);
         ++out.icp_runs;
         out.icp_abandoned += r.rmse_m > o.icp.abandon_rmse_m;

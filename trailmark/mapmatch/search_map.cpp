@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/mapmatch/search_map.h"
 
+#include <Eigen/Geometry>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -8,6 +9,7 @@
 #include <cstdint>
 #include <limits>
 #include <map>
+#include <numbers>
 #include <numeric>
 #include <stdexcept>
 #include <unordered_set>
@@ -187,23 +189,83 @@ bool SearchGridOptions::IsValid(std::string* why) const {
   return true;
 }
 
+double DominantWallAxis(const std::vector<Segment2>& walls) {
+  // Sum of len exp(4 i phi): a wall and one at right angles to it add up, opposite
+  // directions of one wall are the same.
+  double c = 0, s = 0;
+  for (const auto& w : walls) {
+    const Vec2 d = w.b - w.a;
+    const double len = d.norm();
+    if (!(len > 0)) continue;
+    const double phi = std::atan2(d.y(), d.x());
+    c += len * std::cos(4 * phi);
+    s += len * std::sin(4 * phi);
+  }
+  double total = 0;
+  for (const auto& w : walls) total += w.Length();
+  if (!(std::hypot(c, s) > 1e-9 * total)) return 0.0;
+  const double axis = std::atan2(s, c) / 4;  // (-pi/4, pi/4]
+  return axis >= std::numbers::pi / 4 ? axis - std::numbers::pi / 2 : axis;
+}
+
+double GridAxis(const FloorPlan& plan) {
+  const auto& walls = plan.solid_walls();
+  const double axis = DominantWallAxis(walls);
+  const Mat2 to_axes = Eigen::Rotation2Dd(-axis).toRotationMatrix();
+  Box2 box;  // the bounding rectangle in these axes: the same for each quarter turn of them
+  Vec2 centroid = Vec2::Zero();
+  double total = 0;
+  for (const auto& w : walls) {
+    box.Extend(to_axes * w.a), box.Extend(to_axes * w.b);
+    centroid += w.Length() * (to_axes * (0.5 * (w.a + w.b)));
+    total += w.Length();
+  }
+  if (!(total > 0)) return axis;
+  const Vec2 v = centroid / total - 0.5 * (box.min + box.max);
+  if (!(v.norm() > 1e-6 * (box.max - box.min).norm())) return axis;  // symmetric: no direction
+  // The quarter turn closest to v (v is in the axes' frame; ties to the lower turn).
+  int turn = 0;
+  double best = v.x();
+  const double along[4] = {v.x(), v.y(), -v.x(), -v.y()};
+  for (int k = 1; k < 4; ++k) {
+    if (along[k] > best) best = along[k], turn = k;
+  }
+  return axis + turn * std::numbers::pi / 2;
+}
+
 SearchGrid::SearchGrid(const FloorPlan& plan, Options options) : plan_(&plan), options_(options) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("SearchGrid: " + why);
-  const Box2 box = plan.Bounds();
-  if (box.Empty()) return;
+  if (plan.Bounds().Empty()) return;
+  if (options_.align_to_walls) {
+    axis_rad_ = GridAxis(plan);
+    axes_ = Eigen::Rotation2Dd(axis_rad_).toRotationMatrix();
+  }
+  // The plan in the grid's axes (the identity for a plan drawn along its axes: the same
+  // numbers as the map's own).
+  const Mat2 to_grid = axes_.transpose();
+  Box2 box;
+  for (const auto& w : plan.walls()) box.Extend(to_grid * w.a), box.Extend(to_grid * w.b);
+  for (const auto& r : plan.rooms()) {
+    for (const auto& p : r.ring) box.Extend(to_grid * p);
+  }
   const double s = options_.spacing_m;
-  // Grid offset per axis: the nodes as far as possible from the axis-parallel walls (a node on
-  // a wall line would block its doorway; buildings are mostly rectangular, sec. IV-D).
+  // Grid offset per axis: the nodes as far as possible from the walls parallel to the grid's
+  // axes (a node on a wall line would block its doorway; buildings are mostly rectangular,
+  // sec. IV-D).
   std::vector<double> xs, ys;
   for (const auto& w : plan.walls()) {
-    if (std::abs(w.a.x() - w.b.x()) < 1e-9) xs.push_back(w.a.x());
-    if (std::abs(w.a.y() - w.b.y()) < 1e-9) ys.push_back(w.a.y());
+    const Vec2 a = to_grid * w.a, b = to_grid * w.b;
+    const double tol = 1e-9 + 1e-9 * (b - a).norm();
+    if (std::abs(a.x() - b.x()) < tol) xs.push_back(a.x());
+    if (std::abs(a.y() - b.y()) < tol) ys.push_back(a.y());
   }
-  auto best_offset = [s](const std::vector<double>& coords) {
-    double best = 0.5 * s, best_score = -1;
+  // The candidate offsets count from the plan's corner (not the frame's origin: a plan drawn
+  // shifted gets the same nodes relative to its walls).
+  auto best_offset = [s](const std::vector<double>& coords, double corner) {
+    double best = corner + 0.5 * s, best_score = -1;
     for (int k = 0; k < 100; ++k) {
-      const double o = s * k / 100.0;  // node positions o + n s
+      const double o = corner + s * k / 100.0;  // node positions o + n s
       double score = 0.5 * s;
       for (double c : coords) {
         const double r = std::remainder(c - o, s);  // [-s/2, s/2]
@@ -213,7 +275,7 @@ SearchGrid::SearchGrid(const FloorPlan& plan, Options options) : plan_(&plan), o
     }
     return best;
   };
-  const Vec2 offset(best_offset(xs), best_offset(ys));
+  const Vec2 offset(best_offset(xs, box.min.x()), best_offset(ys, box.min.y()));
   origin_ = Vec2(offset.x() + s * std::floor((box.min.x() - s - offset.x()) / s),
                  offset.y() + s * std::floor((box.min.y() - s - offset.y()) / s));
   const double nx = std::ceil((box.max.x() - origin_.x()) / s) + 2, ny = std::ceil((box.max.y() - origin_.y()) / s) + 2;
@@ -229,7 +291,8 @@ SearchGrid::SearchGrid(const FloorPlan& plan, Options options) : plan_(&plan), o
   // its segment to the walls as drawn (for the first convention that changes nothing).
   std::vector<Segment2> closed = plan.walls();
   closed.insert(closed.end(), plan.doors().begin(), plan.doors().end());
-  const SegmentIndex drawn(closed);
+  closed_ = SegmentIndex(std::move(closed));
+  const SegmentIndex& drawn = closed_;
   std::vector<char> outside(static_cast<std::size_t>(nx_) * ny_, 0);
   std::vector<Cell> stack;
   for (int ix = 0; ix < nx_; ++ix) stack.push_back({ix, 0}), stack.push_back({ix, ny_ - 1});
@@ -276,7 +339,7 @@ bool SearchGrid::Inside(const Cell& c) const {
 }
 
 Vec2 SearchGrid::Center(const Cell& c) const {
-  return origin_ + Vec2(c.ix * options_.spacing_m, c.iy * options_.spacing_m);
+  return axes_ * (origin_ + Vec2(c.ix * options_.spacing_m, c.iy * options_.spacing_m));
 }
 
 bool SearchGrid::CanMove(const Cell& c, int dir) const {
@@ -284,8 +347,21 @@ bool SearchGrid::CanMove(const Cell& c, int dir) const {
   return Inside(c) && Inside(n) && !plan_->Crosses(Center(c), Center(n));
 }
 
+bool SearchGrid::Contains(const Vec2& p) const {
+  if (!std::isfinite(p.x()) || !std::isfinite(p.y())) return false;
+  const Cell at = CellOf(p);
+  if (Inside(at) && !closed_.Intersects({p, Center(at)})) return true;  // the usual case
+  for (int dy = -1; dy <= 1; ++dy) {
+    for (int dx = -1; dx <= 1; ++dx) {
+      const Cell n{at.ix + dx, at.iy + dy};
+      if ((dx != 0 || dy != 0) && Inside(n) && !closed_.Intersects({p, Center(n)})) return true;
+    }
+  }
+  return false;
+}
+
 SearchGrid::Cell SearchGrid::CellOf(const Vec2& p) const {
-  const Vec2 q = (p - origin_) / options_.spacing_m;
+  const Vec2 q = (axes_.transpose() * p - origin_) / options_.spacing_m;
   return {static_cast<int>(std::lround(q.x())), static_cast<int>(std::lround(q.y()))};
 }
 
@@ -488,6 +564,7 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
     sequences.push_back(
         {RightHandWalk(grid, *unreached, *HeadingAlongWall(grid, *unreached)), true});
   }
+  for (auto& seq : sequences) seq.grid_axis_rad = grid.axis_rad();
   return sequences;
 }
 
