@@ -191,6 +191,36 @@ TEST(FloorPlanGeoJson, ReadsWallsDoorsRoomsAndLevels) {
   EXPECT_EQ(back.solid_walls().size(), all.solid_walls().size());
 }
 
+TEST(FloorPlanGeoJson, APlanInDegreesIsRefusedAndNamed) {
+  // Issue 23: a 20 x 12 m building exported in longitude/latitude (Dundee) instead of metres.
+  const std::string degrees = R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"wall"},
+     "geometry":{"type":"LineString","coordinates":[[-2.9701,56.4620],[-2.9698,56.4620],
+       [-2.9698,56.4621],[-2.9701,56.4621],[-2.9701,56.4620]]}}]})";
+  try {
+    ParseFloorPlanGeoJson(degrees, "plan.geojson");
+    FAIL() << "a plan in degrees was read";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("plan.geojson"), std::string::npos) << what;
+    EXPECT_NE(what.find("longitude/latitude"), std::string::npos) << what;
+  }
+  // The same shape in millimetres' worth of metres far from any lon/lat: too small, said so.
+  const std::string tiny = R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"wall"},
+     "geometry":{"type":"LineString","coordinates":[[500,500],[500.02,500],[500.02,500.01]]}}]})";
+  try {
+    ParseFloorPlanGeoJson(tiny, "plan.geojson");
+    FAIL() << "a 2 cm plan was read";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("far too small"), std::string::npos) << e.what();
+  }
+  // A small real room (a 1 m cupboard) is a plan in metres.
+  EXPECT_NO_THROW(ParseFloorPlanGeoJson(R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"wall"},
+     "geometry":{"type":"LineString","coordinates":[[0,0],[1,0],[1,1]]}}]})", "plan.geojson"));
+}
+
 TEST(FloorPlanGeoJson, AMultiFloorPlanIsReadOneFloorAtATime) {
   // Floor 0 a 10 x 5 m room; floor 1 a wall straight across it (the room above is split).
   TempDir dir;

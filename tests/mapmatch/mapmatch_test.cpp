@@ -173,7 +173,22 @@ TEST(FloorPlanChecks, BadPlansAreReportedClearly) {
     ADD_FAILURE() << "no error";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("encloses no area"), std::string::npos) << e.what();
+    // ... and says where: the two wall ends of the gap (issue 23).
+    EXPECT_NE(std::string(e.what()).find("first at (0.00, 0.00)"), std::string::npos) << e.what();
   }
+  // A door with no wall: named with its coordinates; a door along a wall or across a gap is not.
+  const FloorPlan stray({{{0, 0}, {4, 0}}, {{4, 0}, {4, 3}}, {{4, 3}, {0, 3}}, {{0, 3}, {0, 0}}},
+                        {{{0, 1}, {0, 2}}, {{2, 1}, {2.8, 1}}}, {});
+  std::string messages;
+  for (const auto& p : CheckFloorPlan(stray)) messages += p.message + "\n";
+  EXPECT_NE(messages.find("door 1 from (2.00, 1.00) to (2.80, 1.00)"), std::string::npos)
+      << messages;
+  EXPECT_EQ(messages.find("door 0"), std::string::npos) << messages;
+  const FloorPlan across({{{0, 0}, {4, 0}}, {{4, 0}, {4, 3}}, {{4, 3}, {0, 3}}, {{0, 3}, {0, 2}},
+                          {{0, 1}, {0, 0}}},
+                         {{{0, 1}, {0, 2}}}, {});
+  // ... and its jambs are not gaps (they touch the door).
+  for (const auto& p : CheckFloorPlan(across)) ADD_FAILURE() << p.message;
   // An entry far from anything enclosed and from every door.
   EXPECT_THROW(ExtractSearchSequences(Room(4, 3), Vec2(50, 50)), std::invalid_argument);
 }

@@ -285,6 +285,25 @@ std::string StringMember(const nlohmann::json& object, const char* key) {
 }
 }  // namespace
 
+void RequirePlanInMetres(const std::vector<Segment2>& walls, const std::string& source) {
+  // A plan in degrees (longitude/latitude, e.g. an indoor map exported as is) is a building a
+  // few ten-thousandths of a unit across: refused, named, instead of an empty search (issue 23).
+  Box2 box;
+  for (const auto& w : walls) box.Extend(w.a), box.Extend(w.b);
+  if (box.Empty()) return;
+  const Vec2 size = box.max - box.min;
+  if (std::max(size.x(), size.y()) >= 0.05) return;
+  const bool lon_lat = std::abs(box.min.x()) <= 180 && std::abs(box.max.x()) <= 180 &&
+                       std::abs(box.min.y()) <= 90 && std::abs(box.max.y()) <= 90;
+  Bad(source, "/features",
+      fmt::format("the walls span {:.3g} x {:.3g} (from ({:.7g}, {:.7g})): {}; the mission "
+                  "format's plans are in metres (trailmark convert wrld-indoor converts a WRLD "
+                  "indoor map)",
+                  size.x(), size.y(), box.min.x(), box.min.y(),
+                  lon_lat ? "this looks like longitude/latitude in degrees, not metres"
+                          : "far too small for a building in metres"));
+}
+
 FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& source,
                                 std::optional<int> level, std::vector<int>* levels_present) {
   std::set<int> levels;
@@ -367,6 +386,7 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
     }
   }
   if (levels_present) levels_present->assign(levels.begin(), levels.end());
+  RequirePlanInMetres(walls, source);
   return FloorPlan(std::move(walls), std::move(doors), std::move(rooms));
 }
 

@@ -21,6 +21,10 @@ MissionInfo ReadMissionInfo(const std::filesystem::path& path);
 std::string MissionInfoToJson(const MissionInfo& info);
 void WriteMissionInfo(const std::filesystem::path& path, const MissionInfo& info);
 
+/// Throws InputError naming `source` when the walls span less than 5 cm: a plan drawn in degrees
+/// (longitude/latitude) or in the wrong unit; the message says which it looks like.
+void RequirePlanInMetres(const std::vector<Segment2>& walls, const std::string& source);
+
 /// Floor plan GeoJSON (spec: "Floor plans"). `level` selects one floor (any integer, a
 /// basement's -1 too; nullopt = every level's features in one plan);
 /// `levels_present` (optional) receives the levels its walls, doors and rooms use, sorted

@@ -128,6 +128,8 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
            "particles outside the building are eliminated");
     t.Flag("wall_follow", [](O& o) -> bool& { return o.filter.wall_follow; },
            "the directional search as a motion model (ours)");
+    t.Flag("exact_inside", [](O& o) -> bool& { return o.filter.exact_inside; },
+           "the exact inside test instead of the 1 m grid cells (issue 23; no better on the houses)");
     t.Flag("grid_align", [](O& o) -> bool& { return o.sequences.grid.align_to_walls; },
            "search grid along the walls' dominant direction (ours; false: the map's x/y axes)");
     return t;

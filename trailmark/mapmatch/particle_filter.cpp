@@ -133,7 +133,8 @@ MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
 MapParticleFilter::~MapParticleFilter() = default;
 
 bool MapParticleFilter::InsideBuilding(const Vec2& p) const {
-  return grid_.Contains(p);
+  if (options_.exact_inside) return grid_.Contains(p);
+  return std::isfinite(p.x()) && std::isfinite(p.y()) && grid_.Inside(grid_.CellOf(p));
 }
 
 Vec2 MapParticleFilter::RandomInsidePoint() {

@@ -157,7 +157,9 @@ std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
   }
   if (overlaps > 1)
     problems.push_back({fmt::format("{} overlapping wall pairs in all", overlaps), false});
-  // Wall ends that touch no other wall: a gap in the outline, or a free-standing partition.
+  // Wall ends that touch no other wall: a gap in the outline, or a free-standing partition. A
+  // jamb of a door drawn across the gap (spec 1.1) touches the door: not a gap.
+  const SegmentIndex door_index(plan.doors());
   int dangling = 0;
   std::string first;
   for (std::size_t i = 0; i < walls.size(); ++i) {
@@ -168,6 +170,9 @@ std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
         touches = touches ||
                   (j != i && walls[j].Length() > snap_m && DistanceToSegment(end, walls[j]) <= snap_m);
       }
+      door_index.ForEachCandidate(BoxAround(end, end, snap_m), [&](std::size_t d) {
+        touches = touches || DistanceToSegment(end, door_index.segments()[d]) <= snap_m;
+      });
       if (!touches && dangling++ == 0) first = fmt::format("({:.2f}, {:.2f})", end.x(), end.y());
     }
   }
@@ -177,6 +182,31 @@ std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
                      "free-standing partition",
                      dangling, first),
          false});
+  }
+  // A door must lie along a wall or across a gap between walls (spec 1.1): both its ends on a
+  // wall. One whose end touches no wall is a door with no wall (issue 23).
+  const auto& doors = plan.doors();
+  int loose = 0;
+  std::string first_door;
+  for (std::size_t k = 0; k < doors.size(); ++k) {
+    for (const Vec2& end : {doors[k].a, doors[k].b}) {
+      bool on_wall = false;
+      for (const std::size_t j : Near(index, BoxAround(end, end, snap_m))) {
+        on_wall = on_wall || DistanceToSegment(end, walls[j]) <= snap_m;
+      }
+      if (!on_wall && loose++ == 0) {
+        first_door = fmt::format("door {} from ({:.2f}, {:.2f}) to ({:.2f}, {:.2f}), its end at "
+                                 "({:.2f}, {:.2f})",
+                                 k, doors[k].a.x(), doors[k].a.y(), doors[k].b.x(),
+                                 doors[k].b.y(), end.x(), end.y());
+      }
+    }
+  }
+  if (loose > 0) {
+    problems.push_back({fmt::format("{} door end(s) touch no wall, first {}: a door with no wall "
+                                    "(a door lies along a wall or across a gap between walls)",
+                                    loose, first_door),
+                        false});
   }
   return problems;
 }
@@ -449,10 +479,14 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
                                                  const SearchSequenceOptions& options) {
   const SearchGrid grid(plan, options.grid);
   if (grid.inside_count() == 0) {
+    // Name what leaves it open: the plan's checks (wall ends that touch nothing, doors with no
+    // wall) carry the features and their coordinates.
+    std::string why;
+    for (const auto& p : CheckFloorPlan(plan, options.wall_snap_m)) why += "; " + p.message;
     throw std::invalid_argument(
-        "the floor plan encloses no area: with the doors closed, the walls must close the building "
-        "(gaps in the "
-        "outer walls?)");
+        "the floor plan encloses no area: with the doors closed, the walls must close the "
+        "building" +
+        (why.empty() ? std::string(" (gaps in the outer walls?)") : why));
   }
   const double reach_m = 3.0 * options.grid.spacing_m + 2.0;
   auto start = grid.Nearest(entry_n);
