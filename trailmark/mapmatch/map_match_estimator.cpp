@@ -540,10 +540,23 @@ EstimatorSummary MapMatchEstimator::Summary() const {
     summary.numbers[id + ".pattern_comparisons"] = static_cast<double>(a.comparisons);
     summary.numbers[id + ".comparisons_skipped_converged"] =
         static_cast<double>(a.skipped_comparisons);
-    std::size_t eliminations = 0, restarts = 0;
+    std::size_t eliminations = 0, restarts = 0, ambiguous = 0;
     for (const auto& [level, f] : a.filters) {
       eliminations += f->summary().wall_eliminations;
       restarts += f->summary().restarts;
+      ambiguous += f->summary().ambiguous_updates;
+    }
+    // Issue 23: comparisons that matched equally well in places far apart, and whether the
+    // place from an unknown start was ever confirmed (until then the ellipse covers the
+    // building).
+    summary.numbers[id + ".ambiguous_comparisons"] = static_cast<double>(ambiguous);
+    const bool unconfirmed = a.filter->Unconfirmed();
+    summary.numbers[id + ".place_unconfirmed"] = unconfirmed ? 1.0 : 0.0;
+    if (unconfirmed) {
+      summary.notes.push_back(fmt::format(
+          "{}: its place was never confirmed by a distinctive pattern comparison ({} matched "
+          "equally well in places far apart): its ellipse covers the building",
+          id, ambiguous));
     }
     summary.numbers[id + ".wall_eliminations"] = static_cast<double>(eliminations);
     summary.numbers[id + ".restarts"] = static_cast<double>(restarts);

@@ -389,7 +389,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   const bool converged_now = Covariance().trace() <= PatternThreshold();
   if (forced_pattern_updates_ > 0) {
     --forced_pattern_updates_;
-  } else if (converged_now && !Unconfirmed()) {
+  } else if (converged_now && !AwaitingConfirmation()) {
     ++summary_.skipped_converged;
     return;
   }
@@ -494,7 +494,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
 }
 
 bool MapParticleFilter::WantsPatterns() const {
-  return options_.pseudo_observations && (forced_pattern_updates_ > 0 || Unconfirmed() ||
+  return options_.pseudo_observations && (forced_pattern_updates_ > 0 || AwaitingConfirmation() ||
                                           Covariance().trace() > PatternThreshold());
 }
 
@@ -525,8 +525,7 @@ bool MapParticleFilter::Distinctive(const PatternComparison& pc, double best_rms
 }
 
 bool MapParticleFilter::Unconfirmed() const {
-  return uniform_start_ && options_.pseudo_observations &&
-         pattern_updates_applied_ < options_.confirm_pattern_updates;
+  return uniform_start_ && pattern_updates_applied_ < options_.confirm_pattern_updates;
 }
 
 double WallFollowingLikelihood(const DistanceField& walls, const Vec2& position_n,
@@ -590,7 +589,7 @@ double MapParticleFilter::PatternThreshold() const {
 }
 
 void MapParticleFilter::NoteConvergence() {
-  if (!converged_ && options_.use_patterns_above_variance_m2 > 0 && !Unconfirmed() &&
+  if (!converged_ && options_.use_patterns_above_variance_m2 > 0 && !AwaitingConfirmation() &&
       Covariance().trace() <= options_.use_patterns_above_variance_m2) {
     converged_ = true;
     tracking_ = true;

@@ -231,7 +231,10 @@ class MapParticleFilter {
   /// the wrong corridor of a large floor with a spread of a few decimetres; until a comparison
   /// has said where the walker is, the ellipse says "somewhere in the building".
   Mat2 ReportedCovariance() const;
-  /// Whether the place from an unknown start is not yet confirmed (see ReportedCovariance).
+  /// Whether the place from an unknown start is not yet confirmed by distinctive comparisons
+  /// (see ReportedCovariance). Without pattern observations nothing confirms it: a uniform
+  /// start stays unconfirmed (the conventional filter from an unknown start is 5-10 m off on
+  /// the houses, its particles' spread a few decimetres).
   bool Unconfirmed() const;
   double MeanHeadingOffset() const;
   const std::vector<Particle>& particles() const { return particles_; }
@@ -270,6 +273,9 @@ class MapParticleFilter {
   bool last_step_alarm_ = false;
   int forced_pattern_updates_ = 0;
   int pattern_updates_applied_ = 0;
+  /// The filter's own rule: comparisons are wanted (and the filter cannot count as converged)
+  /// while this holds — Unconfirmed() with pattern observations on.
+  bool AwaitingConfirmation() const { return options_.pseudo_observations && Unconfirmed(); }
   /// Whether a comparison whose best RMSE is best_rmse_m is distinctive (confirm_distinct_m).
   bool Distinctive(const PatternComparison& pc, double best_rmse_m) const;
   void Recover();
