@@ -17,6 +17,7 @@
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/mapmatch/search_map.h"
 #include "trailmark/io/trajectory_formats.h"
 #include "trailmark/io/geo.h"
 #include "trailmark/io/csv.h"
@@ -189,6 +190,95 @@ void ExportFloorPlanWgs84(const fs::path& mission_dir, const fs::path& out) {
   std::ofstream f(out, std::ios::binary);
   f << FloorPlanToWgs84GeoJson(text, plan.string(), *mission.info().geo_origin);
   if (!f) throw std::runtime_error(out.string() + ": write failed");
+}
+
+int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
+                        std::optional<int> level, double grid_m, bool map_axes) {
+  const MissionDirectory mission(mission_dir);
+  const std::string json_path = mission.Path("mission.json").string();
+  const std::optional<FloorPlan> plan = mission.LoadFloorPlan(level);
+  if (!plan) throw InputError(json_path, 0, "no \"floorplan\" to search");
+  std::optional<Vec2> entry;
+  for (const auto& n : mission.info().nodes) {
+    if (n.kind != NodeKind::kAgent || entry) continue;
+    if (const auto start = mission.info().AgentStart(n)) entry = start->head<2>();
+  }
+  mapmatch::SearchSequenceOptions options;
+  options.grid.spacing_m = grid_m;
+  options.grid.align_to_walls = !map_axes;
+  std::string why;
+  if (!options.grid.IsValid(&why)) throw std::invalid_argument("--grid-m: " + why);
+  const bool corner = !entry;
+  if (corner) {
+    // No start: the inside node nearest the plan's corner (an inspection needs no entry).
+    const mapmatch::SearchGrid g(*plan, options.grid);
+    const auto nearest = g.Nearest(plan->Bounds().min);
+    entry = nearest ? g.Center(*nearest) : plan->Bounds().min;
+  }
+  const std::string plan_source = mission.Path(*mission.info().floorplan).string();
+  std::vector<mapmatch::NodeSequence> sequences;
+  try {
+    sequences = mapmatch::ExtractSearchSequences(*plan, *entry, options);
+  } catch (const std::invalid_argument& e) {
+    throw InputError(plan_source, 0, e.what());
+  }
+  const mapmatch::SearchGrid grid(*plan, options.grid);
+  const std::vector<std::size_t> missed = mapmatch::DoorsNotTraversed(grid, sequences);
+  nlohmann::json doc = nlohmann::json::parse(FloorPlanToGeoJson(*plan));
+  auto position = [](const Vec2& p) { return nlohmann::json::array({p.x(), p.y()}); };
+  std::size_t nodes = 0;
+  for (std::size_t k = 0; k < sequences.size(); ++k) {
+    nlohmann::json line = nlohmann::json::array();
+    for (const Vec2& p : sequences[k].nodes) line.push_back(position(p));
+    if (!sequences[k].nodes.empty()) line.push_back(position(sequences[k].nodes.front()));
+    nodes += sequences[k].nodes.size();
+    doc["features"].push_back(
+        {{"type", "Feature"},
+         {"properties",
+          {{"kind", "search_sequence"},
+           {"index", k},
+           {"around_inner_walls", sequences[k].around_inner_walls}}},
+         {"geometry", {{"type", "LineString"}, {"coordinates", line}}}});
+  }
+  nlohmann::json inside = nlohmann::json::array();
+  for (const Vec2& c : grid.InsideCenters()) inside.push_back(position(c));
+  doc["features"].push_back({{"type", "Feature"},
+                             {"properties", {{"kind", "inside_nodes"}}},
+                             {"geometry", {{"type", "MultiPoint"}, {"coordinates", inside}}}});
+  std::string missed_text;
+  for (const std::size_t d : missed) {
+    const Segment2& door = plan->doors()[d];
+    doc["features"].push_back(
+        {{"type", "Feature"},
+         {"properties", {{"kind", "door_not_traversed"}, {"door", d}}},
+         {"geometry",
+          {{"type", "LineString"},
+           {"coordinates", nlohmann::json::array({position(door.a), position(door.b)})}}}});
+    if (missed_text.size() < 200) {
+      missed_text += fmt::format("{}door {} at ({:.2f}, {:.2f})", missed_text.empty() ? "" : ", ",
+                                 d, 0.5 * (door.a.x() + door.b.x()), 0.5 * (door.a.y() + door.b.y()));
+    }
+  }
+  const double axis_deg = grid.axis_rad() * 180.0 / std::numbers::pi + 0.0;  // no "-0.0"
+  doc["trailmark_search_map"] = {{"grid_spacing_m", grid_m},
+                                 {"grid_axis_deg", axis_deg},
+                                 {"entry", position(*entry)},
+                                 {"sequences", sequences.size()},
+                                 {"doors_not_traversed", missed.size()}};
+  std::ofstream f(out, std::ios::binary);
+  f << doc.dump() << "\n";
+  if (!f) throw std::runtime_error(out.string() + ": write failed");
+  fmt::print("{} search sequences ({} nodes), inside {:.0f} m^2 on a {:g} m grid at {:.1f} deg "
+             "({}), from ({:.2f}, {:.2f}){}\n",
+             sequences.size(), nodes, grid.inside_count() * grid_m * grid_m, grid_m, axis_deg,
+             map_axes ? "the map's axes" : "along the walls", entry->x(), entry->y(),
+             corner ? " (no agent start: the inside node nearest the plan's corner)" : "");
+  fmt::print("inner doors no sequence passes: {}\n",
+             missed.empty() ? std::string("none")
+                            : fmt::format("{} of {}: {}", missed.size(), plan->doors().size(),
+                                          missed_text));
+  fmt::print("written: {}\n", out.string());
+  return missed.empty() ? 0 : 3;
 }
 
 std::size_t ExportTum(const fs::path& source, const std::string& id, const fs::path& out) {

@@ -67,6 +67,15 @@ std::size_t ExportTum(const std::filesystem::path& source, const std::string& id
 /// `trailmark export geojson-wgs84 MISSION --out FILE`: the mission's floor plan (every level)
 /// in WGS 84 longitude/latitude at its geo_origin. InputError when it has neither.
 void ExportFloorPlanWgs84(const std::filesystem::path& mission, const std::filesystem::path& out);
+
+/// `trailmark patterns MISSION --out FILE`: map matching's search grid and directional-search
+/// sequences of the mission's floor plan, written as GeoJSON (the plan, every sequence, the
+/// inside nodes, the inner doors no sequence passes), with a summary printed (issue 23). The
+/// entry is the first agent's start (else the inside node nearest the plan's corner). Returns
+/// 0, or 3 when an inner door is not traversed.
+int WriteSearchPatterns(const std::filesystem::path& mission, const std::filesystem::path& out,
+                        std::optional<int> level, double grid_m, bool map_axes);
+
 /// Reads every file of a mission with all checks; prints rows and time span per stream.
 void Validate(const std::filesystem::path& mission);
 int Bench(std::size_t rows, const std::filesystem::path& json_out);

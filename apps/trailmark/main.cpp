@@ -7,6 +7,7 @@
 //   trailmark reproduce breadcrumb|ins [--seeds N]
 //   trailmark energy [--battery-mah Q --sleep-ua I ...]
 //   trailmark wayout MISSION [--agent A] [--at T]
+//   trailmark patterns MISSION --out FILE [--level N] [--grid-m S] [--map-axes]
 //   trailmark serve --replay MISSION [--speed S] [--port P] [--token T]
 //   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
@@ -298,6 +299,23 @@ int main(int argc, char** argv) {
   wayout->add_option("--agent", wayout_agent, "the firefighter (default ff1)");
   wayout->add_option("--at", wayout_at, "mission time (s); default: the end of the mission");
 
+  std::string patterns_mission, patterns_out;
+  int patterns_level = 0;
+  double patterns_grid_m = 1.0;
+  bool patterns_map_axes = false;
+  auto* patterns = app.add_subcommand(
+      "patterns",
+      "map matching's search grid and directional-search sequences of a mission's floor plan, "
+      "as GeoJSON, and the doors no sequence passes (issue 23)");
+  patterns->add_option("mission", patterns_mission, "mission directory with a floor plan")
+      ->required();
+  patterns->add_option("--out", patterns_out, "GeoJSON file to write")->required();
+  auto* patterns_level_opt =
+      patterns->add_option("--level", patterns_level, "which floor (default level 0, else the lowest)");
+  patterns->add_option("--grid-m", patterns_grid_m, "grid spacing (m; default 1)");
+  patterns->add_flag("--map-axes", patterns_map_axes,
+                     "the grid along the map's x/y axes (the paper) instead of the walls");
+
   cli::ServeOptions serve_options;
   std::string serve_replay;
   std::vector<std::string> serve_kv;
@@ -525,6 +543,11 @@ int main(int argc, char** argv) {
       return cli::Serve(serve_options);
     } else if (*journal_export) {
       return cli::JournalExport(journal_file, journal_mission, journal_out, journal_salvage);
+    } else if (*patterns) {
+      return cli::WriteSearchPatterns(
+          patterns_mission, patterns_out,
+          patterns_level_opt->count() > 0 ? std::optional<int>(patterns_level) : std::nullopt,
+          patterns_grid_m, patterns_map_axes);
     } else if (*wayout) {
       const MissionDirectory m(wayout_mission);
       const beacons::WayOutReport w = ComputeWayOut(

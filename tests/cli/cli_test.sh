@@ -217,6 +217,18 @@ run_failing "$TM" wayout "$dir/bt" --agent nobody
 "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/hsr" --option init=uniform > /dev/null || fail "mapmatch"
 grep -q '"ff1.pattern_comparisons"' "$dir/hsr/diagnostics.json" || fail "mapmatch diagnostics"
 "$TM" eval "$dir/hs" "$dir/hsr/estimates.csv" | matches "^ff1 " || fail "mapmatch eval"
+# The search grid and sequences as GeoJSON (issue 23): the plan stays readable as a plan, the
+# sequences and inside nodes are added; the same house rotated (the frame family) has the
+# same number of sequences and nodes.
+"$TM" patterns "$dir/hs" --out "$dir/hsp.geojson" > "$dir/hsp.txt" || { cat "$dir/hsp.txt"; fail "patterns"; }
+grep -q "search sequences" "$dir/hsp.txt" && grep -q "inner doors no sequence passes: none" "$dir/hsp.txt" || { cat "$dir/hsp.txt"; fail "patterns summary"; }
+grep -q '"search_sequence"' "$dir/hsp.geojson" && grep -q '"inside_nodes"' "$dir/hsp.geojson" || fail "patterns file"
+"$TM" simulate house1-search --seed 2 --vary 3 --family frame --out "$dir/hsv" > /dev/null || fail "simulate frame variant"
+"$TM" patterns "$dir/hsv" --out "$dir/hsvp.geojson" > "$dir/hsvp.txt" || { cat "$dir/hsvp.txt"; fail "patterns of the rotated house"; }
+[ "$(head -1 "$dir/hsp.txt" | cut -d' ' -f1-5)" = "$(head -1 "$dir/hsvp.txt" | cut -d' ' -f1-5)" ] || { cat "$dir/hsp.txt" "$dir/hsvp.txt"; fail "rotated house: other sequences"; }
+mkdir -p "$dir/noplan" && sed '/"floorplan"/d' "$dir/hs/mission.json" > "$dir/noplan/mission.json"
+run_failing "$TM" patterns "$dir/noplan" --out "$dir/x.geojson"
+[ $rc -ne 0 ] && grep -q 'no "floorplan" to search' "$dir/err" || { cat "$dir/err"; fail "patterns without a plan"; }
 run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init=somewhere
 [ $rc -eq 1 ] && grep -q "option init=.somewhere. must be one of auto, known, uniform" "$dir/err" || fail "bad mapmatch option"
 # The report draws the floor a mapmatch run was matched on (its level option).

@@ -147,6 +147,22 @@ TEST(SearchGrid, ContainsIsThePointInPolygonTestNotTheCellsRounding) {
   EXPECT_FALSE(grid.Contains({std::nan(""), 1}));
 }
 
+TEST(SearchSequences, AnInnerDoorNoSequencePassesIsNamed) {
+  // Issue 23, item 2: an 8 x 4 m building split by a wall at x = 4 with a door in it, and the
+  // entry door on the west wall (exterior: closed for the searches, never counted). A 2 m door
+  // is passed by the right-hand search; a 0.4 m one between two rows of the 1 m grid is not
+  // (its room gets a sequence of its own, but no pattern goes through the door).
+  auto plan_with_door = [](double y0, double y1) {
+    return FloorPlan({{{0, 0}, {8, 0}}, {{8, 0}, {8, 4}}, {{8, 4}, {0, 4}}, {{0, 4}, {0, 0}},
+                      {{4, 0}, {4, 4}}},
+                     {{{0, 1}, {0, 2}}, {{4, y0}, {4, y1}}}, {});
+  };
+  const FloorPlan wide = plan_with_door(1.0, 3.0), narrow = plan_with_door(0.9, 1.3);
+  EXPECT_TRUE(DoorsNotTraversed(SearchGrid(wide), ExtractSearchSequences(wide, {0.5, 1.5})).empty());
+  EXPECT_EQ(DoorsNotTraversed(SearchGrid(narrow), ExtractSearchSequences(narrow, {0.5, 1.5})),
+            std::vector<std::size_t>{1});
+}
+
 TEST(FloorPlanChecks, BadPlansAreReportedClearly) {
   EXPECT_TRUE(CheckFloorPlan(FloorPlan({}, {}, {})).front().fatal);
   const FloorPlan odd({{{0, 0}, {4, 0}},

@@ -418,6 +418,34 @@ std::vector<Vec2> SearchGrid::InsideCenters() const {
   return out;
 }
 
+std::vector<std::size_t> DoorsNotTraversed(const SearchGrid& grid,
+                                           const std::vector<NodeSequence>& sequences) {
+  const FloorPlan& plan = grid.plan();
+  const SegmentIndex doors(plan.doors());
+  std::vector<char> passed(plan.doors().size(), 0);
+  for (const NodeSequence& seq : sequences) {
+    const std::size_t n = seq.nodes.size();
+    for (std::size_t k = 0; n > 1 && k < n; ++k) {
+      const Segment2 move{seq.nodes[k], seq.nodes[(k + 1) % n]};
+      doors.ForEachCandidate(BoxAround(move.a, move.b, 0.0), [&](std::size_t d) {
+        if (!passed[d] && SegmentsIntersect(move, doors.segments()[d])) passed[d] = 1;
+      });
+    }
+  }
+  std::vector<std::size_t> out;
+  for (std::size_t d = 0; d < passed.size(); ++d) {
+    if (passed[d]) continue;
+    // Inside on both sides, 0.3 m from the door's middle along its normal.
+    const Segment2& door = plan.doors()[d];
+    const Vec2 along = door.b - door.a;
+    if (!(along.norm() > 0)) continue;
+    const Vec2 normal = Vec2(-along.y(), along.x()) / along.norm();
+    const Vec2 mid = 0.5 * (door.a + door.b);
+    if (grid.Contains(mid + 0.3 * normal) && grid.Contains(mid - 0.3 * normal)) out.push_back(d);
+  }
+  return out;
+}
+
 std::vector<Vec2> RightHandWalk(const SearchGrid& grid, SearchGrid::Cell c, int dir) {
   std::vector<Vec2> nodes{grid.Center(c)};
   std::map<std::tuple<int, int, int>, std::size_t> seen{{{c.ix, c.iy, dir}, 0}};

@@ -149,6 +149,13 @@ struct SearchSequenceOptions {
 std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Vec2& entry_n,
                                                  const SearchSequenceOptions& options = {});
 
+/// The inner doors (the building's inside on both sides: exterior doors are closed for the
+/// searches) that no search sequence passes through, as indices into the plan's doors: a room
+/// behind one has no pattern that enters it, so a responder who searches it is not recognized
+/// there (issue 23, item 2). A sequence passes a door when one of its moves crosses the door.
+std::vector<std::size_t> DoorsNotTraversed(const SearchGrid& grid,
+                                           const std::vector<NodeSequence>& sequences);
+
 /// The right-hand walk on the grid from `start` facing `dir` until it repeats a state.
 std::vector<Vec2> RightHandWalk(const SearchGrid& grid, SearchGrid::Cell start, int dir);
 
