@@ -159,6 +159,10 @@ struct AgentTrack {
   double level_walked_m = 0;  ///< walked when the agent came to this level
   std::deque<std::pair<double, Vec2>> history;  ///< (distance walked, odometry position)
   bool alarm = false;
+  /// The variance indicator watches a filter that has found its place: a known start at once,
+  /// an unknown one once confirmed and its variance at or below the alarm level (issue 23: the
+  /// search for the place is not a map error).
+  bool indicator_armed = false;
   TimeS alarm_since = 0, t = 0;
   std::vector<std::pair<TimeS, TimeS>> alarms;
   std::vector<std::string> wall_alarms;  ///< when and where the walk crossed the map's walls
@@ -475,7 +479,10 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   }
   // Map-error indicator (sec. V-E): the estimated variance above the alarm level.
   const double variance = a.filter->Covariance().trace();
-  if (!a.alarm && variance > m.o.variance_alarm_m2) a.alarm = true, a.alarm_since = step->t1;
+  if (!a.indicator_armed && !a.filter->Unconfirmed() && variance <= m.o.variance_alarm_m2)
+    a.indicator_armed = true;
+  if (a.indicator_armed && !a.alarm && variance > m.o.variance_alarm_m2)
+    a.alarm = true, a.alarm_since = step->t1;
   if (a.alarm && variance <= m.o.variance_alarm_m2) {
     a.alarm = false;
     if (step->t1 - a.alarm_since >= m.o.variance_alarm_min_s)
