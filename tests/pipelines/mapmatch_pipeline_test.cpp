@@ -87,6 +87,19 @@ TEST(MapMatchPipeline, AnUnconfirmedPlaceIsReportedAndItsEllipseCoversTheBuildin
   }
 }
 
+/// The mapmatch summary of house 1's search `seed`, its hall door drawn 2 m off when
+/// `map_error`, from the start mode `init`.
+EstimatorSummary RunHouseSearch(int seed, bool map_error, const std::string& init) {
+  HouseSearchOptions o;
+  o.map_error = map_error;
+  const SimulatedMission sim = SimulateHouseSearch(o, seed);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  VectorSink sink;
+  return RunNamed("mapmatch", MissionDirectory(dir.path()),
+                  {{"init", init}, {"seed", std::to_string(seed)}}, sink);
+}
+
 TEST(MapMatchPipeline, AWalkThroughAWallOfTheMapRaisesTheWallCrossingAlarm) {
   // The map error of sec. V-E (the hall door drawn 2 m from where it is) against the right
   // map, the same left-hand searches (seeds 11-16; the indicator was tuned on seeds 1-10). One
@@ -96,15 +109,7 @@ TEST(MapMatchPipeline, AWalkThroughAWallOfTheMapRaisesTheWallCrossingAlarm) {
   int flagged = 0, false_alarms = 0, with_wall_alarms = 0;
   for (int seed = 11; seed <= 16; ++seed) {
     for (bool map_error : {true, false}) {
-      HouseSearchOptions o;
-      o.map_error = map_error;
-      const SimulatedMission sim = SimulateHouseSearch(o, seed);
-      testing::TempDir dir;
-      WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-      const MissionDirectory mission(dir.path());
-      VectorSink sink;
-      const EstimatorSummary s = RunNamed(
-          "mapmatch", mission, {{"init", "known"}, {"seed", std::to_string(seed)}}, sink);
+      const EstimatorSummary s = RunHouseSearch(seed, map_error, "known");
       const bool verdict = s.numbers.at("ff1.map_error_suspected") == 1.0;
       if (map_error) {
         flagged += verdict;
@@ -132,15 +137,7 @@ TEST(MapMatchPipeline, FromAnUnknownStartTheSearchForThePlaceIsNoMapError) {
   int flagged = 0, false_alarms = 0;
   for (int seed = 11; seed <= 16; ++seed) {
     for (bool map_error : {true, false}) {
-      HouseSearchOptions o;
-      o.map_error = map_error;
-      const SimulatedMission sim = SimulateHouseSearch(o, seed);
-      testing::TempDir dir;
-      WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-      VectorSink sink;
-      const EstimatorSummary s =
-          RunNamed("mapmatch", MissionDirectory(dir.path()),
-                   {{"init", "uniform"}, {"seed", std::to_string(seed)}}, sink);
+      const EstimatorSummary s = RunHouseSearch(seed, map_error, "uniform");
       (map_error ? flagged : false_alarms) += s.numbers.at("ff1.map_error_suspected") == 1.0;
     }
   }
