@@ -208,12 +208,12 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
   options.grid.align_to_walls = !map_axes;
   std::string why;
   if (!options.grid.IsValid(&why)) throw std::invalid_argument("--grid-m: " + why);
+  const mapmatch::SearchGrid grid(*plan, options.grid);
   const bool corner = !entry;
   if (corner) {
     // No start: the inside node nearest the plan's corner (an inspection needs no entry).
-    const mapmatch::SearchGrid g(*plan, options.grid);
-    const auto nearest = g.Nearest(plan->Bounds().min);
-    entry = nearest ? g.Center(*nearest) : plan->Bounds().min;
+    const auto nearest = grid.Nearest(plan->Bounds().min);
+    entry = nearest ? grid.Center(*nearest) : plan->Bounds().min;
   }
   const std::string plan_source = mission.Path(*mission.info().floorplan).string();
   std::vector<mapmatch::NodeSequence> sequences;
@@ -222,7 +222,6 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
   } catch (const std::invalid_argument& e) {
     throw InputError(plan_source, 0, e.what());
   }
-  const mapmatch::SearchGrid grid(*plan, options.grid);
   const std::vector<std::size_t> missed = mapmatch::DoorsNotTraversed(grid, sequences);
   nlohmann::json doc = nlohmann::json::parse(FloorPlanToGeoJson(*plan));
   auto position = [](const Vec2& p) { return nlohmann::json::array({p.x(), p.y()}); };

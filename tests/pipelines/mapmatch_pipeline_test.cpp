@@ -19,6 +19,19 @@ namespace {
 using testing::CanRunNamed;
 using testing::RunNamed;
 
+/// The mapmatch summary of house 1's search `seed` (its hall door drawn 2 m off when
+/// `map_error`) with `options`; the estimates into `sink` when given.
+EstimatorSummary RunHouseSearch(int seed, bool map_error, const OptionValues& options,
+                                VectorSink* sink = nullptr) {
+  HouseSearchOptions o;
+  o.map_error = map_error;
+  const SimulatedMission sim = SimulateHouseSearch(o, seed);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  VectorSink own;
+  return RunNamed("mapmatch", MissionDirectory(dir.path()), options, sink ? *sink : own);
+}
+
 TEST(MapMatchPipeline, KnownStartStaysOnTheMapAndEveryEstimateIsValid) {
   HouseSearchOptions o;
   const SimulatedMission sim = SimulateHouseSearch(o, 1);
@@ -66,15 +79,10 @@ TEST(MapMatchPipeline, AnUnconfirmedPlaceIsReportedAndItsEllipseCoversTheBuildin
   // (pseudo=false) nothing can confirm it: the summary and a note say so, and every ellipse
   // stays at least the house's spread (the searched part alone is 70 m^2: its variance is
   // several m^2).
-  HouseSearchOptions o;
-  const SimulatedMission sim = SimulateHouseSearch(o, 3);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  const MissionDirectory mission(dir.path());
   for (const bool pseudo : {true, false}) {
     VectorSink sink;
-    const EstimatorSummary s = RunNamed(
-        "mapmatch", mission, {{"init", "uniform"}, {"pseudo", pseudo ? "true" : "false"}}, sink);
+    const EstimatorSummary s = RunHouseSearch(
+        3, false, {{"init", "uniform"}, {"pseudo", pseudo ? "true" : "false"}}, &sink);
     EXPECT_EQ(s.numbers.at("ff1.place_unconfirmed"), pseudo ? 0.0 : 1.0);
     bool noted = false;
     for (const auto& n : s.notes) noted = noted || n.find("never confirmed") != std::string::npos;
@@ -87,19 +95,6 @@ TEST(MapMatchPipeline, AnUnconfirmedPlaceIsReportedAndItsEllipseCoversTheBuildin
   }
 }
 
-/// The mapmatch summary of house 1's search `seed`, its hall door drawn 2 m off when
-/// `map_error`, from the start mode `init`.
-EstimatorSummary RunHouseSearch(int seed, bool map_error, const std::string& init) {
-  HouseSearchOptions o;
-  o.map_error = map_error;
-  const SimulatedMission sim = SimulateHouseSearch(o, seed);
-  testing::TempDir dir;
-  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
-  VectorSink sink;
-  return RunNamed("mapmatch", MissionDirectory(dir.path()),
-                  {{"init", init}, {"seed", std::to_string(seed)}}, sink);
-}
-
 TEST(MapMatchPipeline, AWalkThroughAWallOfTheMapRaisesTheWallCrossingAlarm) {
   // The map error of sec. V-E (the hall door drawn 2 m from where it is) against the right
   // map, the same left-hand searches (seeds 11-16; the indicator was tuned on seeds 1-10). One
@@ -109,7 +104,7 @@ TEST(MapMatchPipeline, AWalkThroughAWallOfTheMapRaisesTheWallCrossingAlarm) {
   int flagged = 0, false_alarms = 0, with_wall_alarms = 0;
   for (int seed = 11; seed <= 16; ++seed) {
     for (bool map_error : {true, false}) {
-      const EstimatorSummary s = RunHouseSearch(seed, map_error, "known");
+      const EstimatorSummary s = RunHouseSearch(seed, map_error, {{"init", "known"}, {"seed", std::to_string(seed)}});
       const bool verdict = s.numbers.at("ff1.map_error_suspected") == 1.0;
       if (map_error) {
         flagged += verdict;
@@ -137,7 +132,7 @@ TEST(MapMatchPipeline, FromAnUnknownStartTheSearchForThePlaceIsNoMapError) {
   int flagged = 0, false_alarms = 0;
   for (int seed = 11; seed <= 16; ++seed) {
     for (bool map_error : {true, false}) {
-      const EstimatorSummary s = RunHouseSearch(seed, map_error, "uniform");
+      const EstimatorSummary s = RunHouseSearch(seed, map_error, {{"init", "uniform"}, {"seed", std::to_string(seed)}});
       (map_error ? flagged : false_alarms) += s.numbers.at("ff1.map_error_suspected") == 1.0;
     }
   }

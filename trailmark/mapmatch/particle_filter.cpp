@@ -137,6 +137,11 @@ bool MapParticleFilter::InsideBuilding(const Vec2& p) const {
   return std::isfinite(p.x()) && std::isfinite(p.y()) && grid_.Inside(grid_.CellOf(p));
 }
 
+Vec2 MapParticleFilter::GridNoise(double sigma_m) {
+  // Drawn in the grid's axes, so that a plan drawn rotated gets the same draws (issue 23).
+  return grid_.ToNavigation(Vec2(rng_.Normal(0, sigma_m), rng_.Normal(0, sigma_m)));
+}
+
 Vec2 MapParticleFilter::RandomInsidePoint() {
   const Vec2& c = inside_centers_[std::min(
       inside_centers_.size() - 1, static_cast<std::size_t>(Uniform() * inside_centers_.size()))];
@@ -151,7 +156,7 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
   wall_cusum_ = 0;
   forced_pattern_updates_ = 0;
   for (auto& q : particles_) {
-    q.position_n = p + grid_.ToNavigation(Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps)));
+    q.position_n = p + GridNoise(ps);
     q.heading_offset_rad = offset + rng_.Normal(0, hs);
     q.hand = RandomHand();
     q.p_off_wall = 0;
@@ -233,7 +238,7 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
     const Vec2 mean = Mean();
     for (auto& q : particles_) {
       q.position_n = uniform_start_ ? RandomInsidePoint()
-                                    : mean + grid_.ToNavigation(Vec2(rng_.Normal(0, 1.0), rng_.Normal(0, 1.0)));
+                                    : mean + GridNoise(1.0);
       q.step_from_n = q.position_n;  // a new particle, not a step
       if (uniform_start_) {
         q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
@@ -300,7 +305,7 @@ void MapParticleFilter::Predict(const Vec2& d) {
       q.step_from_n = q.position_n;
       const double ps = widen * options_.position_noise_m;
       const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d +
-                        grid_.ToNavigation(Vec2(rng_.Normal(0, ps), rng_.Normal(0, ps)));
+                        GridNoise(ps);
       q.heading_offset_rad = WrapAngle(
           q.heading_offset_rad + rng_.Normal(0, widen * options_.heading_noise_rad_per_m * len));
       if (plan.Crosses(q.position_n, next)) {
@@ -474,8 +479,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
         const Obs& o = it == obs.end() ? obs.back() : *it;
         Particle& q = particles_[order[k]];
         for (int attempt = 0; attempt < 10; ++attempt) {
-          q.position_n = o.p + grid_.ToNavigation(Vec2(rng_.Normal(0, options_.resample_position_sigma_m),
-                                    rng_.Normal(0, options_.resample_position_sigma_m)));
+          q.position_n = o.p + GridNoise(options_.resample_position_sigma_m);
           if (InsideBuilding(q.position_n)) break;
           q.position_n = o.p;
         }
@@ -568,8 +572,7 @@ void MapParticleFilter::WeighWallFollowing(double step_heading_odometry_rad, dou
 void MapParticleFilter::Recover() {
   ++summary_.recoveries;
   for (auto& q : particles_) {
-    const Vec2 p = q.position_n + grid_.ToNavigation(Vec2(rng_.Normal(0, options_.recover_position_sigma_m),
-                                       rng_.Normal(0, options_.recover_position_sigma_m)));
+    const Vec2 p = q.position_n + GridNoise(options_.recover_position_sigma_m);
     if (InsideBuilding(p)) q.position_n = p;
     q.step_from_n = q.position_n;  // moved by the recovery, not by a step
     q.heading_offset_rad =

@@ -247,6 +247,8 @@ class MapParticleFilter {
   /// Systematic resampling when the effective sample size is below ess_resample_fraction N.
   void ResampleIfDegenerate();
   Vec2 RandomInsidePoint();
+  /// Two independent N(0, sigma_m^2) draws along the grid's axes, in the navigation frame.
+  Vec2 GridNoise(double sigma_m);
   bool InsideBuilding(const Vec2& p) const;
   double PatternThreshold() const;
   void NoteConvergence();
