@@ -6,8 +6,8 @@
 
 #include <algorithm>
 #include <fstream>
-#include <nlohmann/json.hpp>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <numbers>
 #include <set>
 #include <sstream>
@@ -15,13 +15,13 @@
 #include "progress.h"
 #include "trailmark/core/error.h"
 #include "trailmark/eval/metrics.h"
+#include "trailmark/ins/height.h"
+#include "trailmark/io/csv.h"
+#include "trailmark/io/geo.h"
 #include "trailmark/io/metrics_io.h"
 #include "trailmark/io/mission_io.h"
-#include "trailmark/mapmatch/search_map.h"
 #include "trailmark/io/trajectory_formats.h"
-#include "trailmark/io/geo.h"
-#include "trailmark/io/csv.h"
-#include "trailmark/ins/height.h"
+#include "trailmark/mapmatch/search_map.h"
 #include "trailmark/report/html_report.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
@@ -192,8 +192,8 @@ void ExportFloorPlanWgs84(const fs::path& mission_dir, const fs::path& out) {
   if (!f) throw std::runtime_error(out.string() + ": write failed");
 }
 
-int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
-                        std::optional<int> level, double grid_m, bool map_axes) {
+int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::optional<int> level,
+                        double grid_m, bool map_axes) {
   const MissionDirectory mission(mission_dir);
   const std::string json_path = mission.Path("mission.json").string();
   const std::optional<FloorPlan> plan = mission.LoadFloorPlan(level);
@@ -231,13 +231,12 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
     for (const Vec2& p : sequences[k].nodes) line.push_back(position(p));
     if (!sequences[k].nodes.empty()) line.push_back(position(sequences[k].nodes.front()));
     nodes += sequences[k].nodes.size();
-    doc["features"].push_back(
-        {{"type", "Feature"},
-         {"properties",
-          {{"kind", "search_sequence"},
-           {"index", k},
-           {"around_inner_walls", sequences[k].around_inner_walls}}},
-         {"geometry", {{"type", "LineString"}, {"coordinates", line}}}});
+    doc["features"].push_back({{"type", "Feature"},
+                               {"properties",
+                                {{"kind", "search_sequence"},
+                                 {"index", k},
+                                 {"around_inner_walls", sequences[k].around_inner_walls}}},
+                               {"geometry", {{"type", "LineString"}, {"coordinates", line}}}});
   }
   nlohmann::json inside = nlohmann::json::array();
   for (const Vec2& c : grid.InsideCenters()) inside.push_back(position(c));
@@ -254,8 +253,9 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
           {{"type", "LineString"},
            {"coordinates", nlohmann::json::array({position(door.a), position(door.b)})}}}});
     if (missed_text.size() < 200) {
-      missed_text += fmt::format("{}door {} at ({:.2f}, {:.2f})", missed_text.empty() ? "" : ", ",
-                                 d, 0.5 * (door.a.x() + door.b.x()), 0.5 * (door.a.y() + door.b.y()));
+      missed_text +=
+          fmt::format("{}door {} at ({:.2f}, {:.2f})", missed_text.empty() ? "" : ", ", d,
+                      0.5 * (door.a.x() + door.b.x()), 0.5 * (door.a.y() + door.b.y()));
     }
   }
   const double axis_deg = grid.axis_rad() * 180.0 / std::numbers::pi + 0.0;  // no "-0.0"
@@ -267,15 +267,16 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out,
   std::ofstream f(out, std::ios::binary);
   f << doc.dump() << "\n";
   if (!f) throw std::runtime_error(out.string() + ": write failed");
-  fmt::print("{} search sequences ({} nodes), inside {:.0f} m^2 on a {:g} m grid at {:.1f} deg "
-             "({}), from ({:.2f}, {:.2f}){}\n",
-             sequences.size(), nodes, grid.inside_count() * grid_m * grid_m, grid_m, axis_deg,
-             map_axes ? "the map's axes" : "along the walls", entry->x(), entry->y(),
-             corner ? " (no agent start: the inside node nearest the plan's corner)" : "");
+  fmt::print(
+      "{} search sequences ({} nodes), inside {:.0f} m^2 on a {:g} m grid at {:.1f} deg "
+      "({}), from ({:.2f}, {:.2f}){}\n",
+      sequences.size(), nodes, grid.inside_count() * grid_m * grid_m, grid_m, axis_deg,
+      map_axes ? "the map's axes" : "along the walls", entry->x(), entry->y(),
+      corner ? " (no agent start: the inside node nearest the plan's corner)" : "");
   fmt::print("inner doors no sequence passes: {}\n",
-             missed.empty() ? std::string("none")
-                            : fmt::format("{} of {}: {}", missed.size(), plan->doors().size(),
-                                          missed_text));
+             missed.empty()
+                 ? std::string("none")
+                 : fmt::format("{} of {}: {}", missed.size(), plan->doors().size(), missed_text));
   fmt::print("written: {}\n", out.string());
   return missed.empty() ? 0 : 3;
 }

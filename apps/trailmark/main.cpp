@@ -310,8 +310,8 @@ int main(int argc, char** argv) {
   patterns->add_option("mission", patterns_mission, "mission directory with a floor plan")
       ->required();
   patterns->add_option("--out", patterns_out, "GeoJSON file to write")->required();
-  auto* patterns_level_opt =
-      patterns->add_option("--level", patterns_level, "which floor (default level 0, else the lowest)");
+  auto* patterns_level_opt = patterns->add_option("--level", patterns_level,
+                                                  "which floor (default level 0, else the lowest)");
   patterns->add_option("--grid-m", patterns_grid_m, "grid spacing (m; default 1)");
   patterns->add_flag("--map-axes", patterns_map_axes,
                      "the grid along the map's x/y axes (the paper) instead of the walls");

@@ -46,8 +46,8 @@ TEST(DistanceField, ARasterAlongTheWallsGivesTheSameValuesWhereverThePlanIsDrawn
   // the rotated axes, reads what the room drawn along the axes reads at the same places (the
   // cells count from the walls' box, not from the frame's origin); with the raster along the
   // frame's axes the values differ by up to a cell diagonal.
-  const std::vector<Segment2> walls = {{{0, 0}, {8, 0}}, {{8, 0}, {8, 6}}, {{8, 6}, {0, 6}},
-                                       {{0, 6}, {0, 0}}, {{3, 0}, {3, 2.5}}};
+  const std::vector<Segment2> walls = {
+      {{0, 0}, {8, 0}}, {{8, 0}, {8, 6}}, {{8, 6}, {0, 6}}, {{0, 6}, {0, 0}}, {{3, 0}, {3, 2.5}}};
   const double angle = 33.0 * std::acos(-1.0) / 180.0;
   const Mat2 R = Eigen::Rotation2Dd(angle).toRotationMatrix();
   const Vec2 shift(1000.0, -500.0);

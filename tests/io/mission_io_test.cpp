@@ -218,7 +218,8 @@ TEST(FloorPlanGeoJson, APlanInDegreesIsRefusedAndNamed) {
   // A small real room (a 1 m cupboard) is a plan in metres.
   EXPECT_NO_THROW(ParseFloorPlanGeoJson(R"({"type":"FeatureCollection","features":[
     {"type":"Feature","properties":{"kind":"wall"},
-     "geometry":{"type":"LineString","coordinates":[[0,0],[1,0],[1,1]]}}]})", "plan.geojson"));
+     "geometry":{"type":"LineString","coordinates":[[0,0],[1,0],[1,1]]}}]})",
+                                        "plan.geojson"));
 }
 
 TEST(FloorPlanGeoJson, AMultiFloorPlanIsReadOneFloorAtATime) {

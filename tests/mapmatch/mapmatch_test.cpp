@@ -104,8 +104,9 @@ TEST(SearchSequences, APlanDrawnRotatedAndShiftedGetsTheSameGridAndSequences) {
     }
   }
   // The dominant direction modulo a quarter turn, whatever the walls' lengths and order.
-  EXPECT_NEAR(DominantWallAxis({{{0, 0}, {Rot(0.3) * Vec2(5, 0)}}, {{0, 0}, {Rot(0.3) * Vec2(0, 2)}}}),
-              0.3, 1e-12);
+  EXPECT_NEAR(
+      DominantWallAxis({{{0, 0}, {Rot(0.3) * Vec2(5, 0)}}, {{0, 0}, {Rot(0.3) * Vec2(0, 2)}}}), 0.3,
+      1e-12);
   EXPECT_NEAR(DominantWallAxis({{{0, 0}, {Rot(1.2) * Vec2(5, 0)}}}), 1.2 - std::numbers::pi / 2,
               1e-12);
 }
@@ -117,15 +118,17 @@ TEST(SearchGrid, ContainsIsThePointInPolygonTestNotTheCellsRounding) {
   // a wall; the 1 m cells (the paper's test, Inside(CellOf(p))) misjudge a share of them.
   const std::vector<Vec2> ring = {{0, 0}, {9, 0}, {9, 4}, {6, 7}, {0, 7}};
   std::vector<Segment2> walls;
-  for (std::size_t k = 0; k < ring.size(); ++k) walls.push_back({ring[k], ring[(k + 1) % ring.size()]});
+  for (std::size_t k = 0; k < ring.size(); ++k)
+    walls.push_back({ring[k], ring[(k + 1) % ring.size()]});
   const FloorPlan plan(walls, {{{0, 1}, {0, 2}}}, {});
   const SearchGrid grid(plan);
   auto in_polygon = [&](const Vec2& p) {  // crossing number
     bool in = false;
     for (std::size_t k = 0, j = ring.size() - 1; k < ring.size(); j = k++) {
       if ((ring[k].y() > p.y()) != (ring[j].y() > p.y()) &&
-          p.x() < (ring[j].x() - ring[k].x()) * (p.y() - ring[k].y()) / (ring[j].y() - ring[k].y()) +
-                      ring[k].x())
+          p.x() <
+              (ring[j].x() - ring[k].x()) * (p.y() - ring[k].y()) / (ring[j].y() - ring[k].y()) +
+                  ring[k].x())
         in = !in;
     }
     return in;
@@ -153,12 +156,13 @@ TEST(SearchSequences, AnInnerDoorNoSequencePassesIsNamed) {
   // is passed by the right-hand search; a 0.4 m one between two rows of the 1 m grid is not
   // (its room gets a sequence of its own, but no pattern goes through the door).
   auto plan_with_door = [](double y0, double y1) {
-    return FloorPlan({{{0, 0}, {8, 0}}, {{8, 0}, {8, 4}}, {{8, 4}, {0, 4}}, {{0, 4}, {0, 0}},
-                      {{4, 0}, {4, 4}}},
-                     {{{0, 1}, {0, 2}}, {{4, y0}, {4, y1}}}, {});
+    return FloorPlan(
+        {{{0, 0}, {8, 0}}, {{8, 0}, {8, 4}}, {{8, 4}, {0, 4}}, {{0, 4}, {0, 0}}, {{4, 0}, {4, 4}}},
+        {{{0, 1}, {0, 2}}, {{4, y0}, {4, y1}}}, {});
   };
   const FloorPlan wide = plan_with_door(1.0, 3.0), narrow = plan_with_door(0.9, 1.3);
-  EXPECT_TRUE(DoorsNotTraversed(SearchGrid(wide), ExtractSearchSequences(wide, {0.5, 1.5})).empty());
+  EXPECT_TRUE(
+      DoorsNotTraversed(SearchGrid(wide), ExtractSearchSequences(wide, {0.5, 1.5})).empty());
   EXPECT_EQ(DoorsNotTraversed(SearchGrid(narrow), ExtractSearchSequences(narrow, {0.5, 1.5})),
             std::vector<std::size_t>{1});
 }
@@ -200,9 +204,9 @@ TEST(FloorPlanChecks, BadPlansAreReportedClearly) {
   EXPECT_NE(messages.find("door 1 from (2.00, 1.00) to (2.80, 1.00)"), std::string::npos)
       << messages;
   EXPECT_EQ(messages.find("door 0"), std::string::npos) << messages;
-  const FloorPlan across({{{0, 0}, {4, 0}}, {{4, 0}, {4, 3}}, {{4, 3}, {0, 3}}, {{0, 3}, {0, 2}},
-                          {{0, 1}, {0, 0}}},
-                         {{{0, 1}, {0, 2}}}, {});
+  const FloorPlan across(
+      {{{0, 0}, {4, 0}}, {{4, 0}, {4, 3}}, {{4, 3}, {0, 3}}, {{0, 3}, {0, 2}}, {{0, 1}, {0, 0}}},
+      {{{0, 1}, {0, 2}}}, {});
   // ... and its jambs are not gaps (they touch the door).
   for (const auto& p : CheckFloorPlan(across)) ADD_FAILURE() << p.message;
   // An entry far from anything enclosed and from every door.
@@ -566,12 +570,12 @@ TEST(MapParticleFilter, OnlyADistinctiveComparisonConfirmsAndUntilThenTheEllipse
   ASSERT_EQ(seqs.size(), 1u);
   const auto& nodes = seqs[0].nodes;
   auto nearest = [&](const Vec2& p) {
-    return static_cast<std::size_t>(
-        std::min_element(nodes.begin(), nodes.end(),
-                         [&](const Vec2& a, const Vec2& b) {
-                           return (a - p).squaredNorm() < (b - p).squaredNorm();
-                         }) -
-        nodes.begin());
+    return static_cast<std::size_t>(std::min_element(nodes.begin(), nodes.end(),
+                                                     [&](const Vec2& a, const Vec2& b) {
+                                                       return (a - p).squaredNorm() <
+                                                              (b - p).squaredNorm();
+                                                     }) -
+                                    nodes.begin());
   };
   const std::size_t west = nearest({2, 2}), east = nearest({28, 8});
   ASSERT_GT((nodes[west] - nodes[east]).norm(), 25);

@@ -104,7 +104,8 @@ TEST(MapMatchPipeline, AWalkThroughAWallOfTheMapRaisesTheWallCrossingAlarm) {
   int flagged = 0, false_alarms = 0, with_wall_alarms = 0;
   for (int seed = 11; seed <= 16; ++seed) {
     for (bool map_error : {true, false}) {
-      const EstimatorSummary s = RunHouseSearch(seed, map_error, {{"init", "known"}, {"seed", std::to_string(seed)}});
+      const EstimatorSummary s =
+          RunHouseSearch(seed, map_error, {{"init", "known"}, {"seed", std::to_string(seed)}});
       const bool verdict = s.numbers.at("ff1.map_error_suspected") == 1.0;
       if (map_error) {
         flagged += verdict;
@@ -132,7 +133,8 @@ TEST(MapMatchPipeline, FromAnUnknownStartTheSearchForThePlaceIsNoMapError) {
   int flagged = 0, false_alarms = 0;
   for (int seed = 11; seed <= 16; ++seed) {
     for (bool map_error : {true, false}) {
-      const EstimatorSummary s = RunHouseSearch(seed, map_error, {{"init", "uniform"}, {"seed", std::to_string(seed)}});
+      const EstimatorSummary s =
+          RunHouseSearch(seed, map_error, {{"init", "uniform"}, {"seed", std::to_string(seed)}});
       (map_error ? flagged : false_alarms) += s.numbers.at("ff1.map_error_suspected") == 1.0;
     }
   }

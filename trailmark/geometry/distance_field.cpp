@@ -2,7 +2,6 @@
 #include "trailmark/geometry/distance_field.h"
 
 #include <Eigen/Geometry>
-
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>

@@ -171,7 +171,8 @@ std::string WrldFloorPlanGeoJson(const WrldBuilding& b) {
   std::vector<Segment2> walls;
   for (const auto& l : b.levels) {
     floors.emplace_back(l.z_order, l.Plan());
-    walls.insert(walls.end(), floors.back().second.walls().begin(), floors.back().second.walls().end());
+    walls.insert(walls.end(), floors.back().second.walls().begin(),
+                 floors.back().second.walls().end());
   }
   RequirePlanInMetres(walls, b.id.empty() ? std::string("the WRLD building") : b.id);
   return FloorPlanToGeoJson(floors);

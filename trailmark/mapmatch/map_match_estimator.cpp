@@ -98,8 +98,9 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
     real("wall_follow_converged_power",
          [](O& o) -> double& { return o.filter.wall_follow_converged_power; }, "", any,
          "wall-following weight once converged (0: only while uncertain)");
-    real("confirm_distinct_m", [](O& o) -> double& { return o.filter.confirm_distinct_m; }, "m",
-         any, "a comparison confirms only if its best matches lie within this of each other (0: all)");
+    real(
+        "confirm_distinct_m", [](O& o) -> double& { return o.filter.confirm_distinct_m; }, "m", any,
+        "a comparison confirms only if its best matches lie within this of each other (0: all)");
     real("grid_m", [](O& o) -> double& { return o.sequences.grid.spacing_m; }, "m", any,
          "search-pattern grid spacing");
     real("pattern_length_m", [](O& o) -> double& { return o.comparison.pattern_length_m; }, "m",
@@ -128,10 +129,12 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
            "particles outside the building are eliminated");
     t.Flag("wall_follow", [](O& o) -> bool& { return o.filter.wall_follow; },
            "the directional search as a motion model (ours)");
-    t.Flag("exact_inside", [](O& o) -> bool& { return o.filter.exact_inside; },
-           "the exact inside test instead of the 1 m grid cells (issue 23; no better on the houses)");
-    t.Flag("grid_align", [](O& o) -> bool& { return o.sequences.grid.align_to_walls; },
-           "search grid along the walls' dominant direction (ours; false: the map's x/y axes)");
+    t.Flag(
+        "exact_inside", [](O& o) -> bool& { return o.filter.exact_inside; },
+        "the exact inside test instead of the 1 m grid cells (issue 23; no better on the houses)");
+    t.Flag(
+        "grid_align", [](O& o) -> bool& { return o.sequences.grid.align_to_walls; },
+        "search grid along the walls' dominant direction (ours; false: the map's x/y axes)");
     return t;
   }();
   return table;

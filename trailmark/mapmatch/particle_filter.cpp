@@ -88,9 +88,8 @@ std::string MapParticleFilterSummary::BriefReport() const {
       "restarts; {} "
       "comparisons skipped while converged; {} left the building",
       time_updates, pattern_updates, uninformative_updates, ambiguous_updates, wall_eliminations,
-      floor_replacements,
-      pattern_resamples, systematic_resamples, backtracks, restarts, skipped_converged,
-      outside_eliminations);
+      floor_replacements, pattern_resamples, systematic_resamples, backtracks, restarts,
+      skipped_converged, outside_eliminations);
 }
 
 MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
@@ -127,7 +126,8 @@ MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
   nodes_->tree =
       std::make_unique<NodeIndex::Tree>(2, *nodes_, nanoflann::KDTreeSingleIndexAdaptorParams(8));
   particles_.resize(options_.particles);
-  if (options_.wall_follow && !wall_distance_) wall_distance_ = MakeWallDistanceField(grid.plan(), grid.axis_rad());
+  if (options_.wall_follow && !wall_distance_)
+    wall_distance_ = MakeWallDistanceField(grid.plan(), grid.axis_rad());
 }
 
 MapParticleFilter::~MapParticleFilter() = default;
@@ -237,8 +237,7 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
     if (uniform_start_) tracking_ = false;  // the track is to be found again
     const Vec2 mean = Mean();
     for (auto& q : particles_) {
-      q.position_n = uniform_start_ ? RandomInsidePoint()
-                                    : mean + GridNoise(1.0);
+      q.position_n = uniform_start_ ? RandomInsidePoint() : mean + GridNoise(1.0);
       q.step_from_n = q.position_n;  // a new particle, not a step
       if (uniform_start_) {
         q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
@@ -304,8 +303,7 @@ void MapParticleFilter::Predict(const Vec2& d) {
       mass += q.weight;
       q.step_from_n = q.position_n;
       const double ps = widen * options_.position_noise_m;
-      const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d +
-                        GridNoise(ps);
+      const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d + GridNoise(ps);
       q.heading_offset_rad = WrapAngle(
           q.heading_offset_rad + rng_.Normal(0, widen * options_.heading_noise_rad_per_m * len));
       if (plan.Crosses(q.position_n, next)) {
@@ -522,9 +520,8 @@ bool MapParticleFilter::Distinctive(const PatternComparison& pc, double best_rms
   if (count == 0) return false;
   const Vec2 mean = sum / static_cast<double>(count);
   bool close = true;
-  for_each_good([&](const Vec2& p) {
-    close = close && (p - mean).norm() <= options_.confirm_distinct_m;
-  });
+  for_each_good(
+      [&](const Vec2& p) { close = close && (p - mean).norm() <= options_.confirm_distinct_m; });
   return close;
 }
 
@@ -549,8 +546,7 @@ double WallFollowingLikelihood(const DistanceField& walls, const Vec2& position_
   return l;
 }
 
-std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan,
-                                                           double axis_rad) {
+std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan, double axis_rad) {
   DistanceField::Options o;
   o.axis_rad = axis_rad;
   o.cell_m = 0.1;

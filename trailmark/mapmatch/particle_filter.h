@@ -84,9 +84,9 @@ struct MapParticleFilterOptions {
   int confirm_pattern_updates = 5;
   /// Ours (issue 23): only a distinctive comparison confirms — every match whose RMSE is within
   /// 3 sigma^2 of the best (a likelihood ratio of e^-3 or more by eq. 2) lies within this
-  /// distance of those matches' mean position. On a large floor with repeating corridors a straight stretch
-  /// matches equally well in a hundred places 50 m apart; such a comparison still weights and
-  /// draws particles (the paper), but it does not tell the filter where it is. 0: every
+  /// distance of those matches' mean position. On a large floor with repeating corridors a straight
+  /// stretch matches equally well in a hundred places 50 m apart; such a comparison still weights
+  /// and draws particles (the paper), but it does not tell the filter where it is. 0: every
   /// comparison confirms (as before).
   double confirm_distinct_m = 3.0;
   /// Ours: map-error and lost-track evidence — the share of the belief that a step drives into
@@ -261,8 +261,8 @@ class MapParticleFilter {
   Random rng_;
   std::vector<Particle> particles_;
   std::vector<Vec2> inside_centers_;
-  Vec2 inside_mean_ = Vec2::Zero();          ///< of the inside centres
-  Mat2 inside_second_ = Mat2::Zero();        ///< their mean of p p^T
+  Vec2 inside_mean_ = Vec2::Zero();    ///< of the inside centres
+  Mat2 inside_second_ = Mat2::Zero();  ///< their mean of p p^T
   bool uniform_start_ = false;
   // Unique node positions (nanoflann k-d tree) and the (sequence, node) pairs at each.
   struct NodeIndex;

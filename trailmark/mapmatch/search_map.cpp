@@ -1,9 +1,9 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/mapmatch/search_map.h"
 
-#include <Eigen/Geometry>
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -195,10 +195,10 @@ std::vector<MapProblem> CheckFloorPlan(const FloorPlan& plan, double snap_m) {
         on_wall = on_wall || DistanceToSegment(end, walls[j]) <= snap_m;
       }
       if (!on_wall && loose++ == 0) {
-        first_door = fmt::format("door {} from ({:.2f}, {:.2f}) to ({:.2f}, {:.2f}), its end at "
-                                 "({:.2f}, {:.2f})",
-                                 k, doors[k].a.x(), doors[k].a.y(), doors[k].b.x(),
-                                 doors[k].b.y(), end.x(), end.y());
+        first_door = fmt::format(
+            "door {} from ({:.2f}, {:.2f}) to ({:.2f}, {:.2f}), its end at "
+            "({:.2f}, {:.2f})",
+            k, doors[k].a.x(), doors[k].a.y(), doors[k].b.x(), doors[k].b.y(), end.x(), end.y());
       }
     }
   }
