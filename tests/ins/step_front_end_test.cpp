@@ -5,13 +5,13 @@
 
 #include <gtest/gtest.h>
 
-#include <algorithm>
-#include <cmath>
-#include <stdexcept>
-#include <map>
-
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <stdexcept>
 
 #include "trailmark/core/random.h"
 #include "trailmark/ins/dead_reckoning.h"
@@ -25,7 +25,7 @@ namespace {
 PdrOptions WhiteOnly() {
   PdrOptions o;
   o.start_heading_sigma_rad = o.heading_drift_sigma_rad_per_s = o.heading_walk_sigma_rad = 0;
-  o.step_scale_sigma = 0;
+  o.step_scale_sigma = o.turn_scale_sigma = 0;
   return o;
 }
 
@@ -50,7 +50,10 @@ TEST(DeadReckoning, PositionFixIsACovarianceIntersection) {
   for (int k = 0; k < 40; ++k) dr.AddStep(Step{k * 0.5, k * 0.5 + 0.5, "ff1", Vec3(0.6, 0.2, 0)});
   const Mat2 P = dr.covariance();
   const Vec2 x = dr.position_n().head<2>();
-  const auto shared_before = dr.error_covariance().bottomRightCorner<3, 3>().eval();
+  const auto shared_before =
+      dr.error_covariance()
+          .bottomRightCorner<DeadReckoning::kSharedErrors, DeadReckoning::kSharedErrors>()
+          .eval();
   Mat2 R;
   R << 0.8, -0.3, -0.3, 0.5;
   const Vec2 z = x + Vec2(1.0, -0.7);
@@ -67,8 +70,12 @@ TEST(DeadReckoning, PositionFixIsACovarianceIntersection) {
   const Vec2 mean = C * (best_w * P.inverse() * x + (1 - best_w) * R.inverse() * z);
   EXPECT_LT((dr.covariance() - C).norm(), 1e-6 * C.norm());
   EXPECT_LT((dr.position_n().head<2>() - mean).norm(), 1e-6);
-  EXPECT_LT((dr.error_covariance().bottomRightCorner<3, 3>() - shared_before).norm(), 1e-15);
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 5, 5>> eig(dr.error_covariance());
+  EXPECT_LT((dr.error_covariance()
+                 .bottomRightCorner<DeadReckoning::kSharedErrors, DeadReckoning::kSharedErrors>() -
+             shared_before)
+                .norm(),
+            1e-15);
+  const Eigen::SelfAdjointEigenSolver<DeadReckoning::ErrorCovariance> eig(dr.error_covariance());
   EXPECT_GT(eig.eigenvalues().minCoeff(), 0.0);
   // A fix 100 times less certain than the estimate changes nothing.
   const Vec3 before = dr.position_n();
@@ -94,15 +101,22 @@ TEST(DeadReckoning, SetPositionKeepsTheSharedErrorsForTheWalkAfter) {
   TimeS t = 0;
   for (int k = 0; k < 40; ++k, t += 0.5) dr.AddStep({t, t + 0.5, "a", Vec3(0.7, 0, 0), Vec3(1e-6, 1e-6, 0)});
   EXPECT_GT(dr.covariance()(1, 1), 0.05 * 0.05 * 28 * 28 * 0.99);  // the heading across the walk
-  const auto shared_before = dr.error_covariance().bottomRightCorner<3, 3>().eval();
+  const auto shared_before =
+      dr.error_covariance()
+          .bottomRightCorner<DeadReckoning::kSharedErrors, DeadReckoning::kSharedErrors>()
+          .eval();
   Mat2 C;
   C << 0.2, 0.05, 0.05, 0.1;
   dr.SetPosition(Vec2(27.5, 0.4), C);
   EXPECT_EQ(dr.position_n().head<2>(), Vec2(27.5, 0.4));
   EXPECT_EQ(dr.covariance(), C);
   const auto& P = dr.error_covariance();
-  EXPECT_EQ((P.bottomRightCorner<3, 3>() - shared_before).norm(), 0.0);
-  const double cross = P.topRightCorner<2, 3>().norm() + P.bottomLeftCorner<3, 2>().norm();
+  EXPECT_EQ((P.bottomRightCorner<DeadReckoning::kSharedErrors, DeadReckoning::kSharedErrors>() -
+             shared_before)
+                .norm(),
+            0.0);
+  const double cross = P.topRightCorner<2, DeadReckoning::kSharedErrors>().norm() +
+                       P.bottomLeftCorner<DeadReckoning::kSharedErrors, 2>().norm();
   EXPECT_EQ(cross, 0.0);
   for (int k = 0; k < 20; ++k, t += 0.5) dr.AddStep({t, t + 0.5, "a", Vec3(0, 0.7, 0), Vec3(1e-6, 1e-6, 0)});
   Mat2 expected = C;
@@ -119,18 +133,23 @@ TEST(DeadReckoning, SetPositionKeepsTheSharedErrorsForTheWalkAfter) {
 
 TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
   // Exact reference: the covariance of the position over many walks whose steps are turned by
-  // a heading offset + drift x time + a random walk and stretched by one scale error, all
-  // drawn from the options' sigmas. Walk: 40 steps east, 60 s standing, 40 steps north.
+  // a heading offset + drift x time + a turn-scale error x the angle turned + a random walk and
+  // stretched by one scale error, all drawn from the options' sigmas. Walk: 40 steps east, 60 s
+  // standing, 40 steps north, then a loop of four left turns (20 steps a side, 360 deg more),
+  // where the turn-scale error is most of the heading error.
   PdrOptions o;
   o.start_heading_sigma_rad = 0.05;
   o.heading_drift_sigma_rad_per_s = 0.001;
   o.heading_walk_sigma_rad = 0.01;
   o.step_scale_sigma = 0.03;
+  o.turn_scale_sigma = 0.02;  // 9 deg over the walk's 450 deg: small angles still
   std::vector<Step> steps;
   TimeS t = 0;
-  for (int i = 0; i < 80; ++i) {
+  const std::array<Vec3, 4> sides = {Vec3(0.7, 0, 0), Vec3(0, 0.7, 0), Vec3(-0.7, 0, 0),
+                                     Vec3(0, -0.7, 0)};
+  for (int i = 0; i < 160; ++i) {
     if (i == 40) t += 60;
-    const Vec3 d = i < 40 ? Vec3(0.7, 0, 0) : Vec3(0, 0.7, 0);
+    const Vec3 d = i < 40 ? sides[0] : i < 80 ? sides[1] : sides[(2 + (i - 80) / 20) % 4];
     steps.push_back({t, t + 0.5, "a", d, Vec3(1e-4, 1e-4, 0)});
     t += 0.5;
   }
@@ -144,11 +163,16 @@ TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
     double heading = rng.Normal(0, o.start_heading_sigma_rad);
     const double rate = rng.Normal(0, o.heading_drift_sigma_rad_per_s);
     const double scale = rng.Normal(0, o.step_scale_sigma);
+    const double turn_scale = rng.Normal(0, o.turn_scale_sigma);
     Vec2 p(rng.Normal(0, 0.1), rng.Normal(0, 0.1));
     TimeS last = steps.front().t1;
+    double direction = 0;  // of the steps as walked (every step here is >= turn_min_step_m)
     for (const Step& s : steps) {
       heading += rate * (s.t1 - last);
       last = s.t1;
+      const double now = std::atan2(s.delta_n.y(), s.delta_n.x());
+      heading += turn_scale * WrapAngle(now - direction);
+      direction = now;
       const Vec2 d = (1 + scale) * (Eigen::Rotation2Dd(heading) * Vec2(s.delta_n.head<2>()));
       p += d + Vec2(rng.Normal(0, 0.01), rng.Normal(0, 0.01));
       heading += rng.Normal(0, o.heading_walk_sigma_rad);
@@ -163,12 +187,37 @@ TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
   EXPECT_NEAR(c(0, 0), empirical(0, 0), 0.05 * empirical(0, 0));
   EXPECT_NEAR(c(1, 1), empirical(1, 1), 0.05 * empirical(1, 1));
   EXPECT_NEAR(c(0, 1), empirical(0, 1), 0.05 * std::sqrt(empirical(0, 0) * empirical(1, 1)));
-  // Standing 60 s with a drift rate grows the error of the second leg: more than without it.
+  // Standing 60 s with a drift rate grows the error of the second leg: more than without it
+  // (the first 80 steps: east, standing, north).
   PdrOptions no_drift = o;
   no_drift.heading_drift_sigma_rad_per_s = 0;
-  DeadReckoning still(Vec3::Zero(), 0.1, no_drift);
-  for (const Step& s : steps) still.AddStep(s);
-  EXPECT_GT(c.trace(), 1.5 * still.covariance().trace());
+  DeadReckoning drifting(Vec3::Zero(), 0.1, o), still(Vec3::Zero(), 0.1, no_drift);
+  for (int i = 0; i < 80; ++i) drifting.AddStep(steps[i]), still.AddStep(steps[i]);
+  EXPECT_GT(drifting.covariance().trace(), 1.5 * still.covariance().trace());
+  // The turn-scale error is one more independent source: the covariance with it is the one
+  // without it plus that of the turn-scale error alone (linear propagation), which is positive
+  // semi-definite of rank one (one scalar error) and metres in size after 450 deg (0.16 rad
+  // x a lever of ~20 m); steps shorter than turn_min_step_m (shuffling on the spot)
+  // turn nothing.
+  PdrOptions no_turn = o, turn_only = WhiteOnly(), none = WhiteOnly();
+  no_turn.turn_scale_sigma = 0;
+  turn_only.turn_scale_sigma = o.turn_scale_sigma;
+  DeadReckoning straight(Vec3::Zero(), 0.1, no_turn), turning(Vec3::Zero(), 0.1, turn_only),
+      white(Vec3::Zero(), 0.1, none);
+  for (const Step& s : steps) straight.AddStep(s), turning.AddStep(s), white.AddStep(s);
+  const Mat2 added = turning.covariance() - white.covariance();
+  EXPECT_LT((c - straight.covariance() - added).norm(), 1e-9 * c.norm());
+  EXPECT_GT(added.eigenvalues().real().minCoeff(), -1e-9);
+  EXPECT_GT(added.trace(), 1.0);
+  DeadReckoning shuffle(Vec3::Zero(), 0.1, o), shuffle_none(Vec3::Zero(), 0.1, no_turn);
+  for (int k = 0; k < 40; ++k) {
+    const double a = k * 2.0;  // scattered directions, 0.1 m steps
+    const Step s{k * 0.5, k * 0.5 + 0.5, "a", Vec3(0.1 * std::cos(a), 0.1 * std::sin(a), 0),
+                 Vec3(1e-4, 1e-4, 0)};
+    shuffle.AddStep(s);
+    shuffle_none.AddStep(s);
+  }
+  EXPECT_EQ(shuffle.covariance(), shuffle_none.covariance());
 }
 
 /// Records the rows it is fed.

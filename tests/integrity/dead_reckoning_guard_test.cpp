@@ -87,6 +87,7 @@ TEST(DeadReckoningGuard, FallbackEmitsDeadReckoningWhileTheEstimateIsOutsideItsR
     overbound.heading_drift_sigma_rad_per_s *= 3;
     overbound.heading_walk_sigma_rad *= 3;
     overbound.step_scale_sigma *= 3;
+    overbound.turn_scale_sigma *= 3;
     DeadReckoningEstimator dr(info, overbound);
     const auto guarded = Walk(guard);
     const auto truth = Walk(dr);

@@ -35,19 +35,20 @@ bool SymmetricPositiveDefinite(const Mat& P) {
 }
 
 TEST(LandmarkTracker, WithoutRadioItsMotionBlockIsTheDeadReckoningsErrorPropagation) {
-  // A straight walk (no turns: the turn-scale state stays uncoupled) with pauses.
+  // A walk with pauses that turns a quarter left every 15 steps: the motion block, the
+  // turn-scale state included (the same model, the same prior), is the dead reckoning's.
   const PdrOptions pdr;
   LandmarkTracker tracker(Vec3(1, 2, 0), 0.3, 0.05, std::nullopt);
   DeadReckoning dr(Vec3(1, 2, 0), 0.3, pdr, 0.05);
   TimeS t = 0;
   for (int k = 0; k < 60; ++k) {
     t += k % 10 == 0 ? 5.0 : 0.55;
-    const Step s = MakeStep(t, Vec2(0.6, 0.25));
+    const Step s = MakeStep(t, Eigen::Rotation2Dd(M_PI / 2 * (k / 15)) * Vec2(0.6, 0.25));
     tracker.AddStep(s);
     dr.AddStep(s);
   }
   EXPECT_LT((tracker.position() - dr.position_n().head<2>()).norm(), 1e-12);
-  const Mat ours = tracker.covariance().topLeftCorner<5, 5>();
+  const Mat ours = tracker.covariance().topLeftCorner<6, 6>();
   EXPECT_LT((ours - Mat(dr.error_covariance())).cwiseAbs().maxCoeff(),
             1e-12 * dr.error_covariance().cwiseAbs().maxCoeff());
 }

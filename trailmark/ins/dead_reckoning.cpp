@@ -14,9 +14,14 @@ namespace trailmark {
 
 bool PdrOptions::IsValid(std::string* why) const {
   for (double x : {default_step_noise_m, default_step_relative_sigma, start_heading_sigma_rad,
-                   heading_drift_sigma_rad_per_s, heading_walk_sigma_rad, step_scale_sigma}) {
+                   heading_drift_sigma_rad_per_s, heading_walk_sigma_rad, step_scale_sigma,
+                   turn_scale_sigma, turn_min_step_m}) {
     if (!(x >= 0) || !std::isfinite(x)) {
-      if (why) *why = "step noise and heading, drift and scale sigmas must be finite and >= 0";
+      if (why) {
+        *why =
+            "step noise, heading, drift, scale and turn-scale sigmas and the turn's minimum "
+            "step must be finite and >= 0";
+      }
       return false;
     }
   }
@@ -32,24 +37,32 @@ DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const Pd
   error_cov_(kHeading, kHeading) = heading * heading;
   error_cov_(kRate, kRate) = options_.heading_drift_sigma_rad_per_s * options_.heading_drift_sigma_rad_per_s;
   error_cov_(kScale, kScale) = options_.step_scale_sigma * options_.step_scale_sigma;
+  error_cov_(kTurnScale, kTurnScale) = options_.turn_scale_sigma * options_.turn_scale_sigma;
 }
 
 void DeadReckoning::AddStep(const Step& step) {
   // Time since the last step (or none at the first): the heading error grows by the rate error.
   const double dt_s = last_t_ ? std::max(0.0, step.t1 - *last_t_) : 0.0;
   last_t_ = step.t1;
-  Mat5 f = Mat5::Identity();
+  Mat6 f = Mat6::Identity();
   f(kHeading, kRate) = dt_s;
+  // The walking direction's turn since the last step that said where the body faces.
+  const Vec2 d_n = step.delta_n.head<2>();
+  if (d_n.norm() >= std::max(options_.turn_min_step_m, 1e-9)) {
+    const double direction = std::atan2(d_n.y(), d_n.x());
+    if (last_direction_rad_) f(kHeading, kTurnScale) = WrapAngle(direction - *last_direction_rad_);
+    last_direction_rad_ = direction;
+  }
   // The step, turned by the heading error and stretched by the scale error (first order):
   // p += d + d_heading (-d_y, d_x) + d_scale d.
   const double dx = step.delta_n.x(), dy = step.delta_n.y();
-  Mat5 g = Mat5::Identity();
+  Mat6 g = Mat6::Identity();
   g(kX, kHeading) = -dy;
   g(kY, kHeading) = dx;
   g(kX, kScale) = dx;
   g(kY, kScale) = dy;
-  const Mat5 fg = g * f;
-  Mat5 q = Mat5::Zero();
+  const Mat6 fg = g * f;
+  Mat6 q = Mat6::Zero();
   if (step.variance_m2) {
     q(kX, kX) = step.variance_m2->x();
     q(kY, kY) = step.variance_m2->y();
@@ -89,8 +102,8 @@ void DeadReckoning::SetPosition(const Vec2& position_n, const Mat2& cov) {
   const Mat2 c = CheckedFixCovariance("SetPosition", position_n, cov);
   position_n_.head<2>() = position_n;
   error_cov_.topLeftCorner<2, 2>() = c;
-  error_cov_.block<2, 3>(kX, kHeading).setZero();
-  error_cov_.block<3, 2>(kHeading, kX).setZero();
+  error_cov_.block<2, kSharedErrors>(kX, kHeading).setZero();
+  error_cov_.block<kSharedErrors, 2>(kHeading, kX).setZero();
 }
 
 double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
@@ -121,14 +134,14 @@ double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
   // The gain of the intersection (position rows only: Schmidt, the shared errors are not
   // estimated, so their own covariance stays as it is).
   const Mat2 K2 = (P / omega) * (P / omega + fix_cov / (1 - omega)).inverse();
-  Eigen::Matrix<double, 5, 2> K = Eigen::Matrix<double, 5, 2>::Zero();
+  Eigen::Matrix<double, 6, 2> K = Eigen::Matrix<double, 6, 2>::Zero();
   K.topRows<2>() = K2;
-  Eigen::Matrix<double, 2, 5> H = Eigen::Matrix<double, 2, 5>::Zero();
+  Eigen::Matrix<double, 2, 6> H = Eigen::Matrix<double, 2, 6>::Zero();
   H(0, kX) = H(1, kY) = 1;
   // Joseph form with that gain (positive semi-definite for any gain; exact if the fix were
   // independent), then its position block replaced by the intersection's, which is larger
   // whatever the correlation: the joint stays positive semi-definite.
-  const Mat5 IKH = Mat5::Identity() - K * H;
+  const Mat6 IKH = Mat6::Identity() - K * H;
   error_cov_ = IKH * error_cov_ * IKH.transpose() + K * fix_cov * K.transpose();
   const Mat2 I2K = Mat2::Identity() - K2;
   error_cov_.topLeftCorner<2, 2>() =

@@ -33,13 +33,23 @@ struct PdrOptions {
   double heading_walk_sigma_rad = 0.0087;
   /// step-length scale error shared by all steps of an agent: 3 %.
   double step_scale_sigma = 0.03;
+  /// gyro scale-factor error shared by all turns of an agent: every turn of the walking
+  /// direction by Delta (rad) adds k Delta to the heading error, so the error grows with the
+  /// angle turned, not with the number of steps (four laps of a corridor loop turn 1,440 deg).
+  /// 3 %: the sensitivity tolerance of a consumer MEMS gyro (MPU-9250 datasheet: +-3 %).
+  double turn_scale_sigma = 0.03;
+  /// A step shorter than this says nothing about where the body faces: its direction is not
+  /// a turn (shuffling, zero-length steps while standing); the next longer step's turn is
+  /// counted from the last longer step.
+  double turn_min_step_m = 0.2;
   bool IsValid(std::string* why) const;
 };
 
 /// Dead reckoning of one agent, usable without files. The position is the sum of the steps;
-/// its covariance propagates the error state [dx, dy, d_heading, d_heading_rate, d_scale]:
-/// a step d turns by the heading error (lever (-d_y, d_x)) and stretches by the scale error,
-/// the heading error grows by the rate error x time between steps (standing included).
+/// its covariance propagates the error state [dx, dy, d_heading, d_heading_rate, d_scale,
+/// d_turn_scale]: a step d turns by the heading error (lever (-d_y, d_x)) and stretches by the
+/// scale error, the heading error grows by the rate error x time between steps (standing
+/// included) and by the turn-scale error x the angle the walking direction turned.
 class DeadReckoning {
  public:
   /// `start_heading_sigma_rad`: empty takes the options' default.
@@ -61,18 +71,22 @@ class DeadReckoning {
   /// correlation with the new position error is dropped (the fix's error is not the dead
   /// reckoning's). Throws std::invalid_argument as FusePosition does.
   void SetPosition(const Vec2& position_n, const Mat2& cov);
-  /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale].
-  const Eigen::Matrix<double, 5, 5>& error_covariance() const { return error_cov_; }
+  /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale, d_turn_scale].
+  using ErrorCovariance = Eigen::Matrix<double, 6, 6>;
+  const ErrorCovariance& error_covariance() const { return error_cov_; }
+  /// The shared (not white) errors: heading, rate, step scale and turn scale.
+  static constexpr int kSharedErrors = 4;
   const Vec3& position_n() const { return position_n_; }
   Mat2 covariance() const { return error_cov_.topLeftCorner<2, 2>(); }
 
  private:
-  using Mat5 = Eigen::Matrix<double, 5, 5>;
-  enum : int { kX = 0, kY = 1, kHeading = 2, kRate = 3, kScale = 4 };
+  using Mat6 = ErrorCovariance;
+  enum : int { kX = 0, kY = 1, kHeading = 2, kRate = 3, kScale = 4, kTurnScale = 5 };
   PdrOptions options_;
   Vec3 position_n_;
-  Mat5 error_cov_;
+  Mat6 error_cov_;
   std::optional<TimeS> last_t_;
+  std::optional<double> last_direction_rad_;  ///< of the last step >= turn_min_step_m
 };
 
 /// `pdr`: each agent's dead reckoning, an estimate at every step (and its start at the first

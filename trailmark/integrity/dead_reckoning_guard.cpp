@@ -79,6 +79,7 @@ PdrOptions Overbounded(PdrOptions o, const GuardOptions& guard) {
   o.heading_drift_sigma_rad_per_s *= guard.overbound;
   o.heading_walk_sigma_rad *= guard.overbound;
   o.step_scale_sigma *= guard.overbound;
+  o.turn_scale_sigma *= guard.overbound;
   return o;
 }
 }  // namespace

@@ -97,8 +97,9 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
            OptionBounds::Any(), "error-state: the handheld above the agent's z");
     t.Integer("tracker_iterations", [](O& o) -> int& { return o.tracker.iterations; },
               OptionBounds::AtLeast(1), "error-state: Gauss-Newton iterations of one packet's update");
-    t.Real("turn_scale_sigma", [](O& o) -> double& { return o.tracker.turn_scale_sigma; }, "",
-           OptionBounds::Positive(), "error-state: prior sigma of the PDR's turn-scale error");
+    t.Real(
+        "turn_scale_sigma", [](O& o) -> double& { return o.tracker.pdr.turn_scale_sigma; }, "",
+        OptionBounds::Positive(), "error-state: prior sigma of the PDR's turn-scale error");
     t.Flag("adapt_noise", [](O& o) -> bool& { return o.tracker.adapt_noise; },
            "error-state: the RSSI variances scaled up while the packets' mean NIS is above 1");
     t.Flag("slam", &O::slam,

@@ -31,10 +31,15 @@ bool LandmarkTrackerOptions::IsValid(std::string* why) const {
     if (why) *why = "landmark tracker: slam_min_packets >= 2, spread and margin >= 0, grid > 0";
     return false;
   }
-  for (double v : {turn_scale_sigma, turn_min_step_m, given_alpha_sigma_db, given_exponent_sigma, default_alpha_sigma_db,
-                   default_exponent_sigma, default_sigma_db, shadowing_length_m, shadowing_time_s,
-                   min_distance_m, huber_k, gate_sigma, calibrated_alpha_sigma_db,
-                   calibrated_exponent_sigma}) {
+  if (!(pdr.turn_scale_sigma > 0) || !(pdr.turn_min_step_m > 0)) {
+    if (why)
+      *why = "landmark tracker: the turn-scale sigma and the turn's minimum step must be > 0";
+    return false;
+  }
+  for (double v :
+       {given_alpha_sigma_db, given_exponent_sigma, default_alpha_sigma_db, default_exponent_sigma,
+        default_sigma_db, shadowing_length_m, shadowing_time_s, min_distance_m, huber_k, gate_sigma,
+        calibrated_alpha_sigma_db, calibrated_exponent_sigma}) {
     if (!(v > 0) || !std::isfinite(v)) {
       if (why) *why = "landmark tracker: sigmas, lengths, times, huber_k and gate must be finite and > 0";
       return false;
@@ -81,7 +86,7 @@ LandmarkTracker::LandmarkTracker(const Vec3& start_n, double start_sigma_m,
   P_(kHeading, kHeading) = std::max(heading * heading, 1e-12);
   P_(kRate, kRate) = std::max(std::pow(options_.pdr.heading_drift_sigma_rad_per_s, 2), 1e-16);
   P_(kScale, kScale) = std::max(std::pow(options_.pdr.step_scale_sigma, 2), 1e-12);
-  P_(kTurnScale, kTurnScale) = options_.turn_scale_sigma * options_.turn_scale_sigma;
+  P_(kTurnScale, kTurnScale) = options_.pdr.turn_scale_sigma * options_.pdr.turn_scale_sigma;
   P_(kAlpha, kAlpha) = alpha_sigma * alpha_sigma;
   P_(kExponent, kExponent) = n_sigma * n_sigma;
 }
@@ -192,7 +197,7 @@ void LandmarkTracker::AddStep(const Step& step) {
   Propagate(step.t1);
   const Vec2 d = step.delta_n.head<2>();
   const double len = d.norm();
-  if (len >= options_.turn_min_step_m) {
+  if (len >= options_.pdr.turn_min_step_m) {
     // The turn since the last long step: psi += g dtheta.
     const double direction = std::atan2(d.y(), d.x());
     if (direction_rad_) {

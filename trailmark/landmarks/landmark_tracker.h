@@ -45,11 +45,10 @@
 namespace trailmark::landmarks {
 
 struct LandmarkTrackerOptions {
-  /// The dead reckoning's error model as the prior of psi, omega, s and the step noise
+  /// The dead reckoning's error model as the prior of psi, omega, s, g (turn scale: shorter
+  /// steps than pdr.turn_min_step_m do not say where the walker turned) and the step noise
   /// (`pdr`'s defaults, set a priori: ins/dead_reckoning.h).
   PdrOptions pdr;
-  double turn_scale_sigma = 0.03;    ///< g's prior (gyro scale factor, 1-3 %: datasheets)
-  double turn_min_step_m = 0.2;      ///< shorter steps do not say where the walker turned
   /// The radio model's prior when mission.json gives one: a device's offset (about 10 dB
   /// between two phones on recorded BLE, issue 24) and a stale exponent are still possible.
   double given_alpha_sigma_db = 4.0;

@@ -50,6 +50,10 @@ const OptionTable<PdrOptions>& PdrOptionTable() {
            OptionBounds::NonNegative(), "heading random walk per moving step, 1 sigma");
     t.Real("step_scale_sigma", &PdrOptions::step_scale_sigma, "", OptionBounds::NonNegative(),
            "step-length scale error shared by all steps, 1 sigma (fraction)");
+    t.Real("turn_scale_sigma", &PdrOptions::turn_scale_sigma, "", OptionBounds::NonNegative(),
+           "gyro scale-factor error shared by all turns, 1 sigma (fraction of the angle turned)");
+    t.Real("turn_min_step_m", &PdrOptions::turn_min_step_m, "m", OptionBounds::NonNegative(),
+           "steps shorter than this do not count as turns of the walking direction");
     return t;
   }();
   return table;
