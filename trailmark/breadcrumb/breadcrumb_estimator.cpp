@@ -48,7 +48,11 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real("heading_rw", &L::heading_rw_rad_per_sqrt_s, "rad/sqrt(s)", nonneg,
            "heading random walk over time");
     t.Real("min_rssi_dbm", &L::min_rssi_dbm, "dBm", OptionBounds::Any(),
-           "weaker packets are not range edges (mostly NLOS)");
+           "weaker packets are not range edges (mostly NLOS); the paper's channel's, see "
+           "relative_rssi");
+    t.Flag("relative_rssi", &L::relative_rssi_thresholds,
+           "min_rssi_dbm and encounter_dbm move with this channel's level at 1 m (near-field "
+           "packets after drops; else the given model's alpha)");
     t.Flag("agent_rssi", &L::use_agent_rssi, "use agent-to-node RSSI as range edges");
     t.Flag("static_rssi", &L::use_static_rssi, "use node-to-node RSSI links");
     t.Flag("encounters", &L::use_encounters, "encounters as ~1 m edges (sec. V-A)");
@@ -107,6 +111,7 @@ BreadcrumbEstimator::BreadcrumbEstimator(const MissionInfo& info,
   if (!options_.IsValid(&why)) throw std::invalid_argument("breadcrumb: " + why);
   if (info.radio) {
     options_.localizer.radio = radio::LogDistanceModel::From(*info.radio);
+    options_.localizer.radio_given = true;
   } else {
     setup_notes_.push_back(
         "mission.json has no radio calibration: default log-distance model (alpha -40 dBm at "
@@ -263,6 +268,8 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["steps_rejected"] = static_cast<double>(s.steps_rejected);
   num["rssi_packets"] = static_cast<double>(s.rssi_packets);
   num["rssi_below_min"] = static_cast<double>(s.rssi_weak);
+  num["rssi_near_field_samples"] = static_cast<double>(s.near_field_samples);
+  num["rssi_threshold_shift_db"] = s.rssi_threshold_shift_db;
   num["rssi_agent_edges"] = static_cast<double>(s.rssi_agent_used);
   num["rssi_static_packets"] = static_cast<double>(s.rssi_static_used);
   num["range_edges"] = static_cast<double>(s.ranges_used);

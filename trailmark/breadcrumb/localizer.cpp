@@ -24,7 +24,64 @@ double Huber(double r, double k) {
 }  // namespace
 
 BreadcrumbLocalizer::BreadcrumbLocalizer(LocalizerOptions options)
-    : options_(options), gen_(options.gen), node_integrity_("node", options.integrity) {}
+    : options_(options), gen_(options.gen), node_integrity_("node", options.integrity) {
+  stated_alpha_dbm_ =
+      options_.radio_given ? options_.radio.alpha_dbm : options_.paper_reference_dbm;
+  UpdateRssiShift();
+}
+
+void BreadcrumbLocalizer::UpdateRssiShift() {
+  if (!options_.relative_rssi_thresholds) {
+    rssi_shift_db_ = 0;
+    return;
+  }
+  double level = stated_alpha_dbm_;
+  const int n = static_cast<int>(near_field_.size());
+  if (n >= options_.reference_min_samples) {
+    // The body loss behind the dropper: anything in [0, max] (a fit's body term is confounded
+    // with its alpha when most of its pairs are behind): the middle, and half the range allowed.
+    const double body_loss = 0.5 * options_.reference_body_loss_max_db;
+    std::vector<double> v;
+    v.reserve(near_field_.size());
+    for (const NearField& s : near_field_) v.push_back(s.dbm_at_1m + body_loss * s.body_factor);
+    const auto mid = v.begin() + n / 2;
+    std::nth_element(v.begin(), mid, v.end());
+    // The median's standard error (1.25 sigma / sqrt(m) for a normal sample), m the drops: the
+    // packets of one drop, a few seconds at a few metres, share one shadowing.
+    const double standard_error =
+        1.25 * options_.radio.sigma_db / std::sqrt(static_cast<double>(near_field_drops_.size()));
+    const double allowed = 0.5 * options_.reference_body_loss_max_db + 3.0 * standard_error;
+    // Once contradicted, the statement stays refuted (no flapping at the margin).
+    stated_contradicted_ = stated_contradicted_ || std::abs(*mid - stated_alpha_dbm_) > allowed;
+    if (stated_contradicted_) level = *mid;
+    const double shift = level - options_.paper_reference_dbm;
+    if (std::abs(shift - rssi_shift_db_) > 1.0 && summary_.notes.size() < 200) {
+      summary_.notes.push_back(fmt::format(
+          "t={:.1f}: RSSI thresholds {:+.1f} dB from the paper's: the drops' near-field level "
+          "{:.1f} dBm at 1 m ({} packets) {} the stated {:.1f} dBm",
+          now_, shift, *mid, n, level == *mid ? "contradicts" : "agrees with", stated_alpha_dbm_));
+    }
+  }
+  rssi_shift_db_ = level - options_.paper_reference_dbm;
+  summary_.rssi_threshold_shift_db = rssi_shift_db_;
+}
+
+void BreadcrumbLocalizer::NearFieldPacket(const Agent& a, const std::string& node, TimeS t,
+                                          double rssi_dbm) {
+  if (!options_.relative_rssi_thresholds) return;
+  const auto it = a.dropped.find(node);
+  if (it == a.dropped.end() || t < it->second || t - it->second > options_.reference_window_s)
+    return;
+  // The crumb lies where the foot was at the drop: its distance is the PDR's since then.
+  const Vec2 to = CumAt(a, it->second, nullptr) - CumAt(a, t, nullptr);
+  const double d = std::max(to.norm(), 0.5);
+  if (d > options_.reference_max_distance_m || near_field_.size() >= 1000) return;
+  near_field_drops_.insert({a.id, node});
+  near_field_.push_back({rssi_dbm + 10.0 * options_.radio.path_loss_exponent * std::log10(d),
+                         radio::BodyFactor(Vec2::Zero(), HeadingAt(a, t), to)});
+  ++summary_.near_field_samples;
+  UpdateRssiShift();
+}
 
 ScalarModel BreadcrumbLocalizer::RssiModel() const {
   ScalarModel m;
@@ -32,7 +89,7 @@ ScalarModel BreadcrumbLocalizer::RssiModel() const {
   m.alpha_dbm = options_.radio.alpha_dbm;
   m.path_loss_exponent = options_.radio.path_loss_exponent;
   if (options_.model_rssi_truncation) {
-    m.truncation_dbm = options_.min_rssi_dbm;
+    m.truncation_dbm = options_.min_rssi_dbm + rssi_shift_db_;
     m.sigma_db = options_.radio.sigma_db;
   }
   return m;
@@ -60,7 +117,8 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
   }
   next_calibration_ = t + options_.calibration_period_s;
   radio::PathLossCalibrationOptions fit_options = options_.calibration;
-  if (options_.model_rssi_truncation) fit_options.truncation_dbm = options_.min_rssi_dbm;
+  if (options_.model_rssi_truncation)
+    fit_options.truncation_dbm = options_.min_rssi_dbm + rssi_shift_db_;
   const radio::PathLossCalibration c = radio::CalibratePathLoss(
       calibration_pairs_, fit_options,
       summary_.calibration && calibrated_ ? &summary_.calibration->model : nullptr);
@@ -72,6 +130,7 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
   summary_.calibration = c.fit;
   ++summary_.calibrations;
   calibrated_ = true;
+  UpdateRssiShift();
 }
 
 void BreadcrumbLocalizer::AddKnownNode(const std::string& id, const Vec2& position_n,
@@ -311,12 +370,27 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
     StaticPacket(p);
     return;
   }
-  if (p.rssi_dbm < options_.min_rssi_dbm) {
+  const std::string& agent = rx_agent ? p.rx : p.tx;
+  const std::string& other = rx_agent ? p.tx : p.rx;
+  if (p.rssi_dbm - rssi_shift_db_ < options_.min_rssi_dbm) {
+    // Too weak for an edge; from a crumb its dropper has just dropped, a near-field sample.
+    const auto ait = agents_.find(agent);
+    if (options_.relative_rssi_thresholds && ait != agents_.end() && ait->second.started) {
+      Agent& a = ait->second;
+      const auto d = a.dropped.find(other);
+      if (d != a.dropped.end() && p.t >= d->second &&
+          p.t - d->second <= options_.reference_window_s) {
+        Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0, {}, true};
+        a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
+                                          [](TimeS v, const Pending& x) { return v < x.t; }),
+                         q);
+        AdvanceTo(p.t);
+        return;
+      }
+    }
     ++summary_.rssi_weak;
     return;
   }
-  const std::string& agent = rx_agent ? p.rx : p.tx;
-  const std::string& other = rx_agent ? p.tx : p.rx;
   Agent& a = StartedAgent(agent, p.t);
   if (!agents_.count(other)) AddUnknownNode(other);
   if (options_.use_agent_rssi) {
@@ -327,7 +401,7 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   }
   if (options_.use_encounters && !agents_.count(other)) {
     auto& det = encounter_.try_emplace({agent, other}, options_.encounter).first->second;
-    if (auto peak = det.Add(p.t, p.rssi_dbm)) {
+    if (auto peak = det.Add(p.t, p.rssi_dbm - rssi_shift_db_)) {
       Pending q{*peak, Kind::kEncounter, other, 0, 0, {}};
       a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
                                         [](TimeS v, const Pending& x) { return v < x.t; }),
@@ -385,6 +459,7 @@ void BreadcrumbLocalizer::AddEvent(const MissionEvent& e) {
     }
     AddUnknownNode(e.node);
     Agent& a = StartedAgent(e.agent, e.t);
+    a.dropped[e.node] = e.t;
     Pending q{e.t, Kind::kDrop, e.node, 0, 0, {}};
     a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
                                       [](TimeS v, const Pending& x) { return v < x.t; }),
@@ -531,6 +606,12 @@ std::optional<Vec2> BreadcrumbLocalizer::RangeBias(const std::string& kind) cons
 }
 
 void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
+  if (p.kind == Kind::kRssi && (p.weak || p.value - rssi_shift_db_ < options_.min_rssi_dbm)) {
+    // Too weak for an edge (a near-field sample at most): no agent state for it.
+    if (FindStatic(p.other) != nullptr) NearFieldPacket(a, p.other, p.t, p.value);
+    ++summary_.rssi_weak;
+    return;
+  }
   AttachState(a, p.t);
   Vec2 var_t;
   const Vec2 cum_t = CumAt(a, p.t, &var_t);
@@ -582,6 +663,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     ++summary_.unusable;
     return;
   }
+  if (p.kind == Kind::kRssi) NearFieldPacket(a, p.other, p.t, p.value);
   if (node->index < 0) {
     if (p.kind == Kind::kRssi) {
       const auto r = radio::ToRange(options_.radio, p.value);
@@ -660,7 +742,8 @@ void BreadcrumbLocalizer::StaticPacket(const RssiPacket& p) {
   auto [it, fresh] = links_.try_emplace(key);
   Link& link = it->second;
   if (fresh) link.change = radio::LinkChangeDetector(options_.link_change);
-  const bool use = options_.use_static_rssi && p.rssi_dbm >= options_.min_rssi_dbm &&
+  const bool use = options_.use_static_rssi &&
+                   p.rssi_dbm - rssi_shift_db_ >= options_.min_rssi_dbm &&
                    (calibrated_ || !options_.calibrate_online);
   if (use) {
     if (link.edge < 0) {

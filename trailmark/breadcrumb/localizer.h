@@ -31,6 +31,7 @@
 #include <deque>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -118,6 +119,26 @@ struct LocalizerOptions {
   bool use_encounters = true;
   radio::EncounterOptions encounter;
   double encounter_sigma_m = 1.0;
+  /// min_rssi_dbm and encounter.threshold_dbm are the paper's, for its channel (868 MHz: about
+  /// -40 dBm at 1 m, sec. V-A). With relative_rssi_thresholds they move with this channel's
+  /// level at 1 m (a BLE channel reads ~20 dB lower: every packet fell below -65 dBm, no
+  /// encounter passed -40 dBm, and the radio was never used): the given model's alpha
+  /// (radio_given), else the paper's, unless the packets contradict it. The check: the median
+  /// of the packets a dropper hears from its crumb within reference_window_s of the drop and
+  /// reference_max_distance_m of it (PDR), brought to 1 m with the model's exponent. The crumb
+  /// is then behind its dropper, whose body takes 0 to reference_body_loss_max_db (an assumed
+  /// bound) off every packet: half of it is added, and the level contradicts the stated one
+  /// when they differ by more than that half plus 3 standard errors of the median (over the
+  /// drops: the packets of one drop share their shadowing); from then on
+  /// the thresholds follow the packets' level (a summary note says when and by how much).
+  bool relative_rssi_thresholds = true;
+  double paper_reference_dbm = -40.0;
+  double reference_window_s = 3.0;
+  double reference_max_distance_m = 2.5;
+  int reference_min_samples = 5;
+  double reference_body_loss_max_db = 10.0;
+  /// Set by the caller when `radio` is the mission's stated model (not the default).
+  bool radio_given = false;
   double drop_sigma_m = 0.5;
   double default_range_sigma_m = 0.5;        ///< ranges.csv rows without sigma
   /// Range offset and scale per range kind (UWB antenna/hardware delay and clock: the recorded
@@ -162,6 +183,8 @@ struct LocalizerOptions {
 struct LocalizerSummary {
   std::size_t steps = 0, steps_rejected = 0;
   std::size_t rssi_packets = 0, rssi_weak = 0, rssi_agent_used = 0, rssi_static_used = 0;
+  std::size_t near_field_samples = 0;
+  double rssi_threshold_shift_db = 0;  ///< the thresholds' shift from the paper's (last)
   std::size_t ranges_used = 0;
   std::size_t gated = 0, downweighted = 0;
   std::size_t refused = 0;  ///< by the integrity check (a static node inconsistent with its noise)
@@ -251,6 +274,7 @@ class BreadcrumbLocalizer {
     double value = 0;   ///< rssi_dbm or range_m
     double sigma = 0;   ///< range sigma
     std::string range_kind;
+    bool weak = false;  ///< RSSI below the threshold when heard: a near-field sample only
   };
   struct Agent {
     std::string id;
@@ -269,6 +293,7 @@ class BreadcrumbLocalizer {
     /// Calibration: recent packets per static node, and the last drop/encounter time.
     std::map<std::string, std::deque<std::pair<TimeS, double>>> link_history;
     std::map<std::string, TimeS> link_anchor;
+    std::map<std::string, TimeS> dropped;  ///< this agent's drops: node -> time
     Mat2 cached_cov = Mat2::Identity() * 100.0;
     TimeS cov_t = -1e300;  ///< when cached_cov was computed
     Vec2 cov_cum_var = Vec2::Zero();  ///< PDR variance at that time
@@ -327,6 +352,20 @@ class BreadcrumbLocalizer {
   std::map<std::pair<std::string, std::string>, Link> links_;
   std::map<std::pair<std::string, std::string>, radio::EncounterDetector> encounter_;
   std::vector<std::pair<TimeS, std::string>> moved_;
+  /// Near-field levels at 1 m (relative_rssi_thresholds) and the thresholds' shift from them.
+  struct NearField {
+    double dbm_at_1m;    ///< without the body term
+    double body_factor;  ///< radio::BodyFactor of the crumb seen from its dropper
+  };
+  /// The (dropper, crumb) pairs the samples come from: a drop's packets share one shadowing.
+  std::set<std::pair<std::string, std::string>> near_field_drops_;
+  std::vector<NearField> near_field_;
+  double stated_alpha_dbm_ = -40.0;  ///< the reference the thresholds move from
+  bool stated_contradicted_ = false;
+  double rssi_shift_db_ = 0;
+  void UpdateRssiShift();
+  /// A packet from a crumb heard by its dropper shortly after the drop: a near-field sample.
+  void NearFieldPacket(const Agent& a, const std::string& node, TimeS t, double rssi_dbm);
   TimeS now_ = -1e300;
   TimeS last_solve_t_ = -1e300;
   /// Solves unless throttled; true when the factor matches the current network.
