@@ -192,6 +192,14 @@ void ExportFloorPlanWgs84(const fs::path& mission_dir, const fs::path& out) {
   if (!f) throw std::runtime_error(out.string() + ": write failed");
 }
 
+namespace {
+// A grid axis in degrees for people: to 0.1 deg, and a rounding error below 0 reads as 0.
+double AxisDegrees(double rad) {
+  const double deg = std::round(rad * 1800.0 / std::numbers::pi) / 10.0;
+  return deg == 0.0 ? 0.0 : deg;
+}
+}  // namespace
+
 int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::optional<int> level,
                         double grid_m, bool map_axes) {
   const MissionDirectory mission(mission_dir);
@@ -208,21 +216,17 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::o
   options.grid.align_to_walls = !map_axes;
   std::string why;
   if (!options.grid.IsValid(&why)) throw std::invalid_argument("--grid-m: " + why);
-  const mapmatch::SearchGrid grid(*plan, options.grid);
-  const bool corner = !entry;
-  if (corner) {
-    // No start: the inside node nearest the plan's corner (an inspection needs no entry).
-    const auto nearest = grid.Nearest(plan->Bounds().min);
-    entry = nearest ? grid.Center(*nearest) : plan->Bounds().min;
-  }
   const std::string plan_source = mission.Path(*mission.info().floorplan).string();
-  std::vector<mapmatch::NodeSequence> sequences;
+  mapmatch::SearchPatterns patterns;
   try {
-    sequences = mapmatch::ExtractSearchSequences(*plan, *entry, options);
+    patterns = mapmatch::BuildSearchPatterns(*plan, entry, options);
   } catch (const std::invalid_argument& e) {
     throw InputError(plan_source, 0, e.what());
   }
-  const std::vector<std::size_t> missed = mapmatch::DoorsNotTraversed(grid, sequences);
+  const std::vector<mapmatch::NodeSequence>& sequences = patterns.sequences;
+  const std::vector<std::size_t>& missed = patterns.doors_not_traversed;
+  const bool corner = patterns.entry_is_corner;
+  entry = patterns.entry_n;
   nlohmann::json doc = nlohmann::json::parse(FloorPlanToGeoJson(*plan));
   auto position = [](const Vec2& p) { return nlohmann::json::array({p.x(), p.y()}); };
   std::size_t nodes = 0;
@@ -239,7 +243,7 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::o
                                {"geometry", {{"type", "LineString"}, {"coordinates", line}}}});
   }
   nlohmann::json inside = nlohmann::json::array();
-  for (const Vec2& c : grid.InsideCenters()) inside.push_back(position(c));
+  for (const Vec2& c : patterns.inside_n) inside.push_back(position(c));
   doc["features"].push_back({{"type", "Feature"},
                              {"properties", {{"kind", "inside_nodes"}}},
                              {"geometry", {{"type", "MultiPoint"}, {"coordinates", inside}}}});
@@ -258,7 +262,7 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::o
                       0.5 * (door.a.x() + door.b.x()), 0.5 * (door.a.y() + door.b.y()));
     }
   }
-  const double axis_deg = grid.axis_rad() * 180.0 / std::numbers::pi + 0.0;  // no "-0.0"
+  const double axis_deg = AxisDegrees(patterns.grid_axis_rad);
   doc["trailmark_search_map"] = {{"grid_spacing_m", grid_m},
                                  {"grid_axis_deg", axis_deg},
                                  {"entry", position(*entry)},
@@ -270,8 +274,8 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::o
   fmt::print(
       "{} search sequences ({} nodes), inside {:.0f} m^2 on a {:g} m grid at {:.1f} deg "
       "({}), from ({:.2f}, {:.2f}){}\n",
-      sequences.size(), nodes, grid.inside_count() * grid_m * grid_m, grid_m, axis_deg,
-      map_axes ? "the map's axes" : "along the walls", entry->x(), entry->y(),
+      sequences.size(), nodes, static_cast<double>(patterns.inside_n.size()) * grid_m * grid_m,
+      grid_m, axis_deg, map_axes ? "the map's axes" : "along the walls", entry->x(), entry->y(),
       corner ? " (no agent start: the inside node nearest the plan's corner)" : "");
   fmt::print("inner doors no sequence passes: {}\n",
              missed.empty()
@@ -389,19 +393,75 @@ double WallTimeOfRun(const fs::path& run_dir) {
   return 0.0;
 }
 
-// The floor a run of a floor-plan pipeline was matched on (its `level` option), for the report
-// to draw; nullopt for other pipelines or the default floor.
-std::optional<int> LevelOfRun(const fs::path& run_dir) {
+// A run's pipeline (from the registry) and the options it ran with, from its diagnostics.json;
+// nullopt when either is missing.
+std::optional<std::pair<const PipelineSpec*, OptionValues>> SpecOfRun(const fs::path& run_dir) {
   std::ifstream in(run_dir / "diagnostics.json");
   nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
   if (!j.is_object() || !j.contains("options") || !j["options"].is_object()) return std::nullopt;
   const PipelineSpec* pipeline = FindPipeline(j.value("pipeline", std::string()));
-  if (pipeline == nullptr || !pipeline->needs_floor_plan) return std::nullopt;
-  std::map<std::string, std::string> options;
+  if (pipeline == nullptr) return std::nullopt;
+  OptionValues options;
   for (const auto& [k, v] : j["options"].items()) {
     if (v.is_string()) options[k] = v.get<std::string>();
   }
-  return pipeline->floor_level(options);
+  return std::make_pair(pipeline, std::move(options));
+}
+
+// The floor a run of a floor-plan pipeline was matched on (its `level` option), for the report
+// to draw; nullopt for other pipelines or the default floor.
+std::optional<int> LevelOfRun(const fs::path& run_dir) {
+  const auto run = SpecOfRun(run_dir);
+  if (!run || !run->first->needs_floor_plan) return std::nullopt;
+  return run->first->floor_level(run->second);
+}
+
+// The search patterns of the first map-matching run (its grid options), from the first agent's
+// start, as report layers: the sequences, the inside grid nodes (both hidden until ticked) and
+// the inner doors no sequence passes (shown). Empty (with a note) when they cannot be built.
+std::vector<ReportLayer> SearchPatternLayers(const std::vector<fs::path>& run_dirs,
+                                             const MissionInfo& info, const FloorPlan& plan) {
+  for (const auto& dir : run_dirs) {
+    const auto run = SpecOfRun(dir);
+    if (!run || !run->first->search_patterns) continue;
+    std::optional<Vec2> entry;
+    for (const auto& n : info.nodes) {
+      if (n.kind != NodeKind::kAgent || entry) continue;
+      if (const auto start = info.AgentStart(n)) entry = start->head<2>();
+    }
+    mapmatch::SearchPatterns patterns;
+    try {
+      patterns =
+          mapmatch::BuildSearchPatterns(plan, entry, run->first->search_patterns(run->second));
+    } catch (const std::invalid_argument& e) {
+      fmt::print(stderr, "report: the search patterns are not drawn: {}\n", e.what());
+      return {};
+    }
+    std::vector<ReportLayer> layers(3);
+    layers[0].label =
+        fmt::format("search sequences ({}, {} m grid at {:.1f} deg)", run->first->name,
+                    patterns.grid_spacing_m, AxisDegrees(patterns.grid_axis_rad));
+    layers[0].colour = "#2e8b57";
+    for (const auto& s : patterns.sequences) {
+      std::vector<Vec2> line = s.nodes;
+      if (!line.empty()) line.push_back(line.front());
+      layers[0].lines.push_back(std::move(line));
+    }
+    layers[1].label = "search grid: inside nodes";
+    layers[1].colour = "#9acd32";
+    layers[1].points = patterns.inside_n;
+    layers[2].label =
+        fmt::format("doors no search sequence passes ({})", patterns.doors_not_traversed.size());
+    layers[2].colour = "#d62728";
+    layers[2].dashed = true;
+    layers[2].visible = true;
+    for (const std::size_t d : patterns.doors_not_traversed) {
+      layers[2].lines.push_back({plan.doors()[d].a, plan.doors()[d].b});
+    }
+    if (layers[2].lines.empty()) layers.pop_back();
+    return layers;
+  }
+  return {};
 }
 
 }  // namespace
@@ -419,6 +479,7 @@ void Report(const std::vector<fs::path>& run_dirs, const fs::path& mission_arg,
     if ((level = LevelOfRun(run))) break;
   }
   input.plan = mission.LoadFloorPlan(level);
+  if (input.plan) input.layers = SearchPatternLayers(run_dirs, input.info, *input.plan);
   if (mission.Has("truth.csv")) {
     input.truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
   }

@@ -57,13 +57,26 @@ try {
   const hidden = await page.$eval('#map g[data-label]', (g) => getComputedStyle(g).display);
   if (hidden !== 'none') fail(`unticking '${first}' left it drawn (${hidden})`);
   await page.click('#legend label input');
+  // Layers hidden until ticked (map matching's search patterns): not drawn, then drawn.
+  const initially = await page.$$eval('#legend label input', (boxes) => boxes.map((b) => b.checked));
+  const ticked = [];
+  for (let i = 0; i < initially.length; ++i) {
+    if (initially[i]) continue;
+    const layer = `#map > g > g:nth-child(${i + 1})`;
+    const label = await page.$eval(`#legend label:nth-child(${i + 1})`, (e) => e.textContent);
+    if (await page.$eval(layer, (g) => getComputedStyle(g).display) !== 'none') fail(`'${label}' drawn before it is ticked`);
+    await page.click(`#legend label:nth-child(${i + 1}) input`);
+    const shown = await page.$eval(layer, (g) => ({ display: getComputedStyle(g).display, items: g.childElementCount, label: g.dataset.label }));
+    if (shown.display === 'none' || shown.items === 0 || shown.label !== label) fail(`ticking '${label}' did not draw it (${JSON.stringify(shown)})`);
+    ticked.push(`${label}: ${shown.items}`);
+  }
   if (shot) {
     await page.$eval('h2 + p.note + .mapwrap', (e) => e.scrollIntoView());
     await page.$eval('.mapwrap', (e) => e.parentElement.querySelector('h2:nth-of-type(2)')?.scrollIntoView());
     await page.screenshot({ path: shot, fullPage: false });
   }
   if (errors.length) fail(`console errors: ${errors.join(' | ')}`);
-  console.log(`report: true scale (${home.x.toFixed(2)} px/m both ways, wide and tall), wheel, buttons, drag and fit; legend hides '${first}'; no console error`);
+  console.log(`report: true scale (${home.x.toFixed(2)} px/m both ways, wide and tall), wheel, buttons, drag and fit; legend hides '${first}'${ticked.length ? '; ticked on: ' + ticked.join(', ') : ''}; no console error`);
 } finally {
   await browser.close();
 }

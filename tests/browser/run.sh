@@ -29,6 +29,12 @@ kill $pid; wait $pid 2>/dev/null || true
 "$TM" report "$dir/run-pdr" "$dir/run-breadcrumb" --out "$dir/report.html" > /dev/null
 report_shot="${SCREENSHOT:+${SCREENSHOT%.png}-report.png}"
 node "$here/report.mjs" "$dir/report.html" $report_shot
+# ... with map matching's search patterns as layers to tick on (issue 23).
+"$TM" simulate house1-search --seed 1 --out "$dir/h" > /dev/null
+"$TM" run --pipeline mapmatch "$dir/h" --out "$dir/run-mapmatch" > /dev/null
+"$TM" report "$dir/run-mapmatch" --out "$dir/report-house.html" > /dev/null
+node "$here/report.mjs" "$dir/report-house.html" | tee "$dir/report-house.log"
+grep -q "ticked on: search sequences" "$dir/report-house.log" || { echo "FAIL: the house report has no search-pattern layer"; exit 1; }
 # The floor selector: the multi-floor building drawn in another frame (rotated 224 degrees, the
 # origin 1.2 km away: the view must fit the building, not the origin), replayed at 20x.
 "$TM" simulate multi-floor --seed 3 --vary 1 --family frame --out "$dir/f" > /dev/null

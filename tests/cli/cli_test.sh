@@ -234,6 +234,8 @@ run_failing "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/x" --option init
 # The report draws the floor a mapmatch run was matched on (its level option).
 "$TM" run --pipeline mapmatch "$dir/hs" --out "$dir/hsl" --option level=0 > /dev/null || fail "mapmatch level=0"
 "$TM" report "$dir/hsl" --out "$dir/hsl.html" > /dev/null || fail "report of a mapmatch run with a level"
+# ... with map matching's search patterns as layers (issue 23): the sequences and the grid.
+grep -q 'search sequences (mapmatch, 1 m grid at ' "$dir/hsl.html" && grep -q 'search grid: inside nodes' "$dir/hsl.html" || fail "report: search patterns"
 sed -i 's/"level": *"0"/"level":"5"/' "$dir/hsl/diagnostics.json"
 run_failing "$TM" report "$dir/hsl" --out "$dir/x.html"
 [ $rc -ne 0 ] && grep -q "no level 5" "$dir/err" || { cat "$dir/err"; fail "report reads the run's level"; }

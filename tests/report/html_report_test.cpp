@@ -1,7 +1,10 @@
 // SPDX-License-Identifier: MIT
+#include "trailmark/report/html_report.h"
+
 #include <gtest/gtest.h>
 
-#include "trailmark/report/html_report.h"
+#include <map>
+#include <nlohmann/json.hpp>
 
 namespace trailmark {
 namespace {
@@ -73,6 +76,47 @@ TEST(HtmlReport, LineBreaksAreNullPointsNotNullEntries) {
   EXPECT_EQ(data.find(",null"), std::string::npos);
   EXPECT_EQ(data.find("[null"), std::string::npos);
   EXPECT_NE(data.find(R"({"x":null,"y":null})"), std::string::npos);
+}
+
+// Extra layers (map matching's search patterns): each a map dataset with its label, colour,
+// lines broken by null points and its points, hidden until ticked unless visible; the map's
+// bounds take them in.
+TEST(HtmlReport, LayersAreMapDatasetsHiddenUntilTicked) {
+  ReportInput in;
+  in.info.nodes.push_back({.id = "ff1", .kind = NodeKind::kAgent});
+  in.truth = {{0, "ff1", Vec3(0, 0, 0)}, {1, "ff1", Vec3(1, 0, 0)}};
+  ReportLayer sequences;
+  sequences.label = "search sequences";
+  sequences.colour = "#2e8b57";
+  sequences.lines = {{{0, 0}, {0, 5}}, {{1, 1}, {2, 1}}};
+  sequences.points = {{7, -3}};
+  ReportLayer doors;
+  doors.label = "doors no search sequence passes (1)";
+  doors.lines = {{{3, 3}, {3, 4}}};
+  doors.dashed = true;
+  doors.visible = true;
+  in.layers = {sequences, doors};
+  const std::string html = BuildHtmlReport(in);
+  const std::string data = html.substr(html.find("const D = "));
+  const auto json_end = data.find(";\n");
+  const auto d = nlohmann::json::parse(data.substr(10, json_end - 10));
+  std::map<std::string, nlohmann::json> by_label;
+  for (const auto& ds : d["map"]) by_label[ds["label"].get<std::string>()] = ds;
+  ASSERT_TRUE(by_label.count("search sequences"));
+  ASSERT_TRUE(by_label.count("search sequences (points)"));
+  ASSERT_TRUE(by_label.count("doors no search sequence passes (1)"));
+  const auto& lines = by_label["search sequences"];
+  EXPECT_EQ(lines["hidden"], true);
+  EXPECT_EQ(lines["borderColor"], "#2e8b57");
+  EXPECT_EQ(lines["data"].size(), 6u);  // two lines of two points, each closed by a null point
+  EXPECT_TRUE(lines["data"][2]["x"].is_null());
+  EXPECT_EQ(by_label["search sequences (points)"]["pointStyle"], "dot");
+  EXPECT_EQ(by_label["doors no search sequence passes (1)"]["hidden"], false);
+  EXPECT_TRUE(by_label["doors no search sequence passes (1)"].contains("borderDash"));
+  EXPECT_LE(d["bounds"]["xmin"].get<double>(), 0.0);
+  EXPECT_GE(d["bounds"]["xmax"].get<double>(), 7.0);
+  EXPECT_LE(d["bounds"]["ymin"].get<double>(), -3.0);
+  EXPECT_GE(d["bounds"]["ymax"].get<double>(), 5.0);
 }
 
 }  // namespace

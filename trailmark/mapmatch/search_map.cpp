@@ -418,6 +418,25 @@ std::vector<Vec2> SearchGrid::InsideCenters() const {
   return out;
 }
 
+SearchPatterns BuildSearchPatterns(const FloorPlan& plan, const std::optional<Vec2>& entry_n,
+                                   const SearchSequenceOptions& options) {
+  const SearchGrid grid(plan, options.grid);
+  SearchPatterns out;
+  out.grid_axis_rad = grid.axis_rad();
+  out.grid_spacing_m = grid.spacing();
+  out.entry_is_corner = !entry_n;
+  if (entry_n) {
+    out.entry_n = *entry_n;
+  } else {
+    const auto nearest = grid.Nearest(plan.Bounds().min);
+    out.entry_n = nearest ? grid.Center(*nearest) : plan.Bounds().min;
+  }
+  out.inside_n = grid.InsideCenters();
+  out.sequences = ExtractSearchSequences(plan, out.entry_n, options);
+  out.doors_not_traversed = DoorsNotTraversed(grid, out.sequences);
+  return out;
+}
+
 std::vector<std::size_t> DoorsNotTraversed(const SearchGrid& grid,
                                            const std::vector<NodeSequence>& sequences) {
   const FloorPlan& plan = grid.plan();

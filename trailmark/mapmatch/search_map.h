@@ -156,6 +156,25 @@ std::vector<NodeSequence> ExtractSearchSequences(const FloorPlan& plan, const Ve
 std::vector<std::size_t> DoorsNotTraversed(const SearchGrid& grid,
                                            const std::vector<NodeSequence>& sequences);
 
+/// What a reviewer looks at of the search map (issue 23, item 2; `trailmark patterns` and the
+/// HTML report): the grid's axis and inside nodes, the sequences from the entry and the inner
+/// doors none passes.
+struct SearchPatterns {
+  double grid_axis_rad = 0;
+  double grid_spacing_m = 1.0;
+  Vec2 entry_n = Vec2::Zero();
+  bool entry_is_corner = false;  ///< no entry given: the inside node nearest the plan's corner
+  std::vector<Vec2> inside_n;    ///< the inside grid nodes' centres
+  std::vector<NodeSequence> sequences;
+  std::vector<std::size_t> doors_not_traversed;  ///< indices into the plan's doors
+};
+
+/// The search patterns of `plan` from `entry_n` (empty: the inside node nearest the plan's
+/// lower-left corner, as an inspection of a plan needs no entry). Throws std::invalid_argument
+/// as ExtractSearchSequences does.
+SearchPatterns BuildSearchPatterns(const FloorPlan& plan, const std::optional<Vec2>& entry_n,
+                                   const SearchSequenceOptions& options = {});
+
 /// The right-hand walk on the grid from `start` facing `dir` until it repeats a state.
 std::vector<Vec2> RightHandWalk(const SearchGrid& grid, SearchGrid::Cell start, int dir);
 

@@ -95,6 +95,11 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
     return o;
   };
   spec.floor_level = [parse](const OptionValues& values) { return parse(values).level; };
+  if constexpr (requires(const E& e) { mapmatch::SearchSequenceOptions(e.sequences); }) {
+    spec.search_patterns = [parse](const OptionValues& values) {
+      return parse(values).estimator.sequences;
+    };
+  }
   const bool needs_plan = spec.needs_floor_plan;
   spec.make = [parse, inner, front, name, needs_plan, guarded](
                   const EstimatorInputs& in, const OptionValues& values,

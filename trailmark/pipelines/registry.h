@@ -19,6 +19,7 @@
 #include "trailmark/core/options.h"
 #include "trailmark/geometry/floor_plan.h"
 #include "trailmark/ins/step_front_end.h"
+#include "trailmark/mapmatch/search_map.h"
 
 namespace trailmark {
 
@@ -69,6 +70,9 @@ struct PipelineSpec {
   /// The floor of a multi-floor plan it works on (its `level` option); nullopt: the plan's
   /// default floor. Throws like `make` for bad options.
   std::function<std::optional<int>(const OptionValues&)> floor_level;
+  /// A map-matching pipeline's search-pattern options with these option values (its grid's
+  /// spacing and alignment): what the report draws. Empty for a pipeline without patterns.
+  std::function<mapmatch::SearchSequenceOptions(const OptionValues&)> search_patterns;
 
   /// Whether a mission with these streams, landmarks and floor plan can feed it.
   bool CanRun(const MissionInfo& info, StreamSet present, bool has_floor_plan) const;

@@ -96,6 +96,40 @@ std::string BuildHtmlReport(const ReportInput& in) {
     datasets.push_back({{"label", "walls"}, {"data", pts}, {"showLine", true}, {"pointRadius", 0},
                         {"borderColor", kWallColour}, {"borderWidth", 1.5}, {"spanGaps", false}});
   }
+  for (const ReportLayer& layer : in.layers) {
+    if (!layer.lines.empty()) {
+      json pts = json::array();
+      for (const auto& line : layer.lines) {
+        for (const Vec2& p : line) {
+          pts.push_back(Point(p));
+          box.Extend(p);
+        }
+        pts.push_back(Gap());
+      }
+      json ds = {{"label", layer.label},
+                 {"data", pts},
+                 {"showLine", true},
+                 {"pointRadius", 0},
+                 {"borderColor", layer.colour},
+                 {"borderWidth", 1.5},
+                 {"hidden", !layer.visible}};
+      if (layer.dashed) ds["borderDash"] = json::array({4, 3});
+      datasets.push_back(ds);
+    }
+    if (!layer.points.empty()) {
+      json pts = json::array();
+      for (const Vec2& p : layer.points) {
+        pts.push_back(Point(p));
+        box.Extend(p);
+      }
+      datasets.push_back({{"label", layer.lines.empty() ? layer.label : layer.label + " (points)"},
+                          {"data", pts},
+                          {"pointStyle", "dot"},
+                          {"borderColor", layer.colour},
+                          {"backgroundColor", layer.colour},
+                          {"hidden", !layer.visible}});
+    }
+  }
   // Truth per node.
   std::map<std::string, std::vector<TruthSample>> truth_by_id;
   std::vector<std::string> ids;
@@ -268,10 +302,12 @@ td:first-child,th:first-child{text-align:left}.sw{display:inline-block;width:10p
             "<th>SE95 m</th><th>vertical mean m</th><th>IPIN score m</th></tr>\n";
     html += floors + "</table>\n";
   }
-  html += "<h2>Trajectories</h2><p class=note>At true scale (one metre is as long east as "
-          "north). White: truth; squares: true crumbs and landmarks in the dashboard's colours; "
-          "dashed: 95% ellipses of the final estimates. Wheel or +/&minus; to zoom, drag to pan, "
-          "&ldquo;fit&rdquo; to see everything; untick a layer to hide it.</p>\n";
+  html +=
+      "<h2>Trajectories</h2><p class=note>At true scale (one metre is as long east as "
+      "north). White: truth; squares: true crumbs and landmarks in the dashboard's colours; "
+      "dashed: 95% ellipses of the final estimates. Wheel or +/&minus; to zoom, drag to pan, "
+      "&ldquo;fit&rdquo; to see everything; tick a layer to show it (search patterns start "
+      "hidden), untick to hide it.</p>\n";
   html += "<div class=mapwrap><svg id=map role=img aria-label='trajectories on the floor plan, "
           "at true scale'></svg><div class=mapctl><button type=button id=zin aria-label='zoom in'>+"
           "</button><button type=button id=zout aria-label='zoom out'>&minus;</button><button "
@@ -311,6 +347,8 @@ D.map.forEach((ds) => {
       const fill = p.colour || ds.backgroundColor || ds.borderColor;
       const shape = ds.pointStyle === 'triangle'
         ? el('polygon', {points: [[p.x, p.y + mark], [p.x - mark, p.y - mark], [p.x + mark, p.y - mark]].map((q) => q.join(',')).join(' '), fill})
+        : ds.pointStyle === 'dot'
+        ? el('circle', {cx: p.x, cy: p.y, r: mark * 0.35, fill})
         : el('rect', {x: p.x - mark * 0.8, y: p.y - mark * 0.8, width: mark * 1.6, height: mark * 1.6, fill});
       const title = el('title', {});
       title.textContent = (p.id ? p.id + ' ' : '') + ds.label + ' (' + p.x + ', ' + p.y + ')';
@@ -322,7 +360,8 @@ D.map.forEach((ds) => {
   const label = document.createElement('label');
   const box = document.createElement('input');
   box.type = 'checkbox';
-  box.checked = true;
+  box.checked = !ds.hidden;
+  g.style.display = box.checked ? '' : 'none';
   box.onchange = () => { g.style.display = box.checked ? '' : 'none'; };
   const sw = document.createElement('span');
   sw.className = 'sw';

@@ -22,9 +22,22 @@ struct ReportRun {
   double wall_time_s = 0;
 };
 
+/// A map layer beside the trajectories (e.g. map matching's search patterns): polylines and
+/// points in the navigation frame, listed in the legend, hidden until its box is ticked unless
+/// `visible`.
+struct ReportLayer {
+  std::string label;
+  std::string colour = "#6b8e23";
+  std::vector<std::vector<Vec2>> lines;
+  std::vector<Vec2> points;
+  bool dashed = false;
+  bool visible = false;
+};
+
 struct ReportInput {
   MissionInfo info;
   std::optional<FloorPlan> plan;
+  std::vector<ReportLayer> layers;
   std::vector<TruthSample> truth;
   std::vector<ReportRun> runs;
   std::size_t max_points_per_series = 4000;
