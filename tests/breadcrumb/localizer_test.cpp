@@ -309,6 +309,45 @@ TEST(BreadcrumbPipeline, TheTruncatedCalibrationDependsLessOnTheRssiFloor) {
   EXPECT_LT(moved_truncated, 0.5 * moved_ls) << moved_truncated << " vs " << moved_ls;
 }
 
+// start_heading_sigma_floor raises a stated start-heading sigma: after a 20 m straight walk
+// the sideways variance holds the heading's (sigma x 20 m)^2 on top of the steps' own (40
+// steps, each at most (0.03 + 0.15 x 0.5 m)^2 per axis, plus the heading random walk) — with
+// an agent state at every step end (a range of 1 km sigma to a far anchor: no information) and
+// with none after the start (no radio at all: the walk since the state turns with the heading).
+TEST(BreadcrumbLocalizer, AStartHeadingSigmaBelowTheFloorIsRaisedToIt) {
+  auto sideways_variance = [](double floor_rad, bool states) {
+    LocalizerOptions o;
+    o.start_heading_sigma_floor_rad = floor_rad;
+    o.estimate_range_bias = false;
+    BreadcrumbLocalizer loc(o);
+    loc.AddKnownNode("far", Vec2(10, 5000), 1e-3);
+    loc.AddAgent("ff1", Vec2::Zero(), 0.01, 0.01);  // mission.json: 0.01 rad
+    for (int k = 0; k < 40; ++k) {
+      const TimeS t1 = 0.5 * k + 0.5;
+      loc.AddStep({t1 - 0.5, t1, "ff1", Vec3(0.5, 0, 0), std::nullopt});
+      if (!states) continue;
+      RangeMeasurement r;
+      r.t = t1;
+      r.a = "ff1";
+      r.b = "far";
+      r.range_m = 5000;
+      r.sigma_m = 1000;
+      loc.AddRange(r);
+    }
+    loc.Finish();
+    return loc.Estimate("ff1")->covariance(1, 1);
+  };
+  const double steps_at_most = 40 * std::pow(0.03 + 0.15 * 0.5, 2) + 0.5;
+  for (const bool states : {true, false}) {
+    const double stated = sideways_variance(0.0, states),
+                 floored = sideways_variance(0.087, states);
+    EXPECT_GT(stated, std::pow(0.01 * 20, 2)) << states;
+    EXPECT_LT(stated, std::pow(0.01 * 20, 2) + steps_at_most) << states;
+    EXPECT_GT(floored, std::pow(0.087 * 20, 2)) << states;
+    EXPECT_LT(floored, std::pow(0.087 * 20, 2) + steps_at_most) << states;
+  }
+}
+
 // The near-field check of the stated channel level, against its exact reference: an agent walks
 // east at 1 m/s and drops a crumb every 10 s; the crumb's packets 0.5-2.5 s after each drop
 // follow level - 10 n log10(d) with no noise (d from the PDR, n the model's 2.3). Each becomes

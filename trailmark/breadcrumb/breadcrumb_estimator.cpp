@@ -47,6 +47,8 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "prior sigma of the heading drift rate");
     t.Real("heading_rw", &L::heading_rw_rad_per_sqrt_s, "rad/sqrt(s)", nonneg,
            "heading random walk over time");
+    t.Real("start_heading_sigma_floor", &L::start_heading_sigma_floor_rad, "rad", nonneg,
+           "a stated start_heading_sigma below this is raised to it (0: as stated)");
     t.Real("min_rssi_dbm", &L::min_rssi_dbm, "dBm", OptionBounds::Any(),
            "weaker packets are not range edges (mostly NLOS); the paper's channel's, see "
            "relative_rssi");

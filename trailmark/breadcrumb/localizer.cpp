@@ -171,7 +171,8 @@ void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Ve
   gen_.AddPrior(a.state, x0, Mat2::Identity() * s * s);
   a.cached_cov = Mat2::Identity() * s * s;
   if (options_.estimate_heading_scale) {
-    const double sh = std::max(start_heading_sigma_rad.value_or(options_.heading_sigma0_rad), 1e-4);
+    const double sh = std::max({start_heading_sigma_rad.value_or(options_.heading_sigma0_rad),
+                                options_.start_heading_sigma_floor_rad, 1e-4});
     a.theta = gen_.AddNode(Vec2::Zero());
     gen_.AddPrior(a.theta, Vec2::Zero(),
                   Vec2(sh * sh, options_.scale_sigma0 * options_.scale_sigma0).asDiagonal());
@@ -931,7 +932,14 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
     const bool fresh = SolveThrottled();
     if (options_.covariance_period_s <= 0 ||
         (fresh && now_ - a.cov_t >= options_.covariance_period_s)) {
-      a.cached_cov = gen_.Covariance(a.state);
+      if (a.theta >= 0) {
+        const Eigen::Matrix4d joint = gen_.JointCovariance(a.state, a.theta);
+        a.cached_cov = joint.topLeftCorner<2, 2>();
+        a.cached_cross = joint.topRightCorner<2, 2>();
+        a.cached_theta = joint.bottomRightCorner<2, 2>();
+      } else {
+        a.cached_cov = gen_.Covariance(a.state);
+      }
       a.cov_t = now_;
       a.cov_cum_var = a.state_cum_var;
     } else if (a.state_cum_var != a.cov_cum_var) {  // the state moved on: add its PDR variance
@@ -943,8 +951,22 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
     if (!a.started) var = Vec2::Zero();
     NodeEstimate e;
     e.id = id;
-    e.position_n = gen_.Estimate(a.state) + Corrected(a, cum - a.state_cum);
+    const Vec2 walked = cum - a.state_cum;  // the PDR since the state, as measured
+    e.position_n = gen_.Estimate(a.state) + Corrected(a, walked);
     e.covariance = a.cached_cov + Diag((var - a.state_cum_var).cwiseAbs());
+    if (a.theta >= 0 && walked.squaredNorm() > 0) {
+      // p = x + (1 + s) R(psi) walked: the walk since the state turns and stretches with the
+      // heading/scale node's error (first order), correlated with the state's own error.
+      const Vec2 th = gen_.Estimate(a.theta);
+      const Eigen::Rotation2Dd R(th.x());
+      const Vec2 turned = R * walked;
+      Mat2 J;
+      J.col(0) = (1.0 + th.y()) * Vec2(-turned.y(), turned.x());
+      J.col(1) = turned;
+      const Mat2 cross = a.cached_cross * J.transpose();
+      e.covariance += J * a.cached_theta * J.transpose() + cross + cross.transpose();
+      e.covariance = 0.5 * (e.covariance + e.covariance.transpose());
+    }
     return e;
   }
   StaticNode* node = FindStatic(id);

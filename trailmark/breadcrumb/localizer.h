@@ -60,6 +60,8 @@ struct LocalizerOptions {
   // gyro scale-factor error that accrues with every turn), s nearly constant.
   bool estimate_heading_scale = true;
   double heading_sigma0_rad = 0.05;          ///< when mission.json gives no start_heading_sigma
+  /// A stated start_heading_sigma below this is raised to it (0: taken as stated).
+  double start_heading_sigma_floor_rad = 0.0;
   double scale_sigma0 = 0.05;
   double heading_rw_rad_per_sqrt_s = 0.003;
   double heading_per_turn_sigma = 0.01;      ///< random part per turn, fraction of its angle
@@ -295,6 +297,10 @@ class BreadcrumbLocalizer {
     std::map<std::string, TimeS> link_anchor;
     std::map<std::string, TimeS> dropped;  ///< this agent's drops: node -> time
     Mat2 cached_cov = Mat2::Identity() * 100.0;
+    /// With a heading/scale node: the cross-covariance of the state and theta and theta's own,
+    /// for the PDR walked since the state (its displacement turns with the heading's error).
+    Mat2 cached_cross = Mat2::Zero();
+    Mat2 cached_theta = Mat2::Zero();
     TimeS cov_t = -1e300;  ///< when cached_cov was computed
     Vec2 cov_cum_var = Vec2::Zero();  ///< PDR variance at that time
   };
