@@ -348,6 +348,32 @@ TEST(BreadcrumbLocalizer, AStartHeadingSigmaBelowTheFloorIsRaisedToIt) {
   }
 }
 
+// Crumbs heard but never dropped (events.csv absent) are placed from their packets once those
+// pin them down; each packet counts with the edges' per-packet sigma (a link's packets are
+// correlated) rather than the channel's whole sigma_db, which made the placed crumbs claim far
+// more than they had and pulled the agent with them. The agent stays well within its dead
+// reckoning's error and its ellipse holds the truth (seeds 41-43, not used for any setting).
+TEST(BreadcrumbPipeline, CrumbsHeardWithoutADropKeepTheAgentHonest) {
+  double in95 = 0, samples = 0, agent_m = 0, pdr_m = 0;
+  for (const std::uint64_t seed : {41u, 42u, 43u}) {
+    SimulatedMission sim = SimulateScenario("office-loop", seed);
+    Variation v;
+    v.events = EventsKept::kNone;  // the crumbs declared in mission.json, never dropped
+    ApplyVariation(v, sim);
+    ASSERT_TRUE(sim.data.events.empty());
+    TempDir dir;
+    WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+    const Metrics m = RunOnSim(RequirePipeline("breadcrumb"), sim, dir);
+    in95 += m.agents.at_estimates.in95 * static_cast<double>(m.agents.at_estimates.samples);
+    samples += static_cast<double>(m.agents.at_estimates.samples);
+    agent_m += m.agents.stats.mean_m;
+    pdr_m += RunOnSim(RequirePipeline("pdr"), sim, dir).agents.stats.mean_m;
+  }
+  ASSERT_GT(samples, 0.0);
+  EXPECT_GE(in95 / samples, 0.85);
+  EXPECT_LT(agent_m, 0.5 * pdr_m);
+}
+
 // The near-field check of the stated channel level, against its exact reference: an agent walks
 // east at 1 m/s and drops a crumb every 10 s; the crumb's packets 0.5-2.5 s after each drop
 // follow level - 10 n log10(d) with no noise (d from the PDR, n the model's 2.3). Each becomes

@@ -667,8 +667,13 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
   if (p.kind == Kind::kRssi) NearFieldPacket(a, p.other, p.t, p.value);
   if (node->index < 0) {
     if (p.kind == Kind::kRssi) {
+      // One packet of a link carries the edges' share of the shadowing (agent_rssi_sigma_factor:
+      // a link's packets are correlated), not a whole sigma_db: with sigma_db, crumbs heard
+      // without a drop were initialized with ellipses that held none of their truth (issue 25).
       const auto r = radio::ToRange(options_.radio, p.value);
-      ObserveUninitialized(*node, here, r.range_m, r.sigma_m);
+      const double per_packet =
+          std::sqrt(AgentRssiVariance()) / std::max(options_.radio.sigma_db, 1e-6);
+      ObserveUninitialized(*node, here, r.range_m, r.sigma_m * per_packet);
     } else if (p.kind == Kind::kRange) {
       const Vec2 bias = RangeBias(p.range_kind).value_or(Vec2::Zero());
       ObserveUninitialized(*node, here, (p.value - bias.x()) / (1.0 + bias.y()), p.sigma,
