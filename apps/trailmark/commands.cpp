@@ -193,6 +193,15 @@ void ExportFloorPlanWgs84(const fs::path& mission_dir, const fs::path& out) {
 }
 
 namespace {
+// Where the search patterns start: the first agent with a start (horizontal), if any.
+std::optional<Vec2> FirstAgentStart(const MissionInfo& info) {
+  for (const auto& n : info.nodes) {
+    if (n.kind != NodeKind::kAgent) continue;
+    if (const auto start = info.AgentStart(n)) return start->head<2>();
+  }
+  return std::nullopt;
+}
+
 // A grid axis in degrees for people: to 0.1 deg, and a rounding error below 0 reads as 0.
 double AxisDegrees(double rad) {
   const double deg = std::round(rad * 1800.0 / std::numbers::pi) / 10.0;
@@ -206,11 +215,7 @@ int WriteSearchPatterns(const fs::path& mission_dir, const fs::path& out, std::o
   const std::string json_path = mission.Path("mission.json").string();
   const std::optional<FloorPlan> plan = mission.LoadFloorPlan(level);
   if (!plan) throw InputError(json_path, 0, "no \"floorplan\" to search");
-  std::optional<Vec2> entry;
-  for (const auto& n : mission.info().nodes) {
-    if (n.kind != NodeKind::kAgent || entry) continue;
-    if (const auto start = mission.info().AgentStart(n)) entry = start->head<2>();
-  }
+  std::optional<Vec2> entry = FirstAgentStart(mission.info());
   mapmatch::SearchSequenceOptions options;
   options.grid.spacing_m = grid_m;
   options.grid.align_to_walls = !map_axes;
@@ -424,11 +429,7 @@ std::vector<ReportLayer> SearchPatternLayers(const std::vector<fs::path>& run_di
   for (const auto& dir : run_dirs) {
     const auto run = SpecOfRun(dir);
     if (!run || !run->first->search_patterns) continue;
-    std::optional<Vec2> entry;
-    for (const auto& n : info.nodes) {
-      if (n.kind != NodeKind::kAgent || entry) continue;
-      if (const auto start = info.AgentStart(n)) entry = start->head<2>();
-    }
+    const std::optional<Vec2> entry = FirstAgentStart(info);
     mapmatch::SearchPatterns patterns;
     try {
       patterns =

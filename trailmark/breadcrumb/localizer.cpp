@@ -54,12 +54,13 @@ void BreadcrumbLocalizer::UpdateRssiShift() {
     // Once contradicted, the statement stays refuted (no flapping at the margin).
     stated_contradicted_ = stated_contradicted_ || std::abs(*mid - stated_alpha_dbm_) > allowed;
     if (stated_contradicted_) level = *mid;
-    const double shift = level - options_.paper_reference_dbm;
-    if (std::abs(shift - rssi_shift_db_) > 1.0 && summary_.notes.size() < 200) {
+    if (std::abs(level - options_.paper_reference_dbm - rssi_shift_db_) > 1.0 &&
+        summary_.notes.size() < 200) {
       summary_.notes.push_back(fmt::format(
           "t={:.1f}: RSSI thresholds {:+.1f} dB from the paper's: the drops' near-field level "
           "{:.1f} dBm at 1 m ({} packets) {} the stated {:.1f} dBm",
-          now_, shift, *mid, n, level == *mid ? "contradicts" : "agrees with", stated_alpha_dbm_));
+          now_, level - options_.paper_reference_dbm, *mid, n,
+          stated_contradicted_ ? "contradicts" : "agrees with", stated_alpha_dbm_));
     }
   }
   rssi_shift_db_ = level - options_.paper_reference_dbm;
@@ -83,13 +84,20 @@ void BreadcrumbLocalizer::NearFieldPacket(const Agent& a, const std::string& nod
   UpdateRssiShift();
 }
 
+void BreadcrumbLocalizer::Enqueue(Agent& a, const Pending& q) {
+  // After any of the same time: rows of equal time keep their arrival order.
+  a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
+                                    [](TimeS v, const Pending& x) { return v < x.t; }),
+                   q);
+}
+
 ScalarModel BreadcrumbLocalizer::RssiModel() const {
   ScalarModel m;
   m.kind = ScalarModel::Kind::kRssiDb;
   m.alpha_dbm = options_.radio.alpha_dbm;
   m.path_loss_exponent = options_.radio.path_loss_exponent;
   if (options_.model_rssi_truncation) {
-    m.truncation_dbm = options_.min_rssi_dbm + rssi_shift_db_;
+    m.truncation_dbm = MinRssiDbm();
     m.sigma_db = options_.radio.sigma_db;
   }
   return m;
@@ -117,8 +125,7 @@ void BreadcrumbLocalizer::MaybeCalibrate(TimeS t) {
   }
   next_calibration_ = t + options_.calibration_period_s;
   radio::PathLossCalibrationOptions fit_options = options_.calibration;
-  if (options_.model_rssi_truncation)
-    fit_options.truncation_dbm = options_.min_rssi_dbm + rssi_shift_db_;
+  if (options_.model_rssi_truncation) fit_options.truncation_dbm = MinRssiDbm();
   const radio::PathLossCalibration c = radio::CalibratePathLoss(
       calibration_pairs_, fit_options,
       summary_.calibration && calibrated_ ? &summary_.calibration->model : nullptr);
@@ -373,7 +380,7 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   }
   const std::string& agent = rx_agent ? p.rx : p.tx;
   const std::string& other = rx_agent ? p.tx : p.rx;
-  if (p.rssi_dbm - rssi_shift_db_ < options_.min_rssi_dbm) {
+  if (p.rssi_dbm < MinRssiDbm()) {
     // Too weak for an edge; from a crumb its dropper has just dropped, a near-field sample.
     const auto ait = agents_.find(agent);
     if (options_.relative_rssi_thresholds && ait != agents_.end() && ait->second.started) {
@@ -382,9 +389,7 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
       if (d != a.dropped.end() && p.t >= d->second &&
           p.t - d->second <= options_.reference_window_s) {
         Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0, {}, true};
-        a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
-                                          [](TimeS v, const Pending& x) { return v < x.t; }),
-                         q);
+        Enqueue(a, q);
         AdvanceTo(p.t);
         return;
       }
@@ -396,17 +401,13 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   if (!agents_.count(other)) AddUnknownNode(other);
   if (options_.use_agent_rssi) {
     Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0, {}};
-    a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
-                                      [](TimeS v, const Pending& x) { return v < x.t; }),
-                     q);
+    Enqueue(a, q);
   }
   if (options_.use_encounters && !agents_.count(other)) {
     auto& det = encounter_.try_emplace({agent, other}, options_.encounter).first->second;
     if (auto peak = det.Add(p.t, p.rssi_dbm - rssi_shift_db_)) {
       Pending q{*peak, Kind::kEncounter, other, 0, 0, {}};
-      a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
-                                        [](TimeS v, const Pending& x) { return v < x.t; }),
-                       q);
+      Enqueue(a, q);
     }
   }
   AdvanceTo(p.t);
@@ -444,9 +445,7 @@ void BreadcrumbLocalizer::AddRange(const RangeMeasurement& r) {
   if (!agents_.count(other)) AddUnknownNode(other);
   Agent& a = StartedAgent(agent, r.t);
   Pending q{r.t, Kind::kRange, other, r.range_m, sigma, r.kind};
-  a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
-                                    [](TimeS v, const Pending& x) { return v < x.t; }),
-                   q);
+  Enqueue(a, q);
   AdvanceTo(r.t);
 }
 
@@ -462,9 +461,7 @@ void BreadcrumbLocalizer::AddEvent(const MissionEvent& e) {
     Agent& a = StartedAgent(e.agent, e.t);
     a.dropped[e.node] = e.t;
     Pending q{e.t, Kind::kDrop, e.node, 0, 0, {}};
-    a.pending.insert(std::upper_bound(a.pending.begin(), a.pending.end(), q.t,
-                                      [](TimeS v, const Pending& x) { return v < x.t; }),
-                     q);
+    Enqueue(a, q);
   }
   AdvanceTo(e.t);
 }
@@ -607,7 +604,7 @@ std::optional<Vec2> BreadcrumbLocalizer::RangeBias(const std::string& kind) cons
 }
 
 void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
-  if (p.kind == Kind::kRssi && (p.weak || p.value - rssi_shift_db_ < options_.min_rssi_dbm)) {
+  if (p.kind == Kind::kRssi && (p.weak || p.value < MinRssiDbm())) {
     // Too weak for an edge (a near-field sample at most): no agent state for it.
     if (FindStatic(p.other) != nullptr) NearFieldPacket(a, p.other, p.t, p.value);
     ++summary_.rssi_weak;
@@ -748,8 +745,7 @@ void BreadcrumbLocalizer::StaticPacket(const RssiPacket& p) {
   auto [it, fresh] = links_.try_emplace(key);
   Link& link = it->second;
   if (fresh) link.change = radio::LinkChangeDetector(options_.link_change);
-  const bool use = options_.use_static_rssi &&
-                   p.rssi_dbm - rssi_shift_db_ >= options_.min_rssi_dbm &&
+  const bool use = options_.use_static_rssi && p.rssi_dbm >= MinRssiDbm() &&
                    (calibrated_ || !options_.calibrate_online);
   if (use) {
     if (link.edge < 0) {

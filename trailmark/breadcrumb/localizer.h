@@ -325,6 +325,8 @@ class BreadcrumbLocalizer {
   };
 
   Agent& StartedAgent(const std::string& id, TimeS t);
+  /// Into the agent's time-ordered queue of measurements waiting for its PDR.
+  static void Enqueue(Agent& a, const Pending& q);
   Vec2 CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn = nullptr,
              double* cum_turn_signed = nullptr) const;
   /// The PDR displacement `raw` corrected by the agent's current heading/scale estimate.
@@ -369,6 +371,8 @@ class BreadcrumbLocalizer {
   double stated_alpha_dbm_ = -40.0;  ///< the reference the thresholds move from
   bool stated_contradicted_ = false;
   double rssi_shift_db_ = 0;
+  /// min_rssi_dbm moved with the channel (relative_rssi_thresholds).
+  double MinRssiDbm() const { return options_.min_rssi_dbm + rssi_shift_db_; }
   void UpdateRssiShift();
   /// A packet from a crumb heard by its dropper shortly after the drop: a near-field sample.
   void NearFieldPacket(const Agent& a, const std::string& node, TimeS t, double rssi_dbm);

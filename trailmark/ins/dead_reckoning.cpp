@@ -134,9 +134,9 @@ double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
   // The gain of the intersection (position rows only: Schmidt, the shared errors are not
   // estimated, so their own covariance stays as it is).
   const Mat2 K2 = (P / omega) * (P / omega + fix_cov / (1 - omega)).inverse();
-  Eigen::Matrix<double, 6, 2> K = Eigen::Matrix<double, 6, 2>::Zero();
+  Eigen::Matrix<double, kErrors, 2> K = Eigen::Matrix<double, kErrors, 2>::Zero();
   K.topRows<2>() = K2;
-  Eigen::Matrix<double, 2, 6> H = Eigen::Matrix<double, 2, 6>::Zero();
+  Eigen::Matrix<double, 2, kErrors> H = Eigen::Matrix<double, 2, kErrors>::Zero();
   H(0, kX) = H(1, kY) = 1;
   // Joseph form with that gain (positive semi-definite for any gain; exact if the fix were
   // independent), then its position block replaced by the intersection's, which is larger

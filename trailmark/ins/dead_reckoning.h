@@ -72,7 +72,8 @@ class DeadReckoning {
   /// reckoning's). Throws std::invalid_argument as FusePosition does.
   void SetPosition(const Vec2& position_n, const Mat2& cov);
   /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale, d_turn_scale].
-  using ErrorCovariance = Eigen::Matrix<double, 6, 6>;
+  static constexpr int kErrors = 6;
+  using ErrorCovariance = Eigen::Matrix<double, kErrors, kErrors>;
   const ErrorCovariance& error_covariance() const { return error_cov_; }
   /// The shared (not white) errors: heading, rate, step scale and turn scale.
   static constexpr int kSharedErrors = 4;
