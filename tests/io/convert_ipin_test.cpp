@@ -121,6 +121,20 @@ void ExpectRefused(const std::string& text, std::size_t line, const std::string&
                              [](const std::string& path) { ReadIpinLogfile(path); });
 }
 
+// An ACCE sample after the last GYRO sample has no gyro bracket: left out and counted, never
+// read past the gyro samples' end (the fuzzer's find, 2026-12-04: ACCE at 10.5 s, GYRO to 0.02 s).
+TEST(IpinLogfile, AnAccelerometerSampleAfterTheLastGyroSampleIsLeftOut) {
+  TempDir dir;
+  const IpinLogfile log =
+      ReadIpinLogfile(dir.File("log.txt",
+                               "GYRO;0.01;1.01;0.1;0.2;0.3;3\nACCE;10.5;1.015;9.1;0.1;0.6;3\n"
+                               "GYRO;0.02;1.02;0.3;0.4;0.5;3\n"));
+  EXPECT_EQ(log.mission.imu.size(), 0u);
+  ASSERT_FALSE(log.notes.empty());
+  EXPECT_NE(log.notes.front().find("1 of 1 ACCE samples left out"), std::string::npos)
+      << log.notes.front();
+}
+
 TEST(IpinLogfile, BadRecordsAreRefusedWithTheirLine) {
   ExpectRefused("% header\nACCE;0.1;0.1;9.8\n", 2, "ACCE record: expected at least 6 fields");
   ExpectRefused("ACCE;0.1;0.1;9.8;x;0\n", 1, "field 5 (Y): 'x' is not a finite number");

@@ -226,7 +226,9 @@ IpinLogfile ReadIpinLogfile(const std::filesystem::path& logfile, const IpinOpti
   std::size_t outside = 0, j = 0;
   for (const auto& [t, a] : accel) {
     while (j + 1 < gyro.size() && gyro[j + 1].first < t) ++j;
-    if (gyro.size() < 2 || t < gyro[j].first || t > gyro[j + 1].first) {
+    // After the last GYRO sample j is the last index: no bracket (the fuzzer found the read
+    // past the end, 2026-12-04).
+    if (j + 1 >= gyro.size() || t < gyro[j].first || t > gyro[j + 1].first) {
       ++outside;
       continue;
     }
