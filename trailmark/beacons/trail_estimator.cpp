@@ -66,6 +66,8 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Flag("relative_drop_priors", [](O& o) -> bool& { return o.map.relative_drop_priors; },
          "least squares: drop priors on the displacement between consecutive drops");
   t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
+  t.Flag("drop_within_step", &O::drop_within_step,
+         "a drop placed within the step that spans it (false: at the last step's end before it)");
   t.Real("entry_track_m", &O::entry_track_m, "m", OptionBounds::NonNegative(),
          "PDR track compared with the entry heading (0: never)");
   t.Flag("estimate_entry_heading", &O::estimate_entry_heading,
@@ -235,18 +237,44 @@ void BeaconTrailEstimator::AdvanceDropDeadReckoning(Agent& a, const Step& step, 
   a.sum_t_perp_n += (step.t1 - *a.first_step_t) * Vec2(-d_n.y(), d_n.x());
 }
 
-void BeaconTrailEstimator::HintDrop(Agent& a, int i) {
+BeaconTrailEstimator::DropDeadReckoningState BeaconTrailEstimator::DropState(const Agent& a) const {
+  return {a.drop_dr->position_n().head<2>(), a.drop_dr->covariance(), a.sum_d_n, a.sum_t_perp_n};
+}
+
+void BeaconTrailEstimator::HintDrop(Agent& a, int i, const DropDeadReckoningState& at) {
   const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
   Eigen::Matrix<double, 2, 3> along;
-  along << Vec2(-a.sum_d_n.y(), a.sum_d_n.x()), a.sum_t_perp_n, a.sum_d_n;
-  const Mat2 white = a.drop_dr->covariance();
+  along << Vec2(-at.sum_d_n.y(), at.sum_d_n.x()), at.sum_t_perp_n, at.sum_d_n;
   // Between two drops: the white errors accrued since the last (and both drops' scatter).
-  Mat2 increment = white - a.last_drop_white_cov + 2 * drop;
+  Mat2 increment = at.white - a.last_drop_white_cov + 2 * drop;
   increment = 0.5 * (increment + increment.transpose());
-  map_.SetTrackHint(i, a.map_track, a.drop_dr->position_n().head<2>(), white + drop, along,
+  map_.SetTrackHint(i, a.map_track, at.position_n, at.white + drop, along,
                     a.last_drop != i ? a.last_drop : -1, increment);
   a.last_drop = i;
-  a.last_drop_white_cov = white;
+  a.last_drop_white_cov = at.white;
+}
+
+void BeaconTrailEstimator::HintPendingDrops(Agent& a, TimeS until, TimeS t0, TimeS t1,
+                                            const DropDeadReckoningState& before) {
+  if (a.pending_drops.empty()) return;
+  // A drop within the step from t0 to t1 is where that share of the step had taken the
+  // dropper (the step's displacement, its white covariance and lever arms interpolated).
+  const DropDeadReckoningState after = DropState(a);
+  std::vector<std::pair<TimeS, std::string>> later;
+  for (const auto& [t, id] : a.pending_drops) {
+    if (t > until) {
+      later.emplace_back(t, id);
+      continue;
+    }
+    const double f = t1 > t0 ? std::clamp((t - t0) / (t1 - t0), 0.0, 1.0) : 1.0;
+    DropDeadReckoningState at;
+    at.position_n = before.position_n + f * (after.position_n - before.position_n);
+    at.white = before.white + f * (after.white - before.white);
+    at.sum_d_n = before.sum_d_n + f * (after.sum_d_n - before.sum_d_n);
+    at.sum_t_perp_n = before.sum_t_perp_n + f * (after.sum_t_perp_n - before.sum_t_perp_n);
+    HintDrop(a, Beacon(id), at);
+  }
+  a.pending_drops = std::move(later);
 }
 
 void BeaconTrailEstimator::TryEstimateHeading(Agent& a, TimeS t, const BeaconPosition& beacon,
@@ -293,14 +321,25 @@ void BeaconTrailEstimator::FixHeading(Agent& a, TimeS t, double psi_rad, double 
   // The drop priors from here on, and those of the drops made so far (their steps replayed).
   a.drop_dr_rotation_rad = psi_rad;
   StartDropDeadReckoning(a, sigma_rad);
-  std::size_t k = 0;
-  for (const auto& [t_drop, beacon_index] : a.drops_before_fix) {
-    for (; k < a.steps_before_fix.size() && a.steps_before_fix[k].t1 <= t_drop; ++k)
+  if (options_.drop_within_step) {
+    // Each drop within the step that spans it; those after the last step wait for the next.
+    for (const auto& [t_drop, beacon_index] : a.drops_before_fix)
+      a.pending_drops.emplace_back(t_drop, map_.id(beacon_index));
+    for (const Step& s : a.steps_before_fix) {
+      const DropDeadReckoningState before = DropState(a);
+      AdvanceDropDeadReckoning(a, s, s.delta_n.head<2>());
+      HintPendingDrops(a, s.t1, s.t0, s.t1, before);
+    }
+  } else {
+    std::size_t k = 0;
+    for (const auto& [t_drop, beacon_index] : a.drops_before_fix) {
+      for (; k < a.steps_before_fix.size() && a.steps_before_fix[k].t1 <= t_drop; ++k)
+        AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
+      HintDrop(a, beacon_index);
+    }
+    for (; k < a.steps_before_fix.size(); ++k)
       AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
-    HintDrop(a, beacon_index);
   }
-  for (; k < a.steps_before_fix.size(); ++k)
-    AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
   a.steps_before_fix.clear();
   a.drops_before_fix.clear();
   const Vec2 track_n = a.pdr_n - a.start_n;  // in the PDR's frame
@@ -388,23 +427,35 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   last_t_ = t;
   if (const auto* e = std::get_if<MissionEvent>(&row)) {
     if (e->event == "drop" && !e->node.empty()) {
-      const int i = Beacon(e->node);
       drop_rank_.emplace(e->node, static_cast<int>(drop_rank_.size()));
       auto it = agents_.find(e->agent);
-      if (it != agents_.end() && it->second.ekf) it->second.ekf->ConsiderDrop(i, options_.drop_sigma_m);
-      if (it != agents_.end()) {
-        const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
-        if (Agent& a = it->second; a.AwaitingHeading()) {
-          // Where it lies depends on the heading still unknown; a drop at the start does not.
-          if (a.walked_m == 0)
-            map_.SetAnchorHint(i, a.start_n, Mat2::Identity() * a.start_sigma_m * a.start_sigma_m + drop);
-          else
-            a.drops_before_fix.emplace_back(e->t, i);
-        } else if (a.drop_dr) {
-          HintDrop(a, i);
-        } else {
-          const auto [p, cov] = AgentEstimate(it->second);
-          if (p) map_.SetAnchorHint(i, *p, *cov + drop);
+      if (it != agents_.end() && options_.drop_within_step && it->second.drop_dr &&
+          !it->second.AwaitingHeading()) {
+        // Where the dropper was at the drop: within the step that spans it, when that step
+        // comes — the map's prior and the tracker's consider state alike. The beacon joins
+        // the map then, with its prior.
+        Agent& a = it->second;
+        a.pending_drops.emplace_back(e->t, e->node);
+        if (a.ekf) a.deferred.push_back({e->t, -1, std::nullopt, std::nullopt, 0.0, e->node});
+      } else {
+        const int i = Beacon(e->node);
+        if (it != agents_.end() && it->second.ekf)
+          it->second.ekf->ConsiderDrop(i, options_.drop_sigma_m);
+        if (it != agents_.end()) {
+          const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
+          if (Agent& a = it->second; a.AwaitingHeading()) {
+            // Where it lies depends on the heading still unknown; a drop at the start does not.
+            if (a.walked_m == 0)
+              map_.SetAnchorHint(i, a.start_n,
+                                 Mat2::Identity() * a.start_sigma_m * a.start_sigma_m + drop);
+            else
+              a.drops_before_fix.emplace_back(e->t, i);
+          } else if (a.drop_dr) {
+            HintDrop(a, i);
+          } else {
+            const auto [p, cov] = AgentEstimate(it->second);
+            if (p) map_.SetAnchorHint(i, *p, *cov + drop);
+          }
         }
       }
     }
@@ -412,7 +463,11 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
     if (a.AwaitingHeading()) a.steps_before_fix.push_back(*step);
-    if (a.drop_dr) AdvanceDropDeadReckoning(a, *step, d);
+    if (a.drop_dr) {
+      const DropDeadReckoningState before = DropState(a);
+      AdvanceDropDeadReckoning(a, *step, d);
+      HintPendingDrops(a, step->t1, step->t0, step->t1, before);
+    }
     a.walked_m += d.norm();
     if (a.AwaitingHeading() &&
         a.walked_m > options_.entry_heading_fallback_m) {
@@ -514,6 +569,8 @@ void BeaconTrailEstimator::PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1,
 
 void BeaconTrailEstimator::ApplyStanding(TimeS before, TimeS now, EstimateSink& sink) {
   for (auto& [id, a] : agents_) {
+    // Drops made while standing: where the dropper stands (no step spans them).
+    if (a.drop_dr) HintPendingDrops(a, std::nextafter(before, -1e300), 0, 0, DropState(a));
     if (a.deferred.empty() || !a.ekf) continue;
     bool accepted = false;
     std::vector<Deferred> keep;
@@ -633,6 +690,10 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
 }
 
 bool BeaconTrailEstimator::Apply(Agent& a, const Deferred& m) {
+  if (!m.dropped.empty()) {
+    a.ekf->ConsiderDrop(Beacon(m.dropped), options_.drop_sigma_m);
+    return false;
+  }
   const auto pos = map_.Position(m.beacon);
   if (!pos) {
     ++no_position_;

@@ -47,6 +47,11 @@ struct BeaconTrailOptions {
   /// (a longer lag is taken as mds_period_s).
   double map_lag_s = 0.0;
   double drop_sigma_m = 0.3;   ///< m; where a dropped beacon lands around the dropper's estimate
+  /// A drop is placed where the dropper was at the drop's time: within the step that spans it
+  /// (steps arrive at their end), for the map's drop prior and the tracker's consider state
+  /// alike (ours, issue 22). false: at the last step's end before the drop, up to a step
+  /// behind along the walk (the map's beacons lagged the trail by 0.2 m on average).
+  bool drop_within_step = true;
   /// The drop priors of agents with a start come from their own dead reckoning (rotated by
   /// the entry-heading fix), with its covariance of shared errors (heading, drift rate, scale):
   /// not from the tracker, whose estimate is built on the map (issue 22). Set a priori.
@@ -144,6 +149,13 @@ class BeaconTrailEstimator : public OnlineEstimator {
     std::optional<PendingRange> range;
     std::optional<double> bearing;
     double bearing_sigma;
+    std::string dropped;  ///< not empty: the agent dropped this beacon at t (consider state)
+  };
+  /// The drop priors' dead reckoning at one instant: position, white covariance, lever arms.
+  struct DropDeadReckoningState {
+    Vec2 position_n = Vec2::Zero();
+    Mat2 white = Mat2::Zero();
+    Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
   };
   struct Agent {
     std::string id;
@@ -190,13 +202,21 @@ class BeaconTrailEstimator : public OnlineEstimator {
     bool AwaitingHeading() const { return heading_unknown && !heading_fixed; }
     Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
     int last_drop = -1;                      ///< beacon of the previous drop
+    /// Drops waiting for the step that spans them (drop_within_step): time, beacon.
+    std::vector<std::pair<TimeS, std::string>> pending_drops;
     Mat2 last_drop_white_cov = Mat2::Zero();  ///< drop_dr's covariance there
   };
 
   int Beacon(const std::string& id);
   void StartDropDeadReckoning(Agent& a, double heading_sigma_rad);
   void AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d);
-  void HintDrop(Agent& a, int beacon);
+  DropDeadReckoningState DropState(const Agent& a) const;
+  /// The map's prior of `beacon` dropped by `a` at `at`.
+  void HintDrop(Agent& a, int beacon, const DropDeadReckoningState& at);
+  void HintDrop(Agent& a, int beacon) { HintDrop(a, beacon, DropState(a)); }
+  /// The pending drops up to `until`, placed at the share of the step from `before` to now.
+  void HintPendingDrops(Agent& a, TimeS until, TimeS t0, TimeS t1,
+                        const DropDeadReckoningState& before);
   void TryEstimateHeading(Agent& a, TimeS t, const BeaconPosition& beacon,
                           const std::optional<PendingRange>& range, std::optional<double> bearing,
                           double bearing_sigma, EstimateSink& sink);

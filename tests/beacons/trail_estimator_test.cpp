@@ -1,0 +1,89 @@
+// SPDX-License-Identifier: MIT
+// BeaconTrailEstimator: where a dropped beacon's prior lies.
+
+#include "trailmark/beacons/trail_estimator.h"
+
+#include <gtest/gtest.h>
+
+namespace trailmark::beacons {
+namespace {
+
+MissionInfo OneDropperOneBeacon() {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(10, 20, 0), 0.05, 0.0, 0.01));
+  NodeInfo b;
+  b.id = "b1";
+  b.kind = NodeKind::kCrumb;
+  info.nodes.push_back(b);
+  return info;
+}
+
+std::optional<BeaconPosition> MapPosition(const BeaconTrailEstimator& e, const std::string& id) {
+  for (int i = 0; i < static_cast<int>(e.map().size()); ++i)
+    if (e.map().id(i) == id) return e.map().Position(i);
+  return std::nullopt;
+}
+
+// Steps of 0.7 m along +x every 0.6 s (their rows at their end), b1 dropped at `drop_t`.
+Vec2 DroppedAt(double drop_t, bool within_step) {
+  BeaconTrailOptions options;
+  options.drop_within_step = within_step;
+  BeaconTrailEstimator estimator(OneDropperOneBeacon(), options);
+  VectorSink sink;
+  bool dropped = false;
+  for (int k = 0; k < 8; ++k) {
+    Step s;
+    s.t0 = 0.6 * k;
+    s.t1 = 0.6 * (k + 1);
+    s.agent = "ff1";
+    s.delta_n = Vec3(0.7, 0, 0);
+    s.variance_m2 = Vec3(1e-4, 1e-4, 1e-4);
+    if (!dropped && drop_t < s.t1) {
+      estimator.Add(MissionEvent{drop_t, "ff1", "drop", "b1"}, sink);
+      dropped = true;
+    }
+    estimator.Add(s, sink);
+  }
+  estimator.Finish(sink);
+  const auto p = MapPosition(estimator, "b1");
+  EXPECT_TRUE(p.has_value());
+  return p ? p->position_n : Vec2::Constant(std::nan(""));
+}
+
+TEST(BeaconTrailEstimator, ADropIsPlacedWithinTheStepThatSpansIt) {
+  // Dropped a quarter into the third step (1.2-1.8 s): 2.175 m from the start. Its row comes
+  // before the step's (rows in time order, a step at its end).
+  const Vec2 within = DroppedAt(1.35, true);
+  EXPECT_NEAR(within.x(), 10 + 1.4 + 0.25 * 0.7, 1e-6);
+  EXPECT_NEAR(within.y(), 20, 1e-6);
+  // The old placement: where the last step before the drop ended, a quarter step behind.
+  const Vec2 at_end = DroppedAt(1.35, false);
+  EXPECT_NEAR(at_end.x(), 10 + 1.4, 1e-6);
+  // A drop at a step's end (its row after that step's) is the same either way.
+  EXPECT_NEAR(DroppedAt(1.8, true).x(), 10 + 2.1, 1e-6);
+  EXPECT_NEAR(DroppedAt(1.8, false).x(), 10 + 2.1, 1e-6);
+}
+
+TEST(BeaconTrailEstimator, ADropAfterTheLastStepIsPlacedWhereTheDropperStands) {
+  BeaconTrailOptions options;
+  BeaconTrailEstimator estimator(OneDropperOneBeacon(), options);
+  VectorSink sink;
+  Step s;
+  s.t0 = 0;
+  s.t1 = 0.6;
+  s.agent = "ff1";
+  s.delta_n = Vec3(0.7, 0, 0);
+  estimator.Add(s, sink);
+  s.t0 = 0.6;
+  s.t1 = 1.2;
+  estimator.Add(s, sink);
+  estimator.Add(MissionEvent{5.0, "ff1", "drop", "b1"}, sink);  // standing since 1.2 s
+  estimator.Finish(sink);
+  const auto p = MapPosition(estimator, "b1");
+  ASSERT_TRUE(p.has_value());
+  EXPECT_NEAR(p->position_n.x(), 11.4, 1e-6);
+  EXPECT_NEAR(p->position_n.y(), 20, 1e-6);
+}
+
+}  // namespace
+}  // namespace trailmark::beacons
