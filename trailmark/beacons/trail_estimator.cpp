@@ -267,12 +267,10 @@ void BeaconTrailEstimator::HintPendingDrops(Agent& a, TimeS until, TimeS t0, Tim
       continue;
     }
     const double f = t1 > t0 ? std::clamp((t - t0) / (t1 - t0), 0.0, 1.0) : 1.0;
-    DropDeadReckoningState at;
-    at.position_n = before.position_n + f * (after.position_n - before.position_n);
-    at.white = before.white + f * (after.white - before.white);
-    at.sum_d_n = before.sum_d_n + f * (after.sum_d_n - before.sum_d_n);
-    at.sum_t_perp_n = before.sum_t_perp_n + f * (after.sum_t_perp_n - before.sum_t_perp_n);
-    HintDrop(a, Beacon(id), at);
+    const auto lerp = [f](const auto& x0, const auto& x1) { return (x0 + f * (x1 - x0)).eval(); };
+    HintDrop(a, Beacon(id),
+             {lerp(before.position_n, after.position_n), lerp(before.white, after.white),
+              lerp(before.sum_d_n, after.sum_d_n), lerp(before.sum_t_perp_n, after.sum_t_perp_n)});
   }
   a.pending_drops = std::move(later);
 }
@@ -463,10 +461,12 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
     if (a.AwaitingHeading()) a.steps_before_fix.push_back(*step);
-    if (a.drop_dr) {
+    if (a.drop_dr && !a.pending_drops.empty()) {
       const DropDeadReckoningState before = DropState(a);
       AdvanceDropDeadReckoning(a, *step, d);
       HintPendingDrops(a, step->t1, step->t0, step->t1, before);
+    } else if (a.drop_dr) {
+      AdvanceDropDeadReckoning(a, *step, d);
     }
     a.walked_m += d.norm();
     if (a.AwaitingHeading() &&
@@ -570,7 +570,8 @@ void BeaconTrailEstimator::PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1,
 void BeaconTrailEstimator::ApplyStanding(TimeS before, TimeS now, EstimateSink& sink) {
   for (auto& [id, a] : agents_) {
     // Drops made while standing: where the dropper stands (no step spans them).
-    if (a.drop_dr) HintPendingDrops(a, std::nextafter(before, -1e300), 0, 0, DropState(a));
+    if (a.drop_dr && !a.pending_drops.empty())
+      HintPendingDrops(a, std::nextafter(before, -1e300), 0, 0, DropState(a));
     if (a.deferred.empty() || !a.ekf) continue;
     bool accepted = false;
     std::vector<Deferred> keep;
