@@ -85,5 +85,21 @@ TEST(BeaconTrailEstimator, ADropAfterTheLastStepIsPlacedWhereTheDropperStands) {
   EXPECT_NEAR(p->position_n.y(), 20, 1e-6);
 }
 
+TEST(BeaconTrailEstimator, ADropOfAnAgentIsNotABeacon) {
+  // The readers refuse such an event (events.csv, file and line); a live row is left out.
+  BeaconTrailEstimator estimator(OneDropperOneBeacon(), BeaconTrailOptions{});
+  VectorSink sink;
+  estimator.Add(MissionEvent{0.3, "ff1", "drop", "ff1"}, sink);
+  Step s;
+  s.t0 = 0;
+  s.t1 = 0.6;
+  s.agent = "ff1";
+  s.delta_n = Vec3(0.7, 0, 0);
+  estimator.Add(s, sink);
+  estimator.Finish(sink);
+  EXPECT_EQ(estimator.map().size(), 0u);
+  EXPECT_FALSE(MapPosition(estimator, "ff1").has_value());
+}
+
 }  // namespace
 }  // namespace trailmark::beacons

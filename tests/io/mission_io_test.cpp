@@ -159,6 +159,27 @@ TEST(MissionDirectory, DroppedCrumbsJoinTheRegistryAndUnknownIdsFail) {
       AllOf(HasSubstr("steps.csv"), HasSubstr("pdr pipeline")));
 }
 
+TEST(MissionDirectory, AnAgentOrABaseIsNotDropped) {
+  // A drop event whose node is an agent or the base would make it a beacon or crumb of the
+  // estimators (it did: the agent's id became a beacon of the map): refused with file and line.
+  for (const char* node : {"ff1", "base"}) {
+    TempDir dir;
+    dir.File("mission.json", R"({"nodes":[{"id":"base","kind":"base","position":[0,0,0]},
+                                           {"id":"ff1","kind":"agent"}]})");
+    dir.File(
+        "events.csv",
+        std::string("t,agent,event,node\n0,ff1,enter,\n5,ff1,drop,c1\n6,ff1,drop,") + node + "\n");
+    try {
+      const MissionDirectory mission(dir.path());
+      FAIL() << "expected an error for dropping " << node;
+    } catch (const InputError& e) {
+      EXPECT_THAT(e.what(),
+                  AllOf(HasSubstr("events.csv:4:"), HasSubstr(std::string("'") + node + "'"),
+                        HasSubstr("'drop' event")));
+    }
+  }
+}
+
 TEST(MissionDirectory, MissingDirectoryOrMissionJson) {
   TempDir dir;
   EXPECT_THROW(MissionDirectory(dir.path() / "nope"), InputError);

@@ -424,7 +424,9 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   }
   last_t_ = t;
   if (const auto* e = std::get_if<MissionEvent>(&row)) {
-    if (e->event == "drop" && !e->node.empty()) {
+    if (e->event == "drop" && agents_.count(e->node)) {
+      Ignore("drops whose node is an agent");  // the readers refuse them; live rows too
+    } else if (e->event == "drop" && !e->node.empty()) {
       drop_rank_.emplace(e->node, static_cast<int>(drop_rank_.size()));
       auto it = agents_.find(e->agent);
       if (it != agents_.end() && options_.drop_within_step && it->second.drop_dr &&

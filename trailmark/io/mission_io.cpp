@@ -602,7 +602,16 @@ MissionDirectory::MissionDirectory(std::filesystem::path dir) : dir_(std::move(d
     MissionEvent e;
     std::set<std::string> seen;
     while (events.Next(e)) {
-      if (e.event == "drop" && !registry_.Contains(e.node) && seen.insert(e.node).second) {
+      if (e.event != "drop") continue;
+      // A drop puts a crumb (or beacon) down: an agent or a base is not dropped.
+      if (const NodeInfo* n = info_.Find(e.node);
+          n != nullptr && (n->kind == NodeKind::kAgent || n->kind == NodeKind::kBase)) {
+        throw InputError(Path("events.csv").string(), events.csv().line(),
+                         fmt::format("'{}' is {} in mission.json: a 'drop' event's node is the "
+                                     "crumb or beacon dropped",
+                                     e.node, n->kind == NodeKind::kAgent ? "an agent" : "a base"));
+      }
+      if (!registry_.Contains(e.node) && seen.insert(e.node).second) {
         dropped_.push_back(e.node);
       }
     }
