@@ -523,5 +523,72 @@ TEST(BreadcrumbLocalizer, AHeadingDriftIsLearntAndCarriedThroughAStandstill) {
   EXPECT_LT(still.final_error_m, 0.5);
 }
 
+// The zigzag walk above, PDR exact, UWB ranges to three anchors holding the position; three
+// crumbs at known places send RSSI by the stated model, crumb k2 `offset_db` louder.
+struct OffsetWalk {
+  std::optional<double> k1, k2, k3;
+  double mean_error_m = 0;
+};
+OffsetWalk WalkPastALoudCrumb(bool estimate_offsets, double offset_db) {
+  LocalizerOptions o;
+  o.rssi_node_offsets = estimate_offsets;
+  o.radio = {-40.0, 2.3, 4.0};
+  o.radio_given = true;
+  o.calibrate_online = false;
+  BreadcrumbLocalizer loc(o);
+  const std::vector<Vec2> anchors = {{-5, -5}, {40, -5}, {15, 40}};
+  for (std::size_t k = 0; k < anchors.size(); ++k)
+    loc.AddKnownNode("a" + std::to_string(k), anchors[k], 1e-3);
+  const std::vector<Vec2> crumbs = {{3, 2}, {12, 4}, {22, 1}};
+  for (std::size_t k = 0; k < crumbs.size(); ++k)
+    loc.AddKnownNode("k" + std::to_string(k + 1), crumbs[k], 1e-3);
+  loc.AddAgent("ff1", Vec2::Zero(), 0.05, 0.02);
+  Vec2 truth = Vec2::Zero();
+  TimeS t = 0;
+  double sum_error = 0;
+  int n = 0;
+  std::uint32_t noise = 12345;  // a fixed pseudo-random +-2 dB per packet
+  for (int leg = 0; leg < 16; ++leg) {
+    const Vec2 dir = leg % 2 == 0 ? Vec2(0.7, 0) : Vec2(0, leg % 4 == 1 ? 0.7 : -0.7);
+    for (int k = 0; k < 15; ++k) {
+      loc.AddStep({t, t + 0.5, "ff1", Vec3(dir.x(), dir.y(), 0), std::nullopt});
+      truth += dir;
+      t += 0.5;
+      if (k % 3 == 0) {
+        for (std::size_t a = 0; a < anchors.size(); ++a)
+          loc.AddRange(
+              {t, "ff1", "a" + std::to_string(a), (truth - anchors[a]).norm(), 0.3, "uwb"});
+      }
+      for (std::size_t c = 0; c < crumbs.size(); ++c) {
+        noise = noise * 1664525u + 1013904223u;
+        const double e = 4.0 * (noise / 4294967296.0 - 0.5);
+        const double d = std::max((truth - crumbs[c]).norm(), 0.5);
+        const double rssi = -40.0 - 23.0 * std::log10(d) + (c == 1 ? offset_db : 0.0) + e;
+        loc.AddRssi({t, "ff1", "k" + std::to_string(c + 1), rssi});
+      }
+      loc.AdvanceTo(t);
+      sum_error += (loc.Estimate("ff1")->position_n - truth).norm();
+      ++n;
+    }
+  }
+  loc.Finish();
+  return {loc.RssiOffsetDb("k1"), loc.RssiOffsetDb("k2"), loc.RssiOffsetDb("k3"), sum_error / n};
+}
+
+TEST(BreadcrumbLocalizer, ACrumbsRssiOffsetIsLearnt) {
+  const OffsetWalk with = WalkPastALoudCrumb(true, 8.0);
+  ASSERT_TRUE(with.k1 && with.k2 && with.k3);
+  EXPECT_NEAR(*with.k2, 8.0, 1.5);  // the loud crumb
+  EXPECT_NEAR(*with.k1, 0.0, 1.5);  // the others stay near their prior's zero
+  EXPECT_NEAR(*with.k3, 0.0, 1.5);
+  // Without the states the offset is read as distance: the walk's error grows.
+  const OffsetWalk without = WalkPastALoudCrumb(false, 8.0);
+  EXPECT_FALSE(without.k2.has_value());
+  EXPECT_LT(with.mean_error_m, without.mean_error_m);
+  // No offset: none is invented.
+  const OffsetWalk honest = WalkPastALoudCrumb(true, 0.0);
+  EXPECT_LT(std::abs(*honest.k2), 1.5);
+}
+
 }  // namespace
 }  // namespace trailmark::breadcrumb

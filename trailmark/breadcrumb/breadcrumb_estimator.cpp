@@ -83,6 +83,10 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "estimate a range offset (and scale) per range kind");
     t.Real("range_scale_sigma", &L::range_scale_sigma0, "", nonneg,
            "prior sigma of the range scale (0: scale fixed at 1)");
+    t.Flag("rssi_node_offsets", &L::rssi_node_offsets,
+           "estimate an RSSI offset per crumb / landmark (issue 25)");
+    t.Real("rssi_node_offset_sigma_db", &L::rssi_node_offset_sigma_db, "dB", pos,
+           "prior sigma of a node's RSSI offset");
     t.Real("moved_min_z", [](L& o) -> double& { return o.link_change.min_z; }, "", nonneg,
            "a link's RSSI shift must also be this many of its own standard errors (0: dB only)");
     t.Real("gate_sigma", &L::gate_sigma, "", pos,

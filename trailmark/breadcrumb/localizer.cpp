@@ -597,6 +597,22 @@ NodeIndex BreadcrumbLocalizer::RangeBiasNode(const std::string& kind) {
   return n;
 }
 
+NodeIndex BreadcrumbLocalizer::RssiOffsetNode(StaticNode& node) {
+  if (!options_.rssi_node_offsets) return -1;
+  if (node.rssi_offset < 0) {
+    node.rssi_offset = gen_.AddNode(Vec2::Zero());
+    const double s = options_.rssi_node_offset_sigma_db;
+    gen_.AddPrior(node.rssi_offset, Vec2::Zero(), Vec2(s * s, 1e-12).asDiagonal());
+  }
+  return node.rssi_offset;
+}
+
+std::optional<double> BreadcrumbLocalizer::RssiOffsetDb(const std::string& id) const {
+  const auto it = static_.find(id);
+  if (it == static_.end() || it->second.rssi_offset < 0) return std::nullopt;
+  return gen_.Estimate(it->second.rssi_offset).x();
+}
+
 std::optional<Vec2> BreadcrumbLocalizer::RangeBias(const std::string& kind) const {
   auto it = range_bias_.find(kind);
   if (it == range_bias_.end()) return std::nullopt;
@@ -694,7 +710,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const double var = AgentRssiVariance() + slope * slope * offset_var.mean();
       AddScalarRobust(a.state, node->index, cov_here, node->cached_cov,
                       p.value + options_.radio.body_loss_db * body, var, model, offset,
-                      options_.rssi_nlos_k, -1, &p.other, p.t);
+                      options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t);
       ++summary_.rssi_agent_used;
       break;
     }

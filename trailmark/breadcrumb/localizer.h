@@ -150,6 +150,12 @@ struct LocalizerOptions {
   /// 0 keeps the scale at 0: with a PDR scale also estimated (heading/scale node) the two trade
   /// off and are poorly observable; enable it when the odometry scale is trusted.
   double range_scale_sigma0 = 0.0;
+  /// Per-node RSSI offset (issue 25, item 3): each crumb's (or landmark's) transmit power and
+  /// antenna differ — ±3-4 dB between beacons of one make on recorded BLE — so every agent
+  /// packet from it is z = h(d) + o_node + e, o_node a state of the network with a prior of
+  /// `rssi_node_offset_sigma_db` (a priori: the spread quoted above), estimated with the rest.
+  bool rssi_node_offsets = false;
+  double rssi_node_offset_sigma_db = 4.0;
   // robustness
   double gate_sigma = 5.0;                   ///< reject when |innovation| > gate * sigma_S
   double huber_k = 1.5;                      ///< variance x (|nu| / (k sigma_S)) beyond k
@@ -250,6 +256,8 @@ class BreadcrumbLocalizer {
   const std::vector<std::string>& StaticNodes() const { return static_order_; }
   /// Estimated (offset m, scale) of a range kind (empty when not estimated).
   std::optional<Vec2> RangeBias(const std::string& kind) const;
+  /// The estimated RSSI offset of a crumb or landmark (dB; rssi_node_offsets), when it has one.
+  std::optional<double> RssiOffsetDb(const std::string& id) const;
   /// Ids of crumbs detected as moved, with the detection time.
   const std::vector<std::pair<TimeS, std::string>>& MovedNodes() const { return moved_; }
 
@@ -318,6 +326,7 @@ class BreadcrumbLocalizer {
     TimeS cov_t = -1e300;
     std::vector<InitObservation> init;
     int next_try = 0;
+    NodeIndex rssi_offset = -1;  ///< (offset dB, 0) when rssi_node_offsets
   };
   struct Link {
     int edge = -1;
@@ -342,6 +351,8 @@ class BreadcrumbLocalizer {
                        double k_negative, NodeIndex bias = -1, const std::string* source = nullptr,
                        TimeS t = 0);
   NodeIndex RangeBiasNode(const std::string& kind);
+  /// The node's RSSI offset state (created with its prior on first use); -1 when not estimated.
+  NodeIndex RssiOffsetNode(StaticNode& node);
   void ObserveUninitialized(StaticNode& node, const Vec2& from, double range_m, double sigma_m,
                             bool biased = false);
   void TryInitialize(StaticNode& node);
