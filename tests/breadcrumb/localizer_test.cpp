@@ -529,9 +529,9 @@ struct OffsetWalk {
   std::optional<double> k1, k2, k3;
   double mean_error_m = 0;
 };
-OffsetWalk WalkPastALoudCrumb(bool estimate_offsets, double offset_db) {
+OffsetWalk WalkPastALoudCrumb(LocalizerOptions::RssiOffsets mode, double offset_db) {
   LocalizerOptions o;
-  o.rssi_node_offsets = estimate_offsets;
+  o.rssi_offsets = mode;
   o.radio = {-40.0, 2.3, 4.0};
   o.radio_given = true;
   o.calibrate_online = false;
@@ -576,18 +576,22 @@ OffsetWalk WalkPastALoudCrumb(bool estimate_offsets, double offset_db) {
 }
 
 TEST(BreadcrumbLocalizer, ACrumbsRssiOffsetIsLearnt) {
-  const OffsetWalk with = WalkPastALoudCrumb(true, 8.0);
-  ASSERT_TRUE(with.k1 && with.k2 && with.k3);
-  EXPECT_NEAR(*with.k2, 8.0, 1.5);  // the loud crumb
-  EXPECT_NEAR(*with.k1, 0.0, 1.5);  // the others stay near their prior's zero
-  EXPECT_NEAR(*with.k3, 0.0, 1.5);
-  // Without the states the offset is read as distance: the walk's error grows.
-  const OffsetWalk without = WalkPastALoudCrumb(false, 8.0);
+  using Mode = LocalizerOptions::RssiOffsets;
+  const OffsetWalk without = WalkPastALoudCrumb(Mode::kOff, 8.0);
   EXPECT_FALSE(without.k2.has_value());
-  EXPECT_LT(with.mean_error_m, without.mean_error_m);
-  // No offset: none is invented.
-  const OffsetWalk honest = WalkPastALoudCrumb(true, 0.0);
-  EXPECT_LT(std::abs(*honest.k2), 1.5);
+  for (const Mode mode : {Mode::kInnovations, Mode::kNetwork}) {
+    SCOPED_TRACE(static_cast<int>(mode));
+    const OffsetWalk with = WalkPastALoudCrumb(mode, 8.0);
+    ASSERT_TRUE(with.k1 && with.k2 && with.k3);
+    EXPECT_NEAR(*with.k2, 8.0, 1.5);  // the loud crumb
+    EXPECT_NEAR(*with.k1, 0.0, 1.5);  // the others stay near their prior's zero
+    EXPECT_NEAR(*with.k3, 0.0, 1.5);
+    // Without an offset the loudness is read as distance: the walk's error grows.
+    EXPECT_LT(with.mean_error_m, without.mean_error_m);
+    // No offset: none is invented.
+    const OffsetWalk honest = WalkPastALoudCrumb(mode, 0.0);
+    EXPECT_LT(std::abs(*honest.k2), 1.5);
+  }
 }
 
 }  // namespace

@@ -83,8 +83,13 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "estimate a range offset (and scale) per range kind");
     t.Real("range_scale_sigma", &L::range_scale_sigma0, "", nonneg,
            "prior sigma of the range scale (0: scale fixed at 1)");
-    t.Flag("rssi_node_offsets", &L::rssi_node_offsets,
-           "estimate an RSSI offset per crumb / landmark (issue 25)");
+    t.Choice("rssi_offsets", &L::rssi_offsets,
+             std::vector<std::pair<std::string, L::RssiOffsets>>{
+                 {"innovations", L::RssiOffsets::kInnovations},
+                 {"network", L::RssiOffsets::kNetwork},
+                 {"off", L::RssiOffsets::kOff}},
+             "an RSSI offset per crumb / landmark (issue 25): innovations: from each node's "
+             "packet innovations; network: a state of the network (slow); off");
     t.Real("rssi_node_offset_sigma_db", &L::rssi_node_offset_sigma_db, "dB", pos,
            "prior sigma of a node's RSSI offset");
     t.Real("moved_min_z", [](L& o) -> double& { return o.link_change.min_z; }, "", nonneg,

@@ -598,7 +598,7 @@ NodeIndex BreadcrumbLocalizer::RangeBiasNode(const std::string& kind) {
 }
 
 NodeIndex BreadcrumbLocalizer::RssiOffsetNode(StaticNode& node) {
-  if (!options_.rssi_node_offsets) return -1;
+  if (options_.rssi_offsets != LocalizerOptions::RssiOffsets::kNetwork) return -1;
   if (node.rssi_offset < 0) {
     node.rssi_offset = gen_.AddNode(Vec2::Zero());
     const double s = options_.rssi_node_offset_sigma_db;
@@ -609,8 +609,22 @@ NodeIndex BreadcrumbLocalizer::RssiOffsetNode(StaticNode& node) {
 
 std::optional<double> BreadcrumbLocalizer::RssiOffsetDb(const std::string& id) const {
   const auto it = static_.find(id);
-  if (it == static_.end() || it->second.rssi_offset < 0) return std::nullopt;
+  if (it == static_.end()) return std::nullopt;
+  switch (options_.rssi_offsets) {
+    case LocalizerOptions::RssiOffsets::kOff:
+      return std::nullopt;
+    case LocalizerOptions::RssiOffsets::kInnovations:
+      return InnovationOffsetDb(it->second);
+    case LocalizerOptions::RssiOffsets::kNetwork:
+      break;
+  }
+  if (it->second.rssi_offset < 0) return std::nullopt;
   return gen_.Estimate(it->second.rssi_offset).x();
+}
+
+double BreadcrumbLocalizer::InnovationOffsetDb(const StaticNode& node) const {
+  const double s0 = options_.rssi_node_offset_sigma_db;
+  return node.offset_sum / (node.offset_info + 1.0 / (s0 * s0));
 }
 
 std::optional<Vec2> BreadcrumbLocalizer::RangeBias(const std::string& kind) const {
@@ -708,8 +722,22 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const double d = std::max((here - gen_.Estimate(node->index)).norm(), model.min_distance_m);
       const double slope = model.Slope(d);
       const double var = AgentRssiVariance() + slope * slope * offset_var.mean();
-      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov,
-                      p.value + options_.radio.body_loss_db * body, var, model, offset,
+      double z = p.value + options_.radio.body_loss_db * body;
+      if (options_.rssi_offsets == LocalizerOptions::RssiOffsets::kInnovations) {
+        // The node's offset from its packets before this one (prior-shrunk information-weighted
+        // mean of their innovations; gross ones left out), then this packet's innovation added.
+        const double o = InnovationOffsetDb(*node);
+        const Vec2 diff = here - gen_.Estimate(node->index);
+        const Vec2 u = diff.norm() > 1e-9 ? Vec2(diff / diff.norm()) : Vec2(1, 0);
+        const double S = var + slope * slope * u.dot((cov_here + node->cached_cov) * u);
+        const double nu = z - model.Linearize(diff.norm()).predicted;
+        if (std::abs(nu - o) < options_.gate_sigma * std::sqrt(S)) {
+          node->offset_sum += nu / S;
+          node->offset_info += 1.0 / S;
+        }
+        z -= o;
+      }
+      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, z, var, model, offset,
                       options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t);
       ++summary_.rssi_agent_used;
       break;
