@@ -196,7 +196,22 @@ TEST(BreadcrumbPipeline, KickedCrumbIsDetected) {
   struct Null : EstimateSink {
     void Add(const Estimate&) override {}
   } sink;
-  EXPECT_EQ(RunNamed("breadcrumb", mission, {}, sink).numbers.at("moved_detected"), 0.0);
+  const EstimatorSummary summary = RunNamed("breadcrumb", mission, {}, sink);
+  EXPECT_EQ(summary.numbers.at("moved_detected"), 0.0);
+  // Each crumb's RSSI offset is reported (rssi_offsets=innovations by default), within its
+  // prior's reach; none with rssi_offsets=off.
+  int offsets = 0;
+  for (const auto& [key, value] : summary.numbers) {
+    if (key.ends_with(".rssi_offset_db")) {
+      ++offsets;
+      EXPECT_TRUE(std::isfinite(value)) << key;
+      EXPECT_LT(std::abs(value), 12.0) << key;
+    }
+  }
+  EXPECT_GE(offsets, 4);
+  for (const auto& [key, value] :
+       RunNamed("breadcrumb", mission, {{"rssi_offsets", "off"}}, sink).numbers)
+    EXPECT_FALSE(key.ends_with(".rssi_offset_db")) << key;
 }
 
 // Fuzzed streams: random steps (some impossible), RSSI anywhere from -100 to -10 dBm between any

@@ -309,6 +309,10 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
       num[id + ".heading_rate_deg_per_min"] = kb->y() * kDeg * 60.0;
     }
   }
+  // Per crumb or landmark: its RSSI offset as estimated (rssi_offsets; issue 25).
+  for (const std::string& id : loc_->StaticNodes()) {
+    if (const auto o = loc_->RssiOffsetDb(id)) num[id + ".rssi_offset_db"] = *o;
+  }
   num["radio_other_floor"] = static_cast<double>(other_floor_);
   if (!latency_us_.empty()) {
     std::vector<float> l = latency_us_;
