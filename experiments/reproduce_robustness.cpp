@@ -9,7 +9,9 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <limits>
 #include <map>
+#include <tuple>
 
 #include "experiments/experiments.h"
 #include "trailmark/eval/metrics.h"
@@ -50,8 +52,10 @@ Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs
   return o;
 }
 
-std::string Scenario(const PipelineSpec& p) {
-  return p.paper_scenarios.empty() ? "office-loop" : p.paper_scenarios.front();
+/// The scenarios a pipeline runs on: its papers' (the fusion has several), else the office loop.
+std::vector<std::string> Scenarios(const PipelineSpec& p) {
+  if (p.paper_scenarios.empty()) return {"office-loop"};
+  return p.paper_scenarios;
 }
 
 }  // namespace
@@ -79,7 +83,7 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
   // An option a pipeline refuses is an error now, not a column of refused runs.
   for (const PipelineSpec* p : pipelines) {
     if (options.empty()) break;
-    const SimulatedMission sim = SimulateScenario(Scenario(*p), 100 + first_seed);
+    const SimulatedMission sim = SimulateScenario(Scenarios(*p).front(), 100 + first_seed);
     try {
       p->make({sim.data.info, &sim.plan}, options, Feed::kTimeOrdered);
     } catch (const std::invalid_argument& e) {
@@ -87,15 +91,19 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
     }
   }
   std::map<std::string, std::vector<std::string>> by_scenario;
-  for (const PipelineSpec* p : pipelines) by_scenario[Scenario(*p)].push_back(p->name);
+  for (const PipelineSpec* p : pipelines)
+    for (const std::string& scenario : Scenarios(*p)) by_scenario[scenario].push_back(p->name);
 
   struct Cell {
     std::vector<double> p50, p75, max, in95, dr_p75, dr_in95;
+    std::vector<double> best_other_p75;  ///< the best other pipeline's p75 on the same variant
     int worse = 0, refused = 0, runs = 0;
+    int behind_best = 0;  ///< variants where p75 > 1.05 x the best other pipeline's
     std::string first_refusal;
     bool agents = true;
   };
-  std::map<std::pair<std::string, std::string>, Cell> cells;  // (pipeline, family)
+  std::map<std::tuple<std::string, std::string, std::string>, Cell> cells;  // (pipeline,
+                                                                            // scenario, family)
   const auto families = VariationFamilies();
   int done = 0;
   const int total = static_cast<int>(by_scenario.size() * families.size()) * variants;
@@ -109,8 +117,9 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
         const fs::path dir = out / "missions" / fmt::format("{}-{}-{}", scenario, family_name, k);
         WriteMissionDirectory(dir / "mission", sim.data, &sim.plan, v.write);
         const Outcome dr = RunOn("pdr", dir / "mission", dir / "pdr");
+        std::map<std::string, double> p75_of;  // agents' p75 of each pipeline on this variant
         for (const std::string& name : names) {
-          Cell& c = cells[{name, family_name}];
+          Cell& c = cells[{name, scenario, family_name}];
           ++c.runs;
           const Outcome o = RunOn(name, dir / "mission", dir / name, options);
           if (!o.ran) {
@@ -124,11 +133,21 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
           c.p75.push_back(s.p75_m);
           c.max.push_back(s.max_m);
           c.in95.push_back(s.in95);
+          if (c.agents) p75_of[name] = s.p75_m;
           if (c.agents && dr.ran && dr.agents.samples > 0) {
             c.dr_p75.push_back(dr.agents.p75_m);
             c.dr_in95.push_back(dr.agents.in95);
             if (s.p75_m > 1.1 * dr.agents.p75_m) ++c.worse;
           }
+        }
+        for (const auto& [name, p75] : p75_of) {
+          double best = std::numeric_limits<double>::infinity();
+          for (const auto& [other, other_p75] : p75_of)
+            if (other != name) best = std::min(best, other_p75);
+          if (!std::isfinite(best)) continue;
+          Cell& c = cells[{name, scenario, family_name}];
+          c.best_other_p75.push_back(best);
+          if (p75 > 1.05 * best) ++c.behind_best;
         }
         if (++done % std::max(1, total / 10) == 0 || done == total)
           fmt::print(stderr, "robustness: {}/{} variants\n", done, total);
@@ -142,8 +161,10 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
       "the agents' horizontal errors (m; beacons-mds: its beacons'), each figure the mean over "
       "the variants of that variant's statistic (max: the largest); in95: share of truth inside "
       "the estimate's own 95 % ellipse (honest: 85-99 %); DR: dead reckoning (pdr) on the same "
-      "variant; worse: variants where p75 > 1.1 x DR's p75 (goal 0); refused: variants the "
-      "pipeline would not run (with the first reason).\n\n",
+      "variant; worse: variants where p75 > 1.1 x DR's p75 (goal 0); best other: the best p75 "
+      "of the other pipelines run on the same variant (mean over the variants), behind: variants "
+      "where p75 > 1.05 x that (the fusion's goal: 0); refused: variants the pipeline would not "
+      "run (with the first reason).\n\n",
       variants, first_seed, first_seed + variants - 1);
   if (!options.empty()) {
     std::string given;
@@ -152,26 +173,32 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
   }
   text +=
       "| pipeline | scenario | family | p50 m | p75 m | max m | in95 % | DR p75 m | DR in95 % | "
-      "worse than DR | refused |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+      "worse than DR | best other p75 m | behind best | refused |\n"
+      "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   int worse_total = 0, refused_total = 0, runs_total = 0;
   for (const PipelineSpec* p : pipelines) {
-    for (const auto& [family, family_name] : families) {
-      const Cell& c = cells[{p->name, family_name}];
-      worse_total += c.worse;
-      refused_total += c.refused;
-      runs_total += c.runs;
-      const bool any = !c.p50.empty();
-      auto num = [&](double x) { return any ? fmt::format("{:.2f}", x) : std::string("-"); };
-      text += fmt::format(
-          "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", p->name, Scenario(*p),
-          family_name, num(Mean(c.p50)), num(Mean(c.p75)),
-          any ? fmt::format("{:.2f}", *std::max_element(c.max.begin(), c.max.end())) : "-",
-          any ? fmt::format("{:.0f}", 100 * Mean(c.in95)) : "-",
-          c.dr_p75.empty() ? "-" : fmt::format("{:.2f}", Mean(c.dr_p75)),
-          c.dr_in95.empty() ? "-" : fmt::format("{:.0f}", 100 * Mean(c.dr_in95)),
-          c.agents ? fmt::format("{}/{}", c.worse, c.runs - c.refused) : "-",
-          c.refused == 0 ? std::string("0")
-                         : fmt::format("{} ({})", c.refused, c.first_refusal.substr(0, 80)));
+    for (const std::string& scenario : Scenarios(*p)) {
+      for (const auto& [family, family_name] : families) {
+        const Cell& c = cells[{p->name, scenario, family_name}];
+        worse_total += c.worse;
+        refused_total += c.refused;
+        runs_total += c.runs;
+        const bool any = !c.p50.empty();
+        auto num = [&](double x) { return any ? fmt::format("{:.2f}", x) : std::string("-"); };
+        text += fmt::format(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n", p->name,
+            scenario, family_name, num(Mean(c.p50)), num(Mean(c.p75)),
+            any ? fmt::format("{:.2f}", *std::max_element(c.max.begin(), c.max.end())) : "-",
+            any ? fmt::format("{:.0f}", 100 * Mean(c.in95)) : "-",
+            c.dr_p75.empty() ? "-" : fmt::format("{:.2f}", Mean(c.dr_p75)),
+            c.dr_in95.empty() ? "-" : fmt::format("{:.0f}", 100 * Mean(c.dr_in95)),
+            c.agents ? fmt::format("{}/{}", c.worse, c.runs - c.refused) : "-",
+            c.best_other_p75.empty() ? "-" : fmt::format("{:.2f}", Mean(c.best_other_p75)),
+            c.best_other_p75.empty() ? "-"
+                                     : fmt::format("{}/{}", c.behind_best, c.best_other_p75.size()),
+            c.refused == 0 ? std::string("0")
+                           : fmt::format("{} ({})", c.refused, c.first_refusal.substr(0, 80)));
+      }
     }
   }
   text += fmt::format(

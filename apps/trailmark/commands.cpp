@@ -658,7 +658,7 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
     const std::string extra = "multi-floor";
     const fs::path mdir = out / "missions" / extra;
     Simulate(extra, seed, mdir);
-    const std::set<std::string> floors_pipelines{"pdr", "ins", "mapmatch", "breadcrumb"};
+    const std::set<std::string> floors_pipelines{"pdr", "ins", "mapmatch", "breadcrumb", "fusion"};
     for (const auto& p : Pipelines()) {
       if (floors_pipelines.count(p.name)) done.erase(p.name);
       else done.insert(p.name);

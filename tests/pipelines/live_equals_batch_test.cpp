@@ -161,8 +161,10 @@ void CheckCase(const Case& c) {
   VectorSink batch;
   RunNamed(c.pipeline, mission, c.options, batch);
   ASSERT_GT(batch.rows.size(), 20u);
-  const auto floor = spec.needs_floor_plan ? LoadPipelineFloor(spec, mission, c.options)
-                                           : std::optional<FloorPlan>();
+  const bool with_plan =
+      spec.needs_floor_plan || (spec.uses_floor_plan && mission.info().floorplan.has_value());
+  const auto floor =
+      with_plan ? LoadPipelineFloor(spec, mission, c.options) : std::optional<FloorPlan>();
   const FloorPlan* plan = floor ? &*floor : nullptr;
   const std::vector<MissionRow> merged = MergedRows(spec, c.sim.data);
   // In time order: the very same estimates.
@@ -228,10 +230,17 @@ TEST(LiveEqualsBatch, MapMatch) {
              {{"init", "uniform"}}});
 }
 
+// The fusion: live builds a member for every stream, the batch run only those the mission's
+// streams can feed; a member is used once its own evidence arrives, so the two agree.
+TEST(LiveEqualsBatch, Fusion) {
+  CheckCase({"fusion", "beacon trail, steps", SimulateScenario("beacon-trail", 2), {}});
+  CheckCase({"fusion", "training building, foot IMU", WithImuOnly(TwoFirefighters(), 9), {}});
+}
+
 TEST(LiveEqualsBatch, EveryPipelineOfTheRegistryIsCovered) {
-  const std::set<std::string> covered{"pdr",           "ins",         "breadcrumb",
-                                      "landmarks-stopgo", "landmarks-ukf", "beacons-mds",
-                                      "beacons-ekf",   "mapmatch"};
+  const std::set<std::string> covered{
+      "pdr",         "ins",      "breadcrumb", "landmarks-stopgo", "landmarks-ukf", "beacons-mds",
+      "beacons-ekf", "mapmatch", "fusion"};
   for (const auto& p : Pipelines()) EXPECT_TRUE(covered.count(p.name)) << p.name;
 }
 

@@ -19,7 +19,7 @@ namespace {
 
 using ::testing::HasSubstr;
 
-TEST(Registry, EightPipelinesEachWithItsSchemaAndFactory) {
+TEST(Registry, NinePipelinesEachWithItsSchemaAndFactory) {
   std::set<std::string> names;
   for (const auto& p : Pipelines()) {
     names.insert(p.name);
@@ -37,9 +37,9 @@ TEST(Registry, EightPipelinesEachWithItsSchemaAndFactory) {
       EXPECT_FALSE(o.description.empty()) << p.name << " " << o.key;
     }
   }
-  EXPECT_EQ(names, (std::set<std::string>{"pdr", "ins", "breadcrumb", "landmarks-stopgo",
-                                          "landmarks-ukf", "beacons-mds", "beacons-ekf",
-                                          "mapmatch"}));
+  EXPECT_EQ(names,
+            (std::set<std::string>{"pdr", "ins", "breadcrumb", "landmarks-stopgo", "landmarks-ukf",
+                                   "beacons-mds", "beacons-ekf", "mapmatch", "fusion"}));
   EXPECT_EQ(FindPipeline("nope"), nullptr);
   EXPECT_THAT([] { RequirePipeline("nope"); },
               ::testing::ThrowsMessage<std::invalid_argument>(HasSubstr("known: pdr, ")));
@@ -142,7 +142,7 @@ TEST(Registry, RunnableFollowsTheNeeds) {
   EXPECT_TRUE(RunnablePipelines(MissionDirectory(dir.path())).empty());
   dir.File("imu.csv", "t,agent,ax,ay,az,gx,gy,gz\n0,ff1,0,0,9.8,0,0,0\n");
   EXPECT_THAT(RunnablePipelines(MissionDirectory(dir.path())),
-              ::testing::ElementsAre("pdr", "breadcrumb", "ins"));
+              ::testing::ElementsAre("pdr", "breadcrumb", "ins", "fusion"));
   dir.File("ranges.csv", "t,a,b,range\n0,ff1,b1,1\n");
   EXPECT_THAT(RunnablePipelines(MissionDirectory(dir.path())),
               ::testing::Contains("beacons-ekf"));

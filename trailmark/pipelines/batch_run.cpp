@@ -72,7 +72,8 @@ void RequireFloorPlan(const PipelineSpec& pipeline, const MissionDirectory& miss
 PipelinePlan LoadPipelinePlan(const PipelineSpec& pipeline, const MissionDirectory& mission,
                               const OptionValues& options, std::vector<std::string>* notes) {
   PipelinePlan plan;
-  if (!pipeline.needs_floor_plan) return plan;
+  const bool optional_plan = pipeline.uses_floor_plan && mission.info().floorplan.has_value();
+  if (!pipeline.needs_floor_plan && !optional_plan) return plan;
   RequireFloorPlan(pipeline, mission);
   plan.floor = LoadPipelineFloor(pipeline, mission, options, notes, &plan.levels);
   plan.source = mission.Path(*mission.info().floorplan).string();
@@ -176,8 +177,9 @@ EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& c
   EstimatorSummary summary;
   const StreamSet feed = BatchFeedStreams(pipeline, mission, context.options, &summary.notes);
   const PipelinePlan plan = LoadPipelinePlan(pipeline, mission, context.options, &summary.notes);
-  const auto estimator =
-      pipeline.make(plan.InputsFor(mission.info()), context.options, Feed::kTimeOrdered);
+  EstimatorInputs inputs = plan.InputsFor(mission.info());
+  inputs.streams = feed;
+  const auto estimator = pipeline.make(inputs, context.options, Feed::kTimeOrdered);
   MergedStream stream(mission, feed);
   Drive(*estimator, stream, mission, sink, context.progress);
   summary.Merge(estimator->Summary());

@@ -10,6 +10,7 @@
 
 #include "trailmark/beacons/trail_estimator.h"
 #include "trailmark/breadcrumb/breadcrumb_estimator.h"
+#include "trailmark/fusion/fusion_estimator.h"
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/ins/ins_estimator.h"
 #include "trailmark/integrity/consistency.h"
@@ -101,10 +102,10 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
     };
   }
   const bool needs_plan = spec.needs_floor_plan;
-  spec.make = [parse, inner, front, name, needs_plan, guarded](
-                  const EstimatorInputs& in, const OptionValues& values,
-                  Feed feed) -> std::unique_ptr<OnlineEstimator> {
-    const P o = parse(values);
+  // The estimator and its guard, checked options: what `make` wraps and the fusion's members.
+  auto guarded_inner = [parse, inner, name, needs_plan, guarded](
+                           const EstimatorInputs& in,
+                           const P& o) -> std::unique_ptr<OnlineEstimator> {
     std::string why;
     if constexpr (requires(const E& e) { e.IsValid(&why); }) {
       if (!o.estimator.IsValid(&why)) throw std::invalid_argument("pipeline " + name + ": " + why);
@@ -123,6 +124,18 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
       estimator =
           std::make_unique<integrity::DeadReckoningGuard>(in.info, o.guard, std::move(estimator));
     }
+    return estimator;
+  };
+  if (front != Front::kNone) {
+    spec.make_member = [parse, guarded_inner](const EstimatorInputs& in,
+                                              const OptionValues& values) {
+      return guarded_inner(in, parse(values));
+    };
+  }
+  spec.make = [parse, guarded_inner, front](const EstimatorInputs& in, const OptionValues& values,
+                                            Feed feed) -> std::unique_ptr<OnlineEstimator> {
+    const P o = parse(values);
+    std::unique_ptr<OnlineEstimator> estimator = guarded_inner(in, o);
     if (front != Front::kNone) {
       estimator = std::make_unique<StepFrontEnd>(
           in.info, o.steps, front == Front::kGlobal ? RowOrder::kGlobal : RowOrder::kPerAgent,
@@ -134,6 +147,89 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
 }
 
 const StreamSet kStepStreams{Stream::kSteps, Stream::kImu};
+
+/// The fusion's options: its own, and which pipelines may be its members (each at its
+/// defaults; the ablation turns one off).
+struct FusionPipelineOptions {
+  fusion::FusionOptions fusion;
+  bool use_pdr = true;
+  bool use_breadcrumb = true;
+  bool use_beacons = true;
+  bool use_landmarks = true;
+  bool use_mapmatch = true;
+  bool IsValid(std::string* why) const { return fusion.IsValid(why); }
+};
+
+const OptionTable<FusionPipelineOptions>& FusionPipelineOptionTable() {
+  static const OptionTable<FusionPipelineOptions> table = [] {
+    using F = FusionPipelineOptions;
+    OptionTable<F> t;
+    t.Include("", &F::fusion, fusion::FusionOptionTable());
+    t.Flag("use.pdr", &F::use_pdr,
+           "member: dead reckoning (pdr), used where no other member has an estimate");
+    t.Flag("use.breadcrumb", &F::use_breadcrumb,
+           "member: the breadcrumb network (RSSI/ranges to crumbs and between agents)");
+    t.Flag("use.beacons", &F::use_beacons,
+           "member: the beacon trail's EKF (beacons-ekf), when the mission has ranges");
+    t.Flag("use.landmarks", &F::use_landmarks,
+           "member: the landmark filter (landmarks-ukf), with 3+ landmarks and RSSI");
+    t.Flag("use.mapmatch", &F::use_mapmatch,
+           "member: map matching (mapmatch), when the mission has a floor plan");
+    return t;
+  }();
+  return table;
+}
+
+/// The fusion's members for an incident: each allowed pipeline the mission's streams, nodes
+/// and floor plan can feed, built at its defaults.
+std::vector<fusion::FusionMember> FusionMembers(const EstimatorInputs& in,
+                                                const FusionPipelineOptions& o,
+                                                std::vector<std::string>* notes) {
+  struct Candidate {
+    const char* name;
+    bool use;
+    StreamSet evidence;  // the streams of its own evidence (fusion_estimator.h)
+    int static_rank;     // whose estimates of static nodes come first (fusion_estimator.h)
+  };
+  const Candidate allowed[] = {
+      {"breadcrumb", o.use_breadcrumb, {Stream::kRssi, Stream::kRanges}, 2},
+      {"beacons-ekf", o.use_beacons, {Stream::kRanges, Stream::kBearings}, 0},
+      {"landmarks-ukf", o.use_landmarks, {Stream::kRssi}, 1},
+      {"mapmatch", o.use_mapmatch, {}, 3}};
+  // Members get steps from the fusion's front end: imu.csv feeds them as steps.csv does. The
+  // streams only spare members that would never see their evidence (the estimates are the
+  // same without them: a member is used once its evidence arrives).
+  StreamSet present;
+  if (in.streams) {
+    present = *in.streams;
+    if (present.Has(Stream::kImu)) present.Add(Stream::kSteps);
+  } else {
+    for (Stream s : kAllStreams) present.Add(s);
+  }
+  std::vector<fusion::FusionMember> members;
+  for (const auto& [name, use, evidence, rank] : allowed) {
+    if (!use) continue;
+    const PipelineSpec& p = RequirePipeline(name);
+    if (!p.make_member || !p.CanRun(in.info, present, in.floor_plan != nullptr)) continue;
+    // A member that cannot use this incident (a floor plan that encloses nothing, for map
+    // matching) is left out with a note; the others still run.
+    try {
+      members.push_back({name, p.make_member(in, {}), evidence, false, rank});
+    } catch (const std::exception& e) {
+      notes->push_back(fmt::format("{} not used: {}", name, e.what()));
+    }
+  }
+  // Every member dead-reckons the same steps: dead reckoning adds no information of its own
+  // to any of them (as a full member it pulled the fusion toward its drift), so it is used
+  // only where no other member has an estimate (before any evidence, an agent no other tracks).
+  if (o.use_pdr) {
+    fusion::FusionMember dr{"pdr", RequirePipeline("pdr").make_member(in, {})};
+    dr.fallback_only = true;
+    dr.static_rank = 4;
+    members.push_back(std::move(dr));
+  }
+  return members;
+}
 
 std::vector<PipelineSpec> BuildRegistry() {
   std::vector<PipelineSpec> out;
@@ -256,6 +352,28 @@ std::vector<PipelineSpec> BuildRegistry() {
           return std::make_unique<mapmatch::MapMatchEstimator>(in.info, *in.floor_plan,
                                                                in.floor_plan_source, o);
         }));
+  }
+  {
+    PipelineSpec s;
+    s.name = "fusion";
+    s.description =
+        "issue 27, first part: track-to-track fusion by covariance intersection of every "
+        "pipeline the mission can feed (pdr, breadcrumb, beacons-ekf, landmarks-ukf, mapmatch), "
+        "members that disagree with the others left out";
+    s.needs = {kStepStreams};
+    s.uses = {Stream::kSteps,    Stream::kImu,    Stream::kRssi, Stream::kRanges,
+              Stream::kBearings, Stream::kEvents, Stream::kBaro};
+    s.uses_floor_plan = true;
+    s.steps_based = true;
+    s.paper_scenarios = {"landmark-corridor", "beacon-trail", "house1-search"};
+    out.push_back(
+        Make<FusionPipelineOptions>(s, {}, FusionPipelineOptionTable(), Front::kGlobal,
+                                    [](const EstimatorInputs& in, const FusionPipelineOptions& o) {
+                                      std::vector<std::string> notes;
+                                      auto members = FusionMembers(in, o, &notes);
+                                      return std::make_unique<fusion::FusionEstimator>(
+                                          in.info, o.fusion, std::move(members), std::move(notes));
+                                    }));
   }
   return out;
 }

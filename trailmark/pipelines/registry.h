@@ -31,6 +31,9 @@ struct EstimatorInputs {
   /// Every level's plan of a multi-level building, when the pipeline follows the floors (no
   /// `level` option given); null otherwise.
   const LevelPlans* floor_levels = nullptr;
+  /// The streams that will be fed, when known (a batch run knows them; live: nullopt). The
+  /// fusion builds only the members these streams can feed.
+  std::optional<StreamSet> streams{};
 };
 
 struct PipelineSpec {
@@ -42,6 +45,8 @@ struct PipelineSpec {
   /// Streams it reads when present (those in `needs` included).
   StreamSet uses;
   bool needs_floor_plan = false;
+  /// Reads the mission's floor plan when it has one (the fusion's map-matching member).
+  bool uses_floor_plan = false;
   int min_landmarks = 0;  ///< landmark nodes mission.json must declare
   /// Its steps come from steps.csv or from imu.csv through the INS (steps.csv wins in a batch
   /// run when a mission has both).
@@ -70,6 +75,11 @@ struct PipelineSpec {
   /// The floor of a multi-floor plan it works on (its `level` option); nullopt: the plan's
   /// default floor. Throws like `make` for bad options.
   std::function<std::optional<int>(const OptionValues&)> floor_level;
+  /// The estimator as a member of the fusion: `make` without its step front end and stream
+  /// check (the fusion has its own), with its dead-reckoning guard; rows in global time order.
+  /// Null for a pipeline that cannot be a member.
+  std::function<std::unique_ptr<OnlineEstimator>(const EstimatorInputs&, const OptionValues&)>
+      make_member;
   /// A map-matching pipeline's search-pattern options with these option values (its grid's
   /// spacing and alignment): what the report draws. Empty for a pipeline without patterns.
   std::function<mapmatch::SearchSequenceOptions(const OptionValues&)> search_patterns;

@@ -1,0 +1,361 @@
+// SPDX-License-Identifier: MIT
+#include "trailmark/fusion/fusion_estimator.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <deque>
+#include <functional>
+#include <random>
+
+#include "trailmark/pipelines/registry.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark::fusion {
+namespace {
+
+/// A member that answers each step of an agent with an estimate made by `make` (its time, the
+/// step count) — at once, or `lag` steps later (a filter that waits) — and may emit a crumb.
+class Scripted : public OnlineEstimator {
+ public:
+  using Make = std::function<Estimate(const std::string& agent, TimeS t, int k)>;
+  explicit Scripted(Make make, int lag = 0, bool throws_on_first_step = false)
+      : make_(std::move(make)), lag_(lag), throws_(throws_on_first_step) {}
+  void Add(const MissionRow& row, EstimateSink& sink) override {
+    ++rows;
+    const Step* step = std::get_if<Step>(&row);
+    if (step == nullptr) return;
+    if (throws_ && k_ == 0) {
+      ++k_;
+      throw std::invalid_argument("scripted: refused");
+    }
+    queue_.push_back(make_(step->agent, step->t1, k_++));
+    while (static_cast<int>(queue_.size()) > lag_) {
+      sink.Add(queue_.front());
+      queue_.pop_front();
+    }
+  }
+  void Finish(EstimateSink& sink) override {
+    for (const Estimate& e : queue_) sink.Add(e);
+    queue_.clear();
+  }
+  std::optional<Estimate> Current(const std::string&) const override { return std::nullopt; }
+  EstimatorSummary Summary() const override {
+    EstimatorSummary s;
+    s.numbers["rows"] = rows;
+    return s;
+  }
+  int rows = 0;
+
+ private:
+  Make make_;
+  int lag_;
+  bool throws_;
+  int k_ = 0;
+  std::deque<Estimate> queue_;
+};
+
+MissionInfo OneAgent() {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(0, 0, 0), 0.5));
+  return info;
+}
+
+/// The truth of the scripted walk: 0.7 m east per step.
+Vec2 Truth(int k) { return Vec2(0.7 * (k + 1), 0); }
+
+Estimate At(const std::string& id, TimeS t, Vec2 p, double sxx, double sxy, double syy) {
+  Estimate e;
+  e.t = t;
+  e.id = id;
+  e.position_n = Vec3(p.x(), p.y(), 0);
+  e.sxx = sxx;
+  e.sxy = sxy;
+  e.syy = syy;
+  return e;
+}
+
+std::unique_ptr<Scripted> Offset(Vec2 offset, double sxx, double sxy, double syy, int lag = 0) {
+  return std::make_unique<Scripted>(
+      [=](const std::string& a, TimeS t, int k) {
+        return At(a, t, Truth(k) + offset, sxx, sxy, syy);
+      },
+      lag);
+}
+
+std::vector<Estimate> Walk(OnlineEstimator& f, int steps = 100) {
+  VectorSink sink;
+  for (int k = 0; k < steps; ++k)
+    f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+  f.Finish(sink);
+  return sink.rows;
+}
+
+std::vector<FusionMember> Members(std::vector<std::unique_ptr<Scripted>> scripted) {
+  std::vector<FusionMember> out;
+  int i = 0;
+  for (auto& s : scripted) out.push_back({"m" + std::to_string(i++), std::move(s)});
+  return out;
+}
+
+FusionOptions NoHat() {
+  FusionOptions o;
+  o.hat_window_s = 0;
+  return o;
+}
+
+TEST(FusionEstimator, OneMemberIsPassedThrough) {
+  std::vector<std::unique_ptr<Scripted>> s;
+  s.push_back(Offset(Vec2(0.3, -0.2), 0.5, 0.1, 0.4));
+  FusionEstimator f(OneAgent(), {}, Members(std::move(s)));
+  const auto rows = Walk(f);
+  ASSERT_EQ(rows.size(), 100u);
+  for (int k = 0; k < 100; ++k) {
+    EXPECT_DOUBLE_EQ(rows[k].t, 0.5 * (k + 1));
+    EXPECT_LT((rows[k].position_n.head<2>() - (Truth(k) + Vec2(0.3, -0.2))).norm(), 1e-9);
+    EXPECT_NEAR(rows[k].sxx, 0.5, 1e-9);
+    EXPECT_NEAR(rows[k].sxy, 0.1, 1e-9);
+    EXPECT_NEAR(rows[k].syy, 0.4, 1e-9);
+  }
+  EXPECT_EQ(f.Current("ff1")->t, 50.0);
+}
+
+TEST(FusionEstimator, TwoMembersAreTheirCovarianceIntersection) {
+  std::vector<std::unique_ptr<Scripted>> s;
+  // Each member is precise along one axis and off by 0.4 m along the other.
+  s.push_back(Offset(Vec2(0, 0.4), 0.1, 0, 2.0));
+  s.push_back(Offset(Vec2(0.4, 0), 2.0, 0, 0.1));
+  FusionEstimator f(OneAgent(), NoHat(), Members(std::move(s)));
+  const auto rows = Walk(f);
+  ASSERT_EQ(rows.size(), 100u);
+  for (int k = 0; k < 100; ++k) {
+    const std::vector<PositionGaussian> in{
+        {Truth(k) + Vec2(0, 0.4), (Mat2() << 0.1, 0, 0, 2.0).finished()},
+        {Truth(k) + Vec2(0.4, 0), (Mat2() << 2.0, 0, 0, 0.1).finished()}};
+    const Intersection ci = Intersect(in);
+    EXPECT_LT((rows[k].position_n.head<2>() - ci.fused.mean_m).norm(), 1e-9);
+    EXPECT_NEAR(rows[k].sxx, ci.fused.cov_m2(0, 0), 1e-9);
+    EXPECT_NEAR(rows[k].syy, ci.fused.cov_m2(1, 1), 1e-9);
+    // Each member is good along one axis: the fusion is good along both.
+    EXPECT_LT((rows[k].position_n.head<2>() - Truth(k)).norm(), 0.1);
+  }
+  EXPECT_NEAR(f.TypedSummary().members[0].weight_sum / 100, 0.5, 1e-6);
+}
+
+TEST(FusionEstimator, AMemberFarFromTheOthersIsLeftOutAndNoted) {
+  std::vector<std::unique_ptr<Scripted>> s;
+  s.push_back(Offset(Vec2(0.1, 0), 0.04, 0, 0.04));
+  s.push_back(Offset(Vec2(-0.1, 0.1), 0.05, 0, 0.05));
+  s.push_back(std::make_unique<Scripted>([](const std::string& a, TimeS t, int k) {
+    // Wrong by 8 m, sure of itself, from step 40 to 60.
+    const Vec2 off = k >= 40 && k < 60 ? Vec2(0, 8) : Vec2(0, 0);
+    return At(a, t, Truth(k) + off, 0.04, 0, 0.04);
+  }));
+  FusionEstimator f(OneAgent(), NoHat(), Members(std::move(s)));
+  const auto rows = Walk(f);
+  ASSERT_EQ(rows.size(), 100u);
+  for (int k = 0; k < 100; ++k)
+    EXPECT_LT((rows[k].position_n.head<2>() - Truth(k)).norm(), 0.2) << k;
+  EXPECT_EQ(f.TypedSummary().members[2].exclusions, 20);
+  EXPECT_EQ(f.TypedSummary().members[0].exclusions, 0);
+  const EstimatorSummary summary = f.Summary();
+  ASSERT_EQ(summary.integrity.size(), 2u);
+  EXPECT_EQ(summary.integrity[0].action, "excluded");
+  EXPECT_EQ(summary.integrity[0].source, "m2");
+  EXPECT_DOUBLE_EQ(summary.integrity[0].t, 0.5 * 41);
+  EXPECT_EQ(summary.integrity[1].action, "readmitted");
+  EXPECT_DOUBLE_EQ(summary.integrity[1].t, 0.5 * 61);
+  EXPECT_EQ(summary.numbers.at("fusion.m2.exclusions"), 20);
+  EXPECT_EQ(summary.numbers.at("m0.rows"), 100);  // members' summaries under their names
+}
+
+TEST(FusionEstimator, TwoMembersThatDisagreeAreBothCoveredByTheEllipse) {
+  std::vector<std::unique_ptr<Scripted>> s;
+  s.push_back(Offset(Vec2(0, 0), 0.04, 0, 0.04));
+  s.push_back(Offset(Vec2(5, 0), 0.04, 0, 0.04));
+  FusionEstimator f(OneAgent(), NoHat(), Members(std::move(s)));
+  const auto rows = Walk(f, 10);
+  for (const Estimate& e : rows) {
+    Mat2 p;
+    p << e.sxx, e.sxy, e.sxy, e.syy;
+    // Both members lie within the reported 95 % ellipse (chi-square 2 dof: 5.99).
+    const int k = static_cast<int>(std::lround(e.t / 0.5)) - 1;
+    for (const Vec2 member : {Truth(k), Vec2(Truth(k) + Vec2(5, 0))}) {
+      const Vec2 d = member - e.position_n.head<2>();
+      EXPECT_LT(d.dot(p.inverse() * d), 5.99) << e.t;
+    }
+  }
+  EXPECT_EQ(f.TypedSummary().grown_rows, 10);
+}
+
+TEST(FusionEstimator, WaitsForAMemberThatLagsAndGivesTheSameEstimates) {
+  auto run = [](int lag) {
+    std::vector<std::unique_ptr<Scripted>> s;
+    s.push_back(Offset(Vec2(0.2, 0), 0.1, 0, 0.3));
+    s.push_back(Offset(Vec2(0, 0.2), 0.3, 0, 0.1, lag));
+    FusionEstimator f(OneAgent(), NoHat(), Members(std::move(s)));
+    VectorSink sink;
+    std::vector<std::size_t> emitted_after;
+    for (int k = 0; k < 50; ++k) {
+      f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+      emitted_after.push_back(sink.rows.size());
+    }
+    f.Finish(sink);
+    return std::make_pair(sink.rows, emitted_after);
+  };
+  const auto [now, now_counts] = run(0);
+  const auto [late, late_counts] = run(3);
+  ASSERT_EQ(now.size(), 50u);
+  ASSERT_EQ(late.size(), 50u);
+  for (std::size_t i = 0; i < now.size(); ++i) {
+    EXPECT_EQ(now[i].t, late[i].t);
+    if (i < 3) {
+      // Before its first estimate the lagging member is not known to estimate the agent: the
+      // first rows are the other member's alone.
+      EXPECT_LT((late[i].position_n.head<2>() - (Truth(static_cast<int>(i)) + Vec2(0.2, 0))).norm(),
+                1e-12);
+    } else {
+      EXPECT_LT((now[i].position_n - late[i].position_n).norm(), 1e-12) << i;
+    }
+  }
+  // The lagging member held each row back by its three steps, not longer.
+  EXPECT_EQ(late_counts[10], now_counts[10] - 3);
+}
+
+TEST(FusionEstimator, AMemberIsUsedOnlyOnceItsOwnEvidenceArrived) {
+  std::vector<FusionMember> m;
+  m.push_back({"ranges", Offset(Vec2(3, 0), 0.01, 0, 0.01), StreamSet{Stream::kRanges}});
+  m.push_back({"dr", Offset(Vec2(0, 0), 1, 0, 1)});
+  m.back().fallback_only = true;  // dead reckoning: only where no other member estimates
+  FusionEstimator f(OneAgent(), NoHat(), std::move(m));
+  VectorSink sink;
+  for (int k = 0; k < 20; ++k) {
+    if (k == 10) f.Add(RangeMeasurement{0.5 * k + 0.1, "ff1", "b1", 3.0, 0.05}, sink);
+    f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+  }
+  ASSERT_EQ(sink.rows.size(), 20u);
+  for (int k = 0; k < 20; ++k) {
+    const double x = sink.rows[k].position_n.x() - Truth(k).x();
+    if (k < 10)
+      EXPECT_NEAR(x, 0.0, 1e-9) << k;  // the dead reckoning alone
+    else
+      EXPECT_NEAR(x, 3.0, 1e-9) << k;  // the member with ranges alone
+  }
+}
+
+TEST(FusionEstimator, ARowOneMemberRefusesStillReachesTheOthersThenThrows) {
+  std::vector<FusionMember> m;
+  auto refusing = std::make_unique<Scripted>(
+      [](const std::string& a, TimeS t, int k) { return At(a, t, Truth(k), 1, 0, 1); }, 0, true);
+  auto other = Offset(Vec2(0, 0), 1, 0, 1);
+  Scripted* other_ptr = other.get();
+  m.push_back({"refusing", std::move(refusing)});
+  m.push_back({"other", std::move(other)});
+  FusionEstimator f(OneAgent(), {}, std::move(m));
+  VectorSink sink;
+  EXPECT_THROW(f.Add(Step{0, 0.5, "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink),
+               std::invalid_argument);
+  EXPECT_EQ(other_ptr->rows, 1);
+  EXPECT_NO_THROW(f.Add(Step{0.5, 1.0, "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink));
+}
+
+TEST(FusionEstimator, TheHatFindsTheMemberThatIsBetterThanItsCovarianceSays) {
+  // Three members claim the same 0.5 m; one is right to 0.05 m, two scatter by 0.7 m. The
+  // N-cornered hat learns that from their differences: the fusion follows the good one, and
+  // the two that claim too little are inflated.
+  std::mt19937 rng(3);
+  auto noisy = [&rng](double sigma) {
+    return std::make_unique<Scripted>([&rng, sigma](const std::string& a, TimeS t, int k) {
+      std::normal_distribution<double> n(0, sigma);
+      return At(a, t, Truth(k) + Vec2(n(rng), n(rng)), 0.25, 0, 0.25);
+    });
+  };
+  auto run = [&](bool hat) {
+    std::vector<std::unique_ptr<Scripted>> s;
+    s.push_back(noisy(0.05));
+    s.push_back(noisy(0.7));
+    s.push_back(noisy(0.7));
+    FusionOptions o;
+    if (!hat) o.hat_window_s = 0;
+    FusionEstimator f(OneAgent(), o, Members(std::move(s)));
+    const auto rows = Walk(f, 400);
+    double sum = 0;
+    for (std::size_t k = 100; k < rows.size(); ++k)
+      sum += (rows[k].position_n.head<2>() - Truth(static_cast<int>(k))).norm();
+    return std::make_pair(sum / 300, f.Summary());
+  };
+  const auto [with_hat, summary] = run(true);
+  const auto [without, ignored] = run(false);
+  EXPECT_LT(with_hat, 0.15);
+  EXPECT_GT(without, 0.3);
+  EXPECT_GT(summary.numbers.at("fusion.m1.mean_inflation"), 1.3);
+  EXPECT_NEAR(summary.numbers.at("fusion.m0.mean_inflation"), 1.0, 1e-9);
+}
+
+/// A member that places crumb c1 at `where` with each step.
+class PlacesACrumb : public Scripted {
+ public:
+  PlacesACrumb(Vec2 where, double var)
+      : Scripted([](const std::string& a, TimeS t, int k) { return At(a, t, Truth(k), 1, 0, 1); }),
+        where_(where),
+        var_(var) {}
+  void Add(const MissionRow& row, EstimateSink& sink) override {
+    Scripted::Add(row, sink);
+    if (std::holds_alternative<Step>(row)) sink.Add(At("c1", RowTime(row), where_, var_, 0, var_));
+  }
+
+ private:
+  Vec2 where_;
+  double var_;
+};
+
+TEST(FusionEstimator, AStaticNodeComesFromTheMemberThatMeasuresItMostDirectly) {
+  auto run = [](int rank_of_ranges) {
+    std::vector<FusionMember> m;
+    m.push_back({"radio", std::make_unique<PlacesACrumb>(Vec2(5, 5), 0.01)});
+    m.back().static_rank = 2;
+    m.push_back({"ranges", std::make_unique<PlacesACrumb>(Vec2(1, 1), 0.04)});
+    m.back().static_rank = rank_of_ranges;
+    FusionEstimator f(OneAgent(), {}, std::move(m));
+    Walk(f, 5);
+    return *f.Current("c1");
+  };
+  EXPECT_LT((run(0).position_n.head<2>() - Vec2(1, 1)).norm(), 1e-12);  // ranges first
+  EXPECT_NEAR(run(0).sxx, 0.04, 1e-12);
+  EXPECT_LT((run(3).position_n.head<2>() - Vec2(5, 5)).norm(), 1e-12);  // radio first
+  // Equal ranks: intersected (the tighter one takes all the weight here).
+  EXPECT_LT((run(2).position_n.head<2>() - Vec2(5, 5)).norm(), 1e-3);
+}
+
+TEST(FusionEstimator, RefusesBadOptionsAndNoMembers) {
+  FusionOptions o;
+  o.stale_s = -1;
+  std::vector<std::unique_ptr<Scripted>> s;
+  s.push_back(Offset(Vec2(0, 0), 1, 0, 1));
+  EXPECT_THROW(FusionEstimator(OneAgent(), o, Members(std::move(s))), std::invalid_argument);
+  EXPECT_THROW(FusionEstimator(OneAgent(), {}, {}), std::invalid_argument);
+}
+
+// The registry's fusion builds the members the incident can feed.
+TEST(FusionPipeline, BuildsTheMembersTheMissionCanFeed) {
+  const SimulatedMission trail = SimulateScenario("beacon-trail", 2);
+  EstimatorInputs in{trail.data.info, &trail.plan};
+  in.streams = StreamSet{Stream::kSteps, Stream::kRanges, Stream::kEvents};
+  auto f = RequirePipeline("fusion").make(in, {}, Feed::kTimeOrdered);
+  const EstimatorSummary s = f->Summary();
+  EXPECT_EQ(s.numbers.at("fusion.members"), 4);  // breadcrumb, beacons-ekf, mapmatch, pdr
+  EXPECT_TRUE(s.numbers.count("fusion.beacons-ekf.mean_weight"));
+  EXPECT_FALSE(s.numbers.count("fusion.landmarks-ukf.mean_weight"));
+  in.streams = StreamSet{Stream::kSteps};
+  in.floor_plan = nullptr;
+  EXPECT_EQ(RequirePipeline("fusion")
+                .make(in, {}, Feed::kTimeOrdered)
+                ->Summary()
+                .numbers.at("fusion.members"),
+            2);  // the breadcrumb network (no evidence: never used) and dead reckoning
+  EXPECT_THROW(RequirePipeline("fusion").make(in, {{"fusion.stale_s", "-2"}}, Feed::kTimeOrdered),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace trailmark::fusion

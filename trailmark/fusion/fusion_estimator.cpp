@@ -1,0 +1,533 @@
+// SPDX-License-Identifier: MIT
+#include "trailmark/fusion/fusion_estimator.h"
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "trailmark/integrity/consistency.h"
+
+namespace trailmark::fusion {
+
+bool FusionOptions::IsValid(std::string* why) const {
+  auto fail = [why](const char* text) {
+    if (why) *why = text;
+    return false;
+  };
+  if (!(max_wait_s >= 0) || !std::isfinite(max_wait_s))
+    return fail("fusion: max_wait_s must be >= 0");
+  if (!(stale_s >= 0) || !std::isfinite(stale_s)) return fail("fusion: stale_s must be >= 0");
+  if (!(disagreement_probability > 0 && disagreement_probability < 1))
+    return fail("fusion: need 0 < disagreement_probability < 1");
+  if (!(hat_window_s >= 0) || !std::isfinite(hat_window_s))
+    return fail("fusion: hat_window_s must be >= 0");
+  return true;
+}
+
+const OptionTable<FusionOptions>& FusionOptionTable() {
+  static const OptionTable<FusionOptions> table = [] {
+    OptionTable<FusionOptions> t;
+    t.Real("fusion.max_wait_s", &FusionOptions::max_wait_s, "s", OptionBounds::NonNegative(),
+           "a fused row waits at most this long (mission time) for members behind it");
+    t.Real("fusion.stale_s", &FusionOptions::stale_s, "s", OptionBounds::NonNegative(),
+           "a member's estimate older than this at the step's time is left out");
+    t.Real("fusion.disagreement_probability", &FusionOptions::disagreement_probability, "",
+           OptionBounds::Inside(0, 1),
+           "region (2-dof chi-square probability) a member's estimate must lie in around the "
+           "fusion of the others");
+    t.Real("fusion.hat_window_s", &FusionOptions::hat_window_s, "s", OptionBounds::NonNegative(),
+           "time constant of each member's error variance estimated from pairwise differences "
+           "(N-cornered hat; inflates members that claim less than that); 0: off");
+    t.Flag("fusion.hat_weights", &FusionOptions::hat_weights,
+           "weigh the members' positions by the hat's variances once known (else by their "
+           "covariances)");
+    return t;
+  }();
+  return table;
+}
+
+/// Receives one member's estimates.
+class FusionEstimator::MemberSink : public EstimateSink {
+ public:
+  MemberSink(FusionEstimator& fusion, std::size_t member) : fusion_(fusion), member_(member) {}
+  void Add(const Estimate& e) override { fusion_.OnMemberEstimate(member_, e); }
+
+ private:
+  FusionEstimator& fusion_;
+  std::size_t member_;
+};
+
+namespace {
+
+PositionGaussian ToGaussian(const Estimate& e) {
+  PositionGaussian g;
+  g.mean_m = e.position_n.head<2>();
+  g.cov_m2 << e.sxx, e.sxy, e.sxy, e.syy;
+  return g;
+}
+
+bool IsAgent(const MissionInfo& info, const std::string& id) {
+  const NodeInfo* n = info.Find(id);
+  return n != nullptr && n->kind == NodeKind::kAgent;
+}
+
+/// The fused estimate of `inputs` (members' estimates of one node at one time): horizontal by
+/// covariance intersection, height and floor from the members that give them, weighted alike.
+Estimate Combine(const std::vector<Estimate>& inputs, const Intersection& ci) {
+  Estimate out = inputs.front();
+  out.position_n.head<2>() = ci.fused.mean_m;
+  out.sxx = ci.fused.cov_m2(0, 0);
+  out.sxy = ci.fused.cov_m2(0, 1);
+  out.syy = ci.fused.cov_m2(1, 1);
+  // Height: the same intersection in one dimension, over the members that estimate it.
+  double info_z = 0.0, info_zz = 0.0;
+  std::size_t best = 0;
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    if (ci.weights[i] > ci.weights[best]) best = i;
+    if (inputs[i].szz && *inputs[i].szz > 0) {
+      info_zz += ci.weights[i] / *inputs[i].szz;
+      info_z += ci.weights[i] * inputs[i].position_n.z() / *inputs[i].szz;
+    }
+  }
+  if (info_zz > 0) {
+    out.position_n.z() = info_z / info_zz;
+    out.szz = 1.0 / info_zz;
+  } else {
+    out.position_n.z() = inputs[best].position_n.z();
+    out.szz = inputs[best].szz;
+  }
+  out.floor = inputs[best].floor;
+  for (std::size_t i = 0; !out.floor && i < inputs.size(); ++i) out.floor = inputs[i].floor;
+  return out;
+}
+
+Intersection IntersectEstimates(const std::vector<Estimate>& inputs) {
+  std::vector<PositionGaussian> g;
+  g.reserve(inputs.size());
+  for (const Estimate& e : inputs) g.push_back(ToGaussian(e));
+  return Intersect(g);
+}
+
+/// Squared Mahalanobis distance of `a` from `b` under the sum of their covariances.
+double Disagreement(const PositionGaussian& a, const PositionGaussian& b) {
+  Mat2 s = a.cov_m2 + b.cov_m2;
+  s.diagonal() = s.diagonal().cwiseMax(1e-6);
+  const Vec2 d = a.mean_m - b.mean_m;
+  return d.dot(s.inverse() * d);
+}
+
+}  // namespace
+
+FusionEstimator::FusionEstimator(MissionInfo info, FusionOptions options,
+                                 std::vector<FusionMember> members, std::vector<std::string> notes)
+    : info_(std::move(info)),
+      options_(options),
+      members_(std::move(members)),
+      member_notes_(std::move(notes)) {
+  std::string why;
+  if (!options_.IsValid(&why)) throw std::invalid_argument(why);
+  if (members_.empty()) throw std::invalid_argument("fusion: no member estimator");
+  gate_d2_ = integrity::ChiSquareQuantile(2, options_.disagreement_probability);
+  agent_history_.resize(members_.size());
+  for (const FusionMember& m : members_) active_.push_back(m.evidence.empty());
+  static_latest_.resize(members_.size());
+  for (std::size_t i = 0; i < members_.size(); ++i) {
+    if (!members_[i].estimator) throw std::invalid_argument("fusion: member without estimator");
+    sinks_.push_back(std::make_unique<MemberSink>(*this, i));
+    summary_.members.push_back({members_[i].name});
+  }
+}
+
+FusionEstimator::~FusionEstimator() = default;
+
+void FusionEstimator::UseLevels(const LevelSource* levels) {
+  for (FusionMember& m : members_) m.estimator->UseLevels(levels);
+}
+
+std::vector<std::string> FusionEstimator::MemberNames() const {
+  std::vector<std::string> out;
+  for (const FusionMember& m : members_) out.push_back(m.name);
+  return out;
+}
+
+void FusionEstimator::OnMemberEstimate(std::size_t member, const Estimate& e) {
+  if (!active_[member]) return;  // it has seen none of its own evidence yet
+  if (!e.position_n.allFinite() || !std::isfinite(e.sxx) || !std::isfinite(e.syy) ||
+      !std::isfinite(e.sxy)) {
+    return;  // a member's non-finite estimate never reaches the fusion
+  }
+  if (IsAgent(info_, e.id)) {
+    std::deque<Estimate>& h = agent_history_[member][e.id];
+    if (!h.empty() && e.t < h.back().t) return;  // out of order: the member's contract broken
+    h.push_back(e);
+    // A time already fused (a member that caught up late) is not fused again.
+    const auto done = current_.find(e.id);
+    if (done == current_.end() || e.t > done->second.t) pending_[e.id].insert(e.t);
+    // Keep what a pending row can still ask for.
+    const TimeS keep_from = now_ - (options_.max_wait_s + options_.stale_s + 1.0);
+    while (h.size() > 1 && h[1].t <= keep_from) h.pop_front();
+  } else {
+    static_latest_[member][e.id] = e;
+    if (std::find(static_dirty_.begin(), static_dirty_.end(), e.id) == static_dirty_.end())
+      static_dirty_.push_back(e.id);
+  }
+}
+
+void FusionEstimator::Add(const MissionRow& row, EstimateSink& sink) {
+  now_ = std::max(now_, RowTime(row));
+  std::optional<std::string> error;
+  const Stream stream = RowStream(row);
+  for (std::size_t i = 0; i < members_.size(); ++i) {
+    if (members_[i].evidence.Has(stream)) active_[i] = true;
+    try {
+      members_[i].estimator->Add(row, *sinks_[i]);
+    } catch (const std::invalid_argument& e) {
+      if (!error) error = e.what();
+    }
+  }
+  if (const Step* step = std::get_if<Step>(&row); step != nullptr && IsAgent(info_, step->agent)) {
+    pending_[step->agent].insert(step->t1);
+  }
+  for (const std::string& node : static_dirty_) EmitStatic(node, now_, sink);
+  static_dirty_.clear();
+  Resolve(sink, false);
+  if (error) throw std::invalid_argument(*error);
+}
+
+void FusionEstimator::Finish(EstimateSink& sink) {
+  for (std::size_t i = 0; i < members_.size(); ++i) members_[i].estimator->Finish(*sinks_[i]);
+  for (const std::string& node : static_dirty_) EmitStatic(node, now_, sink);
+  static_dirty_.clear();
+  Resolve(sink, true);
+}
+
+std::optional<Estimate> FusionEstimator::Current(const std::string& node) const {
+  const auto it = current_.find(node);
+  if (it == current_.end()) return std::nullopt;
+  return it->second;
+}
+
+bool FusionEstimator::Due(const Pending& p) const {
+  if (now_ > p.t + options_.max_wait_s) return true;
+  for (std::size_t m = 0; m < members_.size(); ++m) {
+    const auto it = agent_history_[m].find(p.agent);
+    if (it == agent_history_[m].end() || it->second.empty()) continue;  // does not estimate it
+    const TimeS latest = it->second.back().t;
+    // A member that has fallen behind by more than the wait is not waited for.
+    if (latest < p.t - 1e-9 && latest >= now_ - options_.max_wait_s) return false;
+  }
+  return true;
+}
+
+void FusionEstimator::Resolve(EstimateSink& sink, bool all) {
+  for (auto& [agent, times] : pending_) {
+    while (!times.empty()) {
+      const Pending p{agent, *times.begin()};
+      if (!all && !Due(p)) break;
+      EmitAgent(p, sink);
+      times.erase(times.begin());
+    }
+  }
+}
+
+std::optional<Estimate> FusionEstimator::MemberAt(std::size_t member, const std::string& agent,
+                                                  TimeS t) const {
+  const auto it = agent_history_[member].find(agent);
+  if (it == agent_history_[member].end()) return std::nullopt;
+  const std::deque<Estimate>& h = it->second;
+  // The first estimate at or after t, and the one before it.
+  auto next = std::lower_bound(h.begin(), h.end(), t - 1e-9,
+                               [](const Estimate& e, TimeS v) { return e.t < v; });
+  if (next != h.end() && next->t <= t + 1e-9) return *next;
+  if (next == h.begin()) return std::nullopt;  // the member starts later
+  const Estimate& prev = *std::prev(next);
+  if (next != h.end()) {
+    // Between two of its estimates: linear in time (position and covariance).
+    const double a = (t - prev.t) / (next->t - prev.t);
+    Estimate e = prev;
+    e.t = t;
+    e.position_n = (1 - a) * prev.position_n + a * next->position_n;
+    e.sxx = (1 - a) * prev.sxx + a * next->sxx;
+    e.sxy = (1 - a) * prev.sxy + a * next->sxy;
+    e.syy = (1 - a) * prev.syy + a * next->syy;
+    if (prev.szz && next->szz) e.szz = (1 - a) * *prev.szz + a * *next->szz;
+    if (t - prev.t > options_.stale_s && next->t - t > options_.stale_s) return std::nullopt;
+    return e;
+  }
+  if (t - prev.t > options_.stale_s) return std::nullopt;
+  return prev;
+}
+
+void FusionEstimator::Note(TimeS t, const std::string& agent, std::size_t member, bool excluded,
+                           double d2) {
+  constexpr std::size_t kMaxNotes = 100;
+  if (notes_.size() >= kMaxNotes) {
+    ++notes_dropped_;
+    return;
+  }
+  IntegrityNote n;
+  n.t = t;
+  n.source = members_[member].name;
+  n.node = agent;
+  n.action = excluded ? "excluded" : "readmitted";
+  n.message = excluded ? fmt::format(
+                             "fusion: {}'s estimate of {} disagrees with the other "
+                             "members most (largest pairwise d2 {:.1f} > {:.1f}); left out",
+                             members_[member].name, agent, d2, gate_d2_)
+                       : fmt::format(
+                             "fusion: {}'s estimate of {} agrees with the other members "
+                             "again; used",
+                             members_[member].name, agent);
+  notes_.push_back(std::move(n));
+}
+
+void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
+  std::vector<std::size_t> used;
+  std::vector<Estimate> inputs;
+  for (const bool fallback : {false, true}) {
+    for (std::size_t m = 0; m < members_.size(); ++m) {
+      if (members_[m].fallback_only != fallback) continue;
+      if (std::optional<Estimate> e = MemberAt(m, p.agent, p.t)) {
+        used.push_back(m);
+        inputs.push_back(*e);
+      } else if (agent_history_[m].count(p.agent) != 0) {
+        ++summary_.members[m].stale;
+      }
+    }
+    if (!inputs.empty()) break;  // the fallback only where no other member estimates
+  }
+  if (inputs.empty()) return;
+  // Leave out a member while three remain and some pair of members disagrees: of the members of
+  // pairs that disagree, the one whose disagreements with all others sum highest (the largest
+  // normalized residual of RAIM's fault exclusion; a loose member agrees with everyone and
+  // arbitrates between two confident ones that disagree).
+  const std::size_t n = inputs.size();
+  std::vector<PositionGaussian> g(n);
+  for (std::size_t i = 0; i < n; ++i) g[i] = ToGaussian(inputs[i]);
+  std::vector<double> pair_d2(n * n, 0.0);
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = i + 1; j < n; ++j)
+      pair_d2[i * n + j] = pair_d2[j * n + i] = Disagreement(g[i], g[j]);
+  std::vector<bool> out(n, false);
+  std::vector<double> out_d2(n, 0.0);
+  std::size_t remaining = n;
+  while (remaining >= 3) {
+    double worst_sum = -1.0;
+    std::size_t worst_i = n;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (out[i]) continue;
+      double sum = 0.0, max_d2 = 0.0;
+      for (std::size_t j = 0; j < n; ++j) {
+        if (j == i || out[j]) continue;
+        sum += pair_d2[i * n + j];
+        max_d2 = std::max(max_d2, pair_d2[i * n + j]);
+      }
+      if (max_d2 > gate_d2_ && sum > worst_sum) {
+        worst_sum = sum;
+        worst_i = i;
+      }
+    }
+    if (worst_i == n) break;
+    double max_d2 = 0.0;
+    for (std::size_t j = 0; j < n; ++j)
+      if (j != worst_i && !out[j]) max_d2 = std::max(max_d2, pair_d2[worst_i * n + j]);
+    out[worst_i] = true;
+    out_d2[worst_i] = max_d2;
+    --remaining;
+  }
+  // Members that claim less than their differences show are inflated before the intersection.
+  const HatEstimate hat = UpdateHat(p.agent, p.t, used, inputs);
+  const std::vector<double>& inflation = hat.inflation;
+  for (std::size_t i = 0; i < n; ++i) {
+    inputs[i].sxx *= inflation[i];
+    inputs[i].sxy *= inflation[i];
+    inputs[i].syy *= inflation[i];
+  }
+  std::vector<Estimate> kept;
+  std::vector<std::size_t> kept_members;
+  std::vector<double> kept_inflation;
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    const auto key = std::make_pair(p.agent, used[i]);
+    const bool was_out = excluded_[key];
+    if (out[i]) {
+      ++summary_.members[used[i]].exclusions;
+      if (!was_out) Note(p.t, p.agent, used[i], true, out_d2[i]);
+    } else {
+      kept.push_back(inputs[i]);
+      kept_members.push_back(used[i]);
+      kept_inflation.push_back(inflation[i]);
+      if (was_out) Note(p.t, p.agent, used[i], false, 0.0);
+    }
+    excluded_[key] = out[i];
+  }
+  Intersection ci = IntersectEstimates(kept);
+  Estimate fused = Combine(kept, ci);
+  fused.t = p.t;
+  fused.id = p.agent;
+  if (options_.hat_weights && hat.variance_m2 && kept.size() >= 2) {
+    // The minimum-variance combination under the hat's variances (floored: a variance the
+    // differences cannot resolve is not taken as zero); the intersection's covariance grows
+    // by the shift so that it still covers the estimate.
+    std::vector<double> w;
+    double sum = 0.0;
+    for (std::size_t i = 0, k = 0; i < n; ++i) {
+      if (out[i]) continue;
+      const double stated = 0.5 * (kept[k].sxx + kept[k].syy) / inflation[i];
+      const double v = std::max({(*hat.variance_m2)[i], 0.05 * stated, 1e-4});
+      w.push_back(1.0 / v);
+      sum += w.back();
+      ++k;
+    }
+    Vec2 mean = Vec2::Zero();
+    for (std::size_t k = 0; k < kept.size(); ++k) {
+      ci.weights[k] = w[k] / sum;
+      mean += ci.weights[k] * kept[k].position_n.head<2>();
+    }
+    const Vec2 shift = mean - fused.position_n.head<2>();
+    fused.position_n.head<2>() = mean;
+    fused.sxx += shift.x() * shift.x();
+    fused.sxy += shift.x() * shift.y();
+    fused.syy += shift.y() * shift.y();
+  }
+  // The last two disagree: keep both, and grow the covariance to cover each of them.
+  if (kept.size() == 2 && Disagreement(ToGaussian(kept[0]), ToGaussian(kept[1])) > gate_d2_) {
+    Mat2 cov;
+    cov << fused.sxx, fused.sxy, fused.sxy, fused.syy;
+    for (const Estimate& e : kept) {
+      const Vec2 d = e.position_n.head<2>() - fused.position_n.head<2>();
+      cov += d * d.transpose();
+    }
+    fused.sxx = cov(0, 0);
+    fused.sxy = cov(0, 1);
+    fused.syy = cov(1, 1);
+    ++summary_.grown_rows;
+  }
+  for (std::size_t i = 0; i < kept.size(); ++i) {
+    FusionMemberSummary& s = summary_.members[kept_members[i]];
+    ++s.rows_used;
+    s.weight_sum += ci.weights[i];
+    s.inflation_sum += kept_inflation[i];
+  }
+  const auto prev = current_.find(p.agent);
+  if (prev != current_.end() && fused.t < prev->second.t) fused.t = prev->second.t;
+  current_[p.agent] = fused;
+  ++summary_.agent_rows;
+  sink.Add(fused);
+}
+
+FusionEstimator::HatEstimate FusionEstimator::UpdateHat(const std::string& agent, TimeS t,
+                                                        const std::vector<std::size_t>& members,
+                                                        const std::vector<Estimate>& inputs) {
+  const std::size_t n = inputs.size();
+  HatEstimate out;
+  out.inflation.assign(n, 1.0);
+  if (options_.hat_window_s <= 0) return out;
+  Hat& hat = hats_[agent];
+  // Exponential forgetting in mission time: a row's weight is 1, older rows fade with tau.
+  const double fade = std::exp(-std::max(0.0, t - hat.t) / options_.hat_window_s);
+  hat.t = t;
+  auto update = [fade](std::pair<double, double>& avg, double value) {
+    avg.first = avg.first * fade + 1.0;
+    avg.second += (value - avg.second) / avg.first;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    update(hat.stated[members[i]], 0.5 * (inputs[i].sxx + inputs[i].syy));
+    for (std::size_t j = i + 1; j < n; ++j) {
+      const double d2 =
+          (inputs[i].position_n.head<2>() - inputs[j].position_n.head<2>()).squaredNorm();
+      update(hat.pair[{members[i], members[j]}], 0.5 * d2);
+    }
+  }
+  if (n < 3) return out;
+  // Least squares of D_ij = s_i^2 + s_j^2 over the pairs present now: with S_i the sum of
+  // member i's D_ij and T the sum of all, s_i^2 = (S_i - T / (n - 1)) / (n - 2) (the three-
+  // cornered hat's (D_ij + D_ik - D_jk) / 2 for n = 3).
+  constexpr double kMinWeight = 10.0;  // rows of history before a pair is trusted
+  std::vector<double> s(n, 0.0);
+  double total = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = i + 1; j < n; ++j) {
+      const auto& avg = hat.pair[{members[i], members[j]}];
+      if (avg.first < kMinWeight) return out;
+      s[i] += avg.second;
+      s[j] += avg.second;
+      total += avg.second;
+    }
+  }
+  const double nn = static_cast<double>(n);
+  out.variance_m2.emplace(n, 0.0);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double variance = std::max(0.0, (s[i] - total / (nn - 1.0)) / (nn - 2.0));
+    (*out.variance_m2)[i] = variance;
+    const double stated = hat.stated[members[i]].second;
+    if (stated > 0) out.inflation[i] = std::max(1.0, variance / stated);
+  }
+  return out;
+}
+
+void FusionEstimator::EmitStatic(const std::string& node, TimeS t, EstimateSink& sink) {
+  std::vector<Estimate> inputs;
+  TimeS latest = -1e300;
+  int best_rank = std::numeric_limits<int>::max();
+  for (std::size_t m = 0; m < members_.size(); ++m) {
+    if (static_latest_[m].count(node) != 0)
+      best_rank = std::min(best_rank, members_[m].static_rank);
+  }
+  for (std::size_t m = 0; m < members_.size(); ++m) {
+    const auto it = static_latest_[m].find(node);
+    if (it == static_latest_[m].end() || members_[m].static_rank != best_rank) continue;
+    inputs.push_back(it->second);
+    latest = std::max(latest, it->second.t);
+  }
+  if (inputs.empty()) return;
+  Estimate fused = Combine(inputs, IntersectEstimates(inputs));
+  fused.id = node;
+  fused.t = std::min(t, latest);
+  const auto prev = current_.find(node);
+  if (prev != current_.end()) fused.t = std::max(fused.t, prev->second.t);
+  current_[node] = fused;
+  ++summary_.static_rows;
+  sink.Add(fused);
+}
+
+EstimatorSummary FusionEstimator::Summary() const {
+  EstimatorSummary out;
+  for (const FusionMember& m : members_) {
+    const EstimatorSummary s = m.estimator->Summary();
+    for (const auto& [key, value] : s.numbers) out.numbers[m.name + "." + key] = value;
+    for (const std::string& note : s.notes) out.notes.push_back(m.name + ": " + note);
+    for (IntegrityNote n : s.integrity) {
+      n.source = m.name + ": " + n.source;
+      out.integrity.push_back(std::move(n));
+    }
+  }
+  out.numbers["fusion.agent_rows"] = static_cast<double>(summary_.agent_rows);
+  out.numbers["fusion.static_rows"] = static_cast<double>(summary_.static_rows);
+  out.numbers["fusion.grown_rows"] = static_cast<double>(summary_.grown_rows);
+  out.numbers["fusion.members"] = static_cast<double>(members_.size());
+  for (const FusionMemberSummary& s : summary_.members) {
+    const double rows = static_cast<double>(std::max<long long>(summary_.agent_rows, 1));
+    out.numbers["fusion." + s.name + ".used_share"] = static_cast<double>(s.rows_used) / rows;
+    out.numbers["fusion." + s.name + ".mean_weight"] =
+        s.rows_used > 0 ? s.weight_sum / static_cast<double>(s.rows_used) : 0.0;
+    out.numbers["fusion." + s.name + ".exclusions"] = static_cast<double>(s.exclusions);
+    out.numbers["fusion." + s.name + ".mean_inflation"] =
+        s.rows_used > 0 ? s.inflation_sum / static_cast<double>(s.rows_used) : 1.0;
+  }
+  out.notes.push_back(
+      fmt::format("fusion of {} member(s): {}", members_.size(), fmt::join(MemberNames(), ", ")));
+  for (const std::string& note : member_notes_) out.notes.push_back("fusion: " + note);
+  for (const IntegrityNote& n : notes_) out.integrity.push_back(n);
+  if (notes_dropped_ > 0) {
+    out.notes.push_back(
+        fmt::format("fusion: {} further exclusion notes not listed", notes_dropped_));
+  }
+  return out;
+}
+
+}  // namespace trailmark::fusion
