@@ -51,6 +51,20 @@ int WriteReproduction(const std::filesystem::path& out, const std::string& title
 Metrics RunAndEvaluate(const std::string& pipeline, const std::filesystem::path& mission_dir,
                        const std::filesystem::path& out, double* wall_s,
                        const OptionValues& options = {}, EstimatorSummary* summary = nullptr);
+/// A pipeline's run on a mission, or why it did not run.
+struct RunOutcome {
+  bool ran = false;
+  std::string refusal;      ///< when it did not: "cannot run (...)" or the error
+  ErrorStatistics agents;   ///< agents pooled (empty when the pipeline tracks no agent)
+  ErrorStatistics statics;  ///< static nodes pooled
+  double wall_s = 0.0;
+  EstimatorSummary summary;
+};
+/// RunAndEvaluate when the mission can feed the pipeline; an error of the run is a refusal.
+RunOutcome RunIfRunnable(const std::string& pipeline, const std::filesystem::path& mission_dir,
+                         const std::filesystem::path& out, const OptionValues& options = {});
+/// Counts one more of `total` and prints "what: done/total unit" to stderr at every tenth.
+void CountProgress(const char* what, const char* unit, int* done, int total);
 /// Mean of the values; 0 for none.
 double Mean(const std::vector<double>& v);
 
@@ -85,6 +99,9 @@ int ReproduceRobustness(int variants, const std::filesystem::path& out, int firs
 /// first_seed .. first_seed + seeds - 1 (issue 21, item 3): how often the lying source is named,
 /// how many honest sources are excluded with it, and p75 without the lie, with it caught, and
 /// with it trusted (integrity.exclude=false, integrity.streams=false).
+/// `trailmark reproduce fusion` (issue 27): the fusion next to every single pipeline on the
+/// same missions of each scenario that has a paper or several sources, seeds first_seed.. .
+int ReproduceFusion(int seeds, const std::filesystem::path& out, int first_seed = 1);
 int ReproduceIntegrity(int seeds, const std::filesystem::path& out, int first_seed = 1);
 
 /// The multi-floor building (issue 26): ins and pdr with and without the barometer on seeds

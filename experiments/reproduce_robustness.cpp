@@ -26,32 +26,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-struct Outcome {
-  bool ran = false;
-  std::string refusal;
-  ErrorStatistics agents;  ///< agents pooled (empty when the pipeline tracks no agent)
-  ErrorStatistics statics;
-};
-
-Outcome RunOn(const std::string& pipeline, const fs::path& mission_dir, const fs::path& out,
-              const OptionValues& options = {}) {
-  Outcome o;
-  try {
-    const MissionDirectory mission(mission_dir);
-    if (!CanRun(RequirePipeline(pipeline), mission)) {
-      o.refusal = "cannot run (streams or nodes missing)";
-      return o;
-    }
-    const Metrics m = RunAndEvaluate(pipeline, mission_dir, out, nullptr, options);
-    o.ran = true;
-    o.agents = m.agents.stats;
-    o.statics = m.static_nodes.stats;
-  } catch (const std::exception& e) {
-    o.refusal = e.what();
-  }
-  return o;
-}
-
 /// The scenarios a pipeline runs on: its papers' (the fusion has several), else the office loop.
 std::vector<std::string> Scenarios(const PipelineSpec& p) {
   if (p.paper_scenarios.empty()) return {"office-loop"};
@@ -116,12 +90,12 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
         ApplyVariation(v, sim);
         const fs::path dir = out / "missions" / fmt::format("{}-{}-{}", scenario, family_name, k);
         WriteMissionDirectory(dir / "mission", sim.data, &sim.plan, v.write);
-        const Outcome dr = RunOn("pdr", dir / "mission", dir / "pdr");
+        const RunOutcome dr = RunIfRunnable("pdr", dir / "mission", dir / "pdr");
         std::map<std::string, double> p75_of;  // agents' p75 of each pipeline on this variant
         for (const std::string& name : names) {
           Cell& c = cells[{name, scenario, family_name}];
           ++c.runs;
-          const Outcome o = RunOn(name, dir / "mission", dir / name, options);
+          const RunOutcome o = RunIfRunnable(name, dir / "mission", dir / name, options);
           if (!o.ran) {
             ++c.refused;
             if (c.first_refusal.empty()) c.first_refusal = o.refusal;
@@ -149,8 +123,7 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
           c.best_other_p75.push_back(best);
           if (p75 > 1.05 * best) ++c.behind_best;
         }
-        if (++done % std::max(1, total / 10) == 0 || done == total)
-          fmt::print(stderr, "robustness: {}/{} variants\n", done, total);
+        CountProgress("robustness", "variants", &done, total);
       }
     }
   }

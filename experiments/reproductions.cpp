@@ -4,14 +4,15 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <fstream>
 #include <map>
 
 #include "experiments/experiments.h"
 #include "trailmark/eval/metrics.h"
+#include "trailmark/ins/ins_estimator.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/pipelines/batch_run.h"
-#include "trailmark/ins/ins_estimator.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark::experiments {
@@ -148,6 +149,30 @@ Metrics RunAndEvaluate(const std::string& pipeline, const fs::path& mission_dir,
   return Evaluate(mission.info(), truth, est);
 }
 
+RunOutcome RunIfRunnable(const std::string& pipeline, const fs::path& mission_dir,
+                         const fs::path& out, const OptionValues& options) {
+  RunOutcome o;
+  try {
+    const MissionDirectory mission(mission_dir);
+    if (!CanRun(RequirePipeline(pipeline), mission)) {
+      o.refusal = "cannot run (streams or nodes missing)";
+      return o;
+    }
+    const Metrics m = RunAndEvaluate(pipeline, mission_dir, out, &o.wall_s, options, &o.summary);
+    o.ran = true;
+    o.agents = m.agents.stats;
+    o.statics = m.static_nodes.stats;
+  } catch (const std::exception& e) {
+    o.refusal = e.what();
+  }
+  return o;
+}
+
+void CountProgress(const char* what, const char* unit, int* done, int total) {
+  if (++*done % std::max(1, total / 10) == 0 || *done == total)
+    fmt::print(stderr, "{}: {}/{} {}\n", what, *done, total, unit);
+}
+
 double Mean(const std::vector<double>& v) {
   double sum = 0;
   for (double x : v) sum += x;
@@ -179,7 +204,10 @@ const std::vector<Reproduction>& Reproductions() {
          return ReproduceBreadcrumb(a.seeds, a.out / "breadcrumb", a.options);
        }},
       {"ins", "the ZUPT INS on the recorded foot-IMU sets (PyShoe VICON, OpenShoe, ...)", false,
-       true, [](const ReproductionArgs& a) { return ReproduceIns(a.data_dir, a.out / "ins", a.options); }},
+       true,
+       [](const ReproductionArgs& a) {
+         return ReproduceIns(a.data_dir, a.out / "ins", a.options);
+       }},
       {"landmarks", "the radio-landmarks paper: stop-and-go, UKF, energy (sec. 5-6)", false, false,
        [](const ReproductionArgs& a) {
          return ReproduceLandmarks(std::max(a.seeds, 20), a.out / "landmarks", a.data_dir);
@@ -189,14 +217,13 @@ const std::vector<Reproduction>& Reproductions() {
        [](const ReproductionArgs& a) {
          return ReproduceBeacons(std::max(a.seeds, 100), a.seeds, a.out / "beacons");
        }},
-      {"mapmatch", "the map-aided search paper on the two simulated houses (Figs. 7-9)", true,
-       true,
+      {"mapmatch", "the map-aided search paper on the two simulated houses (Figs. 7-9)", true, true,
        [](const ReproductionArgs& a) {
          return ReproduceMapMatch(a.seeds, a.out / "mapmatch", a.options, a.first_seed);
        }},
       {"robustness",
-       "every pipeline x every variation family (simulate --vary) against dead reckoning",
-       true, true,
+       "every pipeline x every variation family (simulate --vary) against dead reckoning", true,
+       true,
        [](const ReproductionArgs& a) {
          return ReproduceRobustness(a.seeds, a.out / "robustness", a.first_seed, a.pipelines,
                                     a.options);
@@ -215,6 +242,13 @@ const std::vector<Reproduction>& Reproductions() {
        [](const ReproductionArgs& a) {
          return ReproduceLandmarkTracking(a.seeds, a.out / "landmark-tracking", a.first_seed,
                                           a.options, a.data_dir);
+       }},
+      {"fusion",
+       "the fusion next to every single pipeline on the same missions: the papers' scenarios, "
+       "the office loop, the training building and the multi-floor buildings (issue 27)",
+       true, false,
+       [](const ReproductionArgs& a) {
+         return ReproduceFusion(a.seeds, a.out / "fusion", a.first_seed);
        }},
       {"floors",
        "the multi-floor building: ins and pdr with and without the barometer, the right floor; "

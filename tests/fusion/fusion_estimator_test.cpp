@@ -327,6 +327,73 @@ TEST(FusionEstimator, AStaticNodeComesFromTheMemberThatMeasuresItMostDirectly) {
   EXPECT_LT((run(2).position_n.head<2>() - Vec2(5, 5)).norm(), 1e-3);
 }
 
+/// A member that answers RSSI packets of ff1 (not steps) with an estimate where it stands.
+class OnPackets : public OnlineEstimator {
+ public:
+  explicit OnPackets(Vec2 where) : where_(where) {}
+  void Add(const MissionRow& row, EstimateSink& sink) override {
+    if (const auto* r = std::get_if<RssiPacket>(&row)) sink.Add(At("ff1", r->t, where_, 1, 0, 1));
+  }
+  void Finish(EstimateSink&) override {}
+  std::optional<Estimate> Current(const std::string&) const override { return std::nullopt; }
+  EstimatorSummary Summary() const override { return {}; }
+
+ private:
+  Vec2 where_;
+};
+
+TEST(FusionEstimator, AMembersLastEstimateStillCountsWhileTheAgentStands) {
+  // Ten steps, then 10 s standing, during which only the other member updates (packets).
+  std::vector<FusionMember> m;
+  m.push_back({"steps", Offset(Vec2(0, 0), 1, 0, 1)});
+  m.push_back({"packets", std::make_unique<OnPackets>(Truth(9) + Vec2(0, 0.4))});
+  FusionEstimator f(OneAgent(), NoHat(), std::move(m));
+  VectorSink sink;
+  for (int k = 0; k < 10; ++k)
+    f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+  for (int j = 1; j <= 20; ++j) f.Add(RssiPacket{5.0 + 0.5 * j, "ff1", "L1", -60.0}, sink);
+  f.Finish(sink);
+  EXPECT_EQ(f.TypedSummary().members[0].stale, 0);  // 10 s old, yet current: nothing moved
+  const Estimate& last = sink.rows.back();
+  EXPECT_DOUBLE_EQ(last.t, 15.0);
+  // Both members, equal covariances: halfway between them.
+  EXPECT_LT((last.position_n.head<2>() - (Truth(9) + Vec2(0, 0.2))).norm(), 1e-9);
+  // Walking again after a gap, the old estimate would be stale: one step later it is.
+  FusionOptions o = NoHat();
+  std::vector<FusionMember> m2;
+  m2.push_back(
+      {"steps", std::make_unique<Scripted>([](const std::string& a, TimeS t,
+                                              int k) { return At(a, t, Truth(k), 1, 0, 1); },
+                                           /*lag=*/100)});  // never emits before Finish
+  m2.push_back({"packets", std::make_unique<OnPackets>(Vec2(0, 0))});
+  FusionEstimator walking(OneAgent(), o, std::move(m2));
+  VectorSink s2;
+  walking.Add(Step{0, 0.5, "ff1", Vec3(0.7, 0, 0), std::nullopt}, s2);
+  walking.Add(RssiPacket{3.0, "ff1", "L1", -60.0}, s2);
+  EXPECT_TRUE(s2.rows.empty() || s2.rows.back().position_n.head<2>().norm() < 1e-9);
+}
+
+TEST(FusionEstimator, AMemberThatIsDeadReckoningIsLeftOutBesideTwoWithEvidence) {
+  auto run = [](bool two_with_evidence) {
+    std::vector<FusionMember> m;
+    m.push_back({"like_dr", Offset(Vec2(0, 0), 0.2, 0, 0.2)});
+    m.push_back({"a", Offset(Vec2(0.6, 0), 0.5, 0, 0.5)});
+    if (two_with_evidence) m.push_back({"b", Offset(Vec2(0.6, 0.1), 0.5, 0, 0.5)});
+    m.push_back({"pdr", Offset(Vec2(0, 0), 1, 0, 1)});
+    m.back().fallback_only = true;
+    FusionEstimator f(OneAgent(), NoHat(), std::move(m));
+    const auto rows = Walk(f, 40);
+    return std::make_pair(rows.back(), f.TypedSummary());
+  };
+  const auto [with_two, s2] = run(true);
+  // From its eleventh row on: the faded weight of its rows first reaches 10 there.
+  EXPECT_EQ(s2.members[0].follows_dr, 30);
+  EXPECT_GT(with_two.position_n.x() - Truth(39).x(), 0.55);  // a and b only
+  const auto [with_one, s1] = run(false);
+  EXPECT_EQ(s1.members[0].follows_dr, 0);  // beside one member it is dead reckoning's voice
+  EXPECT_LT(with_one.position_n.x() - Truth(39).x(), 0.3);
+}
+
 TEST(FusionEstimator, RefusesBadOptionsAndNoMembers) {
   FusionOptions o;
   o.stale_s = -1;

@@ -22,6 +22,8 @@ bool FusionOptions::IsValid(std::string* why) const {
   if (!(max_wait_s >= 0) || !std::isfinite(max_wait_s))
     return fail("fusion: max_wait_s must be >= 0");
   if (!(stale_s >= 0) || !std::isfinite(stale_s)) return fail("fusion: stale_s must be >= 0");
+  if (!(follows_dr_m >= 0) || !std::isfinite(follows_dr_m))
+    return fail("fusion: follows_dr_m must be >= 0");
   if (!(disagreement_probability > 0 && disagreement_probability < 1))
     return fail("fusion: need 0 < disagreement_probability < 1");
   if (!(hat_window_s >= 0) || !std::isfinite(hat_window_s))
@@ -36,6 +38,9 @@ const OptionTable<FusionOptions>& FusionOptionTable() {
            "a fused row waits at most this long (mission time) for members behind it");
     t.Real("fusion.stale_s", &FusionOptions::stale_s, "s", OptionBounds::NonNegative(),
            "a member's estimate older than this at the step's time is left out");
+    t.Real("fusion.follows_dr_m", &FusionOptions::follows_dr_m, "m", OptionBounds::NonNegative(),
+           "a member within this rms of dead reckoning over the hat's window uses no evidence "
+           "of its own for that agent and is left out there; 0: off");
     t.Real("fusion.disagreement_probability", &FusionOptions::disagreement_probability, "",
            OptionBounds::Inside(0, 1),
            "region (2-dof chi-square probability) a member's estimate must lie in around the "
@@ -192,6 +197,10 @@ void FusionEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   }
   if (const Step* step = std::get_if<Step>(&row); step != nullptr && IsAgent(info_, step->agent)) {
     pending_[step->agent].insert(step->t1);
+    auto& steps = steps_[step->agent];
+    steps.emplace_back(step->t0, step->t1);
+    const TimeS keep_from = now_ - (options_.max_wait_s + options_.hat_window_s + 10.0);
+    while (steps.size() > 1 && steps.front().second < keep_from) steps.pop_front();
   }
   for (const std::string& node : static_dirty_) EmitStatic(node, now_, sink);
   static_dirty_.clear();
@@ -256,11 +265,23 @@ std::optional<Estimate> FusionEstimator::MemberAt(std::size_t member, const std:
     e.sxy = (1 - a) * prev.sxy + a * next->sxy;
     e.syy = (1 - a) * prev.syy + a * next->syy;
     if (prev.szz && next->szz) e.szz = (1 - a) * *prev.szz + a * *next->szz;
-    if (t - prev.t > options_.stale_s && next->t - t > options_.stale_s) return std::nullopt;
+    if (t - prev.t > options_.stale_s && next->t - t > options_.stale_s &&
+        MovedBetween(agent, prev.t, next->t))
+      return std::nullopt;
     return e;
   }
-  if (t - prev.t > options_.stale_s) return std::nullopt;
+  if (t - prev.t > options_.stale_s && MovedBetween(agent, prev.t, t)) return std::nullopt;
   return prev;
+}
+
+bool FusionEstimator::MovedBetween(const std::string& agent, TimeS from, TimeS to) const {
+  const auto it = steps_.find(agent);
+  if (it == steps_.end()) return true;  // no steps known: time is all there is
+  for (auto s = it->second.rbegin(); s != it->second.rend(); ++s) {
+    if (s->second <= from + 1e-9) return false;  // steps end in time order
+    if (s->first < to - 1e-9) return true;
+  }
+  return false;
 }
 
 void FusionEstimator::Note(TimeS t, const std::string& agent, std::size_t member, bool excluded,
@@ -302,6 +323,50 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
     if (!inputs.empty()) break;  // the fallback only where no other member estimates
   }
   if (inputs.empty()) return;
+  if (options_.follows_dr_m > 0 && !members_[used.front()].fallback_only) {
+    // Dead reckoning at t (a fallback member), and each member's time-averaged distance from
+    // it: a member that stays with it uses no evidence of its own for this agent.
+    std::optional<Estimate> dr;
+    for (std::size_t m = 0; m < members_.size() && !dr; ++m)
+      if (members_[m].fallback_only) dr = MemberAt(m, p.agent, p.t);
+    if (dr) {
+      TimeS& last = from_dr_t_[p.agent];
+      // The hat's window (its default where the hat is off).
+      const double window_s =
+          options_.hat_window_s > 0 ? options_.hat_window_s : FusionOptions{}.hat_window_s;
+      const double fade = std::exp(-std::max(0.0, p.t - last) / window_s);
+      last = p.t;
+      std::vector<bool> follows(inputs.size(), false);
+      std::size_t own = 0;  // members with evidence of their own here
+      for (std::size_t i = 0; i < inputs.size(); ++i) {
+        auto& avg = from_dr_[{p.agent, used[i]}];
+        avg.first = avg.first * fade + 1.0;
+        avg.second += ((inputs[i].position_n.head<2>() - dr->position_n.head<2>()).squaredNorm() -
+                       avg.second) /
+                      avg.first;
+        follows[i] =
+            avg.first >= 10.0 && avg.second < options_.follows_dr_m * options_.follows_dr_m;
+        own += !follows[i];
+      }
+      // Left out only where two or more others use evidence of their own (they can then be
+      // compared with each other); beside a single one, the member that stays with dead
+      // reckoning is dead reckoning's voice, which may be the right one.
+      if (own >= 2) {
+        std::vector<std::size_t> keep_used;
+        std::vector<Estimate> keep_inputs;
+        for (std::size_t i = 0; i < inputs.size(); ++i) {
+          if (follows[i]) {
+            ++summary_.members[used[i]].follows_dr;
+            continue;
+          }
+          keep_used.push_back(used[i]);
+          keep_inputs.push_back(inputs[i]);
+        }
+        used = std::move(keep_used);
+        inputs = std::move(keep_inputs);
+      }
+    }
+  }
   // Leave out a member while three remain and some pair of members disagrees: of the members of
   // pairs that disagree, the one whose disagreements with all others sum highest (the largest
   // normalized residual of RAIM's fault exclusion; a loose member agrees with everyone and
@@ -516,6 +581,7 @@ EstimatorSummary FusionEstimator::Summary() const {
     out.numbers["fusion." + s.name + ".mean_weight"] =
         s.rows_used > 0 ? s.weight_sum / static_cast<double>(s.rows_used) : 0.0;
     out.numbers["fusion." + s.name + ".exclusions"] = static_cast<double>(s.exclusions);
+    out.numbers["fusion." + s.name + ".follows_dr_rows"] = static_cast<double>(s.follows_dr);
     out.numbers["fusion." + s.name + ".mean_inflation"] =
         s.rows_used > 0 ? s.inflation_sum / static_cast<double>(s.rows_used) : 1.0;
   }

@@ -42,8 +42,15 @@ namespace trailmark::fusion {
 struct FusionOptions {
   /// A fused row waits at most this long (mission time) for members still behind it, s.
   double max_wait_s = 3.0;
-  /// A member's estimate of an agent older than this at the step's time is left out, s.
+  /// A member's last estimate of an agent before t still counts at t when the agent has not
+  /// stepped since (standing: nothing moved); else only when at most this old, s.
   double stale_s = 1.0;
+  /// A member whose estimates of an agent stay this close to dead reckoning's (rms over the
+  /// hat's window, m) uses no evidence of its own for that agent (the RSSI network on a mission
+  /// without crumbs is dead reckoning). Where two or more other members do, it is left out: it
+  /// would make the hat take dead reckoning's error for theirs. Needs the `pdr` fallback
+  /// member. 0: off.
+  double follows_dr_m = 0.2;
   /// The region a member's estimate must lie in around the fusion of the others (2-dof
   /// chi-square probability; 99.9 %: a consistent member leaves it one time in a thousand).
   double disagreement_probability = 0.999;
@@ -91,6 +98,7 @@ struct FusionMemberSummary {
   double weight_sum = 0.0;     ///< sum of its covariance-intersection weights over those rows
   long long exclusions = 0;    ///< rows it was left out of as disagreeing with the others
   long long stale = 0;         ///< rows it had no recent estimate for
+  long long follows_dr = 0;    ///< rows it was left out of as no different from dead reckoning
   double inflation_sum = 0.0;  ///< sum of its covariance inflation over the rows it was used in
 };
 
@@ -171,6 +179,13 @@ class FusionEstimator : public OnlineEstimator {
   HatEstimate UpdateHat(const std::string& agent, TimeS t, const std::vector<std::size_t>& members,
                         const std::vector<Estimate>& inputs);
   std::map<std::string, Hat> hats_;
+  /// Per agent: its recent steps (t0, t1), to tell standing from walking.
+  std::map<std::string, std::deque<std::pair<TimeS, TimeS>>> steps_;
+  /// Whether the agent stepped between two times (a step overlaps (from, to)).
+  bool MovedBetween(const std::string& agent, TimeS from, TimeS to) const;
+  /// Per (agent, member): time-averaged squared distance from dead reckoning (weight, mean).
+  std::map<std::pair<std::string, std::size_t>, std::pair<double, double>> from_dr_;
+  std::map<std::string, TimeS> from_dr_t_;
   /// (agent, member) pairs left out at the last row.
   std::map<std::pair<std::string, std::size_t>, bool> excluded_;
   std::vector<std::string> member_notes_;
