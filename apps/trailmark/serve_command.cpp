@@ -50,10 +50,19 @@ int ServeLive(const ServeOptions& o) {
   server::ServerOptions so;
   so.live_dir = o.live;
   so.journal_file = o.journal;
-  // Without --pipeline: the baseline (dead reckoning), which every incident can feed.
+  // Without --pipeline: of the pipelines every incident can feed (steps or a foot IMU is all
+  // they need), the one of lowest serve rank — the fusion, whose members join as their
+  // evidence arrives.
   const PipelineSpec* chosen = nullptr;
   for (const auto& p : Pipelines()) {
-    if (o.pipeline.empty() ? p.baseline && !chosen : p.name == o.pipeline) chosen = &p;
+    if (!o.pipeline.empty()) {
+      if (p.name == o.pipeline) chosen = &p;
+      continue;
+    }
+    const bool any_incident = !p.needs_floor_plan && p.min_landmarks == 0 && p.needs.size() == 1 &&
+                              p.needs.front() == kStepOrImuStreams;
+    if (any_incident && p.serve_rank && (!chosen || *p.serve_rank < *chosen->serve_rank))
+      chosen = &p;
   }
   const PipelineSpec& spec = chosen ? *chosen : RequirePipeline(o.pipeline);
   so.pipeline = spec.name;

@@ -258,6 +258,8 @@ serve_pid=$!
 for _ in $(seq 300); do grep -q "listening on" "$dir/serve.log" && break; sleep 0.1; done
 port=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/serve.log")
 [ -n "$port" ] || { cat "$dir/serve.log"; fail "serve did not start"; }
+# Without --pipeline the replay runs the fusion (issue 27).
+grep -q "serve: fusion on" "$dir/serve.log" || { cat "$dir/serve.log"; fail "serve: default pipeline is not the fusion"; }
 for _ in $(seq 300); do  # the replay releases its first estimates (up to 30 s on a loaded machine)
   curl -s -H "Authorization: Bearer t0k3n" "http://127.0.0.1:$port/api/state" | grep -q '"nodes":\[{' && break
   sleep 0.1
@@ -286,6 +288,14 @@ done
 code=$(curl -s -o /dev/null -w "%{http_code}" "http://127.0.0.1:$port/?token=wrong")
 [ "$code" = 401 ] || fail "serve: dashboard with a wrong token gave $code"
 kill $serve_pid; wait $serve_pid || true
+# Live without --pipeline: the fusion too.
+mkdir -p "$dir/live-default"
+cp "$dir/m2/mission.json" "$dir/live-default/"
+"$TM" serve --live "$dir/live-default" --journal "$dir/jd.db" --port 0 --token T > "$dir/live-default.log" 2>&1 &
+ld_pid=$!
+for _ in $(seq 300); do grep -q "listening on" "$dir/live-default.log" && break; sleep 0.1; done
+kill $ld_pid; wait $ld_pid || true
+grep -q "pipeline fusion (incremental)" "$dir/live-default.log" || { cat "$dir/live-default.log"; fail "serve --live: default pipeline is not the fusion"; }
 grep -q "2 refused without the token" "$dir/serve.log" || { cat "$dir/serve.log"; fail "serve: refusals counted"; }
 run_failing "$TM" serve --replay "$dir/bt" --port 0 --token x --tls-cert "$dir/none.pem" --tls-key "$dir/none.key"
 [ $rc -ne 0 ] && grep -q "none.pem: no such file" "$dir/err" || { cat "$dir/err"; fail "serve with a missing certificate"; }

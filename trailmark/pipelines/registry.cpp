@@ -146,7 +146,7 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
   return spec;
 }
 
-const StreamSet kStepStreams{Stream::kSteps, Stream::kImu};
+const StreamSet kStepStreams = kStepOrImuStreams;
 
 /// The fusion's options: its own, and which pipelines may be its members (each at its
 /// defaults; the ablation turns one off).
@@ -365,6 +365,7 @@ std::vector<PipelineSpec> BuildRegistry() {
               Stream::kBearings, Stream::kEvents, Stream::kBaro};
     s.uses_floor_plan = true;
     s.steps_based = true;
+    s.serve_rank = 0;  // what `trailmark serve` runs unless told otherwise (issue 27)
     s.paper_scenarios = {"landmark-corridor", "beacon-trail", "house1-search"};
     out.push_back(
         Make<FusionPipelineOptions>(s, {}, FusionPipelineOptionTable(), Front::kGlobal,

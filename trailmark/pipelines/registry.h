@@ -23,6 +23,9 @@
 
 namespace trailmark {
 
+/// What a steps-based pipeline needs: steps.csv, or imu.csv through the foot INS.
+inline constexpr StreamSet kStepOrImuStreams{Stream::kSteps, Stream::kImu};
+
 /// What an estimator is built for: the incident's nodes, and the floor it works on.
 struct EstimatorInputs {
   const MissionInfo& info;
