@@ -751,6 +751,11 @@ void IncidentServer::LiveLoop() {
       last_integrity = std::chrono::steady_clock::now();
       integrity = live_->estimator->Summary().integrity;
     }
+    // Which sources each agent's estimate uses (the fusion's members; cheap: a lookup).
+    std::vector<std::pair<std::string, std::vector<SourceShare>>> sources;
+    for (const NodeInfo& n : info_.nodes) {
+      if (n.kind == NodeKind::kAgent) sources.emplace_back(n.id, live_->estimator->Sources(n.id));
+    }
     estimator_lock.unlock();
     stats_.estimated_rows += rows.size();
     std::vector<std::pair<std::string, std::string>> to_publish;
@@ -761,6 +766,7 @@ void IncidentServer::LiveLoop() {
       for (const auto& [id, t] : heard) state_.Heard(id, t);
       for (const auto& e : sink.rows) state_.Apply(e);
       if (integrity) state_.SetIntegrity(std::move(*integrity));
+      for (auto& [id, shares] : sources) state_.SetSources(id, std::move(shares));
       state_.Advance(newest);
       if (publish) to_publish = AgentJson(state_);
     }

@@ -63,6 +63,14 @@ void IncidentState::SetIntegrity(std::vector<IntegrityNote> notes) {
   integrity_ = std::move(notes);
 }
 
+void IncidentState::SetSources(const std::string& id, std::vector<SourceShare> sources) {
+  if (sources.empty()) {
+    sources_.erase(id);
+  } else {
+    sources_[id] = std::move(sources);
+  }
+}
+
 void IncidentState::Advance(TimeS now) {
   now_ = std::max(now_, now);
   std::vector<Alert> before;
@@ -251,6 +259,18 @@ std::string IncidentState::ToJsonText() const {
     if (e.szz) {
       out += ",\"szz\":";
       AppendNumber(out, *e.szz);
+    }
+    // The fusion (issue 27): which members the estimate uses, with their weights.
+    if (const auto src = sources_.find(id); src != sources_.end()) {
+      out += ",\"sources\":[";
+      for (std::size_t i = 0; i < src->second.size(); ++i) {
+        out += i == 0 ? "{\"source\":" : ",{\"source\":";
+        AppendString(out, src->second[i].source);
+        out += ",\"weight\":";
+        AppendNumber(out, src->second[i].weight);
+        out += '}';
+      }
+      out += ']';
     }
     out += '}';
   }

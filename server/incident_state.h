@@ -61,6 +61,9 @@ class IncidentState {
   /// whose latest note at or before now excluded it (or an agent whose estimate disagrees with
   /// its dead reckoning) is an `integrity` alert until a later note readmits it.
   void SetIntegrity(std::vector<IntegrityNote> notes);
+  /// Which sources a node's estimate uses now, with their shares (the estimator's Sources;
+  /// the fusion's members): `sources` in /api/state. An empty list removes them.
+  void SetSources(const std::string& id, std::vector<SourceShare> sources);
   /// Mission time now; recomputes the alerts.
   void Advance(TimeS now);
   TimeS now() const { return now_; }
@@ -90,6 +93,7 @@ class IncidentState {
   MissionInfo info_;
   AlertOptions options_;
   std::vector<IntegrityNote> integrity_;
+  std::map<std::string, std::vector<SourceShare>> sources_;
   TimeS now_ = -1e300;
   std::map<std::string, NodeState> nodes_;
   std::map<std::string, TimeS> heard_;

@@ -80,6 +80,24 @@ TEST(IncidentState, EventTextIsTheStateDocument) {
   EXPECT_TRUE(nlohmann::json::parse(text).at("nodes")[1].at("x").is_number_float()) << text;
 }
 
+TEST(IncidentState, TheFusionsSourcesOfAnEstimateAreInTheState) {
+  IncidentState s(Info());
+  s.Apply(At("ff1", 1, 2));
+  s.Apply(At("ff2", 1, 3));
+  s.SetSources("ff1", {{"beacons-ekf", 0.75}, {"map \"matching\"", 0.25}});
+  s.Advance(1.5);
+  const auto j = nlohmann::json::parse(s.ToJsonText());
+  const auto& ff1 = j.at("nodes")[0];
+  ASSERT_EQ(ff1.at("id"), "ff1");
+  ASSERT_EQ(ff1.at("sources").size(), 2u);
+  EXPECT_EQ(ff1.at("sources")[0].at("source"), "beacons-ekf");
+  EXPECT_DOUBLE_EQ(ff1.at("sources")[0].at("weight").get<double>(), 0.75);
+  EXPECT_EQ(ff1.at("sources")[1].at("source"), "map \"matching\"");
+  EXPECT_FALSE(j.at("nodes")[1].contains("sources"));  // ff2: its estimator does not say
+  s.SetSources("ff1", {});
+  EXPECT_FALSE(nlohmann::json::parse(s.ToJsonText()).at("nodes")[0].contains("sources"));
+}
+
 TEST(IncidentState, AlertsForLinkLostMotionlessAndUncertainty) {
   IncidentState s(Info());
   // ff1 walks for 40 s, ff2 stands still from t = 5 s, then ff1 goes silent.

@@ -101,11 +101,13 @@ ServerOptions LiveOptions(const TempDir& dir, const std::string& pipeline) {
 std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
                               const SimulatedMission& sim, std::size_t* rows_posted,
                               std::size_t* rows_estimated, std::size_t* refusals,
-                              bool bundled = false) {
+                              bool bundled = false, nlohmann::json* final_state = nullptr) {
   ServerOptions o = LiveOptions(dir, pipeline);
   if (!sim.levels.empty()) {
     o.floor_plan = sim.plan;  // the ground floor's
     o.floor_levels = sim.levels;
+  } else if (RequirePipeline(pipeline).uses_floor_plan) {
+    o.floor_plan = sim.plan;  // as `trailmark serve --live` gives the mission's plan
   }
   std::mutex m;
   std::vector<Estimate> live;
@@ -142,6 +144,7 @@ std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
   const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
   while (server.stats().estimated_rows.load() < rows && std::chrono::steady_clock::now() < give_up)
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  if (final_state) *final_state = server.StateJson();
   server.Stop();
   *rows_posted = rows;
   *rows_estimated = server.stats().estimated_rows.load();
@@ -205,6 +208,30 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
 
 TEST(LiveServer, BeaconsEkfOnTheJournalIsTheBatchRun) {
   ExpectLiveIsTheBatchPrefix("beacons-ekf", testing::WithFootImuOnly(SimulateScenario("beacon-trail", 4), 3));
+}
+
+// The fusion live is its batch run, and the state says which members each firefighter's
+// estimate uses (issue 27).
+TEST(LiveServer, FusionOnTheJournalIsTheBatchRunAndNamesItsSources) {
+  const SimulatedMission sim = SimulateScenario("beacon-trail", 4);
+  ExpectLiveIsTheBatchPrefix("fusion", sim);
+  TempDir dir;
+  WriteMission(dir, sim);
+  std::size_t rows = 0, estimated = 0, refusals = 0;
+  nlohmann::json state;
+  RunLive(dir, "fusion", sim, &rows, &estimated, &refusals, false, &state);
+  bool any = false;
+  for (const auto& n : state.at("nodes")) {
+    if (n.at("kind") != "agent") continue;
+    ASSERT_TRUE(n.contains("sources")) << n.dump();
+    double sum = 0;
+    for (const auto& s : n.at("sources")) {
+      sum += s.at("weight").get<double>();
+      any = any || s.at("source") == "beacons-ekf";
+    }
+    EXPECT_NEAR(sum, 1.0, 1e-9);
+  }
+  EXPECT_TRUE(any) << state.dump();  // the trail's ranges reached the beacon filter
 }
 
 TEST(LiveServer, BundlesOfADevicesStreamsGiveTheBatchRunToo) {

@@ -143,6 +143,12 @@ std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& inf
 bool OnDifferentLevels(const LevelSource* levels, const MissionInfo& info, const std::string& a,
                        const std::string& b);
 
+/// One source of a node's current estimate and its share of it (the fusion's members).
+struct SourceShare {
+  std::string source;   ///< a member pipeline's name ("beacons-ekf"), or "dead reckoning"
+  double weight = 0.0;  ///< its share of the estimate, 0..1
+};
+
 class OnlineEstimator {
  public:
   virtual ~OnlineEstimator() = default;
@@ -164,6 +170,10 @@ class OnlineEstimator {
   virtual std::optional<Estimate> Current(const std::string& node) const = 0;
   /// What the estimator reports so far.
   virtual EstimatorSummary Summary() const = 0;
+  /// Which sources the node's latest estimate uses, with their shares (the fusion: its
+  /// members and their weights); empty when the estimator does not say (a single-source
+  /// estimator). Wrappers pass it on.
+  virtual std::vector<SourceShare> Sources(const std::string& /*node*/) const { return {}; }
 };
 
 }  // namespace trailmark

@@ -215,6 +215,12 @@ void FusionEstimator::Finish(EstimateSink& sink) {
   Resolve(sink, true);
 }
 
+std::vector<SourceShare> FusionEstimator::Sources(const std::string& node) const {
+  const auto it = sources_.find(node);
+  if (it == sources_.end()) return {};
+  return it->second;
+}
+
 std::optional<Estimate> FusionEstimator::Current(const std::string& node) const {
   const auto it = current_.find(node);
   if (it == current_.end()) return std::nullopt;
@@ -472,6 +478,10 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
     fused.syy = cov(1, 1);
     ++summary_.grown_rows;
   }
+  std::vector<SourceShare>& shares = sources_[p.agent];
+  shares.clear();
+  for (std::size_t i = 0; i < kept.size(); ++i)
+    shares.push_back({members_[kept_members[i]].name, ci.weights[i]});
   for (std::size_t i = 0; i < kept.size(); ++i) {
     FusionMemberSummary& s = summary_.members[kept_members[i]];
     ++s.rows_used;
@@ -537,6 +547,7 @@ FusionEstimator::HatEstimate FusionEstimator::UpdateHat(const std::string& agent
 
 void FusionEstimator::EmitStatic(const std::string& node, TimeS t, EstimateSink& sink) {
   std::vector<Estimate> inputs;
+  std::vector<std::string> input_names;
   TimeS latest = -1e300;
   int best_rank = std::numeric_limits<int>::max();
   for (std::size_t m = 0; m < members_.size(); ++m) {
@@ -547,11 +558,16 @@ void FusionEstimator::EmitStatic(const std::string& node, TimeS t, EstimateSink&
     const auto it = static_latest_[m].find(node);
     if (it == static_latest_[m].end() || members_[m].static_rank != best_rank) continue;
     inputs.push_back(it->second);
+    input_names.push_back(members_[m].name);
     latest = std::max(latest, it->second.t);
   }
   if (inputs.empty()) return;
-  Estimate fused = Combine(inputs, IntersectEstimates(inputs));
+  const Intersection ci = IntersectEstimates(inputs);
+  Estimate fused = Combine(inputs, ci);
   fused.id = node;
+  std::vector<SourceShare>& shares = sources_[node];
+  shares.clear();
+  for (std::size_t i = 0; i < inputs.size(); ++i) shares.push_back({input_names[i], ci.weights[i]});
   fused.t = std::min(t, latest);
   const auto prev = current_.find(node);
   if (prev != current_.end()) fused.t = std::max(fused.t, prev->second.t);

@@ -122,6 +122,9 @@ class FusionEstimator : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;
+  /// The members of the agent's latest fused row and their weights ("pdr" alone where dead
+  /// reckoning stood in); a static node's: the member it came from.
+  std::vector<SourceShare> Sources(const std::string& node) const override;
   /// fusion.* numbers (rows, each member's mean weight, share used, exclusions), and every
   /// member's summary under its name ("breadcrumb.…"), notes and integrity notes included.
   EstimatorSummary Summary() const override;
@@ -162,6 +165,7 @@ class FusionEstimator : public OnlineEstimator {
   std::vector<std::map<std::string, Estimate>> static_latest_;
   std::vector<std::string> static_dirty_;
   std::map<std::string, Estimate> current_;
+  std::map<std::string, std::vector<SourceShare>> sources_;  ///< of each node's latest row
   /// The N-cornered hat of one agent: time-averaged squared differences of each pair of
   /// members (per axis, m^2) and each member's stated variance (per axis, m^2).
   struct Hat {

@@ -54,6 +54,9 @@ class StepFrontEnd : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;
+  std::vector<SourceShare> Sources(const std::string& node) const override {
+    return inner_->Sources(node);
+  }
   /// The inner estimator's summary, and: rows ignored, late and waiting, the INS's steps.
   EstimatorSummary Summary() const override;
   OnlineEstimator& inner() { return *inner_; }

@@ -233,4 +233,10 @@ EstimatorSummary DeadReckoningGuard::Summary() const {
   return s;
 }
 
+std::vector<SourceShare> DeadReckoningGuard::Sources(const std::string& node) const {
+  if (options_.on_disagreement == GuardAction::kFallback && Disagrees(node))
+    return {{"dead reckoning", 1.0}};
+  return inner_->Sources(node);
+}
+
 }  // namespace trailmark::integrity

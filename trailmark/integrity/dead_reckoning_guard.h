@@ -69,6 +69,9 @@ class DeadReckoningGuard : public OnlineEstimator {
   void UseLevels(const LevelSource* levels) override { inner_->UseLevels(levels); }
   /// The estimate the guard would emit for the node now.
   std::optional<Estimate> Current(const std::string& node) const override;
+  /// The inner estimator's; dead reckoning alone while it stands in for a disagreeing
+  /// estimate (on_disagreement=fallback).
+  std::vector<SourceShare> Sources(const std::string& node) const override;
   /// The inner summary, and: integrity.disagreements (times an estimate left the region),
   /// integrity.disagreement_share (of the agents' estimates), the notes.
   EstimatorSummary Summary() const override;

@@ -16,6 +16,8 @@ export interface NodeState {
   floor?: number;
   /** Vertical variance, m². */
   szz?: number;
+  /** The fusion: which sources (member pipelines) the estimate uses, with their shares. */
+  sources?: Array<{ source: string; weight: number }>;
 }
 
 export interface Alert {

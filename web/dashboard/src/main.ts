@@ -266,6 +266,13 @@ function setText(el: Element, text: string): void {
   if (el.textContent !== text) el.textContent = text;
 }
 
+/** The fusion's sources of an estimate, largest share first: " · beacons-ekf 80 %, mapmatch 20 %". */
+function sourcesText(n: NodeState): string {
+  const shown = (n.sources ?? []).filter((s) => s.weight >= 0.05).sort((a, b) => b.weight - a.weight);
+  if (shown.length === 0) return '';
+  return ` · ${shown.map((s) => `${s.source} ${Math.round(100 * s.weight)} %`).join(', ')}`;
+}
+
 function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): void {
   const list = $('list');
   const shownIds = new Set(agents.map((n) => n.id));
@@ -279,7 +286,7 @@ function renderSide(agents: NodeState[], alerts: Alert[], t: number | null): voi
     const [name, detail, badgeBox] = Array.from(entry.children) as HTMLElement[];
     setText(name, `${n.id}: (${n.x.toFixed(1)}, ${n.y.toFixed(1)}) m`);
     const level = n.floor === undefined ? '' : `, floor ${n.floor}`;
-    setText(detail, ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m${level}`);
+    setText(detail, ` ±${ellipse95(n.sxx, n.sxy, n.syy).a.toFixed(1)} m${level}${sourcesText(n)}`);
     const mine = alerts.filter((x) => x.id === n.id);
     const badgeKey = mine.map((a) => a.kind).join('|');
     if (badgeBox.dataset.key !== badgeKey) {
