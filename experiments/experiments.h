@@ -100,8 +100,10 @@ int ReproduceRobustness(int variants, const std::filesystem::path& out, int firs
 /// how many honest sources are excluded with it, and p75 without the lie, with it caught, and
 /// with it trusted (integrity.exclude=false, integrity.streams=false).
 /// `trailmark reproduce fusion` (issue 27): the fusion next to every single pipeline on the
-/// same missions of each scenario that has a paper or several sources, seeds first_seed.. .
-int ReproduceFusion(int seeds, const std::filesystem::path& out, int first_seed = 1);
+/// same missions of each scenario that has a paper or several sources, seeds first_seed.. ;
+/// `options` go to the fusion only (an ablation: use.mapmatch=false).
+int ReproduceFusion(int seeds, const std::filesystem::path& out, int first_seed = 1,
+                    const OptionValues& options = {});
 int ReproduceIntegrity(int seeds, const std::filesystem::path& out, int first_seed = 1);
 
 /// The multi-floor building (issue 26): ins and pdr with and without the barometer on seeds

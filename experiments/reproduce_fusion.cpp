@@ -48,7 +48,7 @@ struct Cell {
 
 }  // namespace
 
-int ReproduceFusion(int seeds, const fs::path& out, int first_seed) {
+int ReproduceFusion(int seeds, const fs::path& out, int first_seed, const OptionValues& options) {
   std::map<std::pair<std::string, std::string>, Cell> cells;  // (scenario, pipeline)
   std::map<std::string, std::vector<std::string>> ran_on;     // scenario -> pipelines in order
   int done = 0;
@@ -60,7 +60,8 @@ int ReproduceFusion(int seeds, const fs::path& out, int first_seed) {
       WriteMissionDirectory(dir / "mission", sim.data, &sim.plan);
       std::map<std::string, RunOutcome> runs;
       for (const PipelineSpec& p : Pipelines()) {
-        RunOutcome o = RunIfRunnable(p.name, dir / "mission", dir / p.name);
+        RunOutcome o = RunIfRunnable(p.name, dir / "mission", dir / p.name,
+                                     p.name == "fusion" ? options : OptionValues{});
         if (!o.ran && o.refusal.rfind("cannot run", 0) == 0) continue;  // not for this mission
         auto& order = ran_on[scenario];
         if (std::find(order.begin(), order.end(), p.name) == order.end()) order.push_back(p.name);
@@ -110,6 +111,12 @@ int ReproduceFusion(int seeds, const fs::path& out, int first_seed) {
       "| scenario | pipeline | p75 m | in95 % | worse than DR | best paper p75 m | behind | run "
       "time s |\n|---|---|---|---|---|---|---|---|\n",
       first_seed, first_seed + seeds - 1);
+  if (!options.empty()) {
+    std::string given;
+    for (const auto& [k, v] : options)
+      given += fmt::format("{}`{}={}`", given.empty() ? "" : ", ", k, v);
+    text = fmt::format("Options of the fusion: {}.\n\n", given) + text;
+  }
   int behind_total = 0, fusion_runs = 0, fusion_worse = 0;
   for (const std::string& scenario : FusionScenarios()) {
     for (const std::string& name : ran_on[scenario]) {

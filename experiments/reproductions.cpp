@@ -246,9 +246,9 @@ const std::vector<Reproduction>& Reproductions() {
       {"fusion",
        "the fusion next to every single pipeline on the same missions: the papers' scenarios, "
        "the office loop, the training building and the multi-floor buildings (issue 27)",
-       true, false,
+       true, true,
        [](const ReproductionArgs& a) {
-         return ReproduceFusion(a.seeds, a.out / "fusion", a.first_seed);
+         return ReproduceFusion(a.seeds, a.out / "fusion", a.first_seed, a.options);
        }},
       {"floors",
        "the multi-floor building: ins and pdr with and without the barometer, the right floor; "

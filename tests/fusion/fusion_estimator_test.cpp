@@ -270,12 +270,13 @@ TEST(FusionEstimator, TheHatFindsTheMemberThatIsBetterThanItsCovarianceSays) {
       return At(a, t, Truth(k) + Vec2(n(rng), n(rng)), 0.25, 0, 0.25);
     });
   };
-  auto run = [&](bool hat) {
+  auto run = [&](bool hat, double power = 1.0) {
     std::vector<std::unique_ptr<Scripted>> s;
     s.push_back(noisy(0.05));
     s.push_back(noisy(0.7));
     s.push_back(noisy(0.7));
     FusionOptions o;
+    o.hat_power = power;
     if (!hat) o.hat_window_s = 0;
     FusionEstimator f(OneAgent(), o, Members(std::move(s)));
     const auto rows = Walk(f, 400);
@@ -290,6 +291,9 @@ TEST(FusionEstimator, TheHatFindsTheMemberThatIsBetterThanItsCovarianceSays) {
   EXPECT_GT(without, 0.3);
   EXPECT_GT(summary.numbers.at("fusion.m1.mean_inflation"), 1.3);
   EXPECT_NEAR(summary.numbers.at("fusion.m0.mean_inflation"), 1.0, 1e-9);
+  // A larger power leans further toward the best member.
+  const auto [sharper, unused] = run(true, 3.0);
+  EXPECT_LT(sharper, with_hat);
 }
 
 /// A member that places crumb c1 at `where` with each step.

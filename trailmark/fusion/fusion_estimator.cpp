@@ -48,6 +48,9 @@ const OptionTable<FusionOptions>& FusionOptionTable() {
     t.Real("fusion.hat_window_s", &FusionOptions::hat_window_s, "s", OptionBounds::NonNegative(),
            "time constant of each member's error variance estimated from pairwise differences "
            "(N-cornered hat; inflates members that claim less than that); 0: off");
+    t.Real("fusion.hat_power", &FusionOptions::hat_power, "", OptionBounds::Positive(),
+           "the hat's weights are 1/variance to this power (1: the minimum-variance "
+           "combination of independent errors; larger: closer to the best member alone)");
     t.Flag("fusion.hat_weights", &FusionOptions::hat_weights,
            "weigh the members' positions by the hat's variances once known (else by their "
            "covariances)");
@@ -450,7 +453,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
       if (out[i]) continue;
       const double stated = 0.5 * (kept[k].sxx + kept[k].syy) / inflation[i];
       const double v = std::max({(*hat.variance_m2)[i], 0.05 * stated, 1e-4});
-      w.push_back(1.0 / v);
+      w.push_back(std::pow(1.0 / v, options_.hat_power));
       sum += w.back();
       ++k;
     }

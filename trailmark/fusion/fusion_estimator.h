@@ -64,6 +64,10 @@ struct FusionOptions {
   /// by its inverse (the minimum-variance combination) instead of by their stated covariances;
   /// the reported covariance stays the intersection's, grown to cover the shift.
   bool hat_weights = true;
+  /// The hat's weights are (1/s_i^2)^hat_power: 1 is the minimum-variance combination of
+  /// independent errors; the members' errors share dead reckoning's, and a larger power leans
+  /// toward the best member alone.
+  double hat_power = 1.0;
   bool IsValid(std::string* why) const;
 };
 
