@@ -398,6 +398,33 @@ TEST(FusionEstimator, AMemberThatIsDeadReckoningIsLeftOutBesideTwoWithEvidence) 
   EXPECT_LT(with_one.position_n.x() - Truth(39).x(), 0.3);
 }
 
+TEST(FusionEstimator, TwoMembersReadingTheSameEvidenceAreOneOpinion) {
+  // The RSSI network reading the ultrasound ranges as well: with no third member to arbitrate,
+  // the beacon filter (built for ranges, lower static rank) alone; once the network has RSSI of
+  // its own, both again.
+  auto run = [](bool rssi) {
+    std::vector<FusionMember> m;
+    m.push_back(
+        {"radio", Offset(Vec2(2, 0), 0.01, 0, 0.01), StreamSet{Stream::kRssi, Stream::kRanges}});
+    m.back().static_rank = 2;
+    m.push_back({"ranges", Offset(Vec2(0, 0), 0.04, 0, 0.04), StreamSet{Stream::kRanges}});
+    m.back().static_rank = 0;
+    FusionEstimator f(OneAgent(), NoHat(), std::move(m));
+    VectorSink sink;
+    f.Add(RangeMeasurement{0.1, "ff1", "b1", 3.0, 0.05}, sink);
+    if (rssi) f.Add(RssiPacket{0.2, "ff1", "c1", -60.0}, sink);
+    for (int k = 0; k < 10; ++k)
+      f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+    return std::make_pair(sink.rows.back(), f.TypedSummary());
+  };
+  const auto [shared, s1] = run(false);
+  EXPECT_LT((shared.position_n.head<2>() - Truth(9)).norm(), 1e-9);
+  EXPECT_EQ(s1.members[0].shared_evidence, 10);
+  const auto [own, s2] = run(true);
+  EXPECT_GT((own.position_n.head<2>() - Truth(9)).norm(), 1.0);  // the tighter radio member
+  EXPECT_EQ(s2.members[0].shared_evidence, 0);
+}
+
 TEST(FusionEstimator, RefusesBadOptionsAndNoMembers) {
   FusionOptions o;
   o.stale_s = -1;

@@ -51,6 +51,9 @@ const OptionTable<FusionOptions>& FusionOptionTable() {
     t.Real("fusion.hat_power", &FusionOptions::hat_power, "", OptionBounds::Positive(),
            "the hat's weights are 1/variance to this power (1: the minimum-variance "
            "combination of independent errors; larger: closer to the best member alone)");
+    t.Flag("fusion.shared_evidence_to_owner", &FusionOptions::shared_evidence_to_owner,
+           "where only two members count and one's evidence is all the other's (of lower "
+           "static rank), the other alone");
     t.Flag("fusion.hat_weights", &FusionOptions::hat_weights,
            "weigh the members' positions by the hat's variances once known (else by their "
            "covariances)");
@@ -143,6 +146,7 @@ FusionEstimator::FusionEstimator(MissionInfo info, FusionOptions options,
   gate_d2_ = integrity::ChiSquareQuantile(2, options_.disagreement_probability);
   agent_history_.resize(members_.size());
   for (const FusionMember& m : members_) active_.push_back(m.evidence.empty());
+  seen_evidence_.resize(members_.size());
   static_latest_.resize(members_.size());
   for (std::size_t i = 0; i < members_.size(); ++i) {
     if (!members_[i].estimator) throw std::invalid_argument("fusion: member without estimator");
@@ -191,7 +195,10 @@ void FusionEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   std::optional<std::string> error;
   const Stream stream = RowStream(row);
   for (std::size_t i = 0; i < members_.size(); ++i) {
-    if (members_[i].evidence.Has(stream)) active_[i] = true;
+    if (members_[i].evidence.Has(stream)) {
+      active_[i] = true;
+      seen_evidence_[i].Add(stream);
+    }
     try {
       members_[i].estimator->Add(row, *sinks_[i]);
     } catch (const std::invalid_argument& e) {
@@ -373,6 +380,24 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
         }
         used = std::move(keep_used);
         inputs = std::move(keep_inputs);
+      }
+    }
+  }
+  if (options_.shared_evidence_to_owner && inputs.size() == 2 && !members_[used[0]].fallback_only) {
+    // Two members reading the same evidence: the one built for it (lower static rank) alone.
+    auto covered = [&](std::size_t a, std::size_t b) {  // a's evidence seen is b's, b ranks first
+      const StreamSet seen = seen_evidence_[a];
+      if (seen.empty() || members_[b].static_rank >= members_[a].static_rank) return false;
+      for (Stream st : seen.List())
+        if (!members_[b].evidence.Has(st)) return false;
+      return true;
+    };
+    for (std::size_t k = 0; k < 2; ++k) {
+      if (covered(used[k], used[1 - k])) {
+        ++summary_.members[used[k]].shared_evidence;
+        used = {used[1 - k]};
+        inputs = {inputs[1 - k]};
+        break;
       }
     }
   }
@@ -601,6 +626,8 @@ EstimatorSummary FusionEstimator::Summary() const {
         s.rows_used > 0 ? s.weight_sum / static_cast<double>(s.rows_used) : 0.0;
     out.numbers["fusion." + s.name + ".exclusions"] = static_cast<double>(s.exclusions);
     out.numbers["fusion." + s.name + ".follows_dr_rows"] = static_cast<double>(s.follows_dr);
+    out.numbers["fusion." + s.name + ".shared_evidence_rows"] =
+        static_cast<double>(s.shared_evidence);
     out.numbers["fusion." + s.name + ".mean_inflation"] =
         s.rows_used > 0 ? s.inflation_sum / static_cast<double>(s.rows_used) : 1.0;
   }

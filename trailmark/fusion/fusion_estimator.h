@@ -64,6 +64,11 @@ struct FusionOptions {
   /// by its inverse (the minimum-variance combination) instead of by their stated covariances;
   /// the reported covariance stays the intersection's, grown to cover the shift.
   bool hat_weights = true;
+  /// Where only two members count (the hat cannot arbitrate) and every evidence stream one of
+  /// them has seen is evidence of the other, of lower static rank, too (the RSSI network and
+  /// the beacon filter both reading the ultrasound ranges), they are not two opinions: the one
+  /// built for that evidence is used alone.
+  bool shared_evidence_to_owner = true;
   /// The hat's weights are (1/s_i^2)^hat_power: 1 is the minimum-variance combination of
   /// independent errors; the members' errors share dead reckoning's, and a larger power leans
   /// toward the best member alone.
@@ -103,6 +108,7 @@ struct FusionMemberSummary {
   long long exclusions = 0;    ///< rows it was left out of as disagreeing with the others
   long long stale = 0;         ///< rows it had no recent estimate for
   long long follows_dr = 0;    ///< rows it was left out of as no different from dead reckoning
+  long long shared_evidence = 0;  ///< rows it gave way to the member built for its evidence
   double inflation_sum = 0.0;  ///< sum of its covariance inflation over the rows it was used in
 };
 
@@ -158,6 +164,7 @@ class FusionEstimator : public OnlineEstimator {
   std::vector<FusionMember> members_;
   std::vector<std::unique_ptr<MemberSink>> sinks_;
   std::vector<bool> active_;  ///< per member: its evidence has arrived
+  std::vector<StreamSet> seen_evidence_;  ///< per member: which of its evidence streams came
   double gate_d2_ = 0.0;
   TimeS now_ = -1e300;
   /// Per agent, the times a fused row is asked for (its steps' ends, and every time a member
