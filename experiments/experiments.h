@@ -15,6 +15,8 @@
 #include "trailmark/core/options.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/ins/zupt_ins.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/sim/mission_sim.h"
 
 namespace trailmark::experiments {
 
@@ -51,6 +53,10 @@ int WriteReproduction(const std::filesystem::path& out, const std::string& title
 Metrics RunAndEvaluate(const std::string& pipeline, const std::filesystem::path& mission_dir,
                        const std::filesystem::path& out, double* wall_s,
                        const OptionValues& options = {}, EstimatorSummary* summary = nullptr);
+/// Writes a simulated mission as `trailmark simulate` does: every level's plan in one file for a
+/// building of several floors, the one plan otherwise, none for a scenario without a building.
+void WriteSimulatedMission(const std::filesystem::path& dir, const SimulatedMission& sim,
+                           const MissionWriteStyle& style = {});
 /// A pipeline's run on a mission, or why it did not run.
 struct RunOutcome {
   bool ran = false;

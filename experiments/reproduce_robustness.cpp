@@ -89,7 +89,7 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
         const Variation v = DrawVariation(family, static_cast<std::uint64_t>(k));
         ApplyVariation(v, sim);
         const fs::path dir = out / "missions" / fmt::format("{}-{}-{}", scenario, family_name, k);
-        WriteMissionDirectory(dir / "mission", sim.data, &sim.plan, v.write);
+        WriteSimulatedMission(dir / "mission", sim, v.write);
         const RunOutcome dr = RunIfRunnable("pdr", dir / "mission", dir / "pdr");
         std::map<std::string, double> p75_of;  // agents' p75 of each pipeline on this variant
         for (const std::string& name : names) {

@@ -149,6 +149,16 @@ Metrics RunAndEvaluate(const std::string& pipeline, const fs::path& mission_dir,
   return Evaluate(mission.info(), truth, est);
 }
 
+void WriteSimulatedMission(const fs::path& dir, const SimulatedMission& sim,
+                           const MissionWriteStyle& style) {
+  if (!sim.levels.empty()) {
+    WriteMissionDirectory(dir, sim.data, sim.levels, style);  // every level, drawn alike
+  } else {
+    const bool has_plan = !sim.plan.walls().empty();
+    WriteMissionDirectory(dir, sim.data, has_plan ? &sim.plan : nullptr, style);
+  }
+}
+
 RunOutcome RunIfRunnable(const std::string& pipeline, const fs::path& mission_dir,
                          const fs::path& out, const OptionValues& options) {
   RunOutcome o;

@@ -652,22 +652,19 @@ int Demo(const std::string& scenario, std::uint64_t seed, const fs::path& out) {
     reports.push_back((out / ("report-" + extra + ".html")).string());
   }
   {
-    // Floors (issue 26): the multi-floor building with the foot INS and the phone's steps and
-    // barometer, map matching on every level and the breadcrumbs; the report has the Floors
-    // table.
-    const std::string extra = "multi-floor";
+    // Every source at once (issue 27): the multi-floor building with two firefighters, their
+    // breadcrumbs, radio landmarks on every level, an ultrasound exit trail, foot IMUs, phone
+    // steps, barometers and every level's plan; every pipeline that can run on it, the fusion
+    // among them. Its report has the Floors table.
+    const std::string extra = "all-sources";
     const fs::path mdir = out / "missions" / extra;
     Simulate(extra, seed, mdir);
-    const std::set<std::string> floors_pipelines{"pdr", "ins", "mapmatch", "breadcrumb", "fusion"};
-    for (const auto& p : Pipelines()) {
-      if (floors_pipelines.count(p.name)) done.erase(p.name);
-      else done.insert(p.name);
-    }
+    for (const auto& p : Pipelines()) done.erase(p.name);
     const std::size_t first = rows.size();
     run_all(extra, mdir, out / "runs" / extra, out / ("report-" + extra + ".html"));
     reports.push_back((out / ("report-" + extra + ".html")).string());
     for (std::size_t i = first; i < rows.size(); ++i) {
-      if (const auto& f = rows[i].second.floors) {
+      if (const auto& f = rows[i].second.floors; f && rows[i].second.agents.stats.samples > 0) {
         floor_lines.push_back(fmt::format(
             "{:<18} {:<18} right floor {:.1f} %, VE95 {:.2f} m, IPIN score {:.2f} m", extra,
             rows[i].first.pipeline, 100 * f->floor_hit_rate, f->ve95_m, f->ipin_score_m));

@@ -8,6 +8,9 @@
 #include <functional>
 #include <random>
 
+#include "test_util.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/pipelines/batch_run.h"
 #include "trailmark/pipelines/registry.h"
 #include "trailmark/sim/scenarios.h"
 
@@ -331,6 +334,34 @@ TEST(FusionEstimator, AStaticNodeComesFromTheMemberThatMeasuresItMostDirectly) {
   EXPECT_LT((run(2).position_n.head<2>() - Vec2(5, 5)).norm(), 1e-3);
 }
 
+TEST(FusionEstimator, AStaticNodeComesFromAMemberWhoseEvidenceNamesIt) {
+  // A beacon filter (rank 0) keeps the breadcrumb it never ranges where it was dropped; the
+  // RSSI network (rank 2) hears it: the crumb is the network's. A beacon the ranges name is the
+  // filter's, and a node no evidence names comes from the lowest rank as before.
+  auto run = [](const std::string& ranged, const std::string& heard) {
+    std::vector<FusionMember> m;
+    m.push_back({"ranges", std::make_unique<PlacesACrumb>(Vec2(1, 1), 0.04)});
+    m.back().static_rank = 0;
+    m.back().evidence = StreamSet{Stream::kRanges};
+    m.push_back({"radio", std::make_unique<PlacesACrumb>(Vec2(5, 5), 0.01)});
+    m.back().static_rank = 2;
+    m.back().evidence = StreamSet{Stream::kRssi};
+    FusionEstimator f(OneAgent(), {}, std::move(m));
+    VectorSink sink;
+    for (int k = 0; k < 5; ++k) {
+      if (!ranged.empty())
+        f.Add(RangeMeasurement{0.5 * k + 0.1, ranged, "ff1", 2.0, 0.3, "ultrasound"}, sink);
+      if (!heard.empty()) f.Add(RssiPacket{0.5 * k + 0.2, "ff1", heard, -70.0}, sink);
+      f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+    }
+    f.Finish(sink);
+    return f.Current("c1")->position_n.head<2>().eval();
+  };
+  EXPECT_LT((run("b1", "c1") - Vec2(5, 5)).norm(), 1e-12);  // only the radio hears c1
+  EXPECT_LT((run("c1", "c1") - Vec2(1, 1)).norm(), 1e-12);  // both: the ranges first
+  EXPECT_LT((run("b1", "b2") - Vec2(1, 1)).norm(), 1e-12);  // neither: the lowest rank
+}
+
 /// A member that answers RSSI packets of ff1 (not steps) with an estimate where it stands.
 class OnPackets : public OnlineEstimator {
  public:
@@ -453,6 +484,28 @@ TEST(FusionPipeline, BuildsTheMembersTheMissionCanFeed) {
             2);  // the breadcrumb network (no evidence: never used) and dead reckoning
   EXPECT_THROW(RequirePipeline("fusion").make(in, {{"fusion.stale_s", "-2"}}, Feed::kTimeOrdered),
                std::invalid_argument);
+}
+
+TEST(FusionPipeline, TakesTheFootImusStepsWhereAMissionAlsoHasAPhones) {
+  // The multi-floor building has both imu.csv and steps.csv: the fusion dead-reckons on the
+  // foot INS's steps (docs/fusion.md), every single steps-based pipeline on steps.csv, and a
+  // note says which file each one did not use.
+  const SimulatedMission sim = SimulateScenario("multi-floor", 3);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, sim.levels);
+  const MissionDirectory mission(dir.path());
+  std::vector<std::string> notes;
+  const StreamSet fusion = BatchFeedStreams(RequirePipeline("fusion"), mission, {}, &notes);
+  EXPECT_TRUE(fusion.Has(Stream::kImu));
+  EXPECT_FALSE(fusion.Has(Stream::kSteps));
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("steps.csv not used"), std::string::npos);
+  notes.clear();
+  const StreamSet mapmatch = BatchFeedStreams(RequirePipeline("mapmatch"), mission, {}, &notes);
+  EXPECT_TRUE(mapmatch.Has(Stream::kSteps));
+  EXPECT_FALSE(mapmatch.Has(Stream::kImu));
+  ASSERT_EQ(notes.size(), 1u);
+  EXPECT_NE(notes[0].find("imu.csv not used"), std::string::npos);
 }
 
 }  // namespace

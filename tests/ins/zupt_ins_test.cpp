@@ -65,6 +65,38 @@ TEST(ZuptIns, PureTranslationIsIntegratedExactlyAndGivesOneStepPerStride) {
   EXPECT_NEAR(ins.summary().distance_m, 1.25, 0.05);
 }
 
+// When a step ends: the strides above land at rest + k (2T + rest) + 2T and lift off at
+// (k + 1)(2T + rest) + rest. At the landing (default) each step's t1 is the landing, within the
+// detector's `min_stance_samples` (and its window); at the lift-off (the old behaviour) one rest
+// later. The displacements are the same either way.
+TEST(ZuptIns, AStepEndsWhenTheFootLandsUnlessAskedForTheLiftOff) {
+  const double T = 0.25, rest = 0.4, dt = 0.005;
+  const auto imu = TranslationStrides(5, 4.0, T, rest);
+  auto steps_of = [&](bool at_landing) {
+    InsOptions o;
+    o.detector.kind = DetectorKind::kMag;
+    o.detector.gamma = 1.0;
+    o.step_at_landing = at_landing;
+    ZuptIns ins(o);
+    std::vector<Step> steps;
+    ins.on_step = [&](const Step& s) { steps.push_back(s); };
+    for (const auto& s : imu) ins.Add(s);
+    ins.Finish();
+    return steps;
+  };
+  const std::vector<Step> landing = steps_of(true), lift_off = steps_of(false);
+  ASSERT_EQ(landing.size(), 5u);
+  ASSERT_EQ(lift_off.size(), 5u);  // the last stance ends with the data
+  for (std::size_t k = 0; k < landing.size(); ++k) {
+    const double landed = rest + k * (2 * T + rest) + 2 * T;
+    EXPECT_GE(landing[k].t1, landed - 1e-9) << k;
+    EXPECT_LT(landing[k].t1, landed + 12 * dt) << k;  // 3 samples and the detector's window
+    EXPECT_NEAR(landing[k].delta_n.x(), 0.25, 0.01);
+    EXPECT_NEAR(lift_off[k].t1, landed + rest, 12 * dt) << k;
+    EXPECT_NEAR(lift_off[k].delta_n.x(), 0.25, 0.01);
+  }
+}
+
 // A stationary MEMS IMU (white noise and a constant bias) for 10 minutes: every sample is a
 // stance, the ZUPTs hold the velocity at zero within sigma_zupt, and the position may only
 // random-walk with that residual: sigma_v * sqrt(T * dt) ~ 0.01 m/s * sqrt(600 s * 0.01 s) =

@@ -11,6 +11,7 @@
 #include <numbers>
 
 #include "trailmark/eval/metrics.h"
+#include "trailmark/sim/scenarios.h"
 
 namespace trailmark {
 namespace {
@@ -117,6 +118,76 @@ TEST(BeaconLab, RetreatBySmallestIdReachesTheExitWithoutCrossingAWall) {
     EXPECT_EQ(targets.back(), 0);
     EXPECT_TRUE(std::is_sorted(targets.rbegin(), targets.rend()));
   }
+}
+
+}  // namespace
+}  // namespace trailmark
+
+namespace trailmark {
+namespace {
+
+// The all-sources incident (issue 27): the multi-floor building with landmarks and an
+// ultrasound exit trail that ff1 lays on the ground floor on the way in.
+TEST(AllSources, AnExitTrailOnTheGroundFloorHeardOnlyThere) {
+  for (const std::uint64_t seed : {3u, 8u}) {
+    const SimulatedMission sim = SimulateScenario("all-sources", seed);
+    const MissionData& m = sim.data;
+    ASSERT_EQ(sim.levels.size(), 4u);
+    std::map<std::string, TimeS> dropped;  // beacon -> drop time
+    for (const MissionEvent& e : m.events) {
+      if (e.event == "drop" && e.node.rfind("b", 0) == 0) {
+        EXPECT_EQ(e.agent, "ff1");
+        dropped[e.node] = e.t;
+      }
+    }
+    // A trail along 20 m of corridor, a beacon within 2 m of the last: 8 or more.
+    EXPECT_GE(dropped.size(), 8u) << seed;
+    for (const TruthSample& r : m.truth) {
+      if (!dropped.count(r.id)) continue;
+      EXPECT_EQ(r.floor, 0);
+      const Vec2 p = r.position_n.head<2>();  // inside the 24 x 12 m block
+      EXPECT_TRUE(p.x() > 0 && p.x() < 24 && p.y() > 0 && p.y() < 12) << r.id;
+    }
+    // Every foot range: to a beacon placed by then, from a foot on the ground floor.
+    std::map<std::string, std::vector<const TruthSample*>> track;
+    for (const TruthSample& r : m.truth)
+      if (r.id == "ff1" || r.id == "ff2") track[r.id].push_back(&r);
+    std::map<std::string, int> ranged;
+    for (const RangeMeasurement& r : m.ranges) {
+      EXPECT_EQ(r.kind, "ultrasound");
+      ASSERT_TRUE(dropped.count(r.a)) << r.a;
+      EXPECT_GE(r.t, dropped[r.a]);
+      if (!track.count(r.b)) continue;  // beacon <-> beacon
+      ++ranged[r.b];
+      const auto& tr = track[r.b];
+      const auto it = std::lower_bound(tr.begin(), tr.end(), r.t,
+                                       [](const TruthSample* x, TimeS t) { return x->t < t; });
+      ASSERT_NE(it, tr.end());
+      EXPECT_LT(std::abs((*it)->position_n.z()), 0.5) << r.b << " at " << r.t;
+    }
+    EXPECT_GT(ranged["ff1"], 50);  // on the way in and out
+    EXPECT_GT(ranged["ff2"], 50);  // searching the ground floor
+    EXPECT_EQ(m.bearings.size() +
+                  std::count_if(m.ranges.begin(), m.ranges.end(),
+                                [&](const RangeMeasurement& r) { return !track.count(r.b); }),
+              m.ranges.size());  // a bearing with every foot range, none between beacons
+  }
+}
+
+TEST(AllSources, TheTrailLeavesEveryOtherSourceAsWithoutIt) {
+  // The trail's random draws come last: the same building, walks, steps, RSSI and barometers
+  // as the multi-floor building with landmarks of the same seed.
+  const SimulatedMission all = SimulateScenario("all-sources", 5);
+  const SimulatedMission lm = SimulateScenario("multi-floor-landmarks", 5);
+  ASSERT_EQ(all.data.steps.size(), lm.data.steps.size());
+  for (std::size_t i = 0; i < lm.data.steps.size(); ++i)
+    EXPECT_EQ(all.data.steps[i].delta_n, lm.data.steps[i].delta_n);
+  ASSERT_EQ(all.data.rssi.size(), lm.data.rssi.size());
+  for (std::size_t i = 0; i < lm.data.rssi.size(); ++i)
+    EXPECT_EQ(all.data.rssi[i].rssi_dbm, lm.data.rssi[i].rssi_dbm);
+  EXPECT_EQ(all.data.baro.size(), lm.data.baro.size());
+  EXPECT_TRUE(lm.data.ranges.empty());
+  EXPECT_FALSE(all.data.ranges.empty());
 }
 
 }  // namespace

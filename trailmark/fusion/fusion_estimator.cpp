@@ -147,6 +147,7 @@ FusionEstimator::FusionEstimator(MissionInfo info, FusionOptions options,
   agent_history_.resize(members_.size());
   for (const FusionMember& m : members_) active_.push_back(m.evidence.empty());
   seen_evidence_.resize(members_.size());
+  measured_.resize(members_.size());
   static_latest_.resize(members_.size());
   for (std::size_t i = 0; i < members_.size(); ++i) {
     if (!members_[i].estimator) throw std::invalid_argument("fusion: member without estimator");
@@ -198,6 +199,20 @@ void FusionEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     if (members_[i].evidence.Has(stream)) {
       active_[i] = true;
       seen_evidence_[i].Add(stream);
+      std::unordered_set<std::string>& named = measured_[i];
+      std::visit(
+          [&named](const auto& r) {
+            using R = std::decay_t<decltype(r)>;
+            if constexpr (std::is_same_v<R, RssiPacket>) {
+              named.insert(r.rx);
+              named.insert(r.tx);
+            } else if constexpr (std::is_same_v<R, RangeMeasurement> ||
+                                 std::is_same_v<R, BearingMeasurement>) {
+              named.insert(r.a);
+              named.insert(r.b);
+            }
+          },
+          row);
     }
     try {
       members_[i].estimator->Add(row, *sinks_[i]);
@@ -577,14 +592,23 @@ void FusionEstimator::EmitStatic(const std::string& node, TimeS t, EstimateSink&
   std::vector<Estimate> inputs;
   std::vector<std::string> input_names;
   TimeS latest = -1e300;
+  // The members that estimate the node; of them, those that measured it when any did.
+  std::vector<bool> candidate(members_.size(), false);
+  bool any_measured = false;
+  for (std::size_t m = 0; m < members_.size(); ++m) {
+    if (static_latest_[m].count(node) == 0) continue;
+    candidate[m] = true;
+    any_measured = any_measured || measured_[m].count(node) != 0;
+  }
   int best_rank = std::numeric_limits<int>::max();
   for (std::size_t m = 0; m < members_.size(); ++m) {
-    if (static_latest_[m].count(node) != 0)
+    if (candidate[m] && (!any_measured || measured_[m].count(node) != 0))
       best_rank = std::min(best_rank, members_[m].static_rank);
   }
   for (std::size_t m = 0; m < members_.size(); ++m) {
     const auto it = static_latest_[m].find(node);
     if (it == static_latest_[m].end() || members_[m].static_rank != best_rank) continue;
+    if (any_measured && measured_[m].count(node) == 0) continue;
     inputs.push_back(it->second);
     input_names.push_back(members_[m].name);
     latest = std::max(latest, it->second.t);

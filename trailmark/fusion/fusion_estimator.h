@@ -8,7 +8,8 @@
 /// (covariance_intersection.h) — the members dead-reckon the same steps, so their errors are
 /// correlated by an amount no one knows, and covariance intersection is consistent for every such
 /// correlation. Static nodes (crumbs, beacons, landmarks) come from the member that measures them
-/// most directly (FusionMember::static_rank) whenever it updates one.
+/// most directly (FusionMember::static_rank) among those whose evidence rows name the node,
+/// whenever it updates one.
 ///
 /// Integrity between members: with three or more members at a step, a member whose estimate
 /// lies outside the fusion of the others (squared Mahalanobis distance under the sum of both
@@ -30,6 +31,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "trailmark/core/mission.h"
@@ -93,8 +95,10 @@ struct FusionMember {
   /// evidence arrives, or for an agent no other member estimates).
   bool fallback_only = false;
   /// Static nodes (crumbs, beacons, landmarks) come from the member of lowest rank that
-  /// estimates them — the one whose source measures them most directly (ultrasound ranges
+  /// estimates them and whose evidence rows name them (any member that estimates them when
+  /// none does) — the one whose source measures them most directly (ultrasound ranges
   /// before RSSI to landmarks before RSSI to crumbs); members of equal rank are intersected.
+  /// A beacon filter's crumbs, which no range names, are only where they were dropped.
   /// Two members' estimates of a node are not independent evidence of it, and an RSSI network
   /// that treats beacons as crumbs is far from the ranges' map (measured in docs/fusion.md).
   int static_rank = 0;
@@ -165,6 +169,8 @@ class FusionEstimator : public OnlineEstimator {
   std::vector<std::unique_ptr<MemberSink>> sinks_;
   std::vector<bool> active_;  ///< per member: its evidence has arrived
   std::vector<StreamSet> seen_evidence_;  ///< per member: which of its evidence streams came
+  /// Per member: the nodes its evidence rows named (a range's or RSSI packet's ends).
+  std::vector<std::unordered_set<std::string>> measured_;
   double gate_d2_ = 0.0;
   TimeS now_ = -1e300;
   /// Per agent, the times a fused row is asked for (its steps' ends, and every time a member

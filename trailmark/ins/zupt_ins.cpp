@@ -366,18 +366,34 @@ void ZuptIns::Process(const Sample& s, bool stance) {
   state.q_nb = q_;
   state.position_cov = P_.block<3, 3>(kPos, kPos);
   state.stance = stance;
-  StanceBookkeeping(stance);
-  last_state_ = state;
+  // A step's end state is the agent's latest (State()) when the step is emitted: this sample's
+  // at a landing, the previous sample's at a lift-off.
+  if (options_.step_at_landing) {
+    const InsState previous = last_state_;
+    last_state_ = state;
+    StanceBookkeeping(stance, previous);
+  } else {
+    StanceBookkeeping(stance, last_state_);
+    last_state_ = state;
+  }
   if (on_state) on_state(state);
 }
 
-void ZuptIns::StanceBookkeeping(bool stance) {
+void ZuptIns::StanceBookkeeping(bool stance, const InsState& previous) {
+  // (At a landing last_state_ is this sample's state; `previous` the one before.)
   stance_run_ = stance ? stance_run_ + 1 : 0;
-  if (stance && stance_run_ >= options_.min_stance_samples) in_stance_phase_ = true;
+  if (stance && stance_run_ >= options_.min_stance_samples && !in_stance_phase_) {
+    in_stance_phase_ = true;
+    // The foot has landed: a step ends here (its position ZUPT-corrected by the stance so far).
+    if (options_.step_at_landing) EmitStep(last_state_);
+  }
   if (stance || !in_stance_phase_) return;
   // The stance phase ended at the previous sample: its position is ZUPT-corrected.
   in_stance_phase_ = false;
-  const InsState& end = last_state_;
+  if (!options_.step_at_landing) EmitStep(previous);
+}
+
+void ZuptIns::EmitStep(const InsState& end) {
   if (!last_stance_end_t_) {
     last_stance_end_t_ = end.t;
     last_stance_end_p_ = end.position_n;
@@ -417,7 +433,7 @@ void ZuptIns::Finish() {
     Process(PopDelayed(), decisions[k].stance);
   }
   while (delay_size_ > 0) Process(PopDelayed(), false);  // (only when the window never filled)
-  if (in_stance_phase_) StanceBookkeeping(false);
+  if (in_stance_phase_) StanceBookkeeping(false, last_state_);  // the last state ends a stance
   summary_.accel_bias = ba_;
   summary_.gyro_bias = bg_;
 }

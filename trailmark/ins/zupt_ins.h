@@ -61,6 +61,12 @@ struct InsOptions {
   // steps
   int min_stance_samples = 3;
   double min_step_length_m = 0.02;    ///< shorter displacements between stances are no step
+  /// When a step ends: at the foot's landing (its stance detected, `min_stance_samples` in),
+  /// or at its lift-off (the end of the stance, the previous behaviour). The displacement is
+  /// the foot's from stance to stance either way; at lift-off the walker's body is already a
+  /// step ahead of the resting foot, so a step stamped there lags the walk by one step (DR of
+  /// the INS's steps 1.2 m mean against the INS's own 0.3 m on all-sources seed 1).
+  bool step_at_landing = true;
   /// Textbook dense arithmetic: Phi as a full 15x15 matrix (P = Phi P Phi^T + Q), the Kalman
   /// update with the full H (P = P - K H P, then symmetrized), the detector's window summed
   /// anew. Slow; the reference the structured arithmetic is tested against (same results to
@@ -138,7 +144,10 @@ class ZuptIns {
   void Inject(const ErrorVector& dx);
   /// P's upper triangle of its first n rows and columns copied into the lower.
   void MirrorUpper(int n);
-  void StanceBookkeeping(bool stance);
+  /// After each processed sample (last_state_ is its state; `previous`, the sample's before).
+  void StanceBookkeeping(bool stance, const InsState& previous);
+  /// The step from the last step's end to `end` (none when shorter than min_step_length_m).
+  void EmitStep(const InsState& end);
 
   InsOptions options_;
   ZuptDetector detector_;

@@ -111,14 +111,29 @@ std::optional<FloorPlan> LoadPipelineFloor(const PipelineSpec& pipeline,
 
 namespace {
 
+StreamSet Without(StreamSet set, Stream left_out) {
+  StreamSet out;
+  for (Stream s : set.List()) {
+    if (s != left_out) out.Add(s);
+  }
+  return out;
+}
+
 /// The streams of the mission a reader of `uses` gets; steps.csv shadows imu.csv for a
-/// steps-based one (noted).
-StreamSet FeedStreams(StreamSet uses, bool steps_based, const MissionDirectory& mission,
-                      const OptionValues& options, std::vector<std::string>* notes) {
+/// steps-based one, imu.csv steps.csv for one that prefers the foot IMU (noted).
+StreamSet FeedStreams(StreamSet uses, bool steps_based, bool prefers_foot_imu,
+                      const MissionDirectory& mission, const OptionValues& options,
+                      std::vector<std::string>* notes) {
   const StreamSet present = PresentStreams(mission);
   StreamSet feed;
   for (Stream s : uses.List()) {
     if (present.Has(s)) feed.Add(s);
+  }
+  if (steps_based && prefers_foot_imu && feed.Has(Stream::kSteps) && feed.Has(Stream::kImu)) {
+    notes->push_back(
+        "steps from imu.csv through the foot INS; steps.csv not used (remove imu.csv to use "
+        "it)");
+    return Without(feed, Stream::kSteps);
   }
   if (steps_based && feed.Has(Stream::kSteps)) {
     bool ins_options = false;
@@ -128,11 +143,7 @@ StreamSet FeedStreams(StreamSet uses, bool steps_based, const MissionDirectory& 
       notes->push_back(
           "steps from steps.csv; imu.csv not used (remove steps.csv to run the INS on it, or "
           "run the ins pipeline)");
-      StreamSet without;
-      for (Stream s : feed.List()) {
-        if (s != Stream::kImu) without.Add(s);
-      }
-      feed = without;
+      feed = Without(feed, Stream::kImu);
     }
   }
   return feed;
@@ -166,8 +177,8 @@ void Drive(OnlineEstimator& estimator, MergedStream& stream, const MissionDirect
 StreamSet BatchFeedStreams(const PipelineSpec& pipeline, const MissionDirectory& mission,
                            const OptionValues& options, std::vector<std::string>* notes) {
   std::vector<std::string> ignored;
-  return FeedStreams(pipeline.uses, pipeline.steps_based, mission, options,
-                     notes != nullptr ? notes : &ignored);
+  return FeedStreams(pipeline.uses, pipeline.steps_based, pipeline.prefers_foot_imu, mission,
+                     options, notes != nullptr ? notes : &ignored);
 }
 
 EstimatorSummary RunBatch(const PipelineSpec& pipeline, const PipelineContext& context,
@@ -266,7 +277,7 @@ beacons::WayOutReport ComputeWayOut(const MissionDirectory& mission, const std::
                          std::move(map));
   std::vector<std::string> notes;
   const StreamSet uses{Stream::kSteps, Stream::kImu, Stream::kRanges, Stream::kEvents};
-  MergedStream stream(mission, FeedStreams(uses, true, mission, {}, &notes));
+  MergedStream stream(mission, FeedStreams(uses, true, false, mission, {}, &notes));
   NullSink sink;
   Drive(estimator, stream, mission, sink, [](double) {}, at_s);
   return trail.WayOut(agent, at_s.value_or(trail.last_t()), window_s);

@@ -365,6 +365,7 @@ std::vector<PipelineSpec> BuildRegistry() {
               Stream::kBearings, Stream::kEvents, Stream::kBaro};
     s.uses_floor_plan = true;
     s.steps_based = true;
+    s.prefers_foot_imu = true;
     s.serve_rank = 0;  // what `trailmark serve` runs unless told otherwise (issue 27)
     s.paper_scenarios = {"landmark-corridor", "beacon-trail", "house1-search"};
     out.push_back(

@@ -54,6 +54,11 @@ struct PipelineSpec {
   /// Its steps come from steps.csv or from imu.csv through the INS (steps.csv wins in a batch
   /// run when a mission has both).
   bool steps_based = false;
+  /// Steps-based, and a mission with both imu.csv and steps.csv feeds it the foot IMU's steps
+  /// (through the ZUPT INS) instead of steps.csv's (the fusion: a foot INS dead-reckons far
+  /// better than a phone's PDR; docs/fusion.md). Live, each agent's first rows decide, as for
+  /// every steps-based pipeline (the IMU's come first: it rests before the first step).
+  bool prefers_foot_imu = false;
   /// The live server raises map-error alerts from its estimates (a map-aided estimator).
   bool raises_map_alerts = false;
   /// Dead reckoning: the demo runs it on every mission for comparison.

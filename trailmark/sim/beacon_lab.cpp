@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <numbers>
 
 #include "trailmark/core/random.h"
@@ -107,9 +108,26 @@ double TurnAngle(const Vec2& a, const Vec2& b, const Vec2& c) {
   return std::abs(std::atan2(u.x() * v.y() - u.y() * v.x(), u.dot(v)));
 }
 
-// Applies the three deployment rules along `walk` (the deployment route).
-BeaconLayout Deploy(const FloorPlan& plan, const Route& route, const Walk& walk,
-                    const DeploymentOptions& o, double range_m, Random& rng) {
+// PDR steps of ff1 (the IMU's heading starts off by a magnetometer error) and its truth.
+void AddPdrSteps(const Walk& walk, PdrErrorOptions pdr_options, double heading_sigma_rad,
+                 Random& pdr_rng, MissionData& m) {
+  pdr_options.initial_heading_error_rad = heading_sigma_rad * pdr_rng.Normal();
+  PdrErrorModel pdr(pdr_options, pdr_rng.Fork());
+  AppendPdrWalk(pdr, walk, "ff1", m);
+}
+
+void SortByTime(MissionData& m) {
+  auto by_time = [](const auto& a, const auto& b) { return a.t < b.t; };
+  std::stable_sort(m.ranges.begin(), m.ranges.end(), by_time);
+  std::stable_sort(m.bearings.begin(), m.bearings.end(), by_time);
+  std::stable_sort(m.events.begin(), m.events.end(), by_time);
+  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
+}
+
+}  // namespace
+
+BeaconLayout DeployBeacons(const FloorPlan& plan, const Route& route, const Walk& walk,
+                           const DeploymentOptions& o, double range_m, Random& rng) {
   BeaconLayout layout;
   std::vector<Vec2> turns;
   for (std::size_t i = 1; i + 1 < route.waypoints.size(); ++i) {
@@ -156,6 +174,7 @@ BeaconLayout Deploy(const FloorPlan& plan, const Route& route, const Walk& walk,
 
 std::string BeaconId(int j) { return fmt::format("b{:02d}", j + 1); }
 
+namespace {
 // A NLOS range is long: by U(min, max) (the paper's multipath), or with a long tail.
 double LongBy(const UltrasoundOptions& us, Random& rng) {
   if (us.nlos_tail_mean_m > 0)
@@ -163,13 +182,13 @@ double LongBy(const UltrasoundOptions& us, Random& rng) {
                     us.nlos_max_m);
   return rng.Uniform(us.nlos_min_m, us.nlos_max_m);
 }
+}  // namespace
 
-// Ultrasound pulses of the foot node, received by the beacons (range and bearing from the
-// beacon to the foot).
-void SimulateFootUltrasound(const FloorPlan& plan, const Walk& walk,
+void SimulateFootUltrasound(const FloorPlan& plan, const Walk& walk, const std::string& agent,
                             const std::vector<Vec2>& beacons,
                             const std::vector<TimeS>& beacon_since, const UltrasoundOptions& us,
-                            Random& us_rng, MissionData& m) {
+                            Random& us_rng, MissionData& m,
+                            const std::function<bool(TimeS)>& audible) {
   auto position_at = [&](TimeS t) {
     const auto it = std::lower_bound(walk.truth.begin(), walk.truth.end(), t,
                                      [](const Walk::Sample& s, TimeS v) { return s.t < v; });
@@ -183,6 +202,7 @@ void SimulateFootUltrasound(const FloorPlan& plan, const Walk& walk,
   for (TimeS t = walk.truth.front().t + 0.2; t <= walk.truth.back().t;
        t += us.pulse_period_s + us_rng.Uniform(-us.period_jitter_s, us.period_jitter_s)) {
     const TimeS tr = std::round(t * 1000) / 1000;
+    if (audible && !audible(tr)) continue;
     const Vec2 foot = position_at(tr);
     for (int j = 0; j < B; ++j) {
       if (beacon_since[j] > tr) continue;
@@ -208,21 +228,18 @@ void SimulateFootUltrasound(const FloorPlan& plan, const Walk& walk,
       }
       if (range > us.max_range_m + us.nlos_max_m) continue;
       bearing = std::remainder(bearing, 2 * kPi);
-      m.ranges.push_back({tr, BeaconId(j), "ff1", std::round(std::max(range, 0.02) * 1000) / 1000,
+      m.ranges.push_back({tr, BeaconId(j), agent, std::round(std::max(range, 0.02) * 1000) / 1000,
                           us.range_sigma_m, "ultrasound"});
       m.bearings.push_back(
-          {tr, BeaconId(j), "ff1", std::round(bearing * 1000) / 1000, us.bearing_sigma_rad});
+          {tr, BeaconId(j), agent, std::round(bearing * 1000) / 1000, us.bearing_sigma_rad});
     }
   }
 }
 
-// Beacon <-> beacon ranging at time t: the pairs in line of sight that `linked` allows (only
-// the pairs with beacon `only` when >= 0), a burst each.
-template <typename Linked>
 void SimulateBeaconRanging(const FloorPlan& plan, const std::vector<Vec2>& beacons,
                            const std::vector<TimeS>& beacon_since, const UltrasoundOptions& us,
-                           TimeS t, int only, const Linked& linked, Random& us_rng,
-                           MissionData& m) {
+                           TimeS t, int only, const std::function<bool(int, int)>& linked,
+                           Random& us_rng, MissionData& m) {
   const int B = static_cast<int>(beacons.size());
   for (int i = 0; i < B; ++i) {
     for (int j = i + 1; j < B; ++j) {
@@ -241,24 +258,6 @@ void SimulateBeaconRanging(const FloorPlan& plan, const std::vector<Vec2>& beaco
     }
   }
 }
-
-// PDR steps of ff1 (the IMU's heading starts off by a magnetometer error) and its truth.
-void AddPdrSteps(const Walk& walk, PdrErrorOptions pdr_options, double heading_sigma_rad,
-                 Random& pdr_rng, MissionData& m) {
-  pdr_options.initial_heading_error_rad = heading_sigma_rad * pdr_rng.Normal();
-  PdrErrorModel pdr(pdr_options, pdr_rng.Fork());
-  AppendPdrWalk(pdr, walk, "ff1", m);
-}
-
-void SortByTime(MissionData& m) {
-  auto by_time = [](const auto& a, const auto& b) { return a.t < b.t; };
-  std::stable_sort(m.ranges.begin(), m.ranges.end(), by_time);
-  std::stable_sort(m.bearings.begin(), m.bearings.end(), by_time);
-  std::stable_sort(m.events.begin(), m.events.end(), by_time);
-  std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
-}
-
-}  // namespace
 
 BeaconLabOptions::BeaconLabOptions() {
   walker.speed_mps = 1.1;
@@ -328,7 +327,7 @@ SimulatedMission SimulateBeaconLab(const BeaconLabOptions& o, std::uint64_t seed
   const Route deploy_route = DeploymentRoute();
   const Walk deploy_walk = WalkRoute(deploy_route, o.walker, 0.0, walk_rng);
   const BeaconLayout layout =
-      Deploy(sim.plan, deploy_route, deploy_walk, o.deployment, us.max_range_m, deploy_rng);
+      DeployBeacons(sim.plan, deploy_route, deploy_walk, o.deployment, us.max_range_m, deploy_rng);
   const int B = static_cast<int>(layout.beacons.size());
 
   // The walk of this mission.
@@ -385,7 +384,7 @@ SimulatedMission SimulateBeaconLab(const BeaconLabOptions& o, std::uint64_t seed
   m.events.push_back({walk.truth.front().t, "ff1", "enter", ""});
   if (!o.surveyed) m.events.push_back({walk.truth.back().t, "ff1", "exit", ""});
 
-  SimulateFootUltrasound(sim.plan, walk, layout.beacons, beacon_since, us, us_rng, m);
+  SimulateFootUltrasound(sim.plan, walk, "ff1", layout.beacons, beacon_since, us, us_rng, m);
   // Beacon <-> beacon ranging: each new beacon ranges the others at its drop, then every pair
   // periodically (static nodes, line of sight).
   const auto every_pair = [](int, int) { return true; };
@@ -449,7 +448,7 @@ SimulatedMission SimulateShapedTrail(const ShapedTrailOptions& o, std::uint64_t 
   }
   const Walk deploy_walk = WalkRoute(deploy_route, o.walker, 0.0, walk_rng);
   const BeaconLayout layout =
-      Deploy(sim.plan, deploy_route, deploy_walk, o.deployment, us.max_range_m, deploy_rng);
+      DeployBeacons(sim.plan, deploy_route, deploy_walk, o.deployment, us.max_range_m, deploy_rng);
   const int B = static_cast<int>(layout.beacons.size());
   // Back to the entry and out again along the trail (a search), then the retreat.
   Route trace;
@@ -505,7 +504,7 @@ SimulatedMission SimulateShapedTrail(const ShapedTrailOptions& o, std::uint64_t 
   AddPdrSteps(walk, o.pdr, o.initial_heading_error_sigma_rad, pdr_rng, m);
   m.events.push_back({walk.truth.front().t, "ff1", "enter", ""});
   m.events.push_back({walk.truth.back().t, "ff1", "exit", ""});
-  SimulateFootUltrasound(sim.plan, walk, layout.beacons, since, us, us_rng, m);
+  SimulateFootUltrasound(sim.plan, walk, "ff1", layout.beacons, since, us, us_rng, m);
   // Links between trail neighbours only (deployment order), at each drop and periodically.
   const auto neighbours = [&](int i, int j) { return std::abs(i - j) <= o.neighbour_links; };
   for (int j = 0; j < B; ++j) {

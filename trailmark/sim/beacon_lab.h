@@ -6,6 +6,7 @@
 /// dominated by magnetic disturbance). No I/O.
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -96,6 +97,27 @@ bool UltrasoundLineOfSight(const FloorPlan& plan, const Vec2& a, const Vec2& b, 
 /// id heard (line of sight within range), until the first beacon. Empty when none is heard.
 std::vector<int> RetreatTargets(const FloorPlan& plan, const std::vector<Vec2>& beacons,
                                 const Vec2& position, double range_m);
+
+/// The building blocks of a beacon trail, for other scenarios (the all-sources incident):
+/// beacon j's id ("b01" for j = 0);
+std::string BeaconId(int j);
+/// the three deployment rules applied along `walk` (the walk of `route`) in `plan`;
+BeaconLayout DeployBeacons(const FloorPlan& plan, const Route& route, const Walk& walk,
+                           const DeploymentOptions& options, double range_m, Random& rng);
+/// the pulses of `agent`'s foot node received by the beacons placed by then (`beacon_since`):
+/// a range and a bearing (from the beacon to the foot) each, appended to `m`; `audible`, when
+/// given, says whether the foot can be heard at time t at all (on the beacons' floor);
+void SimulateFootUltrasound(const FloorPlan& plan, const Walk& walk, const std::string& agent,
+                            const std::vector<Vec2>& beacons,
+                            const std::vector<TimeS>& beacon_since, const UltrasoundOptions& us,
+                            Random& rng, MissionData& m,
+                            const std::function<bool(TimeS)>& audible = {});
+/// beacon <-> beacon ranging at time t: a burst for each pair in line of sight that `linked`
+/// allows (only the pairs with beacon `only` when >= 0).
+void SimulateBeaconRanging(const FloorPlan& plan, const std::vector<Vec2>& beacons,
+                           const std::vector<TimeS>& beacon_since, const UltrasoundOptions& us,
+                           TimeS t, int only, const std::function<bool(int, int)>& linked,
+                           Random& rng, MissionData& m);
 
 SimulatedMission SimulateBeaconLab(const BeaconLabOptions& options, std::uint64_t seed);
 

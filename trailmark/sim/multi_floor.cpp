@@ -311,7 +311,59 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       }
     }
   }
+  // The beacon trail last: the random streams above are those without it.
+  int beacons = 0;
+  if (o.beacon_trail) {
+    Random deploy_rng = rng.Fork(), us_rng = rng.Fork();
+    const FloorPlan& ground = out.levels[1].second;
+    const UltrasoundOptions& us = o.ultrasound;
+    // ff1's way in from the entrance (the first rule drops a beacon just inside the door) to
+    // the stairwell, and the route's turns (the third rule).
+    const Walk& walk_in = sim.walks[0].second;
+    Walk trail;
+    for (const auto& s : walk_in.truth) {
+      if (s.position.y() < 0.3) continue;  // still in the street
+      if (s.position.x() > kStairX - 0.5) break;
+      trail.truth.push_back(s);
+    }
+    RouteBuilder route;
+    route.Enter();
+    route.To(kStairX - 0.5, 6.0, 0);
+    const BeaconLayout layout =
+        DeployBeacons(ground, route.route, trail, o.deployment, us.max_range_m, deploy_rng);
+    beacons = static_cast<int>(layout.beacons.size());
+    for (int j = 0; j < beacons; ++j) {
+      NodeInfo n;
+      n.id = BeaconId(j);
+      n.kind = NodeKind::kCrumb;
+      m.info.nodes.push_back(n);
+      const Vec3 p(layout.beacons[j].x(), layout.beacons[j].y(), 0.0);
+      m.truth.push_back({layout.drop_time_s[j], n.id, p, 0});
+      m.events.push_back({layout.drop_time_s[j], "ff1", "drop", n.id});
+    }
+    // Every foot node is heard on the ground floor only (the beacons' floor; not on the stairs
+    // above the first steps).
+    for (const auto& [id, walk] : sim.walks) {
+      const Walk* w = &walk;
+      SimulateFootUltrasound(ground, walk, id, layout.beacons, layout.drop_time_s, us, us_rng, m,
+                             [w](TimeS t) { return std::abs(TruthAt(*w, t).z) < 0.4; });
+    }
+    const auto every_pair = [](int, int) { return true; };
+    for (int j = 0; j < beacons; ++j) {
+      SimulateBeaconRanging(ground, layout.beacons, layout.drop_time_s, us,
+                            layout.drop_time_s[j] + 0.5, j, every_pair, us_rng, m);
+    }
+    const TimeS t_end =
+        std::max(sim.walks[0].second.truth.back().t, sim.walks[1].second.truth.back().t);
+    for (TimeS t = layout.drop_time_s.front() + us.beacon_ranging_period_s; t <= t_end;
+         t += us.beacon_ranging_period_s) {
+      SimulateBeaconRanging(ground, layout.beacons, layout.drop_time_s, us, t, -1, every_pair,
+                            us_rng, m);
+    }
+  }
   auto by_time = [](const auto& x, const auto& y) { return x.t < y.t; };
+  std::stable_sort(m.ranges.begin(), m.ranges.end(), by_time);
+  std::stable_sort(m.bearings.begin(), m.bearings.end(), by_time);
   std::stable_sort(m.events.begin(), m.events.end(), by_time);
   std::stable_sort(m.rssi.begin(), m.rssi.end(), by_time);
   std::stable_sort(m.truth.begin(), m.truth.end(), by_time);
@@ -324,17 +376,20 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       "level 2 at {:.2f} m, a switchback stairwell; ff1 searches levels 1 and 2, ff2 the ground "
       "floor and the basement; phone PDR steps (no height), a foot IMU at {:g} Hz, a barometer "
       "each at {:g} Hz (offset, weather {:+.2f} hPa/h, a ventilation fan from t = {:.0f} s); "
-      "{}simulated, seed {}",
+      "{}{}simulated, seed {}",
       em1, e1, e2, o.imu.rate_hz, o.baro.rate_hz, weather_rate_hpa_per_s * 3600, ppv_start_s,
       o.radio || o.landmarks_per_level > 0
-          ? fmt::format("{}{}RSSI losing {:.1f} dB per floor; ",
-                        o.radio ? "breadcrumbs and a base, " : "",
-                        o.landmarks_per_level > 0
-                            ? fmt::format("{} surveyed landmarks on each level, ",
-                                          o.landmarks_per_level)
-                            : std::string(),
-                        floor_loss_db)
+          ? fmt::format(
+                "{}{}RSSI losing {:.1f} dB per floor; ", o.radio ? "breadcrumbs and a base, " : "",
+                o.landmarks_per_level > 0
+                    ? fmt::format("{} surveyed landmarks on each level, ", o.landmarks_per_level)
+                    : std::string(),
+                floor_loss_db)
           : std::string(),
+      beacons > 0 ? fmt::format("an exit trail of {} ultrasound beacons on the ground floor "
+                                "dropped by ff1 on the way in; ",
+                                beacons)
+                  : std::string(),
       seed);
   return out;
 }

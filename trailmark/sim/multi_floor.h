@@ -3,16 +3,19 @@
 /// A multi-storey building for the floors issue (issue 26): a basement, a ground floor and two
 /// upper floors of an office block, a switchback stairwell joining them, and two firefighters
 /// who walk in from the street — one searches the two upper floors, the other the basement and
-/// the ground floor; the rooms' partitions differ between levels — with a phone-class PDR (steps that do not measure height), a foot IMU that
-/// climbs the stairs, and a barometer each (noise, device offset, weather drift, the building's
-/// overpressure from a ventilation fan, rare spikes), and a breadcrumb dispenser each with a
-/// base in the street: RSSI through walls and floors (10-20 dB per floor). Storey heights, room
-/// visits, stops, the weather and the floors' loss are drawn per seed. No I/O.
+/// the ground floor; the rooms' partitions differ between levels — with a phone-class PDR (steps
+/// that do not measure height), a foot IMU that climbs the stairs, and a barometer each (noise,
+/// device offset, weather drift, the building's overpressure from a ventilation fan, rare spikes),
+/// and a breadcrumb dispenser each with a base in the street: RSSI through walls and floors (10-20
+/// dB per floor). Storey heights, room visits, stops, the weather and the floors' loss are drawn
+/// per seed. Optionally radio landmarks on every level and an ultrasound beacon exit trail on the
+/// ground floor: the all-sources incident of the fusion issue (issue 27). No I/O.
 
 #include <cstdint>
 #include <utility>
 #include <vector>
 
+#include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/mission_sim.h"
 #include "trailmark/sim/pdr_error_model.h"
@@ -58,6 +61,13 @@ struct MultiFloorOptions {
   /// would put the landmark on the level above. 1.8 m stays on its level in any storey >= 2.8 m.
   double landmark_height_m = 1.8;
   double phone_height_m = 1.2;        ///< the receiving phone above the feet
+  /// An ultrasound beacon exit trail (issue 27: the all-sources incident): ff1 drops beacons by
+  /// the deployment rules of the ultrasound-beacons paper on the way in, from the entrance to
+  /// the foot of the stairwell; both firefighters' foot nodes range them (range and bearing)
+  /// whenever they walk the ground floor, the beacons range each other (line of sight, 5 m).
+  bool beacon_trail = false;
+  UltrasoundOptions ultrasound;
+  DeploymentOptions deployment;
   PdrErrorOptions pdr;
   BaroSimOptions baro;
   ImuSimOptions imu;          ///< the foot IMU (100 Hz, industrial grade by default)

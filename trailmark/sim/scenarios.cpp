@@ -208,7 +208,12 @@ std::vector<ScenarioInfo> Scenarios() {
           {"multi-floor-landmarks",
            "the multi-floor building with 3 surveyed radio landmarks at the ceiling of each "
            "level's corridor, heard by the phones through the floors (the building's floor "
-           "loss, 10-20 dB), for the landmark pipelines' floor gate (issue 26, item 4)"}};
+           "loss, 10-20 dB), for the landmark pipelines' floor gate (issue 26, item 4)"},
+          {"all-sources",
+           "every source at once (issue 27): the multi-floor building with two firefighters, "
+           "their breadcrumbs and a base, 3 surveyed radio landmarks per level, an ultrasound "
+           "beacon exit trail dropped on the ground floor, foot IMUs, phone steps, barometers "
+           "and every level's floor plan"}};
 }
 
 namespace {
@@ -253,6 +258,12 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   if (name == "multi-floor-landmarks") {
     MultiFloorOptions o;
     o.landmarks_per_level = 3;
+    return Named(SimulateMultiFloor(o, seed), name);
+  }
+  if (name == "all-sources") {
+    MultiFloorOptions o;
+    o.landmarks_per_level = 3;
+    o.beacon_trail = true;
     return Named(SimulateMultiFloor(o, seed), name);
   }
   if (name == "incident-4h") {
