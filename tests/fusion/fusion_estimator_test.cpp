@@ -230,7 +230,9 @@ TEST(FusionEstimator, AMemberIsUsedOnlyOnceItsOwnEvidenceArrived) {
   m.push_back({"ranges", Offset(Vec2(3, 0), 0.01, 0, 0.01), StreamSet{Stream::kRanges}});
   m.push_back({"dr", Offset(Vec2(0, 0), 1, 0, 1)});
   m.back().fallback_only = true;  // dead reckoning: only where no other member estimates
-  FusionEstimator f(OneAgent(), NoHat(), std::move(m));
+  FusionOptions o = NoHat();
+  o.predict_fraction = 0;  // the fused rows only (the range would be a time to predict at)
+  FusionEstimator f(OneAgent(), o, std::move(m));
   VectorSink sink;
   for (int k = 0; k < 20; ++k) {
     if (k == 10) f.Add(RangeMeasurement{0.5 * k + 0.1, "ff1", "b1", 3.0, 0.05}, sink);
@@ -454,6 +456,51 @@ TEST(FusionEstimator, TwoMembersReadingTheSameEvidenceAreOneOpinion) {
   const auto [own, s2] = run(true);
   EXPECT_GT((own.position_n.head<2>() - Truth(9)).norm(), 1.0);  // the tighter radio member
   EXPECT_EQ(s2.members[0].shared_evidence, 0);
+}
+
+TEST(FusionEstimator, BetweenFusedRowsTheEstimateIsPredictedAtItsVelocityForHalfTheInterval) {
+  // One member at the truth, a step (0.7 m east) every 0.5 s, other rows (a barometer) every
+  // 0.05 s in between: a predicted row at most every 0.1 s, on the line at 1.4 m/s, for at most
+  // half the interval (0.25 s) after each fused row, its covariance grown by (0.5 m/s x dt)^2.
+  // Off: nothing between the fused rows.
+  auto run = [](double fraction) {
+    FusionOptions o = NoHat();
+    o.predict_fraction = fraction;
+    std::vector<std::unique_ptr<Scripted>> one;
+    one.push_back(Offset(Vec2::Zero(), 0.01, 0, 0.01));
+    FusionEstimator f(OneAgent(), o, Members(std::move(one)));
+    VectorSink sink;
+    for (int k = 0; k < 10; ++k) {
+      f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+      for (int j = 1; j <= 9; ++j) f.Add(BaroSample{0.5 * (k + 1) + 0.05 * j, "ff1", 1000.0}, sink);
+    }
+    f.Finish(sink);
+    return sink.rows;
+  };
+  const std::vector<Estimate> held = run(0.0);
+  EXPECT_EQ(held.size(), 10u);  // the fused rows only
+  const std::vector<Estimate> rows = run(0.5);
+  int predicted = 0;
+  TimeS last_fused = 0, last_row = -1;
+  for (const Estimate& e : rows) {
+    EXPECT_GT(e.t, last_row - 1e-9);  // time order
+    last_row = e.t;
+    const double k = std::round(e.t / 0.5);
+    if (std::abs(e.t - 0.5 * k) < 1e-9) {  // a fused row: the member's
+      EXPECT_NEAR(e.position_n.x(), 0.7 * k, 1e-9);
+      last_fused = e.t;
+      continue;
+    }
+    ++predicted;
+    const double ahead = e.t - last_fused;
+    EXPECT_GE(ahead, 0.1 - 1e-9);
+    EXPECT_LE(ahead, 0.25 + 1e-9);
+    EXPECT_NEAR(e.position_n.x(), 0.7 * (last_fused / 0.5) + 1.4 * ahead, 1e-9);
+    EXPECT_NEAR(e.position_n.y(), 0.0, 1e-12);
+    EXPECT_NEAR(e.sxx, 0.01 + std::pow(0.5 * ahead, 2), 1e-9);
+  }
+  // Two a step (0.1 and 0.2 s after it) from the second step on (the first has no baseline).
+  EXPECT_EQ(predicted, 18);
 }
 
 TEST(FusionEstimator, RefusesBadOptionsAndNoMembers) {

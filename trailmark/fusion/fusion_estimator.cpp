@@ -26,6 +26,13 @@ bool FusionOptions::IsValid(std::string* why) const {
     return fail("fusion: follows_dr_m must be >= 0");
   if (!(disagreement_probability > 0 && disagreement_probability < 1))
     return fail("fusion: need 0 < disagreement_probability < 1");
+  if (!(predict_fraction >= 0) || !std::isfinite(predict_fraction))
+    return fail("fusion: predict_fraction must be >= 0");
+  if (!(predict_period_s > 0) || !std::isfinite(predict_period_s) || !(predict_baseline_s > 0) ||
+      !std::isfinite(predict_baseline_s))
+    return fail("fusion: predict_period_s and predict_baseline_s must be > 0");
+  if (!(predict_speed_sigma_mps >= 0) || !std::isfinite(predict_speed_sigma_mps))
+    return fail("fusion: predict_speed_sigma must be >= 0");
   if (!(hat_window_s >= 0) || !std::isfinite(hat_window_s))
     return fail("fusion: hat_window_s must be >= 0");
   return true;
@@ -54,6 +61,17 @@ const OptionTable<FusionOptions>& FusionOptionTable() {
     t.Flag("fusion.shared_evidence_to_owner", &FusionOptions::shared_evidence_to_owner,
            "where only two members count and one's evidence is all the other's (of lower "
            "static rank), the other alone");
+    t.Real("fusion.predict_fraction", &FusionOptions::predict_fraction, "",
+           OptionBounds::NonNegative(),
+           "between fused rows, predict an agent's estimate for at most this part of the "
+           "interval behind the last one, at its velocity; 0: hold the last fused row");
+    t.Real("fusion.predict_period_s", &FusionOptions::predict_period_s, "s",
+           OptionBounds::Positive(), "at most one predicted row per agent this often");
+    t.Real("fusion.predict_baseline_s", &FusionOptions::predict_baseline_s, "s",
+           OptionBounds::Positive(),
+           "the velocity from the fused row at least this long before the last one");
+    t.Real("fusion.predict_speed_sigma", &FusionOptions::predict_speed_sigma_mps, "m/s",
+           OptionBounds::NonNegative(), "a predicted row's covariance grows by (this x time)^2");
     t.Flag("fusion.hat_weights", &FusionOptions::hat_weights,
            "weigh the members' positions by the hat's variances once known (else by their "
            "covariances)");
@@ -230,6 +248,7 @@ void FusionEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   for (const std::string& node : static_dirty_) EmitStatic(node, now_, sink);
   static_dirty_.clear();
   Resolve(sink, false);
+  if (options_.predict_fraction > 0) Predict(sink);
   if (error) throw std::invalid_argument(*error);
 }
 
@@ -254,12 +273,27 @@ std::optional<Estimate> FusionEstimator::Current(const std::string& node) const 
 
 bool FusionEstimator::Due(const Pending& p) const {
   if (now_ > p.t + options_.max_wait_s) return true;
+  // A member is waited for until it has caught up with the agent's last step by p.t: between
+  // steps its latest estimate is its belief at p.t (nothing moved it since), and a row at a
+  // time between steps (another member's update) need not wait for the next step.
+  TimeS caught_up = p.t;
+  if (options_.wait_for_next_step) {
+    // (the old rule: every member's next estimate after p.t)
+  } else if (const auto s = steps_.find(p.agent); s != steps_.end()) {
+    caught_up = -1e300;
+    for (auto it = s->second.rbegin(); it != s->second.rend(); ++it) {
+      if (it->second <= p.t + 1e-9) {
+        caught_up = it->second;
+        break;
+      }
+    }
+  }
   for (std::size_t m = 0; m < members_.size(); ++m) {
     const auto it = agent_history_[m].find(p.agent);
     if (it == agent_history_[m].end() || it->second.empty()) continue;  // does not estimate it
     const TimeS latest = it->second.back().t;
     // A member that has fallen behind by more than the wait is not waited for.
-    if (latest < p.t - 1e-9 && latest >= now_ - options_.max_wait_s) return false;
+    if (latest < caught_up - 1e-9 && latest >= now_ - options_.max_wait_s) return false;
   }
   return true;
 }
@@ -535,7 +569,53 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
   if (prev != current_.end() && fused.t < prev->second.t) fused.t = prev->second.t;
   current_[p.agent] = fused;
   ++summary_.agent_rows;
+  auto& track = fused_track_[p.agent];
+  track.emplace_back(fused.t, fused.position_n.head<2>());
+  while (track.size() > 2 && track[1].first <= fused.t - 2.0 - options_.predict_baseline_s)
+    track.pop_front();
+  TimeS& written = last_written_t_[p.agent];
+  written = std::max(written, fused.t);
   sink.Add(fused);
+}
+
+std::optional<Estimate> FusionEstimator::PredictedAt(const std::string& agent, TimeS t) const {
+  const auto track = fused_track_.find(agent);
+  const auto current = current_.find(agent);
+  if (track == fused_track_.end() || track->second.size() < 2 || current == current_.end())
+    return std::nullopt;
+  const auto& [t1, p1] = track->second.back();
+  if (current->second.t != t1) return std::nullopt;
+  // The baseline: the latest fused row at least predict_baseline_s before the last.
+  const std::pair<TimeS, Vec2>* base = nullptr;
+  for (auto it = track->second.rbegin(); it != track->second.rend(); ++it) {
+    if (it->first <= t1 - options_.predict_baseline_s) {
+      base = &*it;
+      break;
+    }
+  }
+  if (base == nullptr) return std::nullopt;
+  const double interval_s = t1 - base->first;
+  const double ahead_s = t - t1;
+  if (interval_s > 2.0 || ahead_s <= 0 || ahead_s > options_.predict_fraction * interval_s)
+    return std::nullopt;
+  Estimate e = current->second;
+  e.t = t;
+  e.position_n.head<2>() = p1 + (p1 - base->second) / interval_s * ahead_s;
+  const double grow = std::pow(options_.predict_speed_sigma_mps * ahead_s, 2);
+  e.sxx += grow;
+  e.syy += grow;
+  return e;
+}
+
+void FusionEstimator::Predict(EstimateSink& sink) {
+  for (auto& [agent, written] : last_written_t_) {
+    if (now_ < written + options_.predict_period_s - 1e-9) continue;
+    if (const std::optional<Estimate> e = PredictedAt(agent, now_)) {
+      written = now_;
+      ++summary_.predicted_rows;
+      sink.Add(*e);
+    }
+  }
 }
 
 FusionEstimator::HatEstimate FusionEstimator::UpdateHat(const std::string& agent, TimeS t,
@@ -642,6 +722,7 @@ EstimatorSummary FusionEstimator::Summary() const {
   out.numbers["fusion.agent_rows"] = static_cast<double>(summary_.agent_rows);
   out.numbers["fusion.static_rows"] = static_cast<double>(summary_.static_rows);
   out.numbers["fusion.grown_rows"] = static_cast<double>(summary_.grown_rows);
+  out.numbers["fusion.predicted_rows"] = static_cast<double>(summary_.predicted_rows);
   out.numbers["fusion.members"] = static_cast<double>(members_.size());
   for (const FusionMemberSummary& s : summary_.members) {
     const double rows = static_cast<double>(std::max<long long>(summary_.agent_rows, 1));

@@ -75,6 +75,20 @@ struct FusionOptions {
   /// independent errors; the members' errors share dead reckoning's, and a larger power leans
   /// toward the best member alone.
   double hat_power = 1.0;
+  /// Between an agent's fused rows (a foot IMU's steps come once a stride, ~1.1 s), the
+  /// estimate predicted to the time of every row the fusion gets, at most every
+  /// `predict_period_s`: the last fused position moved on at the velocity since the fused row
+  /// at least `predict_baseline_s` before it (taken only when at most 2 s before), for at most
+  /// `predict_fraction` of that interval — a walker who stops overshoots by at most that part
+  /// of a stride. The covariance grows by (predict_speed_sigma_mps x time ahead)^2 on each
+  /// axis. 0: off (an estimate is held until the next fused row).
+  double predict_fraction = 0.5;
+  /// The old waiting rule: a fused row waits for every member's next estimate after its time
+  /// (else only for members that have not yet caught up with the agent's last step by then).
+  bool wait_for_next_step = true;
+  double predict_period_s = 0.1;
+  double predict_baseline_s = 0.5;
+  double predict_speed_sigma_mps = 0.5;
   bool IsValid(std::string* why) const;
 };
 
@@ -120,6 +134,7 @@ struct FusionSummary {
   long long agent_rows = 0;   ///< fused agent estimates emitted
   long long static_rows = 0;  ///< fused estimates of static nodes emitted
   long long grown_rows = 0;   ///< rows whose covariance grew over two disagreeing members
+  long long predicted_rows = 0;  ///< rows predicted between fused rows
   std::vector<FusionMemberSummary> members;
 };
 
@@ -158,6 +173,11 @@ class FusionEstimator : public OnlineEstimator {
   bool Due(const Pending& p) const;
   void EmitAgent(const Pending& p, EstimateSink& sink);
   void EmitStatic(const std::string& node, TimeS t, EstimateSink& sink);
+  /// Predicted rows at now_ for agents between fused rows (FusionOptions::predict_fraction).
+  void Predict(EstimateSink& sink);
+  /// The agent's last fused row moved on to t at its velocity; none beyond the prediction's
+  /// reach (or before the last fused row, or without a baseline).
+  std::optional<Estimate> PredictedAt(const std::string& agent, TimeS t) const;
   /// The member's estimate of the agent at t: its own at t, else interpolated between its
   /// estimates before and after t, else its latest before t unless older than `stale_s`.
   std::optional<Estimate> MemberAt(std::size_t member, const std::string& agent, TimeS t) const;
@@ -182,6 +202,10 @@ class FusionEstimator : public OnlineEstimator {
   std::vector<std::map<std::string, Estimate>> static_latest_;
   std::vector<std::string> static_dirty_;
   std::map<std::string, Estimate> current_;
+  /// Per agent: its recent fused rows (time, position; the prediction's baseline) and the time
+  /// of its last row written (fused or predicted).
+  std::map<std::string, std::deque<std::pair<TimeS, Vec2>>> fused_track_;
+  std::map<std::string, TimeS> last_written_t_;
   std::map<std::string, std::vector<SourceShare>> sources_;  ///< of each node's latest row
   /// The N-cornered hat of one agent: time-averaged squared differences of each pair of
   /// members (per axis, m^2) and each member's stated variance (per axis, m^2).
