@@ -248,6 +248,27 @@ TEST(FusionEstimator, AMemberIsUsedOnlyOnceItsOwnEvidenceArrived) {
   }
 }
 
+TEST(FusionEstimator, DeadReckoningOfAFootInsIsAFullMember) {
+  // A member 2 m east of the truth and dead reckoning at the truth, equally confident: with a
+  // phone's steps dead reckoning is only a fallback (the member alone); once the front end
+  // says the agent's steps come from its foot INS, the two are intersected (half way).
+  auto run = [](bool foot_ins) {
+    std::vector<FusionMember> m;
+    m.push_back({"radio", Offset(Vec2(2, 0), 0.5, 0, 0.5)});
+    m.push_back({"dr", Offset(Vec2(0, 0), 0.5, 0, 0.5)});
+    m.back().fallback_only = true;
+    m.back().full_with_foot_ins = true;
+    FusionOptions o = NoHat();
+    o.predict_fraction = 0;
+    FusionEstimator f(OneAgent(), o, std::move(m));
+    f.StepsFromFootIns("ff1", foot_ins);
+    const std::vector<Estimate> rows = Walk(f, 10);
+    return rows.back().position_n.x() - Truth(9).x();
+  };
+  EXPECT_NEAR(run(false), 2.0, 1e-9);
+  EXPECT_NEAR(run(true), 1.0, 1e-6);
+}
+
 TEST(FusionEstimator, ARowOneMemberRefusesStillReachesTheOthersThenThrows) {
   std::vector<FusionMember> m;
   auto refusing = std::make_unique<Scripted>(

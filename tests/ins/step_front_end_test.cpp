@@ -228,6 +228,10 @@ class Recorder : public OnlineEstimator {
   void Finish(EstimateSink&) override {}
   std::optional<Estimate> Current(const std::string&) const override { return std::nullopt; }
   EstimatorSummary Summary() const override { return {}; }
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    told.emplace_back(agent, foot_ins);
+  }
+  std::vector<std::pair<std::string, bool>> told;  ///< StepsFromFootIns calls
 
  private:
   std::vector<MissionRow>* rows_;
@@ -332,12 +336,20 @@ TEST(StepFrontEnd, AnAgentsFirstSourceWinsAndTheOtherIsCounted) {
   MissionInfo info;
   info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
   info.nodes.push_back(NodeInfo::Base("base", Vec3::Zero()));
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3::Zero(), 0.1));
   std::vector<MissionRow> seen;
-  StepFrontEnd front(info, {}, RowOrder::kPerAgent, Feed::kLive, std::make_unique<Recorder>(&seen));
+  auto recorder = std::make_unique<Recorder>(&seen);
+  const Recorder& told = *recorder;
+  StepFrontEnd front(info, {}, RowOrder::kPerAgent, Feed::kLive, std::move(recorder));
   NullSink sink;
   front.Add(Step{0, 1, "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
   front.Add(ImuSample{1.0, "ff1", Vec3(0, 0, 9.8), Vec3::Zero()}, sink);  // steps came first
+  front.Add(ImuSample{1.0, "ff2", Vec3(0, 0, 9.8), Vec3::Zero()}, sink);  // ff2: a foot IMU
   EXPECT_EQ(seen.size(), 1u);
+  // The inner estimator is told each agent's source once, when it is chosen.
+  ASSERT_EQ(told.told.size(), 2u);
+  EXPECT_EQ(told.told[0], std::make_pair(std::string("ff1"), false));
+  EXPECT_EQ(told.told[1], std::make_pair(std::string("ff2"), true));
   EXPECT_EQ(front.Summary().numbers.at("rows_ignored"), 1.0);
   EXPECT_THROW(front.Add(Step{1, 2, "base", Vec3(0.7, 0, 0), std::nullopt}, sink),
                std::invalid_argument);

@@ -156,6 +156,10 @@ class OnlineEstimator {
   /// plan, radio estimators gate packets through floors); `levels` outlives the estimator.
   /// Wrappers pass it on. Default: not used.
   virtual void UseLevels(const LevelSource* /*levels*/) {}
+  /// Where an agent's steps come from, told once per agent before its first step by the step
+  /// front end that chose it (ins/step_front_end.h): a foot IMU through the ZUPT INS, or the
+  /// mission's steps (a phone's PDR). Wrappers pass it on. Default: not used.
+  virtual void StepsFromFootIns(const std::string& /*agent*/, bool /*foot_ins*/) {}
   /// One row. Each node's rows of one stream come in non-decreasing time; an estimator that
   /// needs all rows in global time order says so in its documentation (the pipeline registry
   /// then feeds it through a StepFrontEnd that restores the order). Rows of streams the

@@ -180,6 +180,16 @@ void FusionEstimator::UseLevels(const LevelSource* levels) {
   for (FusionMember& m : members_) m.estimator->UseLevels(levels);
 }
 
+void FusionEstimator::StepsFromFootIns(const std::string& agent, bool foot_ins) {
+  if (foot_ins) foot_ins_agents_.insert(agent);
+  for (FusionMember& m : members_) m.estimator->StepsFromFootIns(agent, foot_ins);
+}
+
+bool FusionEstimator::FallbackFor(std::size_t m, const std::string& agent) const {
+  return members_[m].fallback_only &&
+         !(members_[m].full_with_foot_ins && foot_ins_agents_.count(agent) != 0);
+}
+
 std::vector<std::string> FusionEstimator::MemberNames() const {
   std::vector<std::string> out;
   for (const FusionMember& m : members_) out.push_back(m.name);
@@ -377,7 +387,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
   std::vector<Estimate> inputs;
   for (const bool fallback : {false, true}) {
     for (std::size_t m = 0; m < members_.size(); ++m) {
-      if (members_[m].fallback_only != fallback) continue;
+      if (FallbackFor(m, p.agent) != fallback) continue;
       if (std::optional<Estimate> e = MemberAt(m, p.agent, p.t)) {
         used.push_back(m);
         inputs.push_back(*e);
@@ -388,7 +398,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
     if (!inputs.empty()) break;  // the fallback only where no other member estimates
   }
   if (inputs.empty()) return;
-  if (options_.follows_dr_m > 0 && !members_[used.front()].fallback_only) {
+  if (options_.follows_dr_m > 0 && !FallbackFor(used.front(), p.agent)) {
     // Dead reckoning at t (a fallback member), and each member's time-averaged distance from
     // it: a member that stays with it uses no evidence of its own for this agent.
     std::optional<Estimate> dr;
@@ -404,6 +414,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
       std::vector<bool> follows(inputs.size(), false);
       std::size_t own = 0;  // members with evidence of their own here
       for (std::size_t i = 0; i < inputs.size(); ++i) {
+        if (members_[used[i]].fallback_only) continue;  // dead reckoning itself, a full member
         auto& avg = from_dr_[{p.agent, used[i]}];
         avg.first = avg.first * fade + 1.0;
         avg.second += ((inputs[i].position_n.head<2>() - dr->position_n.head<2>()).squaredNorm() -
@@ -432,7 +443,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
       }
     }
   }
-  if (options_.shared_evidence_to_owner && inputs.size() == 2 && !members_[used[0]].fallback_only) {
+  if (options_.shared_evidence_to_owner && inputs.size() == 2 && !FallbackFor(used[0], p.agent)) {
     // Two members reading the same evidence: the one built for it (lower static rank) alone.
     auto covered = [&](std::size_t a, std::size_t b) {  // a's evidence seen is b's, b ranks first
       const StreamSet seen = seen_evidence_[a];

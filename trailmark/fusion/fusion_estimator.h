@@ -116,6 +116,10 @@ struct FusionMember {
   /// Two members' estimates of a node are not independent evidence of it, and an RSSI network
   /// that treats beacons as crumbs is far from the ranges' map (measured in docs/fusion.md).
   int static_rank = 0;
+  /// A fallback member that is a full member for an agent whose steps come from its foot IMU
+  /// through the ZUPT INS (OnlineEstimator::StepsFromFootIns): dead reckoning of a foot INS is
+  /// a good and honest opinion of its own; of a phone's PDR it is neither.
+  bool full_with_foot_ins = false;
 };
 
 /// What the fusion did, per member.
@@ -145,6 +149,7 @@ class FusionEstimator : public OnlineEstimator {
                   std::vector<std::string> notes = {});
   ~FusionEstimator() override;
   void UseLevels(const LevelSource* levels) override;
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override;
   /// Every row goes to every member; a step of an agent asks for a fused row at its t1.
   /// A row a member cannot use (std::invalid_argument) still reaches the others; the first
   /// such error is thrown after all have seen the row.
@@ -188,6 +193,9 @@ class FusionEstimator : public OnlineEstimator {
   std::vector<FusionMember> members_;
   std::vector<std::unique_ptr<MemberSink>> sinks_;
   std::vector<bool> active_;  ///< per member: its evidence has arrived
+  std::set<std::string> foot_ins_agents_;  ///< agents whose steps come from a foot INS
+  /// Whether member m is used only as a fallback for this agent.
+  bool FallbackFor(std::size_t m, const std::string& agent) const;
   std::vector<StreamSet> seen_evidence_;  ///< per member: which of its evidence streams came
   /// Per member: the nodes its evidence rows named (a range's or RSSI packet's ends).
   std::vector<std::unordered_set<std::string>> measured_;

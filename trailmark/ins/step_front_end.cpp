@@ -61,6 +61,7 @@ bool StepFrontEnd::UseSource(const std::string& agent, bool imu) {
                                             agent, imu ? "IMU samples" : "steps"));
   }
   const auto [it, first] = source_is_imu_.emplace(agent, imu);
+  if (first) inner_->StepsFromFootIns(agent, imu);
   if (it->second == imu) return true;
   ++ignored_;
   return false;

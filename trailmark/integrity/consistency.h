@@ -161,6 +161,9 @@ class StreamCheck : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override { inner_->Finish(sink); }
   void UseLevels(const LevelSource* levels) override { inner_->UseLevels(levels); }
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    inner_->StepsFromFootIns(agent, foot_ins);
+  }
   std::vector<SourceShare> Sources(const std::string& node) const override {
     return inner_->Sources(node);
   }

@@ -67,6 +67,9 @@ class DeadReckoningGuard : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override;
   void UseLevels(const LevelSource* levels) override { inner_->UseLevels(levels); }
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    inner_->StepsFromFootIns(agent, foot_ins);
+  }
   /// The estimate the guard would emit for the node now.
   std::optional<Estimate> Current(const std::string& node) const override;
   /// The inner estimator's; dead reckoning alone while it stands in for a disagreeing

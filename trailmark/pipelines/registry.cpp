@@ -214,17 +214,23 @@ std::vector<fusion::FusionMember> FusionMembers(const EstimatorInputs& in,
     // A member that cannot use this incident (a floor plan that encloses nothing, for map
     // matching) is left out with a note; the others still run.
     try {
-      members.push_back({name, p.make_member(in, {}), evidence, false, rank});
+      members.push_back({.name = name,
+                         .estimator = p.make_member(in, {}),
+                         .evidence = evidence,
+                         .static_rank = rank});
     } catch (const std::exception& e) {
       notes->push_back(fmt::format("{} not used: {}", name, e.what()));
     }
   }
-  // Every member dead-reckons the same steps: dead reckoning adds no information of its own
-  // to any of them (as a full member it pulled the fusion toward its drift), so it is used
-  // only where no other member has an estimate (before any evidence, an agent no other tracks).
+  // Every member dead-reckons the same steps: dead reckoning of a phone's PDR adds no
+  // information of its own to any of them (as a full member it pulled the fusion toward its
+  // drift, its ellipse far too small), so it is used only where no other member has an
+  // estimate (before any evidence, an agent no other tracks). Of a foot INS it is a full member
+  // (docs/fusion.md: better than the members that correct it, and honest).
   if (o.use_pdr) {
     fusion::FusionMember dr{"pdr", RequirePipeline("pdr").make_member(in, {})};
     dr.fallback_only = true;
+    dr.full_with_foot_ins = true;
     dr.static_rank = 4;
     members.push_back(std::move(dr));
   }
