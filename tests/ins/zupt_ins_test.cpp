@@ -45,6 +45,7 @@ TEST(ZuptIns, PureTranslationIsIntegratedExactlyAndGivesOneStepPerStride) {
   InsOptions o;
   o.detector.kind = DetectorKind::kMag;  // accelerometer-only: stance = |a| == g
   o.detector.gamma = 1.0;
+  o.mid_swing_steps = false;  // one step per stride (the mid-swing steps: the test below)
   const auto imu = TranslationStrides(5, 4.0, 0.25, 0.4);  // 0.25 m per stride
   ZuptIns ins(o);
   std::vector<Step> steps;
@@ -77,6 +78,7 @@ TEST(ZuptIns, AStepEndsWhenTheFootLandsUnlessAskedForTheLiftOff) {
     o.detector.kind = DetectorKind::kMag;
     o.detector.gamma = 1.0;
     o.step_at_landing = at_landing;
+    o.mid_swing_steps = false;
     ZuptIns ins(o);
     std::vector<Step> steps;
     ins.on_step = [&](const Step& s) { steps.push_back(s); };
@@ -94,6 +96,37 @@ TEST(ZuptIns, AStepEndsWhenTheFootLandsUnlessAskedForTheLiftOff) {
     EXPECT_NEAR(landing[k].delta_n.x(), 0.25, 0.01);
     EXPECT_NEAR(lift_off[k].t1, landed + rest, 12 * dt) << k;
     EXPECT_NEAR(lift_off[k].delta_n.x(), 0.25, 0.01);
+  }
+}
+
+// Half way through each swing a step ends too (from the second swing on: the first has no
+// swing before it to time the half by): a swing pushed for T and braked for T is half way,
+// a T^2 / 2 = 0.125 m, after T; the landing's step is the other half. The same total.
+TEST(ZuptIns, AStepEndsHalfWayThroughEachSwingToo) {
+  const double T = 0.25, rest = 0.4, dt = 0.005;
+  const auto imu = TranslationStrides(5, 4.0, T, rest);
+  InsOptions o;
+  o.detector.kind = DetectorKind::kMag;
+  o.detector.gamma = 1.0;
+  ASSERT_TRUE(o.mid_swing_steps);  // the default
+  ZuptIns ins(o);
+  std::vector<Step> steps;
+  ins.on_step = [&](const Step& s) { steps.push_back(s); };
+  for (const auto& s : imu) ins.Add(s);
+  ins.Finish();
+  ASSERT_EQ(steps.size(), 9u);
+  EXPECT_NEAR(steps[0].delta_n.x(), 0.25, 0.01);  // the first stride: landing only
+  double total = 0;
+  for (const Step& s : steps) total += s.delta_n.x();
+  EXPECT_NEAR(total, 1.25, 0.05);
+  for (int k = 1; k < 5; ++k) {
+    const Step& mid = steps[2 * k - 1];
+    const Step& landing = steps[2 * k];
+    const double lift_off = rest + k * (2 * T + rest);  // this stride's swing starts
+    EXPECT_NEAR(mid.t1, lift_off + T, 12 * dt) << k;
+    EXPECT_NEAR(mid.delta_n.x(), 0.125, 0.01) << k;
+    EXPECT_NEAR(landing.delta_n.x(), 0.125, 0.01) << k;
+    EXPECT_GT(landing.t1, mid.t1);
   }
 }
 

@@ -50,6 +50,8 @@ const OptionTable<InsOptions>& InsOptionTable() {
     t.Flag("biases", &O::estimate_biases,
            "estimate accelerometer and gyro biases (false: the IMU is taken as unbiased)");
     t.Flag("zaru", &O::zaru, "zero angular rate updates in stance (gated)");
+    t.Flag("mid_swing_steps", &O::mid_swing_steps,
+           "also a step half way through each swing (two a stride, as the walker's)");
     t.Flag("step_at_landing", &O::step_at_landing,
            "a step ends when the foot lands (false: when it lifts off, a step behind the walker)");
     t.Real("zaru_sigma", &O::zaru_sigma_radps, "rad/s", OptionBounds::Positive(),

@@ -384,30 +384,48 @@ void ZuptIns::StanceBookkeeping(bool stance, const InsState& previous) {
   stance_run_ = stance ? stance_run_ + 1 : 0;
   if (stance && stance_run_ >= options_.min_stance_samples && !in_stance_phase_) {
     in_stance_phase_ = true;
+    if (swinging_) last_swing_samples_ = swing_samples_;
+    swinging_ = false;
     // The foot has landed: a step ends here (its position ZUPT-corrected by the stance so far).
     if (options_.step_at_landing) EmitStep(last_state_);
+  }
+  if (swinging_) ++swing_samples_;
+  // (Counted in samples, not seconds: the same steps whatever the clock's origin.)
+  if (!stance && !in_stance_phase_ && options_.mid_swing_steps && swinging_ && !mid_swing_done_ &&
+      last_swing_samples_ > 0 && 2 * swing_samples_ >= last_swing_samples_) {
+    // Half way through the swing the foot passes the other, resting one, under the walker: a
+    // step ends here too (the swing's first half, dead-reckoned by the INS alone).
+    mid_swing_done_ = true;
+    EmitStep(last_state_, /*horizontal_only=*/true);
   }
   if (stance || !in_stance_phase_) return;
   // The stance phase ended at the previous sample: its position is ZUPT-corrected.
   in_stance_phase_ = false;
+  swinging_ = true;
+  swing_samples_ = 0;
+  mid_swing_done_ = false;
   if (!options_.step_at_landing) EmitStep(previous);
 }
 
-void ZuptIns::EmitStep(const InsState& end) {
+void ZuptIns::EmitStep(const InsState& end, bool horizontal_only) {
   if (!last_stance_end_t_) {
     last_stance_end_t_ = end.t;
     last_stance_end_p_ = end.position_n;
     last_stance_end_cov_ = end.position_cov;
     return;
   }
-  const Vec3 delta = end.position_n - last_stance_end_p_;
+  Vec3 delta = end.position_n - last_stance_end_p_;
+  // A step that ends in the air keeps the foot's lift out of the height: the landing's carries
+  // the whole climb.
+  if (horizontal_only) delta.z() = 0.0;
   if (delta.head<2>().norm() < options_.min_step_length_m) return;  // shuffling, not a step
   const Vec3 var = (end.position_cov.diagonal() - last_stance_end_cov_.diagonal()).cwiseMax(1e-6);
   Step step{*last_stance_end_t_, end.t, agent_, delta, var};
   ++summary_.steps;
   summary_.distance_m += delta.head<2>().norm();
   last_stance_end_t_ = end.t;
-  last_stance_end_p_ = end.position_n;
+  last_stance_end_p_.head<2>() = end.position_n.head<2>();
+  if (!horizontal_only) last_stance_end_p_.z() = end.position_n.z();
   last_stance_end_cov_ = end.position_cov;
   if (on_step) on_step(step);
 }

@@ -67,6 +67,10 @@ struct InsOptions {
   /// step ahead of the resting foot, so a step stamped there lags the walk by one step (DR of
   /// the INS's steps 1.2 m mean against the INS's own 0.3 m on all-sources seed 1).
   bool step_at_landing = true;
+  /// Also a step half way through each swing (half the last swing's samples after lift-off):
+  /// a foot IMU on one foot lands once a stride, and there the swinging foot passes the other,
+  /// under the walker — the walker's own steps, twice a stride.
+  bool mid_swing_steps = true;
   /// Textbook dense arithmetic: Phi as a full 15x15 matrix (P = Phi P Phi^T + Q), the Kalman
   /// update with the full H (P = P - K H P, then symmetrized), the detector's window summed
   /// anew. Slow; the reference the structured arithmetic is tested against (same results to
@@ -147,7 +151,7 @@ class ZuptIns {
   /// After each processed sample (last_state_ is its state; `previous`, the sample's before).
   void StanceBookkeeping(bool stance, const InsState& previous);
   /// The step from the last step's end to `end` (none when shorter than min_step_length_m).
-  void EmitStep(const InsState& end);
+  void EmitStep(const InsState& end, bool horizontal_only = false);
 
   InsOptions options_;
   ZuptDetector detector_;
@@ -177,6 +181,10 @@ class ZuptIns {
   std::optional<TimeS> last_stance_end_t_;
   Vec3 last_stance_end_p_ = Vec3::Zero();
   Eigen::Matrix3d last_stance_end_cov_ = Eigen::Matrix3d::Zero();
+  bool swinging_ = false;        ///< between a lift-off and the next landing
+  long swing_samples_ = 0;       ///< samples since the lift-off
+  long last_swing_samples_ = 0;  ///< the last swing's length in samples
+  bool mid_swing_done_ = false;
   InsState last_state_;
   // saturation: an axis repeating the same large value (a clipped sensor)
   Eigen::Matrix<double, 6, 1> last_raw_ = Eigen::Matrix<double, 6, 1>::Zero();
