@@ -283,27 +283,12 @@ std::optional<Estimate> FusionEstimator::Current(const std::string& node) const 
 
 bool FusionEstimator::Due(const Pending& p) const {
   if (now_ > p.t + options_.max_wait_s) return true;
-  // A member is waited for until it has caught up with the agent's last step by p.t: between
-  // steps its latest estimate is its belief at p.t (nothing moved it since), and a row at a
-  // time between steps (another member's update) need not wait for the next step.
-  TimeS caught_up = p.t;
-  if (options_.wait_for_next_step) {
-    // (the old rule: every member's next estimate after p.t)
-  } else if (const auto s = steps_.find(p.agent); s != steps_.end()) {
-    caught_up = -1e300;
-    for (auto it = s->second.rbegin(); it != s->second.rend(); ++it) {
-      if (it->second <= p.t + 1e-9) {
-        caught_up = it->second;
-        break;
-      }
-    }
-  }
   for (std::size_t m = 0; m < members_.size(); ++m) {
     const auto it = agent_history_[m].find(p.agent);
     if (it == agent_history_[m].end() || it->second.empty()) continue;  // does not estimate it
     const TimeS latest = it->second.back().t;
     // A member that has fallen behind by more than the wait is not waited for.
-    if (latest < caught_up - 1e-9 && latest >= now_ - options_.max_wait_s) return false;
+    if (latest < p.t - 1e-9 && latest >= now_ - options_.max_wait_s) return false;
   }
   return true;
 }

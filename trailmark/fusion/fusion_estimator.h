@@ -83,9 +83,6 @@ struct FusionOptions {
   /// of a stride. The covariance grows by (predict_speed_sigma_mps x time ahead)^2 on each
   /// axis. 0: off (an estimate is held until the next fused row).
   double predict_fraction = 0.5;
-  /// The old waiting rule: a fused row waits for every member's next estimate after its time
-  /// (else only for members that have not yet caught up with the agent's last step by then).
-  bool wait_for_next_step = true;
   double predict_period_s = 0.1;
   double predict_baseline_s = 0.5;
   double predict_speed_sigma_mps = 0.5;
