@@ -58,7 +58,7 @@ SimulatedMission SimulateSearchOnFile(const SimulateSearchArgs& a, std::uint64_t
     o.hand = Hand::kRight;
   else
     throw std::invalid_argument("--hand must be left or right, not '" + a.hand + "'");
-  o.duration_s = a.minutes * 60;
+  o.duration_s = a.minutes.value_or(10.0) * 60;
   std::optional<double> heading;
   if (a.heading_deg) heading = *a.heading_deg * std::numbers::pi / 180;
   SimulatedMission sim = SimulateSearchOnPlan(plan, entry, heading, o, seed);
@@ -76,10 +76,16 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     throw std::invalid_argument("--family needs --vary K (the variant to draw)");
   if (scenario != "search" && search.Given())
     throw std::invalid_argument(
-        "--floorplan, --level, --entry, --heading, --hand and --minutes are for the 'search' "
-        "scenario");
-  SimulatedMission sim =
-      scenario == "search" ? SimulateSearchOnFile(search, seed) : SimulateScenario(scenario, seed);
+        "--floorplan, --level, --entry, --heading and --hand are for the 'search' scenario");
+  if (search.minutes && scenario != "search" && scenario != "all-sources-4h")
+    throw std::invalid_argument("--minutes is for the 'search' and 'all-sources-4h' scenarios");
+  if (search.firefighters && scenario != "all-sources-4h")
+    throw std::invalid_argument("--firefighters is for the 'all-sources-4h' scenario");
+  SimulatedMission sim = scenario == "search" ? SimulateSearchOnFile(search, seed)
+                         : scenario == "all-sources-4h"
+                             ? SimulateAllSourcesLoad(seed, search.firefighters.value_or(20),
+                                                      search.minutes.value_or(240.0) * 60)
+                             : SimulateScenario(scenario, seed);
   if (imu.rate_hz > 0) {
     sim.data.imu.clear();  // a scenario's own foot IMU gives way to the one asked for
     ImuSimOptions o;

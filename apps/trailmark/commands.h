@@ -31,10 +31,10 @@ struct SimulateSearchArgs {
   std::string entry;                  ///< "X,Y"
   std::optional<double> heading_deg;  ///< walking in; default: away from the nearest door
   std::string hand = "left";
-  double minutes = 10;
+  std::optional<double> minutes;    ///< search: default 10; all-sources-4h: default 240
+  std::optional<int> firefighters;  ///< all-sources-4h: default 20
   bool Given() const {
-    return !floorplan.empty() || level || !entry.empty() || heading_deg || hand != "left" ||
-           minutes != 10;
+    return !floorplan.empty() || level || !entry.empty() || heading_deg || hand != "left";
   }
 };
 /// `--vary K [--family F]`: a variant of the scenario (sim/variation.h, docs/simulator.md).

@@ -91,7 +91,13 @@ int main(int argc, char** argv) {
                        "search: walking-in direction in degrees (0 = +x, 90 = +y; default: "
                        "away from the door nearest the entry)");
   simulate->add_option("--hand", sim_search.hand, "search: left (default) or right");
-  simulate->add_option("--minutes", sim_search.minutes, "search: duration (default 10)")
+  simulate
+      ->add_option("--firefighters", sim_search.firefighters,
+                   "all-sources-4h: firefighters (default 20)")
+      ->check(CLI::Range(1, 1000));
+  simulate
+      ->add_option("--minutes", sim_search.minutes,
+                   "search: duration (default 10); all-sources-4h: length (default 240)")
       ->check(CLI::Range(0.1, 1440.0));
 
   cli::SimulateVary sim_vary;

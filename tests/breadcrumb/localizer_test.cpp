@@ -15,6 +15,7 @@
 #include "trailmark/core/random.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/sim/multi_floor.h"
 #include "trailmark/sim/scenarios.h"
 #include "trailmark/sim/variation.h"
 
@@ -86,6 +87,41 @@ Metrics RunOnSim(const PipelineSpec& p, const SimulatedMission& sim, const TempD
   RunBatch(p, {mission, options}, sink);
   if (rows) *rows = sink.rows;
   return Evaluate(sim.data.info, sim.data.truth, sink.rows);
+}
+
+// Many firefighters (issue 27's load): the network is re-solved and its marginals refreshed at
+// most every solve_period_s / covariance_period_s of mission time (0.25 s by default) instead of
+// at every agent's estimate; between solves an estimate is the last solution plus the PDR since.
+// Far fewer factorizations, about the same errors (the scenario's tables: docs/breadcrumb.md).
+TEST(BreadcrumbPipeline, ThrottledSolvesCostLessAndStayCloseToTheExactOnes) {
+  MultiFloorOptions o;
+  o.foot_imu = false;
+  o.firefighters = 6;
+  o.duration_s = 300.0;
+  const SimulatedMission sim = SimulateMultiFloor(o, 2);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, sim.levels);
+  struct Sink : EstimateSink {
+    void Add(const Estimate& e) override { rows.push_back(e); }
+    std::vector<Estimate> rows;
+  };
+  const MissionDirectory mission(dir.path());
+  Sink throttled, exact;
+  const EstimatorSummary st = RunBatch(RequirePipeline("breadcrumb"), {mission, {}}, throttled);
+  const EstimatorSummary se =
+      RunBatch(RequirePipeline("breadcrumb"),
+               {mission, {{"solve_period_s", "0"}, {"covariance_period_s", "0"}}}, exact);
+  const double f_throttled = st.numbers.at("factorizations");
+  const double f_exact = se.numbers.at("factorizations");
+  // A solve factorizes once per Gauss-Newton pass over the persistent links (at most 3).
+  EXPECT_LE(f_throttled, 3 * (o.duration_s / 0.25 + 20)) << f_exact;
+  EXPECT_LT(f_throttled, 0.6 * f_exact);
+  const Metrics mt = Evaluate(sim.data.info, sim.data.truth, throttled.rows);
+  const Metrics me = Evaluate(sim.data.info, sim.data.truth, exact.rows);
+  EXPECT_LT(mt.agents.stats.mean_m, 1.1 * me.agents.stats.mean_m + 0.05);
+  EXPECT_LT(mt.agents.stats.p95_m, 1.1 * me.agents.stats.p95_m + 0.1);
+  // Honest: the ellipses cover as often (the cached covariance grows with the PDR since).
+  EXPECT_GE(mt.agents.stats.in95, me.agents.stats.in95 - 0.02);
 }
 
 // The issue's targets on the breadcrumb paper's 400 m office experiment (sec. V-A), one seed

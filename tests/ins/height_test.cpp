@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <optional>
 
@@ -244,6 +245,67 @@ TEST(HeightFilter, AFanStartedOnTheStairsLeavesThePhonesClimbItsOwn) {
   EXPECT_NEAR(f.height_m(), 3.5, 0.35);
   EXPECT_LE(std::abs(f.height_m() - 3.5), 3 * std::sqrt(f.height_variance_m2()));
   EXPECT_EQ(f.Level(kSpecFloors).first, 1);
+}
+
+TEST(HeightChannel, TheAirSharedByTheBarometersInsideIsTakenOutOfEachOfThem) {
+  // Five phones (steps without height): "up" climbs 3.5 m over 10 s from t = 20 s, three stand
+  // on their floors, "street" stands outside. At t = 23 s a fan raises the pressure inside by
+  // 0.3 hPa (-2.5 m) within a second: the four inside see it, the street does not.
+  auto run = [](bool shared, int inside_standing, std::uint64_t seed) {
+    MissionInfo info;
+    std::vector<std::string> ids{"up", "street"};
+    for (int k = 0; k < inside_standing; ++k) ids.push_back("s" + std::to_string(k));
+    for (const std::string& id : ids) info.nodes.push_back(NodeInfo::Agent(id, Vec3::Zero(), 0.1));
+    info.floors = kSpecFloors;
+    HeightOptions o;
+    o.shared_air = shared;
+    HeightChannel channel(info, o);
+    Random rng(seed);
+    for (int k = 0; k < 400; ++k) {
+      const TimeS t = 0.2 * k;
+      for (const std::string& id : ids) {
+        const double z = id == "up" ? std::clamp((t - 20.0) * 0.35, 0.0, 3.5) : 0.0;
+        if (k % 3 == 0) {
+          Step s = FlatStep(t, 0.0, 1.0);
+          s.agent = id;
+          channel.Add(s);
+        }
+        BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
+        r.agent = id;
+        if (id != "street") r.pressure_hpa += 0.3 * std::clamp(t - 23.0, 0.0, 1.0);
+        channel.Add(r);
+      }
+    }
+    EstimatorSummary summary;
+    channel.AddToSummary(summary);
+    return std::pair{summary, std::vector<double>{channel.Filter("up")->height_m(),
+                                                  channel.Filter("up")->air_m(),
+                                                  channel.Filter("street")->air_m(),
+                                                  channel.Filter("street")->height_m()}};
+  };
+  double worst_with = 0, worst_without = 0;
+  for (const std::uint64_t seed : {1u, 2u, 3u, 4u, 5u}) {
+    const auto [with, h] = run(true, 3, seed);
+    const auto [without, h0] = run(false, 3, seed);
+    // Seen once, by the four inside, as the whole of the fan's change; not by the street.
+    EXPECT_EQ(with.numbers.at("height.shared_air_changes"), 1) << seed;
+    EXPECT_NEAR(h[1], -2.5, 0.3) << seed;
+    EXPECT_EQ(h[2], 0.0) << seed;
+    EXPECT_NEAR(h[3], 0.0, 0.5) << seed;
+    // The climber's height: the climb, within its own sigma.
+    EXPECT_NEAR(h[0], 3.5, 0.5) << seed;
+    worst_with = std::max(worst_with, std::abs(h[0] - 3.5));
+    worst_without = std::max(worst_without, std::abs(h0[0] - 3.5));
+    EXPECT_EQ(without.numbers.count("height.shared_air_changes"), 0u);
+  }
+  // The climber alone can mistake the fan for part of its climb (seed 1: 2.5 m off, a floor);
+  // with the others' barometers it cannot.
+  EXPECT_LT(worst_with, worst_without);
+  EXPECT_GT(worst_without, 1.0);
+  // Two inside (the climber and one standing) are too few to call anything shared.
+  const auto [few, hf] = run(true, 1, 1);
+  EXPECT_EQ(few.numbers.at("height.shared_air_changes"), 0);
+  EXPECT_EQ(hf[1], 0.0);
 }
 
 TEST(HeightFilter, ASpikeIsSkippedAndAStuckSensorIsNamed) {

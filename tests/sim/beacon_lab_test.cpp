@@ -9,8 +9,10 @@
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <set>
 
 #include "trailmark/eval/metrics.h"
+#include "trailmark/sim/multi_floor.h"
 #include "trailmark/sim/scenarios.h"
 
 namespace trailmark {
@@ -188,6 +190,47 @@ TEST(AllSources, TheTrailLeavesEveryOtherSourceAsWithoutIt) {
   EXPECT_EQ(all.data.baro.size(), lm.data.baro.size());
   EXPECT_TRUE(lm.data.ranges.empty());
   EXPECT_FALSE(all.data.ranges.empty());
+}
+
+TEST(AllSources, ManyFirefightersOnToursUntilTheEnd) {
+  // Issue 27's load: more firefighters entering 20 s apart, tour after tour until duration_s.
+  MultiFloorOptions o;
+  o.landmarks_per_level = 3;
+  o.beacon_trail = true;
+  o.foot_imu = false;
+  o.firefighters = 5;
+  o.duration_s = 900.0;
+  o.rest_min_s = o.rest_max_s = 30.0;
+  const SimulatedMission sim = SimulateMultiFloor(o, 4);
+  const MissionData& m = sim.data;
+  ASSERT_EQ(sim.walks.size(), 5u);
+  EXPECT_TRUE(m.imu.empty());
+  std::map<std::string, TimeS> first_step, last_step;
+  std::map<std::string, std::set<int>> floors_of;
+  for (const Step& s : m.steps) {
+    if (!first_step.count(s.agent)) first_step[s.agent] = s.t0;
+    last_step[s.agent] = s.t1;
+    EXPECT_LE(s.t1, o.duration_s + 1e-9);
+  }
+  for (const TruthSample& r : m.truth)
+    if (r.id.rfind("ff", 0) == 0 && r.floor) floors_of[r.id].insert(*r.floor);
+  for (int k = 0; k < 5; ++k) {
+    const std::string id = "ff" + std::to_string(k + 1);
+    ASSERT_TRUE(first_step.count(id)) << id;
+    EXPECT_NEAR(first_step[id], 20.0 * k, 2.0) << id;  // entering 20 s apart
+    // Still on tour near the end: more than one search of 4-6 minutes each.
+    EXPECT_GT(last_step[id], o.duration_s - 300.0) << id;
+    // Two tours at least: both pairs of levels searched.
+    EXPECT_EQ(floors_of[id], (std::set<int>{-1, 0, 1, 2})) << id;
+  }
+  // One tour each and two firefighters: the all-sources incident itself.
+  MultiFloorOptions one;
+  one.landmarks_per_level = 3;
+  one.beacon_trail = true;
+  EXPECT_EQ(SimulateMultiFloor(one, 4).data.steps.size(),
+            SimulateScenario("all-sources", 4).data.steps.size());
+  o.firefighters = 0;
+  EXPECT_THROW(SimulateMultiFloor(o, 4), std::invalid_argument);
 }
 
 }  // namespace

@@ -15,7 +15,7 @@ bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
   if (!(l.state_period_s >= 0) || !(l.max_latency_s >= 0) || !(l.encounter_sigma_m > 0) ||
       !(l.drop_sigma_m > 0) || !(l.default_range_sigma_m > 0) || !(l.gate_sigma > 0) ||
       !(l.huber_k > 0) || !(l.moved_sigma_m > 0) || !(l.max_speed_mps > 0) ||
-      !(static_period_s >= 0)) {
+      !(static_period_s >= 0) || !(l.solve_period_s >= 0) || !(l.covariance_period_s >= 0)) {
     if (why) *why = "sigmas, gates and periods must be positive";
     return false;
   }
@@ -29,6 +29,12 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     const auto pos = OptionBounds::Positive(), nonneg = OptionBounds::NonNegative();
     t.Real("state_period_s", &L::state_period_s, "s", nonneg,
            "measurements closer in time share one agent state (IV-E)");
+    t.Real("solve_period_s", &L::solve_period_s, "s", nonneg,
+           "re-solve the network at most this often (mission time; estimates between solves: "
+           "the last solution plus the PDR since; 0: at every estimate)");
+    t.Real("covariance_period_s", &L::covariance_period_s, "s", nonneg,
+           "refresh a node's marginal covariance at most this often (between: the last one "
+           "plus the PDR's variance since; 0: at every estimate)");
     t.Real("max_latency_s", &L::max_latency_s, "s", nonneg,
            "how long a radio measurement may wait for the PDR to cover its time");
     t.Real("step_sigma_floor_m", &L::step_sigma_floor_m, "m", nonneg,

@@ -182,8 +182,8 @@ struct LocalizerOptions {
   double init_covariance_inflation = 4.0;
   double init_grid_m = 1.0;
   // throttling for large incidents (0 = exact online behaviour: solve at every request)
-  double solve_period_s = 0.0;       ///< re-solve L x = b at most this often (mission time)
-  double covariance_period_s = 0.0;  ///< refresh a node's marginal covariance this often
+  double solve_period_s = 0.25;       ///< re-solve L x = b at most this often (mission time)
+  double covariance_period_s = 0.25;  ///< refresh a node's marginal covariance this often
   // agents
   double known_start_sigma_m = 0.01;         ///< `start` without `start_sigma`
   double unknown_start_sigma_m = 1000.0;

@@ -32,6 +32,7 @@ bool HeightOptions::IsValid(std::string* why) const {
   if (!(jump_persist_s >= 0) || !(stuck_after_s > 0) || !(max_vertical_speed_mps > 0)) {
     return fail("height: jump_persist_s >= 0, stuck_after_s > 0, max_vertical_speed_mps > 0");
   }
+  if (shared_air_min_agents < 2) return fail("height.shared_air_min_agents must be >= 2");
   return true;
 }
 
@@ -62,6 +63,14 @@ const OptionTable<HeightOptions>& HeightOptionTable() {
     t.Real("stuck_after_s", &HeightOptions::stuck_after_s, "s", OptionBounds::Positive(),
            "the same reading this long is a stuck barometer");
     t.Flag("use_baro", &HeightOptions::use_baro, "use baro.csv (off: step heights only)");
+    t.Flag("shared_air", &HeightOptions::shared_air,
+           "a change of the air seen at once by several barometers, faster than a person "
+           "climbs, is taken out of each of their readings (a fan started while one was on the "
+           "stairs)");
+    t.Integer("shared_air_min_agents", &HeightOptions::shared_air_min_agents,
+              OptionBounds::Between(2, 1000000),
+              "barometers (and half of those reporting) that must see a change of the air at "
+              "once");
     return t;
   }();
   return table;
@@ -327,7 +336,7 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
     repeated_value_ = p;
     repeated_since_ = t;
   }
-  const double y = PressureAltitudeM(p);
+  const double y = PressureAltitudeM(p) - air_m_;
   const double r2 = options_.baro_sigma_m * options_.baro_sigma_m;
   DriftTo(t);
   if (!referenced_) {
@@ -341,6 +350,11 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
     return BaroUse::kReference;
   }
   if (!steps_know_height_ && LevelShift(t, y)) return BaroUse::kJump;
+  return UseReading(t, y);
+}
+
+HeightFilter::BaroUse HeightFilter::UseReading(TimeS t, double y) {
+  const double r2 = options_.baro_sigma_m * options_.baro_sigma_m;
   const Eigen::RowVector2d H(1.0, 1.0);
   auto update = [&](double residual) {
     const double S = (H * P_ * H.transpose())(0, 0) + r2;
@@ -455,8 +469,34 @@ std::pair<int, double> HeightFilter::Level(const std::vector<FloorLevel>& floors
   return {best, std::max(best_p, 0.0)};
 }
 
+namespace {
+/// A change of the air rising linearly over rise_s from since: the share of it at t.
+double AirRamp(TimeS t, TimeS since, double rise_s) {
+  if (t < since) return 0.0;
+  return rise_s > 0 ? std::min(1.0, (t - since) / rise_s) : 1.0;
+}
+}  // namespace
+
+void HeightFilter::AirChanged(TimeS since, double rise_s, double jump_m) {
+  air_m_ += jump_m;
+  ++air_changes_;
+  for (Recent& r : recent_) r.y -= jump_m * AirRamp(r.t, since, rise_s);
+  for (auto& [ti, yi] : rejected_run_) yi -= jump_m * AirRamp(ti, since, rise_s);
+  if (shift_) {
+    // The change that opened the shift was the air's, now taken out: the shift is over, and
+    // its readings since it opened are used as any other (a climb in them is the agent's).
+    Shift shift = std::move(*shift_);
+    shift_.reset();
+    recent_.clear();
+    for (auto& [ti, yi] : shift.readings) {
+      if (ti >= shift.since) UseReading(ti, yi - jump_m * AirRamp(ti, since, rise_s));
+    }
+  }
+}
+
 std::map<std::string, double> HeightFilter::Counters() const {
   return {{"steps", static_cast<double>(steps_)},
+          {"baro_air_changes", static_cast<double>(air_changes_)},
           {"stairs_steps", static_cast<double>(stairs_steps_)},
           {"baro_used", static_cast<double>(used_)},
           {"baro_rejected", static_cast<double>(rejected_)},
@@ -514,6 +554,12 @@ void HeightChannel::Add(const MissionRow& row) {
   } else if (const auto* baro = std::get_if<BaroSample>(&row)) {
     if (!IsAgent(info_, baro->agent)) return;
     HeightFilter& f = FilterOf(baro->agent);
+    if (options_.shared_air && options_.use_baro && std::isfinite(baro->pressure_hpa) &&
+        std::isfinite(baro->t)) {
+      air_recent_[baro->agent].emplace_back(baro->t,
+                                            PressureAltitudeM(baro->pressure_hpa) - f.air_m());
+      if (baro->t >= air_checked_t_ + kAirCheckS) CheckSharedAir(baro->t);
+    }
     f.AddBaro(*baro);
     for (auto& n : f.TakeNotes(baro->agent)) notes_.push_back(std::move(n));
   } else if (const auto* event = std::get_if<MissionEvent>(&row)) {
@@ -521,6 +567,115 @@ void HeightChannel::Add(const MissionRow& row) {
     const HeightFilter& f = FilterOf(event->agent);
     dropped_[event->node] = {f.height_m(), f.height_variance_m2(), f.Level(info_.floors).first};
   }
+}
+
+void HeightChannel::CheckSharedAir(TimeS t) {
+  air_checked_t_ = t;
+  // Each agent's change: the median of its last second against that of the second before the
+  // one before (the second between holds a change of the air while it rises: a fan's takes a
+  // second or two), from barometers that reported in both. A lone spike moves neither.
+  struct Change {
+    std::string agent;
+    double d_m;
+    double before_m;
+  };
+  std::vector<Change> changes;
+  std::size_t readings = 0;
+  for (auto& [agent, q] : air_recent_) {
+    while (!q.empty() && q.front().first <= t - 3 * kAirWindowS) q.pop_front();
+    std::vector<double> fresh, older;
+    for (const auto& [ti, yi] : q) {
+      if (ti > t - kAirWindowS) fresh.push_back(yi);
+      if (ti <= t - 2 * kAirWindowS) older.push_back(yi);
+    }
+    if (fresh.size() < 3 || older.size() < 3) continue;
+    readings += fresh.size() + older.size();
+    const double before = Median(older);
+    changes.push_back({agent, Median(std::move(fresh)) - before, before});
+  }
+  const std::size_t n = changes.size();
+  if (n < static_cast<std::size_t>(options_.shared_air_min_agents)) return;
+  std::vector<double> d;
+  for (const Change& c : changes) d.push_back(c.d_m);
+  const double shared = Median(d);
+  // Faster than a person climbs, beyond the noise of the median of the medians (1.25 sigma /
+  // sqrt(n) each; the change of one agent: two medians of ~5 readings).
+  const double per_agent_sigma =
+      1.25 * options_.baro_sigma_m * std::sqrt(2.0 / std::max(3.0, readings / (2.0 * n)));
+  const double sigma_shared = 1.25 * per_agent_sigma / std::sqrt(static_cast<double>(n));
+  const double climb_m = options_.max_vertical_speed_mps * 2 * kAirWindowS;
+  if (std::abs(shared) <= climb_m + 3 * sigma_shared) return;
+  // The barometers that saw it: nearer the shared change than no change (one in the street
+  // does not share the building's air), and no further from it than a climb and the noise.
+  const double allowed = climb_m + 3 * per_agent_sigma;
+  std::vector<const Change*> saw;
+  for (const Change& c : changes) {
+    if (std::abs(c.d_m - shared) < std::abs(c.d_m) && std::abs(c.d_m - shared) <= allowed)
+      saw.push_back(&c);
+  }
+  if (saw.size() < static_cast<std::size_t>(options_.shared_air_min_agents) || 2 * saw.size() < n)
+    return;
+  // The change as the air's: a level per barometer and one change for all, rising linearly
+  // from t_j over `rise` (FitPressureJump's model without a climb), by least squares over their
+  // readings; taken only once it is over (its end a second before the newest reading), so that
+  // the whole of it comes out.
+  double best_sse = std::numeric_limits<double>::infinity(), jump = 0, since = 0, rise = 0;
+  for (const double rise_s : {0.0, 0.5, 1.0, 2.0}) {
+    for (const auto& [t_j, unused] : air_recent_[saw.front()->agent]) {
+      if (t_j <= t - 3 * kAirWindowS + 0.5) continue;
+      // Per barometer, the level a_i and the shared J: with u the ramp, J = sum (y - ybar_i)
+      // (u - ubar_i) / sum (u - ubar_i)^2.
+      double num = 0, den = 0;
+      for (const Change* c : saw) {
+        double ybar = 0, ubar = 0;
+        const auto& q = air_recent_[c->agent];
+        for (const auto& [ti, yi] : q) {
+          ybar += yi;
+          ubar += AirRamp(ti, t_j, rise_s);
+        }
+        ybar /= static_cast<double>(q.size());
+        ubar /= static_cast<double>(q.size());
+        for (const auto& [ti, yi] : q) {
+          const double du = AirRamp(ti, t_j, rise_s) - ubar;
+          num += (yi - ybar) * du;
+          den += du * du;
+        }
+      }
+      if (!(den > 1e-9)) continue;
+      const double j = num / den;
+      double sse = 0;
+      for (const Change* c : saw) {
+        const auto& q = air_recent_[c->agent];
+        double level = 0;
+        for (const auto& [ti, yi] : q) level += yi - j * AirRamp(ti, t_j, rise_s);
+        level /= static_cast<double>(q.size());
+        for (const auto& [ti, yi] : q) {
+          const double r = yi - level - j * AirRamp(ti, t_j, rise_s);
+          sse += r * r;
+        }
+      }
+      if (sse < best_sse) {
+        best_sse = sse;
+        jump = j;
+        since = t_j;
+        rise = rise_s;
+      }
+    }
+  }
+  // Not over yet (or not the air's after all): later.
+  if (!std::isfinite(best_sse) || since + rise > t - kAirWindowS || std::abs(jump) <= climb_m)
+    return;
+  for (const Change* c : saw) {
+    filters_.at(c->agent).AirChanged(since, rise, jump);
+    for (auto& [ti, yi] : air_recent_[c->agent]) yi -= jump * AirRamp(ti, since, rise);
+  }
+  const double shared_m = jump;
+  ++air_jumps_;
+  notes_.push_back({since, "barometers", "", "repeats",
+                    fmt::format("the air changed by {:+.2f} m ({:+.2f} hPa) for {} of {} "
+                                "barometers at once, faster than a person climbs (a fan, a "
+                                "door): taken out of their readings",
+                                shared_m, -shared_m / 8.3, saw.size(), n)});
 }
 
 std::optional<LevelBelief> HeightChannel::NodeLevel(const std::string& node) const {
@@ -557,6 +712,7 @@ void HeightChannel::AddToSummary(EstimatorSummary& summary) const {
     summary.numbers["height." + agent + ".final_level_probability"] = p;
     summary.numbers["height." + agent + ".final_z_m"] = f.height_m();
   }
+  if (options_.shared_air) summary.numbers["height.shared_air_changes"] = air_jumps_;
   summary.integrity.insert(summary.integrity.end(), notes_.begin(), notes_.end());
 }
 

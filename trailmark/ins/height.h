@@ -74,6 +74,13 @@ struct HeightOptions {
   double stuck_after_s = 10.0;
   /// Use the barometer (off: steps only).
   bool use_baro = true;
+  /// The air every barometer inside shares (ours; HeightChannel): a change of the air seen at
+  /// once by at least `shared_air_min_agents` barometers (and half of those reporting),
+  /// faster than a person climbs, is taken out of each of their readings from where it began —
+  /// a fan started while one of them was on the stairs is no longer that one's climb. Off by
+  /// default: on held-out 20-firefighter missions no better on the floor (docs/floors.md).
+  bool shared_air = false;
+  int shared_air_min_agents = 3;
   bool IsValid(std::string* why) const;
 };
 /// The `height.` keys.
@@ -99,9 +106,20 @@ class HeightFilter {
   std::map<std::string, double> Counters() const;
   /// Integrity notes since the last call (jumps absorbed, stuck sensor).
   std::vector<IntegrityNote> TakeNotes(const std::string& agent);
+  /// The air's barometric height changed by `jump_m` from `since` on, as other barometers saw
+  /// it (HeightChannel's shared air): this reading and later ones are taken with it removed,
+  /// and so are the readings since `since` the filter still holds (a change being settled,
+  /// rejected readings waiting for company).
+  /// The change rose linearly over `rise_s` from `since` (0: at once).
+  void AirChanged(TimeS since, double rise_s, double jump_m);
+  /// The sum of those changes (m): what is taken out of every reading.
+  double air_m() const { return air_m_; }
 
  private:
   void Predict(double q_h_m2);
+  /// A reading (barometric height y, its air changes removed) gated into the state, or kept
+  /// with the rejected ones (a jump, a height change the steps missed).
+  BaroUse UseReading(TimeS t, double y);
   void DriftTo(TimeS t);
   HeightOptions options_;
   Eigen::Vector2d x_ = Eigen::Vector2d::Zero();
@@ -148,6 +166,8 @@ class HeightFilter {
   double repeated_value_ = 0;
   std::optional<TimeS> repeated_since_;
   bool stuck_ = false;
+  double air_m_ = 0;
+  std::size_t air_changes_ = 0;
   std::size_t steps_ = 0, stairs_steps_ = 0, used_ = 0, rejected_ = 0, jumps_ = 0,
               height_changes_ = 0, stuck_readings_ = 0;
   std::vector<IntegrityNote> notes_;
@@ -195,9 +215,18 @@ class HeightChannel : public LevelSource {
 
  private:
   HeightFilter& FilterOf(const std::string& agent);
+  /// The shared air (HeightOptions::shared_air): each agent's barometric heights of the last
+  /// two seconds, as its filter takes them (its air changes removed); checked at most every
+  /// kAirCheckS of mission time.
+  void CheckSharedAir(TimeS t);
+  static constexpr double kAirWindowS = 1.0;  ///< the two windows compared (as HeightFilter's)
+  static constexpr double kAirCheckS = 0.2;
   MissionInfo info_;
   HeightOptions options_;
   std::map<std::string, HeightFilter> filters_;
+  std::map<std::string, std::deque<std::pair<TimeS, double>>> air_recent_;
+  TimeS air_checked_t_ = -1e300;
+  std::size_t air_jumps_ = 0;
   struct Dropped {
     double z_m, szz_m2;
     int level;

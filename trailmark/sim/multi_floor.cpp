@@ -1,15 +1,16 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/sim/multi_floor.h"
 
-#include "trailmark/sim/rssi_channel.h"
-
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <numbers>
+#include <stdexcept>
 #include <string>
+
+#include "trailmark/sim/rssi_channel.h"
 
 namespace trailmark {
 
@@ -118,6 +119,14 @@ Walk::Sample TruthAt(const Walk& walk, TimeS t) {
   return out;
 }
 
+/// The walk up to t_end: steps ending by then, truth samples, stops begun by then.
+void CutWalk(Walk& walk, TimeS t_end) {
+  std::erase_if(walk.steps, [t_end](const TrueStep& s) { return s.t1 > t_end; });
+  std::erase_if(walk.truth, [t_end](const Walk::Sample& s) { return s.t > t_end; });
+  std::erase_if(walk.stops, [t_end](const Walk::StopInterval& s) { return s.t_stop > t_end; });
+  for (Walk::StopInterval& s : walk.stops) s.t_go = std::min(s.t_go, t_end);
+}
+
 }  // namespace
 
 MultiFloorOptions::MultiFloorOptions() {
@@ -158,6 +167,11 @@ double StandardPressureHpa(double z_m, double p0_hpa) {
 }
 
 SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t seed) {
+  if (o.firefighters < 1 || !(o.duration_s >= 0) || !(o.rest_min_s >= 0) ||
+      !(o.rest_max_s >= o.rest_min_s)) {
+    throw std::invalid_argument(
+        "multi-floor: need firefighters >= 1, duration_s >= 0, 0 <= rest_min_s <= rest_max_s");
+  }
   Random rng(seed);
   // Storeys of another height in every building: 3.0-4.2 m, the basement 2.8-3.8 m.
   const double e1 = rng.Uniform(3.0, 4.2);
@@ -165,27 +179,40 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
   const double em1 = -rng.Uniform(2.8, 3.8);
   const std::vector<FloorLevel> floors{{-1, em1}, {0, 0.0}, {1, e1}, {2, e2}};
 
-  // ff1 searches the two upper floors, ff2 the ground floor and the basement.
-  RouteBuilder a;
-  a.Enter();
-  a.To(19.5, 6.0, 0);
-  a.To(21.0, 6.0, 0);
-  a.Stairs(0, e1);
-  a.Search(1, e1, rng, rng.Uniform() < 0.5);
-  a.Stairs(e1, e2);
-  a.Search(2, e2, rng, rng.Uniform() < 0.5);
-  a.Stairs(e2, e1);
-  a.Stairs(e1, 0);
-  a.To(19.5, 6.0, 0);
-  a.Leave();
-  RouteBuilder b;
-  b.Enter();
-  b.Search(0, 0, rng, rng.Uniform() < 0.5);
-  b.Stairs(0, em1);
-  b.Search(-1, em1, rng, rng.Uniform() < 0.5);
-  b.Stairs(em1, 0);
-  b.To(19.5, 6.0, 0);
-  b.Leave();
+  // ff1 searches the two upper floors, ff2 the ground floor and the basement; ff3 as ff1 and so
+  // on; on further tours (duration_s) each searches the other pair.
+  std::vector<std::pair<std::string, Route>> agents;
+  const double mean_speed_mps = 0.8 * o.walker.speed_mps;  // stops and stairs, roughly
+  for (int k = 0; k < o.firefighters; ++k) {
+    RouteBuilder r;
+    const TimeS t_start = k * 20.0;
+    for (int tour = 0;; ++tour) {
+      r.Enter();
+      if ((k + tour) % 2 == 0) {
+        r.To(19.5, 6.0, 0);
+        r.To(21.0, 6.0, 0);
+        r.Stairs(0, e1);
+        r.Search(1, e1, rng, rng.Uniform() < 0.5);
+        r.Stairs(e1, e2);
+        r.Search(2, e2, rng, rng.Uniform() < 0.5);
+        r.Stairs(e2, e1);
+        r.Stairs(e1, 0);
+      } else {
+        r.Search(0, 0, rng, rng.Uniform() < 0.5);
+        r.Stairs(0, em1);
+        r.Search(-1, em1, rng, rng.Uniform() < 0.5);
+        r.Stairs(em1, 0);
+      }
+      r.To(19.5, 6.0, 0);
+      r.Leave();
+      if (o.duration_s <= 0) break;
+      double stopped_s = 0;
+      for (const Route::Stop& st : r.route.stops) stopped_s += st.duration_s;
+      if (t_start + r.route.Length() / mean_speed_mps + stopped_s > o.duration_s + 60.0) break;
+      r.Stop(rng.Uniform(o.rest_min_s, o.rest_max_s));  // in the street: a new cylinder
+    }
+    agents.emplace_back(fmt::format("ff{}", k + 1), r.route);
+  }
 
   SimulatedMission out;
   SimulatedMission& sim = out;
@@ -193,7 +220,6 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
   m.info.name = "multi-floor";
   m.info.floors = floors;
   m.info.floorplan = "floorplan.geojson";
-  const std::vector<std::pair<std::string, Route>> agents{{"ff1", a.route}, {"ff2", b.route}};
   const double start_heading = std::numbers::pi / 2;  // facing the entrance (north)
   for (const auto& [id, route] : agents) {
     m.info.nodes.push_back(
@@ -210,7 +236,8 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
     const auto& [id, route] = agents[i];
     const TimeS t_start = i * 20.0;
     Random walk_rng = rng.Fork();
-    const Walk walk = WalkRoute(route, o.walker, t_start, walk_rng);
+    Walk walk = WalkRoute(route, o.walker, t_start, walk_rng);
+    if (o.duration_s > 0) CutWalk(walk, o.duration_s);
     sim.walks.emplace_back(id, walk);
     // Truth: feet height and level.
     for (const auto& s : walk.truth) {
@@ -353,8 +380,8 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       SimulateBeaconRanging(ground, layout.beacons, layout.drop_time_s, us,
                             layout.drop_time_s[j] + 0.5, j, every_pair, us_rng, m);
     }
-    const TimeS t_end =
-        std::max(sim.walks[0].second.truth.back().t, sim.walks[1].second.truth.back().t);
+    TimeS t_end = 0;
+    for (const auto& [id, walk] : sim.walks) t_end = std::max(t_end, walk.truth.back().t);
     for (TimeS t = layout.drop_time_s.front() + us.beacon_ranging_period_s; t <= t_end;
          t += us.beacon_ranging_period_s) {
       SimulateBeaconRanging(ground, layout.beacons, layout.drop_time_s, us, t, -1, every_pair,
@@ -373,11 +400,22 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
                    [](const Step& x, const Step& y) { return x.t1 < y.t1; });
   m.info.description = fmt::format(
       "Multi-storey block (issue 26): basement at {:.2f} m, ground floor 0, level 1 at {:.2f} m, "
-      "level 2 at {:.2f} m, a switchback stairwell; ff1 searches levels 1 and 2, ff2 the ground "
-      "floor and the basement; phone PDR steps (no height), a foot IMU at {:g} Hz, a barometer "
+      "level 2 at {:.2f} m, a switchback stairwell; {}phone PDR steps (no height), {}a barometer "
       "each at {:g} Hz (offset, weather {:+.2f} hPa/h, a ventilation fan from t = {:.0f} s); "
       "{}{}simulated, seed {}",
-      em1, e1, e2, o.imu.rate_hz, o.baro.rate_hz, weather_rate_hpa_per_s * 3600, ppv_start_s,
+      em1, e1, e2,
+      o.firefighters == 2 && o.duration_s <= 0
+          ? std::string("ff1 searches levels 1 and 2, ff2 the ground floor and the basement; ")
+          : fmt::format("{} firefighters entering 20 s apart, each searching two levels a tour "
+                        "(levels 1 and 2, or the ground floor and the basement){}; ",
+                        o.firefighters,
+                        o.duration_s > 0
+                            ? fmt::format(", tour after tour with rests in the street until "
+                                          "t = {:g} s",
+                                          o.duration_s)
+                            : std::string()),
+      o.foot_imu ? fmt::format("a foot IMU at {:g} Hz, ", o.imu.rate_hz) : std::string(),
+      o.baro.rate_hz, weather_rate_hpa_per_s * 3600, ppv_start_s,
       o.radio || o.landmarks_per_level > 0
           ? fmt::format(
                 "{}{}RSSI losing {:.1f} dB per floor; ", o.radio ? "breadcrumbs and a base, " : "",

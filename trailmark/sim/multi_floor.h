@@ -72,6 +72,15 @@ struct MultiFloorOptions {
   BaroSimOptions baro;
   ImuSimOptions imu;          ///< the foot IMU (100 Hz, industrial grade by default)
   bool foot_imu = true;
+  /// Firefighters (ff1, ff2, ...), entering 20 s apart. Each searches two levels on a tour:
+  /// ff1 levels 1 and 2, ff2 the ground floor and the basement, ff3 as ff1, and so on.
+  int firefighters = 2;
+  /// > 0: every firefighter goes on tour after tour (in, a search, out; then a rest of
+  /// `rest_min_s`-`rest_max_s` in the street, a cylinder change, the next tour searching the
+  /// other two levels) until this mission time, where the walk is cut (the 20-firefighter,
+  /// 4-hour incident of issue 27's must-hold). 0: one tour each.
+  double duration_s = 0.0;
+  double rest_min_s = 60.0, rest_max_s = 300.0;
   MultiFloorOptions();
 };
 

@@ -213,7 +213,12 @@ std::vector<ScenarioInfo> Scenarios() {
            "every source at once (issue 27): the multi-floor building with two firefighters, "
            "their breadcrumbs and a base, 3 surveyed radio landmarks per level, an ultrasound "
            "beacon exit trail dropped on the ground floor, foot IMUs, phone steps, barometers "
-           "and every level's floor plan"}};
+           "and every level's floor plan"},
+          {"all-sources-4h",
+           "the load of issue 27's must-hold: the all-sources building with 20 firefighters "
+           "entering 20 s apart, tour after tour (a search of two levels, a rest in the street) "
+           "for 4 hours; every source but the foot IMUs (phone steps; 28.8 M IMU samples would "
+           "be 2 GB of CSV)"}};
 }
 
 namespace {
@@ -223,6 +228,16 @@ SimulatedMission Named(SimulatedMission sim, const std::string& name) {
   return sim;
 }
 }  // namespace
+
+SimulatedMission SimulateAllSourcesLoad(std::uint64_t seed, int firefighters, double duration_s) {
+  MultiFloorOptions o;
+  o.landmarks_per_level = 3;
+  o.beacon_trail = true;
+  o.firefighters = firefighters;
+  o.duration_s = duration_s;
+  o.foot_imu = false;
+  return Named(SimulateMultiFloor(o, seed), "all-sources-4h");
+}
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
   if (name == "office-loop") return SimulateOfficeLoop({}, seed);
@@ -266,6 +281,7 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {
     o.beacon_trail = true;
     return Named(SimulateMultiFloor(o, seed), name);
   }
+  if (name == "all-sources-4h") return SimulateAllSourcesLoad(seed);
   if (name == "incident-4h") {
     const SyntheticIncident inc = MakeSyntheticIncident({}, seed);
     SimulatedMission sim;

@@ -56,5 +56,9 @@ struct ScenarioInfo {
 std::vector<ScenarioInfo> Scenarios();
 /// Throws std::invalid_argument for an unknown name.
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed);
+/// `all-sources-4h` with another crew or length (issue 27's load; `simulate all-sources-4h
+/// --firefighters N --minutes M`).
+SimulatedMission SimulateAllSourcesLoad(std::uint64_t seed, int firefighters = 20,
+                                        double duration_s = 4 * 3600.0);
 
 }  // namespace trailmark
