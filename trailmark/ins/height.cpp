@@ -415,6 +415,10 @@ HeightFilter::BaroUse HeightFilter::UseReading(TimeS t, double y) {
     x_[1] = mean - x_[0];
     P_(1, 1) += r2;
     Agree(t);
+    // The readings held for a change of the air carry the offset before this one: a change
+    // opened on them would go back to it (a spike taken as the first reading's reference put a
+    // firefighter 16 m up for ten minutes that way).
+    recent_.clear();
     ++jumps_;
     notes_.push_back(
         {t, "", "", "repeats",
