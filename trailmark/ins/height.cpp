@@ -227,7 +227,7 @@ bool HeightFilter::LevelShift(TimeS t, double y) {
     SettleShift(t);
     return true;
   }
-  recent_.push_back({t, y, x_[1], P_(1, 1)});
+  recent_.push_back({t, y, x_[1], P_(1, 1), x_[0]});
   while (!recent_.empty() && recent_.front().t < t - kShiftHistoryS) recent_.pop_front();
   // Medians: a lone spike moves neither.
   std::vector<double> fresh, older;
@@ -246,7 +246,22 @@ bool HeightFilter::LevelShift(TimeS t, double y) {
                          std::sqrt(1.0 / static_cast<double>(fresh.size()) +
                                    1.0 / static_cast<double>(older.size()));
   if (std::abs(d) <= options_.max_vertical_speed_mps * kShiftWindowS + 3 * sigma_d) return false;
-  shift_ = Shift{t, before, recent_.front().offset_m, recent_.front().offset_var_m2, {}};
+  // The offset before the change: the filter's at the window's first reading — unless that was
+  // the reference itself, one reading moments ago (a firefighter walking in through a door into
+  // a fan's overpressure 3 s after the first reading): then the median of the readings' y - h
+  // before the change (all of them ~5 s after the reference).
+  double offset_m = recent_.front().offset_m, offset_var_m2 = recent_.front().offset_var_m2;
+  if (reference_t_ && recent_.front().t - *reference_t_ <= 0.5) {
+    std::vector<double> pre;
+    for (const auto& r : recent_)
+      if (r.t <= t - 2 * kShiftWindowS) pre.push_back(r.y - r.h_m);
+    if (pre.size() >= 5) {
+      offset_var_m2 =
+          1.57 * options_.baro_sigma_m * options_.baro_sigma_m / static_cast<double>(pre.size());
+      offset_m = Median(std::move(pre));
+    }
+  }
+  shift_ = Shift{t, before, offset_m, offset_var_m2, {}};
   for (const auto& r : recent_) shift_->readings.emplace_back(r.t, r.y);
   return true;
 }
@@ -345,6 +360,7 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
     P_(1, 1) = P_(0, 0) + r2;
     P_(0, 1) = P_(1, 0) = -P_(0, 0);
     referenced_ = true;
+    reference_t_ = t;
     Agree(t);
     rejected_run_.clear();
     return BaroUse::kReference;

@@ -125,6 +125,7 @@ class HeightFilter {
   Eigen::Vector2d x_ = Eigen::Vector2d::Zero();
   Eigen::Matrix2d P_ = Eigen::Matrix2d::Zero();
   bool referenced_ = false;
+  std::optional<TimeS> reference_t_;  ///< when the offset was last referenced on one reading
   std::optional<TimeS> last_baro_t_;
   // Persistence of step height changes.
   std::deque<std::pair<double, double>> pending_;  ///< uncommitted steps: dz, szz
@@ -150,6 +151,7 @@ class HeightFilter {
     TimeS t;
     double y;                ///< the reading's barometric height
     double offset_m, offset_var_m2;  ///< b and its variance before it
+    double h_m;                      ///< h before it
   };
   std::deque<Recent> recent_;
   struct Shift {
