@@ -308,42 +308,43 @@ TEST(HeightChannel, TheAirSharedByTheBarometersInsideIsTakenOutOfEachOfThem) {
   EXPECT_EQ(hf[1], 0.0);
 }
 
+/// A phone (steps without height) standing on the ground floor, readings every 0.2 s for 30 s:
+/// the first one at `first_m` as height (the offset's reference), the others noise; from
+/// `fan_s` a fan's overpressure (0.3 hPa, -2.5 m) rising over `rise_s` (0: at once, a door).
+HeightFilter PhoneWithAFirstReadingOff(std::uint64_t seed, double first_m, TimeS fan_s,
+                                       double rise_s) {
+  HeightFilter f(0.0, 0.05);
+  Random rng(seed);
+  for (int k = 0; k < 150; ++k) {
+    const TimeS t = 0.2 * k;
+    if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
+    BaroSample r = Reading(t, k == 0 ? first_m : rng.Normal(0, 0.3));
+    if (t >= fan_s)
+      r.pressure_hpa += 0.3 * (rise_s > 0 ? std::min(1.0, (t - fan_s) / rise_s) : 1.0);
+    f.AddBaro(r);
+  }
+  return f;
+}
+
 TEST(HeightFilter, ASpikeAsTheFirstReadingLeavesNoTraceOnALaterChangeOfTheAir) {
-  // A phone's barometer (steps without height) whose first reading is a spike of -16 m (the
-  // reference: the offset is wrong until the readings that follow re-reference it), and 4 s
-  // later a door into a fan's overpressure (-2.5 m within a second). Seen on all-sources-4h
-  // (20 firefighters, seed 1 of --minutes 10): the change was settled on the offset before the
-  // re-reference, and the firefighter stood 16 m up for ten minutes.
+  // The first reading a spike of -16 m (the offset is wrong until the readings that follow
+  // re-reference it), and 4 s later a fan's overpressure within a second. Seen on
+  // all-sources-4h (20 firefighters, seed 1 of --minutes 10): the change was settled on the
+  // offset before the re-reference, and the firefighter stood 16 m up for ten minutes.
   for (const std::uint64_t seed : {1u, 2u, 3u}) {
-    HeightFilter f(0.0, 0.05);
-    Random rng(seed);
-    for (int k = 0; k < 150; ++k) {
-      const TimeS t = 0.2 * k;
-      if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
-      BaroSample r = Reading(t, k == 0 ? -16.0 : rng.Normal(0, 0.3));
-      r.pressure_hpa += 0.3 * std::clamp(t - 4.0, 0.0, 1.0);
-      f.AddBaro(r);
-    }
+    const HeightFilter f = PhoneWithAFirstReadingOff(seed, -16.0, 4.0, 1.0);
     EXPECT_NEAR(f.height_m(), 0.0, 0.5) << seed;
     EXPECT_EQ(f.Level(kSpecFloors).first, 0) << seed;
   }
 }
 
 TEST(HeightFilter, AChangeOfTheAirSecondsAfterTheFirstReadingIsSettledOnTheReadingsNotOnIt) {
-  // A phone's barometer whose first reading is 1.2 m off (3.4 sigma: the offset's reference),
-  // and 3.4 s later the door into a fan's overpressure (-2.5 m at once). Seen on all-sources-4h
-  // (20 firefighters; seed 102 of --minutes 10, ff8): the change was settled on the offset of
-  // that one reading, and the firefighter stood a floor down for the rest of the search.
+  // The first reading 1.2 m off (3.4 sigma: the offset's reference), and 3.4 s later the door
+  // into a fan's overpressure. Seen on all-sources-4h (20 firefighters; seed 102 of --minutes
+  // 10, ff8): the change was settled on the offset of that one reading, and the firefighter
+  // stood a floor down for the rest of the search.
   for (const std::uint64_t seed : {1u, 2u, 3u}) {
-    HeightFilter f(0.0, 0.05);
-    Random rng(seed);
-    for (int k = 0; k < 150; ++k) {
-      const TimeS t = 0.2 * k;
-      if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
-      BaroSample r = Reading(t, k == 0 ? 1.2 : rng.Normal(0, 0.3));
-      if (t >= 3.4) r.pressure_hpa += 0.3;
-      f.AddBaro(r);
-    }
+    const HeightFilter f = PhoneWithAFirstReadingOff(seed, 1.2, 3.4, 0.0);
     EXPECT_NEAR(f.height_m(), 0.0, 0.5) << seed;
     EXPECT_EQ(f.Level(kSpecFloors).first, 0) << seed;
   }
