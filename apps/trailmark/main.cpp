@@ -210,8 +210,10 @@ int main(int argc, char** argv) {
   std::string reproduce_out = "out/reproduce";
   auto* reproduce = app.add_subcommand(
       "reproduce", "a paper's experiment on simulated equivalents, side by side with the paper");
-  reproduce->add_option("name", reproduce_name, "breadcrumb | ins | landmarks | beacons | mapmatch | robustness | integrity | floors")
-      ->required();
+  std::string reproduction_names;  // from the reproductions' registry: never out of date
+  for (const auto& r : experiments::Reproductions())
+    reproduction_names += (reproduction_names.empty() ? "" : " | ") + r.name;
+  reproduce->add_option("name", reproduce_name, reproduction_names)->required();
   reproduce->add_option("--seeds", reproduce_seeds, "number of simulated runs (seeds 1..N)")
       ->check(CLI::Range(1, 1000));
   int reproduce_first_seed = 1;
