@@ -146,6 +146,12 @@ void HeightFilter::AddStep(const Step& step) {
 
 namespace {
 // The (upper) median: a lone spike moves it not.
+/// A change of the air rising linearly over rise_s from since: the share of it at t.
+double AirRamp(TimeS t, TimeS since, double rise_s) {
+  if (t < since) return 0.0;
+  return rise_s > 0 ? std::min(1.0, (t - since) / rise_s) : 1.0;
+}
+
 double Median(std::vector<double> v) {
   std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
   return v[v.size() / 2];
@@ -168,7 +174,7 @@ std::optional<PressureJumpFit> FitPressureJump(const std::vector<std::pair<TimeS
   // Columns: a, J, and r when fitted; the model's row at time t for a jump from t_j over rise.
   auto row = [&](TimeS t, TimeS t_j, double rise) {
     Eigen::Vector3d a;
-    a << 1.0, t < t_j ? 0.0 : (rise > 0 ? std::min(1.0, (t - t_j) / rise) : 1.0), t - t_end;
+    a << 1.0, AirRamp(t, t_j, rise), t - t_end;
     return a;
   };
   std::optional<PressureJumpFit> best;
@@ -488,14 +494,6 @@ std::pair<int, double> HeightFilter::Level(const std::vector<FloorLevel>& floors
   }
   return {best, std::max(best_p, 0.0)};
 }
-
-namespace {
-/// A change of the air rising linearly over rise_s from since: the share of it at t.
-double AirRamp(TimeS t, TimeS since, double rise_s) {
-  if (t < since) return 0.0;
-  return rise_s > 0 ? std::min(1.0, (t - since) / rise_s) : 1.0;
-}
-}  // namespace
 
 void HeightFilter::AirChanged(TimeS since, double rise_s, double jump_m) {
   air_m_ += jump_m;
