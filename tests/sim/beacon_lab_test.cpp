@@ -233,5 +233,29 @@ TEST(AllSources, ManyFirefightersOnToursUntilTheEnd) {
   EXPECT_THROW(SimulateMultiFloor(o, 4), std::invalid_argument);
 }
 
+TEST(AllSources, AMissionShorterThanTheCrewsEntryHasTheFirefightersWhoEntered) {
+  // 20 firefighters 20 s apart and a 70 s mission: ff1-ff4 have entered (at 0, 20, 40, 60 s),
+  // ff5 (80 s) has not. It crashed on the ones who had not (an empty walk).
+  MultiFloorOptions o;
+  o.landmarks_per_level = 3;
+  o.beacon_trail = true;
+  o.foot_imu = false;
+  o.firefighters = 20;
+  o.duration_s = 70.0;
+  const SimulatedMission sim = SimulateMultiFloor(o, 7);
+  ASSERT_EQ(sim.walks.size(), 4u);
+  std::set<std::string> agents, stepping, listed;
+  for (const NodeInfo& n : sim.data.info.nodes)
+    if (n.kind == NodeKind::kAgent) listed.insert(n.id);
+  for (const TruthSample& r : sim.data.truth)
+    if (r.id.rfind("ff", 0) == 0) agents.insert(r.id);
+  for (const Step& s : sim.data.steps) stepping.insert(s.agent);
+  const std::set<std::string> entered{"ff1", "ff2", "ff3", "ff4"};
+  EXPECT_EQ(listed, entered);
+  EXPECT_EQ(agents, entered);
+  EXPECT_EQ(stepping, entered);
+  for (const BaroSample& b : sim.data.baro) EXPECT_LE(b.t, o.duration_s + 1e-9);
+}
+
 }  // namespace
 }  // namespace trailmark

@@ -186,6 +186,9 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
   for (int k = 0; k < o.firefighters; ++k) {
     RouteBuilder r;
     const TimeS t_start = k * 20.0;
+    // A mission that ends before a firefighter's turn to enter (20 s apart) does not have him:
+    // he would have no sample at all. At least a second of walk for the ones it has.
+    if (o.duration_s > 0 && t_start + 1.0 > o.duration_s) break;
     for (int tour = 0;; ++tour) {
       r.Enter();
       if ((k + tour) % 2 == 0) {
@@ -408,7 +411,7 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
           ? std::string("ff1 searches levels 1 and 2, ff2 the ground floor and the basement; ")
           : fmt::format("{} firefighters entering 20 s apart, each searching two levels a tour "
                         "(levels 1 and 2, or the ground floor and the basement){}; ",
-                        o.firefighters,
+                        agents.size(),
                         o.duration_s > 0
                             ? fmt::format(", tour after tour with rests in the street until "
                                           "t = {:g} s",

@@ -78,7 +78,8 @@ struct MultiFloorOptions {
   /// > 0: every firefighter goes on tour after tour (in, a search, out; then a rest of
   /// `rest_min_s`-`rest_max_s` in the street, a cylinder change, the next tour searching the
   /// other two levels) until this mission time, where the walk is cut (the 20-firefighter,
-  /// 4-hour incident of issue 27's must-hold). 0: one tour each.
+  /// 4-hour incident of issue 27's must-hold). 0: one tour each. A firefighter whose turn to
+  /// enter comes less than a second before this time is not in the mission.
   double duration_s = 0.0;
   double rest_min_s = 60.0, rest_max_s = 300.0;
   MultiFloorOptions();
