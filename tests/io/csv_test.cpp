@@ -274,6 +274,16 @@ TEST(CsvReader, ImplausibleVariancesRangesAndAnglesAreRefusedWithTheirLine) {
               AllOf(HasSubstr("r1.csv:2:"), HasSubstr("'range'")));
   EXPECT_THAT(ErrorOf<RangeMeasurement>(dir.File("r2.csv", ranges + "0,b1,b2,3,1e308,uwb\n")),
               AllOf(HasSubstr("r2.csv:2:"), HasSubstr("'sigma'")));
+  // The spec's kinds (or none); 'nan' was taken as a fourth kind with its own range bias.
+  EXPECT_EQ(ErrorOf<RangeMeasurement>(dir.File(
+                "r3.csv", ranges + "0,b1,b2,3,,ultrasound\n1,b1,b2,3,,rssi\n2,b1,b2,3,, uwb \n"
+                                   "3,b1,b2,3,,\n")),
+            "");
+  EXPECT_THAT(ErrorOf<RangeMeasurement>(dir.File("r4.csv", ranges + "0,b1,b2,3,0.1,nan\n")),
+              AllOf(HasSubstr("r4.csv:2:"), HasSubstr("'nan' is not a range kind"),
+                    HasSubstr("ultrasound, uwb, rssi")));
+  EXPECT_THAT(ErrorOf<RangeMeasurement>(dir.File("r5.csv", ranges + "0,b1,b2,3,0.1,UWB\n")),
+              AllOf(HasSubstr("r5.csv:2:"), HasSubstr("'uwb'?")));
   const std::string bearings = "t,a,b,bearing,sigma\n";
   EXPECT_EQ(ErrorOf<BearingMeasurement>(dir.File("b0.csv", bearings + "0,b1,ff1,-2.5,0.3\n")), "");
   EXPECT_THAT(ErrorOf<BearingMeasurement>(dir.File("b1.csv", bearings + "0,b1,ff1,1e9,0.3\n")),

@@ -41,11 +41,28 @@ constexpr double kMaxDeviceGapS = kMaxDeviceTimeGapS;  // one device's rows a da
 
 // The events of the spec (mission-format.md, events.csv).
 constexpr std::string_view kEventNames[] = {"drop", "wake", "enter", "exit", "stop", "go"};
+// The range kinds of the spec (mission-format.md, ranges.csv); empty: not said.
+constexpr std::string_view kRangeKinds[] = {"ultrasound", "uwb", "rssi"};
 
 std::string_view TrimCell(std::string_view v) {
   const auto first = v.find_first_not_of(" \t");
   if (first == std::string_view::npos) return {};
   return v.substr(first, v.find_last_not_of(" \t") - first + 1);
+}
+
+// A name that must be one of the spec's (`names`, listed as `listed`): refused with the line,
+// and the lowercase name suggested when only the case differs.
+template <std::size_t N>
+void CheckName(const CsvReader& c, const char* column, const std::string& name,
+               const std::string_view (&names)[N], const char* what) {
+  if (std::find(std::begin(names), std::end(names), name) != std::end(names)) return;
+  std::string lower = name;
+  for (char& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  const bool case_only = std::find(std::begin(names), std::end(names), lower) != std::end(names);
+  std::string listed;
+  for (const std::string_view n : names) listed += (listed.empty() ? "" : ", ") + std::string(n);
+  c.Fail(fmt::format("column '{}': '{}' is not {} of the mission format ({}){}", column, name, what,
+                     listed, case_only ? fmt::format("; names are lowercase: '{}'?", lower) : ""));
 }
 
 void CheckAtMost(const CsvReader& c, const char* what, double value, double max,
@@ -168,7 +185,8 @@ struct Layout<RangeMeasurement> {
     r.sigma_m = c.OptionalDouble(k[4]);
     if (r.sigma_m && *r.sigma_m <= 0) c.Fail("column 'sigma': must be positive");
     if (r.sigma_m) CheckAtMost(c, "sigma", *r.sigma_m, kMaxRangeSigmaM, "m");
-    r.kind = k[5] >= 0 ? std::string(c.Field(k[5])) : std::string();
+    r.kind = k[5] >= 0 ? std::string(TrimCell(c.Field(k[5]))) : std::string();
+    if (!r.kind.empty()) CheckName(c, "kind", r.kind, kRangeKinds, "a range kind");
   }
   static std::vector<std::string_view> Ids(const RangeMeasurement& r) { return {r.a, r.b}; }
   static void Format(CsvWriter& w, const RangeMeasurement& r) {
@@ -207,16 +225,7 @@ struct Layout<MissionEvent> {
     r.agent.assign(c.NodeId(k[1]));
     r.event.assign(TrimCell(c.Field(k[2])));
     if (r.event.empty()) c.Fail("column 'event': empty");
-    if (std::find(std::begin(kEventNames), std::end(kEventNames), r.event) ==
-        std::end(kEventNames)) {
-      std::string lower = r.event;
-      for (char& ch : lower) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-      const bool case_only = std::find(std::begin(kEventNames), std::end(kEventNames), lower) !=
-                             std::end(kEventNames);
-      c.Fail(fmt::format("column 'event': '{}' is not an event of the mission format ({}){}",
-                         r.event, "drop, wake, enter, exit, stop, go",
-                         case_only ? fmt::format("; names are lowercase: '{}'?", lower) : ""));
-    }
+    CheckName(c, "event", r.event, kEventNames, "an event");
     r.node.clear();
     if (k[3] >= 0 && !TrimCell(c.Field(k[3])).empty()) r.node.assign(c.NodeId(k[3]));
     if (r.event == "drop" && r.node.empty()) c.Fail("a 'drop' event needs the dropped node id");
