@@ -715,5 +715,98 @@ TEST(MapParticleFilter, ParticlesStayInsideTheBuildingThroughAnOpenEntry) {
   }
 }
 
+TEST(KldSampling, TheSampleSizeIsTheChiSquareQuantileOverTwiceEpsilon) {
+  // chi^2 quantiles at 0.99 (tables): 1 dof 6.635, 9 dof 21.666, 49 dof 74.919.
+  EXPECT_NEAR(KldSampleSize(2, 0.05, 0.99), 6.635 / 0.1, 0.01);
+  EXPECT_NEAR(KldSampleSize(10, 0.05, 0.99), 21.666 / 0.1, 0.01);
+  EXPECT_NEAR(KldSampleSize(50, 0.1, 0.99), 74.919 / 0.2, 0.01);
+  EXPECT_EQ(KldSampleSize(1, 0.05, 0.99), 1.0);
+  EXPECT_EQ(KldSampleSize(0, 0.05, 0.99), 1.0);
+  // Fox (2003), eq. (13): the Wilson-Hilferty form, within 0.5 % from 20 bins on.
+  const double z = 2.326348;  // the standard normal's 0.99 quantile
+  for (int k : {20, 50, 200, 1000}) {
+    const double a = 2.0 / (9 * (k - 1));
+    const double wilson_hilferty = (k - 1) / (2 * 0.05) * std::pow(1 - a + std::sqrt(a) * z, 3);
+    EXPECT_NEAR(KldSampleSize(k, 0.05, 0.99) / wilson_hilferty, 1.0, 0.005) << k;
+  }
+}
+
+TEST(MapParticleFilter, KldSamplingShrinksAGatheredBeliefAndTakesEveryParticleForARecovery) {
+  // A 6 x 4 room, a known start 0.6 m from the east wall with a 5 cm spread: a step north
+  // along the wall weighs the particles (wall following) and resamples them (at any loss of
+  // effective size here); with KLD-sampling it keeps the particles the histogram asks for —
+  // few bins, so the fewest — within [kld_min_particles, particles]. A step east to the wall
+  // then drives part of the belief through it and raises a wall alarm; the recovery spreads a
+  // belief of every particle again. Without KLD-sampling the number never changes.
+  const RoomWithExactPattern room;
+  const auto& [plan, grid, seqs, walk, pc] = room;
+  for (const double epsilon : {0.0, 0.05}) {
+    MapParticleFilterOptions o = RoomWithExactPattern::ForcedComparisons();
+    o.wall_follow = true;
+    o.ess_resample_fraction = 1.0;
+    o.particles = 2000;
+    o.kld_epsilon = epsilon;
+    o.kld_min_particles = 50;
+    MapParticleFilter pf(grid, seqs, o);
+    pf.InitializeKnown(Vec2(5.4, 2), 0.0, 0.05, 0.0);
+    ASSERT_EQ(pf.particles().size(), 2000u);
+    pf.Predict(Vec2(0, 0.3));
+    ASSERT_GT(pf.summary().systematic_resamples, 0u) << epsilon;
+    ASSERT_EQ(pf.summary().recoveries, 0u);
+    const std::size_t gathered = pf.particles().size();
+    double sum = 0;
+    for (const auto& q : pf.particles()) sum += q.weight;
+    EXPECT_NEAR(sum, 1.0, 1e-9);
+    // At most 3 x 3 position bins (0.5 m; the spread is 0.14 m after the step's noise) x 2
+    // of heading (the offset 0 lies on a bin's edge) x 2 hands = 36 bins:
+    // chi^2_35(0.99) / 0.1 = 573.4.
+    if (epsilon > 0) {
+      EXPECT_LE(gathered, 574u);
+      EXPECT_GE(gathered, 50u);
+      EXPECT_EQ(pf.summary().particles_min, gathered);
+    } else {
+      EXPECT_EQ(gathered, 2000u);
+    }
+    // East, to the wall from the belief's mean: about half of it crosses.
+    const Vec2 m = pf.Mean();
+    pf.Predict(Vec2(6.0 - m.x(), 0));
+    ASSERT_EQ(pf.summary().recoveries, 1u) << epsilon;
+    EXPECT_EQ(pf.summary().restarts, 0u);
+    EXPECT_EQ(pf.particles().size(), 2000u);
+    EXPECT_EQ(pf.summary().particles_max, 2000u);
+    if (epsilon == 0) EXPECT_EQ(pf.summary().particles_min, 2000u);
+    for (const auto& q : pf.particles()) ASSERT_TRUE(q.position_n.allFinite());
+  }
+  MapParticleFilterOptions bad;
+  bad.kld_epsilon = 0.05;
+  bad.kld_min_particles = bad.particles + 1;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+  bad.kld_min_particles = 100;
+  bad.kld_quantile = 1.0;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+}
+
+TEST(MapParticleFilter, KldSamplingOffIsTheFixedFilterBitForBit) {
+  // The default (kld_epsilon 0) and the explicit "off" of every KLD option give the same
+  // particles at every step of a house search: the options change nothing unless KLD is on.
+  const HouseOneSearch house(60, 5);
+  const auto& [sim, seqs, grid] = house;
+  MapParticleFilterOptions other;
+  other.kld_quantile = 0.9;
+  other.kld_bin_m = 0.2;
+  other.kld_min_particles = 20;
+  MapParticleFilter a(grid, seqs), b(grid, seqs, other);
+  a.InitializeUniform();
+  b.InitializeUniform();
+  for (const auto& st : sim.data.steps) {
+    a.Predict(st.delta_n.head<2>());
+    b.Predict(st.delta_n.head<2>());
+    ASSERT_EQ(a.particles().size(), b.particles().size());
+    for (std::size_t i = 0; i < a.particles().size(); ++i)
+      ASSERT_EQ(a.particles()[i].position_n, b.particles()[i].position_n);
+  }
+  EXPECT_EQ(a.particles().size(), static_cast<std::size_t>(MapParticleFilterOptions{}.particles));
+}
+
 }  // namespace
 }  // namespace trailmark::mapmatch

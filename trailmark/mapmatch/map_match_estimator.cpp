@@ -39,6 +39,10 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
              "initial state: known start, uniform over the building, or auto (known if given)");
     t.Integer("particles", [](O& o) -> int& { return o.filter.particles; },
               OptionBounds::Between(10, 1000000), "particles per agent (the paper: 500)");
+    t.Integer(
+        "kld_min_particles", [](O& o) -> int& { return o.filter.kld_min_particles; },
+        OptionBounds::Between(10, 1000000),
+        "KLD-sampling: the fewest particles (at most `particles`)");
     t.Integer("recover_pattern_updates",
               [](O& o) -> int& { return o.filter.recover_pattern_updates; },
               OptionBounds::Between(0, 1000000), "forced comparisons after a wall alarm");
@@ -101,6 +105,18 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
     real(
         "confirm_distinct_m", [](O& o) -> double& { return o.filter.confirm_distinct_m; }, "m", any,
         "a comparison confirms only if its best matches lie within this of each other (0: all)");
+    real(
+        "kld_epsilon", [](O& o) -> double& { return o.filter.kld_epsilon; }, "", any,
+        "KLD-sampling: bound of the histogram's KL distance (0: a fixed number of particles)");
+    real(
+        "kld_quantile", [](O& o) -> double& { return o.filter.kld_quantile; }, "", any,
+        "KLD-sampling: probability of that bound (1 - delta)");
+    real(
+        "kld_bin_m", [](O& o) -> double& { return o.filter.kld_bin_m; }, "m", any,
+        "KLD-sampling: histogram bin of position, along the grid's axes");
+    real(
+        "kld_bin_rad", [](O& o) -> double& { return o.filter.kld_bin_rad; }, "rad", any,
+        "KLD-sampling: histogram bin of heading offset");
     real("grid_m", [](O& o) -> double& { return o.sequences.grid.spacing_m; }, "m", any,
          "search-pattern grid spacing");
     real("pattern_length_m", [](O& o) -> double& { return o.comparison.pattern_length_m; }, "m",

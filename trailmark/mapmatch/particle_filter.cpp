@@ -12,6 +12,8 @@
 #include <numeric>
 #include <stdexcept>
 
+#include "trailmark/integrity/consistency.h"
+
 namespace trailmark::mapmatch {
 
 struct MapParticleFilter::NodeIndex {
@@ -76,6 +78,15 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
     return fail(
         "wall_follow_leave must be within (0, 1), wall_follow_return and "
         "wall_follow_off_likelihood within (0, 1], wall_follow_converged_power within [0, 1]");
+  if (!(kld_epsilon >= 0 && kld_epsilon < 1))
+    return fail("kld_epsilon must be within [0, 1) (0: off)");
+  if (!(kld_quantile > 0.5 && kld_quantile < 1))
+    return fail("kld_quantile must be within (0.5, 1)");
+  if (!(kld_bin_m > 0) || !(kld_bin_rad > 0) || !std::isfinite(kld_bin_m) ||
+      !std::isfinite(kld_bin_rad))
+    return fail("kld_bin_m and kld_bin_rad must be > 0");
+  if (kld_min_particles < 10 || kld_min_particles > particles)
+    return fail("kld_min_particles must be within 10 .. particles");
   return true;
 }
 
@@ -86,10 +97,17 @@ std::string MapParticleFilterSummary::BriefReport() const {
       "{} floor "
       "replacements, {} particles from patterns, {} systematic resamples, {} backtracks, {} "
       "restarts; {} "
-      "comparisons skipped while converged; {} left the building",
+      "comparisons skipped while converged; {} left the building; particles {} now ({} .. {}), "
+      "{} particle-steps",
       time_updates, pattern_updates, uninformative_updates, ambiguous_updates, wall_eliminations,
       floor_replacements, pattern_resamples, systematic_resamples, backtracks, restarts,
-      skipped_converged, outside_eliminations);
+      skipped_converged, outside_eliminations, particles_now, particles_min, particles_max,
+      particle_steps);
+}
+
+double KldSampleSize(int occupied_bins, double epsilon, double quantile) {
+  if (occupied_bins <= 1) return 1.0;
+  return integrity::ChiSquareQuantile(occupied_bins - 1, quantile) / (2 * epsilon);
 }
 
 MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
@@ -126,6 +144,7 @@ MapParticleFilter::MapParticleFilter(const SearchGrid& grid,
   nodes_->tree =
       std::make_unique<NodeIndex::Tree>(2, *nodes_, nanoflann::KDTreeSingleIndexAdaptorParams(8));
   particles_.resize(options_.particles);
+  NoteParticleCount();
   if (options_.wall_follow && !wall_distance_)
     wall_distance_ = MakeWallDistanceField(grid.plan(), grid.axis_rad());
 }
@@ -150,6 +169,8 @@ Vec2 MapParticleFilter::RandomInsidePoint() {
 }
 
 void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
+  particles_.resize(options_.particles);
+  NoteParticleCount();
   uniform_start_ = false;
   converged_ = false;
   tracking_ = false;
@@ -166,6 +187,8 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
 }
 
 void MapParticleFilter::InitializeUniform() {
+  particles_.resize(options_.particles);
+  NoteParticleCount();
   uniform_start_ = true;
   pattern_updates_applied_ = 0;
   converged_ = false;
@@ -183,8 +206,8 @@ void MapParticleFilter::InitializeUniform() {
 
 void MapParticleFilter::ContinueFrom(const MapParticleFilter& from,
                                      const std::vector<char>& keep) {
-  if (from.particles_.size() != particles_.size() || keep.size() != particles_.size()) {
-    throw std::invalid_argument("ContinueFrom: filters with different numbers of particles");
+  if (keep.size() != from.particles_.size()) {
+    throw std::invalid_argument("ContinueFrom: keep has another size than the particles");
   }
   uniform_start_ = from.uniform_start_;
   converged_ = from.converged_;
@@ -195,6 +218,7 @@ void MapParticleFilter::ContinueFrom(const MapParticleFilter& from,
   last_blocked_mass_ = 0;
   last_step_alarm_ = false;
   particles_ = from.particles_;
+  NoteParticleCount();
   for (auto& q : particles_) q.step_from_n = q.position_n;
   std::vector<char> dead(keep.size());
   bool any = false;
@@ -203,6 +227,7 @@ void MapParticleFilter::ContinueFrom(const MapParticleFilter& from,
     any = any || (keep[i] && particles_[i].weight > 0);
   }
   if (any) ReplaceFromSurvivors(dead);
+  GrowToMaximum();  // KLD-sampling: a change of level is a moment of doubt
 }
 
 std::uint8_t MapParticleFilter::RandomHand() {
@@ -236,6 +261,8 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
     ++summary_.restarts;
     if (uniform_start_) tracking_ = false;  // the track is to be found again
     const Vec2 mean = Mean();
+    particles_.resize(options_.particles);  // KLD-sampling: a restart takes every particle
+    NoteParticleCount();
     for (auto& q : particles_) {
       q.position_n = uniform_start_ ? RandomInsidePoint() : mean + GridNoise(1.0);
       q.step_from_n = q.position_n;  // a new particle, not a step
@@ -266,23 +293,92 @@ void MapParticleFilter::ResampleIfDegenerate() {
 }
 
 void MapParticleFilter::SystematicResample() {
-  const std::size_t n = particles_.size();
+  const bool kld = options_.kld_epsilon > 0;
+  // With KLD-sampling the draw is made at the most particles first: its histogram says how
+  // many the belief needs; then that many are taken from it, evenly spaced (the draw is in
+  // the cumulative weight's order, so this is a systematic resampling to that number).
+  const std::size_t n_in = particles_.size();
+  const std::size_t n = kld ? static_cast<std::size_t>(options_.particles) : n_in;
   std::vector<Particle> out(n);
   const double step = 1.0 / n;
   double u = Uniform() * step, acc = particles_[0].weight;
   std::size_t k = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    while (u > acc && k + 1 < n) acc += particles_[++k].weight;
+    while (u > acc && k + 1 < n_in) acc += particles_[++k].weight;
+    out[i] = particles_[k];
+    out[i].weight = step;
+    u += step;
+  }
+  ++summary_.systematic_resamples;
+  if (kld) {
+    const double wanted =
+        KldSampleSize(OccupiedBins(out), options_.kld_epsilon, options_.kld_quantile);
+    const auto m = static_cast<std::size_t>(std::clamp<double>(
+        std::ceil(wanted), options_.kld_min_particles, static_cast<double>(options_.particles)));
+    if (m < n) {
+      std::vector<Particle> fewer(m);
+      const double stride = static_cast<double>(n) / m;
+      const double start = Uniform() * stride;
+      for (std::size_t i = 0; i < m; ++i) {
+        fewer[i] = out[std::min(n - 1, static_cast<std::size_t>(start + i * stride))];
+        fewer[i].weight = 1.0 / m;
+      }
+      out = std::move(fewer);
+    }
+  }
+  particles_ = std::move(out);
+  NoteParticleCount();
+}
+
+void MapParticleFilter::GrowToMaximum() {
+  const auto most = static_cast<std::size_t>(options_.particles);
+  if (particles_.size() >= most) return;
+  // Copies of the particles drawn by weight (a systematic draw), each with weight 1 / N: a
+  // belief about to be spread needs every particle, whatever its histogram says now.
+  Normalize();
+  std::vector<Particle> out(most);
+  const double step = 1.0 / most;
+  double u = Uniform() * step, acc = particles_[0].weight;
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < most; ++i) {
+    while (u > acc && k + 1 < particles_.size()) acc += particles_[++k].weight;
     out[i] = particles_[k];
     out[i].weight = step;
     u += step;
   }
   particles_ = std::move(out);
-  ++summary_.systematic_resamples;
+  NoteParticleCount();
+}
+
+int MapParticleFilter::OccupiedBins(const std::vector<Particle>& particles) const {
+  // Bins along the grid's axes and of the heading offset from the grid's axis, so that a plan
+  // drawn rotated or shifted gets the same histogram.
+  std::vector<std::uint64_t> keys;
+  keys.reserve(particles.size());
+  for (const Particle& q : particles) {
+    const Vec2 g = grid_.ToGrid(q.position_n) / options_.kld_bin_m;
+    const double h = WrapAngle(q.heading_offset_rad - grid_.axis_rad()) + std::numbers::pi;
+    const auto ix =
+        static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(g.x())) & 0xFFFFF);
+    const auto iy =
+        static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(g.y())) & 0xFFFFF);
+    const auto ih = static_cast<std::uint64_t>(std::floor(h / options_.kld_bin_rad)) & 0x3FFF;
+    keys.push_back((ix << 44) | (iy << 24) | (ih << 1) | (q.hand & 1u));
+  }
+  std::sort(keys.begin(), keys.end());
+  return static_cast<int>(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
+
+void MapParticleFilter::NoteParticleCount() {
+  const std::size_t n = particles_.size();
+  summary_.particles_now = n;
+  summary_.particles_min = summary_.particles_min == 0 ? n : std::min(summary_.particles_min, n);
+  summary_.particles_max = std::max(summary_.particles_max, n);
 }
 
 void MapParticleFilter::Predict(const Vec2& d) {
   ++summary_.time_updates;
+  summary_.particle_steps += particles_.size();
   NoteConvergence();
   const double len = d.norm();
   const FloorPlan& plan = grid_.plan();
@@ -567,6 +663,7 @@ void MapParticleFilter::WeighWallFollowing(double step_heading_odometry_rad, dou
 
 void MapParticleFilter::Recover() {
   ++summary_.recoveries;
+  GrowToMaximum();  // KLD-sampling: a belief to be spread takes every particle
   for (auto& q : particles_) {
     const Vec2 p = q.position_n + GridNoise(options_.recover_position_sigma_m);
     if (InsideBuilding(p)) q.position_n = p;

@@ -145,9 +145,29 @@ struct MapParticleFilterOptions {
   /// heading jumps (2026-11-23: the same seeds, checked on 721-840; docs/mapmatch.md).
   /// 0 = likelihood_sigma throughout (the paper).
   double tracking_likelihood_sigma = 0.5;
+  /// KLD-sampling (Fox 2003, "Adapting the sample size in particle filters through
+  /// KLD-sampling", IJRR 22(12); ours, not the paper's): at each systematic resampling the
+  /// number of particles becomes the one that bounds, with probability `kld_quantile`, the
+  /// Kullback-Leibler distance between the particles' histogram and the belief by
+  /// `kld_epsilon`: n = chi^2_{k-1}(kld_quantile) / (2 epsilon), k the histogram bins the
+  /// resampled particles occupy (bins of `kld_bin_m` along the search grid's axes, of
+  /// `kld_bin_rad` of heading offset, and the search hand), within [kld_min_particles,
+  /// particles]. A uniform start, a recovery and a restart go back to `particles`. 0: off, a
+  /// fixed number of particles (the paper).
+  double kld_epsilon = 0.0;
+  double kld_quantile = 0.99;   ///< 1 - delta (Fox: delta = 0.01)
+  double kld_bin_m = 0.5;       ///< bin size of position (m; AMCL's default)
+  double kld_bin_rad = 0.1745;  ///< bin size of heading offset (10 deg; AMCL's default)
+  int kld_min_particles = 100;  ///< the fewest particles (AMCL's default)
   std::uint64_t seed = 1;
   bool IsValid(std::string* why) const;
 };
+
+/// KLD-sampling's sample size (Fox 2003, eq. (9) before its Wilson-Hilferty approximation):
+/// the number of samples that bounds the KL distance between the maximum-likelihood histogram
+/// of k occupied bins and the true one by epsilon with probability `quantile`:
+/// chi^2_{k-1}(quantile) / (2 epsilon); 1 for k <= 1.
+double KldSampleSize(int occupied_bins, double epsilon, double quantile);
 
 struct MapParticleFilterSummary {
   std::size_t time_updates = 0, pattern_updates = 0, uninformative_updates = 0;
@@ -155,6 +175,10 @@ struct MapParticleFilterSummary {
   std::size_t wall_eliminations = 0, floor_replacements = 0, pattern_resamples = 0;
   std::size_t systematic_resamples = 0, backtracks = 0, restarts = 0, skipped_converged = 0;
   std::size_t wall_alarms = 0, recoveries = 0, outside_eliminations = 0;
+  /// KLD-sampling: the particles after the last resampling, the fewest and the most, and the
+  /// particle-steps (time updates x particles) the filter has carried.
+  std::size_t particles_now = 0, particles_min = 0, particles_max = 0;
+  std::size_t particle_steps = 0;
   std::string BriefReport() const;
 };
 
@@ -199,7 +223,7 @@ class MapParticleFilter {
   void InitializeUniform();
 
   /// Continues the belief of `from`, a filter of another level of the same building (same
-  /// frame, same number of particles): its particles where `keep` is non-zero, the others
+  /// frame; its number of particles): its particles where `keep` is non-zero, the others
   /// replaced by copies of those (by weight; every particle when none is kept), and its
   /// convergence state; the wall alarm's CUSUM starts again.
   void ContinueFrom(const MapParticleFilter& from, const std::vector<char>& keep);
@@ -243,7 +267,14 @@ class MapParticleFilter {
  private:
   void Normalize();
   void ReplaceFromSurvivors(const std::vector<char>& dead);
+  /// Systematic resampling to the same number of particles, or with KLD-sampling on to the
+  /// number the resampled particles' histogram asks for.
   void SystematicResample();
+  /// Resamples (systematically) up to `particles` when KLD-sampling has made fewer.
+  void GrowToMaximum();
+  /// The number of histogram bins (KLD-sampling) the given particles occupy.
+  int OccupiedBins(const std::vector<Particle>& particles) const;
+  void NoteParticleCount();
   /// Systematic resampling when the effective sample size is below ess_resample_fraction N.
   void ResampleIfDegenerate();
   Vec2 RandomInsidePoint();

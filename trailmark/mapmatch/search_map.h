@@ -92,6 +92,9 @@ class SearchGrid {
   double axis_rad() const { return axis_rad_; }
   /// A vector given in the grid's axes, in the navigation frame.
   Vec2 ToNavigation(const Vec2& v_grid) const { return axes_ * v_grid; }
+  /// A point of the navigation frame in the grid's own frame (its axes, from the centre of cell
+  /// (0, 0); metres): the same for the plan drawn rotated or shifted.
+  Vec2 ToGrid(const Vec2& p_n) const { return axes_.transpose() * p_n - origin_; }
   /// Whether a searcher can move from c in direction dir.
   bool CanMove(const Cell& c, int dir) const;
   /// Whether `p` lies inside the building: it reaches an inside node of its cell or of the eight
