@@ -297,18 +297,8 @@ void MapParticleFilter::SystematicResample() {
   // With KLD-sampling the draw is made at the most particles first: its histogram says how
   // many the belief needs; then that many are taken from it, evenly spaced (the draw is in
   // the cumulative weight's order, so this is a systematic resampling to that number).
-  const std::size_t n_in = particles_.size();
-  const std::size_t n = kld ? static_cast<std::size_t>(options_.particles) : n_in;
-  std::vector<Particle> out(n);
-  const double step = 1.0 / n;
-  double u = Uniform() * step, acc = particles_[0].weight;
-  std::size_t k = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    while (u > acc && k + 1 < n_in) acc += particles_[++k].weight;
-    out[i] = particles_[k];
-    out[i].weight = step;
-    u += step;
-  }
+  const std::size_t n = kld ? static_cast<std::size_t>(options_.particles) : particles_.size();
+  std::vector<Particle> out = DrawSystematic(n);
   ++summary_.systematic_resamples;
   if (kld) {
     const double wanted =
@@ -336,18 +326,22 @@ void MapParticleFilter::GrowToMaximum() {
   // Copies of the particles drawn by weight (a systematic draw), each with weight 1 / N: a
   // belief about to be spread needs every particle, whatever its histogram says now.
   Normalize();
-  std::vector<Particle> out(most);
-  const double step = 1.0 / most;
+  particles_ = DrawSystematic(most);
+  NoteParticleCount();
+}
+
+std::vector<MapParticleFilter::Particle> MapParticleFilter::DrawSystematic(std::size_t n) {
+  std::vector<Particle> out(n);
+  const double step = 1.0 / n;
   double u = Uniform() * step, acc = particles_[0].weight;
   std::size_t k = 0;
-  for (std::size_t i = 0; i < most; ++i) {
+  for (std::size_t i = 0; i < n; ++i) {
     while (u > acc && k + 1 < particles_.size()) acc += particles_[++k].weight;
     out[i] = particles_[k];
     out[i].weight = step;
     u += step;
   }
-  particles_ = std::move(out);
-  NoteParticleCount();
+  return out;
 }
 
 int MapParticleFilter::OccupiedBins(const std::vector<Particle>& particles) const {

@@ -270,6 +270,8 @@ class MapParticleFilter {
   /// Systematic resampling to the same number of particles, or with KLD-sampling on to the
   /// number the resampled particles' histogram asks for.
   void SystematicResample();
+  /// n particles drawn systematically by weight (the weights summing to 1), each of weight 1/n.
+  std::vector<Particle> DrawSystematic(std::size_t n);
   /// Resamples (systematically) up to `particles` when KLD-sampling has made fewer.
   void GrowToMaximum();
   /// The number of histogram bins (KLD-sampling) the given particles occupy.
