@@ -637,49 +637,82 @@ void HeightChannel::CheckSharedAir(TimeS t) {
   // from t_j over `rise` (FitPressureJump's model without a climb), by least squares over their
   // readings; taken only once it is over (its end a second before the newest reading), so that
   // the whole of it comes out.
-  double best_sse = std::numeric_limits<double>::infinity(), jump = 0, since = 0, rise = 0;
-  for (const double rise_s : {0.0, 0.5, 1.0, 2.0}) {
-    for (const auto& [t_j, unused] : air_recent_[saw.front()->agent]) {
-      if (t_j <= t - 3 * kAirWindowS + 0.5) continue;
-      // Per barometer, the level a_i and the shared J: with u the ramp, J = sum (y - ybar_i)
-      // (u - ubar_i) / sum (u - ubar_i)^2.
-      double num = 0, den = 0;
-      for (const Change* c : saw) {
-        double ybar = 0, ubar = 0;
-        const auto& q = air_recent_[c->agent];
-        for (const auto& [ti, yi] : q) {
-          ybar += yi;
-          ubar += AirRamp(ti, t_j, rise_s);
+  struct Fit {
+    double sse = std::numeric_limits<double>::infinity(), jump = 0, since = 0, rise = 0;
+  };
+  // The sum of squares of one barometer's readings about its level and the change j.
+  auto barometer_sse = [&](const Change* c, double j, TimeS t_j, double rise_s) {
+    const auto& q = air_recent_[c->agent];
+    double level = 0;
+    for (const auto& [ti, yi] : q) level += yi - j * AirRamp(ti, t_j, rise_s);
+    level /= static_cast<double>(q.size());
+    double sse = 0;
+    for (const auto& [ti, yi] : q) {
+      const double r = yi - level - j * AirRamp(ti, t_j, rise_s);
+      sse += r * r;
+    }
+    return sse;
+  };
+  auto fit = [&](const std::vector<const Change*>& group) {
+    Fit best;
+    for (const double rise_s : {0.0, 0.5, 1.0, 2.0}) {
+      for (const auto& [t_j, unused] : air_recent_[group.front()->agent]) {
+        if (t_j <= t - 3 * kAirWindowS + 0.5) continue;
+        // Per barometer, the level a_i and the shared J: with u the ramp, J = sum (y - ybar_i)
+        // (u - ubar_i) / sum (u - ubar_i)^2.
+        double num = 0, den = 0;
+        for (const Change* c : group) {
+          double ybar = 0, ubar = 0;
+          const auto& q = air_recent_[c->agent];
+          for (const auto& [ti, yi] : q) {
+            ybar += yi;
+            ubar += AirRamp(ti, t_j, rise_s);
+          }
+          ybar /= static_cast<double>(q.size());
+          ubar /= static_cast<double>(q.size());
+          for (const auto& [ti, yi] : q) {
+            const double du = AirRamp(ti, t_j, rise_s) - ubar;
+            num += (yi - ybar) * du;
+            den += du * du;
+          }
         }
-        ybar /= static_cast<double>(q.size());
-        ubar /= static_cast<double>(q.size());
-        for (const auto& [ti, yi] : q) {
-          const double du = AirRamp(ti, t_j, rise_s) - ubar;
-          num += (yi - ybar) * du;
-          den += du * du;
-        }
-      }
-      if (!(den > 1e-9)) continue;
-      const double j = num / den;
-      double sse = 0;
-      for (const Change* c : saw) {
-        const auto& q = air_recent_[c->agent];
-        double level = 0;
-        for (const auto& [ti, yi] : q) level += yi - j * AirRamp(ti, t_j, rise_s);
-        level /= static_cast<double>(q.size());
-        for (const auto& [ti, yi] : q) {
-          const double r = yi - level - j * AirRamp(ti, t_j, rise_s);
-          sse += r * r;
-        }
-      }
-      if (sse < best_sse) {
-        best_sse = sse;
-        jump = j;
-        since = t_j;
-        rise = rise_s;
+        if (!(den > 1e-9)) continue;
+        const double j = num / den;
+        double sse = 0;
+        for (const Change* c : group) sse += barometer_sse(c, j, t_j, rise_s);
+        if (sse < best.sse) best = {sse, j, t_j, rise_s};
       }
     }
+    return best;
+  };
+  Fit f = fit(saw);
+  // Each barometer must have changed when the air did: one that changed a second or more
+  // later (a firefighter who walked in through the door into the fan's air) is left to its own
+  // filter — the shared ramp taken out of its readings from before it entered put it 1.7 m up
+  // for the rest of its search (all-sources-4h --minutes 10, seed 305, ff9). Each barometer's
+  // own time of the change (the fitted change as a step, from its readings alone) against the
+  // median of them all (the group's fit would stretch its ramp to the late one).
+  if (std::isfinite(f.sse)) {
+    std::vector<TimeS> own(saw.size());
+    for (std::size_t i = 0; i < saw.size(); ++i) {
+      double best_sse = std::numeric_limits<double>::infinity();
+      for (const auto& [t_j, unused] : air_recent_[saw[i]->agent]) {
+        const double sse = barometer_sse(saw[i], f.jump, t_j, 0.0);
+        if (sse < best_sse) best_sse = sse, own[i] = t_j;
+      }
+    }
+    const TimeS when = Median(own);
+    std::vector<const Change*> same_time;
+    for (std::size_t i = 0; i < saw.size(); ++i) {
+      if (std::abs(own[i] - when) <= kAirSameTimeS) same_time.push_back(saw[i]);
+    }
+    if (same_time.size() < saw.size()) {
+      if (same_time.size() < static_cast<std::size_t>(options_.shared_air_min_agents)) return;
+      saw = std::move(same_time);
+      f = fit(saw);
+    }
   }
+  const double best_sse = f.sse, jump = f.jump, since = f.since, rise = f.rise;
   // Not over yet (or not the air's after all): later.
   if (!std::isfinite(best_sse) || since + rise > t - kAirWindowS || std::abs(jump) <= climb_m)
     return;
