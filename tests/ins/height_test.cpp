@@ -349,6 +349,48 @@ TEST(HeightChannel, AFirefighterWhoWalksInAfterTheFanKeepsHisOwnChangeOfTheAir) 
   }
 }
 
+TEST(HeightFilter, TheFloorsAsAPriorLetTheOffsetTakeTheWeather) {
+  // A phone (steps without height) on the ground floor for an hour, then up a flight of 3.5 m
+  // in 10 s and 10 minutes on level 1; the weather raises the pressure by 1 hPa an hour (-8.3 m
+  // as height). Readings every 0.2 s, noise 0.3 m. Without the floors the weather goes into
+  // the height (a slow change is the agent's when the steps do not measure height); with them
+  // into the offset, and the climb is still the agent's.
+  auto run = [](bool prior, std::uint64_t seed) {
+    HeightOptions o;
+    o.floor_prior = prior;
+    HeightFilter f(0.0, 0.05, o);
+    f.SetFloors(kSpecFloors);
+    Random rng(seed);
+    for (int k = 0; k < 5 * 4210; ++k) {
+      const TimeS t = 0.2 * k;
+      const double z = std::clamp((t - 3600.0) * 0.35, 0.0, 3.5);
+      if (k % 3 == 0) f.AddStep(FlatStep(t, 0.0, 1.0));
+      BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
+      r.pressure_hpa += t / 3600.0;
+      f.AddBaro(r);
+      // After an hour: the floor's height, half a level boundary (1 m) away at most, a lag
+      // behind the weather of a few decimetres (the offset's random walk is slow).
+      if (k == 5 * 3590) {
+        EXPECT_NEAR(f.height_m(), prior ? 0.0 : -8.3, prior ? 0.5 : 2.0) << seed;
+        EXPECT_EQ(f.Level(kSpecFloors).first, prior ? 0 : -1) << seed;
+      }
+    }
+    return f;
+  };
+  for (const std::uint64_t seed : {1u, 2u, 3u}) {
+    const HeightFilter with = run(true, seed), without = run(false, seed);
+    EXPECT_NEAR(with.height_m(), 3.5, 0.4) << seed;
+    EXPECT_EQ(with.Level(kSpecFloors).first, 1) << seed;
+    EXPECT_LE(std::abs(with.height_m() - 3.5), 3 * std::sqrt(with.height_variance_m2())) << seed;
+    EXPECT_GT(with.Counters().at("floor_priors"), 100);
+    EXPECT_LT(without.height_m(), 0.0) << seed;  // the weather taken as a descent
+    EXPECT_EQ(without.Counters().count("floor_priors"), 0u);
+  }
+  HeightOptions bad;
+  bad.floor_prior_sigma_m = 0;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+}
+
 /// A phone (steps without height) standing on the ground floor, readings every 0.2 s for 30 s:
 /// the first one at `first_m` as height (the offset's reference), the others noise; from
 /// `fan_s` a fan's overpressure (0.3 hPa, -2.5 m) rising over `rise_s` (0: at once, a door).

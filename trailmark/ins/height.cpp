@@ -33,6 +33,9 @@ bool HeightOptions::IsValid(std::string* why) const {
     return fail("height: jump_persist_s >= 0, stuck_after_s > 0, max_vertical_speed_mps > 0");
   }
   if (shared_air_min_agents < 2) return fail("height.shared_air_min_agents must be >= 2");
+  if (!(floor_prior_window_s > 0) || !(floor_prior_level_m > 0) || !(floor_prior_gate_m > 0) ||
+      !(floor_prior_period_s >= 0) || !(floor_prior_sigma_m > 0))
+    return fail("height.floor_prior_*: window, level, gate and sigma > 0, period >= 0");
   return true;
 }
 
@@ -67,6 +70,19 @@ const OptionTable<HeightOptions>& HeightOptionTable() {
            "a change of the air seen at once by several barometers, faster than a person "
            "climbs, is taken out of each of their readings (a fan started while one was on the "
            "stairs)");
+    t.Flag("floor_prior", &HeightOptions::floor_prior,
+           "the floors as a prior: on a level for a while near a level of `floors`, h is "
+           "measured there (the barometer's offset takes the weather)");
+    t.Real("floor_prior_window_s", &HeightOptions::floor_prior_window_s, "s",
+           OptionBounds::Positive(), "floor prior: how long the height must stay level");
+    t.Real("floor_prior_level_m", &HeightOptions::floor_prior_level_m, "m",
+           OptionBounds::Positive(), "floor prior: the height's span over that time");
+    t.Real("floor_prior_gate_m", &HeightOptions::floor_prior_gate_m, "m", OptionBounds::Positive(),
+           "floor prior: the nearest level within this");
+    t.Real("floor_prior_period_s", &HeightOptions::floor_prior_period_s, "s",
+           OptionBounds::NonNegative(), "floor prior: at most one every this long");
+    t.Real("floor_prior_sigma_m", &HeightOptions::floor_prior_sigma_m, "m",
+           OptionBounds::Positive(), "floor prior: sigma of the level as a measurement of h");
     t.Integer("shared_air_min_agents", &HeightOptions::shared_air_min_agents,
               OptionBounds::Between(2, 1000000),
               "barometers (and half of those reporting) that must see a change of the air at "
@@ -372,7 +388,37 @@ HeightFilter::BaroUse HeightFilter::AddBaro(const BaroSample& sample) {
     return BaroUse::kReference;
   }
   if (!steps_know_height_ && LevelShift(t, y)) return BaroUse::kJump;
-  return UseReading(t, y);
+  const BaroUse use = UseReading(t, y);
+  if (use == BaroUse::kUsed && options_.floor_prior && !floors_.empty()) FloorPrior(t);
+  return use;
+}
+
+void HeightFilter::FloorPrior(TimeS t) {
+  level_h_.emplace_back(t, x_[0]);
+  while (!level_h_.empty() && level_h_.front().first < t - options_.floor_prior_window_s)
+    level_h_.pop_front();
+  if (last_floor_prior_t_ && t - *last_floor_prior_t_ < options_.floor_prior_period_s) return;
+  if (t - level_h_.front().first < 0.8 * options_.floor_prior_window_s) return;
+  double lo = x_[0], hi = x_[0];
+  for (const auto& [ti, hi_m] : level_h_) lo = std::min(lo, hi_m), hi = std::max(hi, hi_m);
+  if (hi - lo > options_.floor_prior_level_m) return;  // on stairs, or not settled
+  const FloorLevel* nearest = nullptr;
+  for (const FloorLevel& f : floors_) {
+    if (!nearest || std::abs(f.elevation_m - x_[0]) < std::abs(nearest->elevation_m - x_[0]))
+      nearest = &f;
+  }
+  if (!nearest || std::abs(nearest->elevation_m - x_[0]) > options_.floor_prior_gate_m) return;
+  // h measured at the level: H = [1, 0].
+  const double r2 = options_.floor_prior_sigma_m * options_.floor_prior_sigma_m;
+  const double S = P_(0, 0) + r2;
+  const Eigen::Vector2d K = P_.col(0) / S;
+  x_ += K * (nearest->elevation_m - x_[0]);
+  Eigen::Matrix2d I_KH = Eigen::Matrix2d::Identity();
+  I_KH.col(0) -= K;
+  P_ = I_KH * P_ * I_KH.transpose() + K * r2 * K.transpose();
+  P_ = 0.5 * (P_ + P_.transpose());
+  last_floor_prior_t_ = t;
+  ++floor_priors_;
 }
 
 HeightFilter::BaroUse HeightFilter::UseReading(TimeS t, double y) {
@@ -513,14 +559,16 @@ void HeightFilter::AirChanged(TimeS since, double rise_s, double jump_m) {
 }
 
 std::map<std::string, double> HeightFilter::Counters() const {
-  return {{"steps", static_cast<double>(steps_)},
-          {"baro_air_changes", static_cast<double>(air_changes_)},
-          {"stairs_steps", static_cast<double>(stairs_steps_)},
-          {"baro_used", static_cast<double>(used_)},
-          {"baro_rejected", static_cast<double>(rejected_)},
-          {"baro_jumps", static_cast<double>(jumps_)},
-          {"baro_height_changes", static_cast<double>(height_changes_)},
-          {"baro_stuck", static_cast<double>(stuck_readings_)}};
+  std::map<std::string, double> c{{"steps", static_cast<double>(steps_)},
+                                  {"baro_air_changes", static_cast<double>(air_changes_)},
+                                  {"stairs_steps", static_cast<double>(stairs_steps_)},
+                                  {"baro_used", static_cast<double>(used_)},
+                                  {"baro_rejected", static_cast<double>(rejected_)},
+                                  {"baro_jumps", static_cast<double>(jumps_)},
+                                  {"baro_height_changes", static_cast<double>(height_changes_)},
+                                  {"baro_stuck", static_cast<double>(stuck_readings_)}};
+  if (options_.floor_prior) c["floor_priors"] = static_cast<double>(floor_priors_);
+  return c;
 }
 
 std::vector<IntegrityNote> HeightFilter::TakeNotes(const std::string& agent) {
@@ -551,7 +599,9 @@ HeightFilter& HeightChannel::FilterOf(const std::string& agent) {
   if (const NodeInfo* node = info_.Find(agent)) {
     if (const auto start = info_.AgentStart(*node)) z = start->z();
   }
-  return filters_.emplace(agent, HeightFilter(z, kStartSigmaM, options_)).first->second;
+  HeightFilter& f = filters_.emplace(agent, HeightFilter(z, kStartSigmaM, options_)).first->second;
+  if (options_.floor_prior) f.SetFloors(info_.floors);
+  return f;
 }
 
 const HeightFilter* HeightChannel::Filter(const std::string& agent) const {

@@ -83,6 +83,19 @@ struct HeightOptions {
   /// (the worst mission 93.9 -> 98.2 %), vertical in95 89 -> 92 % (docs/floors.md).
   bool shared_air = true;
   int shared_air_min_agents = 3;
+  /// The floors as a prior (ours): while the agent's height has stayed within
+  /// `floor_prior_level_m` for `floor_prior_window_s` (walking or standing on a level: stairs
+  /// climb 3 m in that time) and lies within `floor_prior_gate_m` of a level of the mission's
+  /// `floors`, at most every `floor_prior_period_s` h is measured at that level with
+  /// `floor_prior_sigma_m`: the barometer's offset then takes the weather's drift instead of the
+  /// height (phone steps do not measure height). Only with `floors` in mission.json. On since
+  /// 2026-12-05: the 4-hour incident's right floor 17.6 -> 98.9 % (docs/floors.md).
+  bool floor_prior = true;
+  double floor_prior_window_s = 10.0;
+  double floor_prior_level_m = 0.5;
+  double floor_prior_gate_m = 1.0;
+  double floor_prior_period_s = 5.0;
+  double floor_prior_sigma_m = 0.3;
   bool IsValid(std::string* why) const;
 };
 /// The `height.` keys.
@@ -114,6 +127,8 @@ class HeightFilter {
   /// rejected readings waiting for company).
   /// The change rose linearly over `rise_s` from `since` (0: at once).
   void AirChanged(TimeS since, double rise_s, double jump_m);
+  /// The building's levels, for the floor prior (HeightOptions::floor_prior).
+  void SetFloors(std::vector<FloorLevel> floors) { floors_ = std::move(floors); }
   /// The sum of those changes (m): what is taken out of every reading.
   double air_m() const { return air_m_; }
 
@@ -129,6 +144,11 @@ class HeightFilter {
   bool referenced_ = false;
   std::optional<TimeS> reference_t_;  ///< when the offset was last referenced on one reading
   std::optional<TimeS> last_baro_t_;
+  std::vector<FloorLevel> floors_;                ///< for the floor prior (empty: none)
+  std::deque<std::pair<TimeS, double>> level_h_;  ///< h after each used reading, the window
+  std::optional<TimeS> last_floor_prior_t_;
+  std::size_t floor_priors_ = 0;
+  void FloorPrior(TimeS t);
   // Persistence of step height changes.
   std::deque<std::pair<double, double>> pending_;  ///< uncommitted steps: dz, szz
   double pending_dz_ = 0;
