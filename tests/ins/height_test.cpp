@@ -247,37 +247,57 @@ TEST(HeightFilter, AFanStartedOnTheStairsLeavesThePhonesClimbItsOwn) {
   EXPECT_EQ(f.Level(kSpecFloors).first, 1);
 }
 
+// Phones (steps without height, one every 0.6 s) of the given ids at the spec's floors, a
+// reading every 0.2 s for 80 s: the true height z(id, t) with 0.3 m of noise, plus air(id, t)
+// hPa (a fan, a door); the channel's summary at the end.
+template <class Z, class Air>
+EstimatorSummary WalkPhones(HeightChannel& channel, const std::vector<std::string>& ids,
+                            std::uint64_t seed, Z z, Air air) {
+  Random rng(seed);
+  for (int k = 0; k < 400; ++k) {
+    const TimeS t = 0.2 * k;
+    for (const std::string& id : ids) {
+      if (k % 3 == 0) {
+        Step s = FlatStep(t, 0.0, 1.0);
+        s.agent = id;
+        channel.Add(s);
+      }
+      BaroSample r = Reading(t, z(id, t) + rng.Normal(0, 0.3));
+      r.agent = id;
+      r.pressure_hpa += air(id, t);
+      channel.Add(r);
+    }
+  }
+  EstimatorSummary summary;
+  channel.AddToSummary(summary);
+  return summary;
+}
+
+MissionInfo PhonesAtTheSpecsFloors(const std::vector<std::string>& ids) {
+  MissionInfo info;
+  for (const std::string& id : ids) info.nodes.push_back(NodeInfo::Agent(id, Vec3::Zero(), 0.1));
+  info.floors = kSpecFloors;
+  return info;
+}
+
 TEST(HeightChannel, TheAirSharedByTheBarometersInsideIsTakenOutOfEachOfThem) {
   // Five phones (steps without height): "up" climbs 3.5 m over 10 s from t = 20 s, three stand
   // on their floors, "street" stands outside. At t = 23 s a fan raises the pressure inside by
   // 0.3 hPa (-2.5 m) within a second: the four inside see it, the street does not.
   auto run = [](bool shared, int inside_standing, std::uint64_t seed) {
-    MissionInfo info;
     std::vector<std::string> ids{"up", "street"};
     for (int k = 0; k < inside_standing; ++k) ids.push_back("s" + std::to_string(k));
-    for (const std::string& id : ids) info.nodes.push_back(NodeInfo::Agent(id, Vec3::Zero(), 0.1));
-    info.floors = kSpecFloors;
     HeightOptions o;
     o.shared_air = shared;
-    HeightChannel channel(info, o);
-    Random rng(seed);
-    for (int k = 0; k < 400; ++k) {
-      const TimeS t = 0.2 * k;
-      for (const std::string& id : ids) {
-        const double z = id == "up" ? std::clamp((t - 20.0) * 0.35, 0.0, 3.5) : 0.0;
-        if (k % 3 == 0) {
-          Step s = FlatStep(t, 0.0, 1.0);
-          s.agent = id;
-          channel.Add(s);
-        }
-        BaroSample r = Reading(t, z + rng.Normal(0, 0.3));
-        r.agent = id;
-        if (id != "street") r.pressure_hpa += 0.3 * std::clamp(t - 23.0, 0.0, 1.0);
-        channel.Add(r);
-      }
-    }
-    EstimatorSummary summary;
-    channel.AddToSummary(summary);
+    HeightChannel channel(PhonesAtTheSpecsFloors(ids), o);
+    const EstimatorSummary summary = WalkPhones(
+        channel, ids, seed,
+        [](const std::string& id, TimeS t) {
+          return id == "up" ? std::clamp((t - 20.0) * 0.35, 0.0, 3.5) : 0.0;
+        },
+        [](const std::string& id, TimeS t) {
+          return id != "street" ? 0.3 * std::clamp(t - 23.0, 0.0, 1.0) : 0.0;
+        });
     return std::pair{summary, std::vector<double>{channel.Filter("up")->height_m(),
                                                   channel.Filter("up")->air_m(),
                                                   channel.Filter("street")->air_m(),
@@ -315,31 +335,15 @@ TEST(HeightChannel, AFirefighterWhoWalksInAfterTheFanKeepsHisOwnChangeOfTheAir) 
   // his: taken out of his readings from 23 s on, it put him 1.6 m up for the rest of the
   // search (all-sources-4h --minutes 10, seed 305, ff9); his own filter takes his door.
   for (const std::uint64_t seed : {1u, 2u, 3u, 4u, 5u}) {
-    MissionInfo info;
     const std::vector<std::string> ids{"s0", "s1", "s2", "s3", "late"};
-    for (const std::string& id : ids) info.nodes.push_back(NodeInfo::Agent(id, Vec3::Zero(), 0.1));
-    info.floors = kSpecFloors;
     HeightOptions o;
     o.shared_air = true;
-    HeightChannel channel(info, o);
-    Random rng(seed);
-    for (int k = 0; k < 400; ++k) {
-      const TimeS t = 0.2 * k;
-      for (const std::string& id : ids) {
-        if (k % 3 == 0) {
-          Step s = FlatStep(t, 0.0, 1.0);
-          s.agent = id;
-          channel.Add(s);
-        }
-        BaroSample r = Reading(t, rng.Normal(0, 0.3));
-        r.agent = id;
-        r.pressure_hpa +=
-            id == "late" ? (t >= 24.4 ? 0.3 : 0.0) : 0.3 * std::clamp(t - 23.0, 0.0, 1.0);
-        channel.Add(r);
-      }
-    }
-    EstimatorSummary summary;
-    channel.AddToSummary(summary);
+    HeightChannel channel(PhonesAtTheSpecsFloors(ids), o);
+    const EstimatorSummary summary = WalkPhones(
+        channel, ids, seed, [](const std::string&, TimeS) { return 0.0; },
+        [](const std::string& id, TimeS t) {
+          return id == "late" ? (t >= 24.4 ? 0.3 : 0.0) : 0.3 * std::clamp(t - 23.0, 0.0, 1.0);
+        });
     EXPECT_EQ(summary.numbers.at("height.shared_air_changes"), 1) << seed;
     for (const char* id : {"s0", "s1", "s2", "s3"})
       EXPECT_NEAR(channel.Filter(id)->air_m(), -2.5, 0.3) << seed << " " << id;
