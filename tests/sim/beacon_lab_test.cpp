@@ -192,21 +192,9 @@ TEST(AllSources, TheTrailLeavesEveryOtherSourceAsWithoutIt) {
   EXPECT_FALSE(all.data.ranges.empty());
 }
 
-// The all-sources building with a crew on tours until duration_s, phone steps only (issue 27's
-// load, `simulate all-sources-4h`).
-MultiFloorOptions CrewOnTours(int firefighters, double duration_s) {
-  MultiFloorOptions o;
-  o.landmarks_per_level = 3;
-  o.beacon_trail = true;
-  o.foot_imu = false;
-  o.firefighters = firefighters;
-  o.duration_s = duration_s;
-  return o;
-}
-
 TEST(AllSources, ManyFirefightersOnToursUntilTheEnd) {
   // Issue 27's load: more firefighters entering 20 s apart, tour after tour until duration_s.
-  MultiFloorOptions o = CrewOnTours(5, 900.0);
+  MultiFloorOptions o = AllSourcesLoadOptions(5, 900.0);
   o.rest_min_s = o.rest_max_s = 30.0;
   const SimulatedMission sim = SimulateMultiFloor(o, 4);
   const MissionData& m = sim.data;
@@ -243,7 +231,7 @@ TEST(AllSources, ManyFirefightersOnToursUntilTheEnd) {
 TEST(AllSources, AMissionShorterThanTheCrewsEntryHasTheFirefightersWhoEntered) {
   // 20 firefighters 20 s apart and a 70 s mission: ff1-ff4 have entered (at 0, 20, 40, 60 s),
   // ff5 (80 s) has not. It crashed on the ones who had not (an empty walk).
-  const MultiFloorOptions o = CrewOnTours(20, 70.0);
+  const MultiFloorOptions o = AllSourcesLoadOptions(20, 70.0);
   const SimulatedMission sim = SimulateMultiFloor(o, 7);
   ASSERT_EQ(sim.walks.size(), 4u);
   std::set<std::string> agents, stepping, listed;

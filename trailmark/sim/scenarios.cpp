@@ -229,14 +229,19 @@ SimulatedMission Named(SimulatedMission sim, const std::string& name) {
 }
 }  // namespace
 
-SimulatedMission SimulateAllSourcesLoad(std::uint64_t seed, int firefighters, double duration_s) {
+MultiFloorOptions AllSourcesLoadOptions(int firefighters, double duration_s) {
   MultiFloorOptions o;
   o.landmarks_per_level = 3;
   o.beacon_trail = true;
   o.firefighters = firefighters;
   o.duration_s = duration_s;
   o.foot_imu = false;
-  return Named(SimulateMultiFloor(o, seed), "all-sources-4h");
+  return o;
+}
+
+SimulatedMission SimulateAllSourcesLoad(std::uint64_t seed, int firefighters, double duration_s) {
+  return Named(SimulateMultiFloor(AllSourcesLoadOptions(firefighters, duration_s), seed),
+               "all-sources-4h");
 }
 
 SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed) {

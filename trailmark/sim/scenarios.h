@@ -8,9 +8,10 @@
 
 #include "trailmark/core/mission.h"
 #include "trailmark/geometry/floor_plan.h"
+#include "trailmark/sim/mission_sim.h"
+#include "trailmark/sim/multi_floor.h"
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/rssi_channel.h"
-#include "trailmark/sim/mission_sim.h"
 #include "trailmark/sim/walker.h"
 
 namespace trailmark {
@@ -60,5 +61,8 @@ SimulatedMission SimulateScenario(const std::string& name, std::uint64_t seed);
 /// --firefighters N --minutes M`).
 SimulatedMission SimulateAllSourcesLoad(std::uint64_t seed, int firefighters = 20,
                                         double duration_s = 4 * 3600.0);
+/// The building options of that load: the all-sources building, a crew on tours until
+/// duration_s, phone steps only (no foot IMU).
+MultiFloorOptions AllSourcesLoadOptions(int firefighters, double duration_s);
 
 }  // namespace trailmark
