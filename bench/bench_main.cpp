@@ -5,31 +5,34 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <filesystem>
+#include <map>
+#include <nanoflann.hpp>
 
-#include "trailmark/io/mission_io.h"
-#include "trailmark/breadcrumb/localizer.h"
-#include "trailmark/ins/zupt_ins.h"
-#include "trailmark/landmarks/landmark_estimator.h"
-#include "trailmark/landmarks/landmark_ukf.h"
+#include "server/journal.h"
 #include "trailmark/beacons/beacon_map.h"
 #include "trailmark/beacons/map_least_squares.h"
 #include "trailmark/beacons/mds.h"
 #include "trailmark/beacons/scaat_ekf.h"
-#include "trailmark/sim/beacon_lab.h"
-#include "trailmark/mapmatch/pattern_comparison.h"
+#include "trailmark/breadcrumb/gen_network.h"
+#include "trailmark/breadcrumb/localizer.h"
+#include "trailmark/core/random.h"
+#include "trailmark/core/time_order_buffer.h"
+#include "trailmark/geometry/rigid_fit.h"
+#include "trailmark/ins/zupt_ins.h"
+#include "trailmark/io/mission_io.h"
+#include "trailmark/landmarks/landmark_estimator.h"
+#include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/mapmatch/particle_filter.h"
+#include "trailmark/mapmatch/pattern_comparison.h"
 #include "trailmark/mapmatch/search_map.h"
+#include "trailmark/pipelines/batch_run.h"
+#include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
-#include "trailmark/geometry/rigid_fit.h"
-#include <nanoflann.hpp>
-#include "trailmark/pipelines/batch_run.h"
-#include "trailmark/sim/synthetic_incident.h"
 #include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/synthetic_incident.h"
 #include "trailmark/sim/synthetic_streams.h"
-#include "server/journal.h"
 
 namespace {
 
@@ -190,6 +193,74 @@ void BM_BreadcrumbIncident(benchmark::State& state) {
       benchmark::Counter(o.duration_s * state.iterations(), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_BreadcrumbIncident)->Arg(1)->Arg(4)->Unit(benchmark::kMillisecond);
+
+// The GEN network once it fills (arg 0: sparse LDL^T always, dense_fill_share 1; arg 1: the
+// dense factor, the default 0.5): 60 crumbs ranging to each other, 8 walkers whose old states
+// are marginalized at every step (the fill that links every crumb they heard), a solve and the
+// walker's marginal at every step, as the localizer does with 20 firefighters.
+void BM_GenNetworkFilled(benchmark::State& state) {
+  for (auto _ : state) {
+    breadcrumb::GenOptions go;
+    go.dense_fill_share = state.range(0) == 0 ? 1.0 : 0.5;
+    breadcrumb::GenNetwork gen(go);
+    Random rng(7);
+    constexpr int kCrumbs = 60, kWalkers = 8, kSteps = 150;
+    std::vector<Vec2> crumb;
+    for (int c = 0; c < kCrumbs; ++c) {
+      crumb.emplace_back(rng.Uniform(0, 60), rng.Uniform(0, 30));
+      gen.AddPrior(gen.AddNode(crumb.back()), crumb.back(), Mat2::Identity() * 4.0);
+    }
+    breadcrumb::ScalarModel range;
+    std::vector<breadcrumb::NodeIndex> state_of;
+    std::vector<Vec2> pos;
+    for (int w = 0; w < kWalkers; ++w) {
+      pos.emplace_back(rng.Uniform(0, 60), rng.Uniform(0, 30));
+      state_of.push_back(gen.AddNode(pos.back()));
+      gen.AddPrior(state_of.back(), pos.back(), Mat2::Identity() * 0.01);
+    }
+    for (int k = 0; k < kSteps; ++k) {
+      for (int w = 0; w < kWalkers; ++w) {
+        const Vec2 step(0.7 * std::cos(0.05 * k + w), 0.7 * std::sin(0.05 * k + w));
+        pos[w] += step;
+        const breadcrumb::NodeIndex next = gen.AddNode(gen.Estimate(state_of[w]) + step);
+        gen.AddRelative(next, state_of[w], step, Mat2::Identity() * 0.01);
+        gen.DeleteNode(state_of[w]);
+        gen.MoveNode(next, state_of[w]);
+        for (int h = 0; h < 3; ++h) {
+          const int c = static_cast<int>(rng.Uniform(0, kCrumbs - 1e-9));
+          gen.AddScalar(state_of[w], c, (pos[w] - crumb[c]).norm() + rng.Normal(0, 0.3), 0.09,
+                        range);
+        }
+        gen.Solve();
+        benchmark::DoNotOptimize(gen.Covariance(state_of[w]));
+      }
+    }
+    state.counters["dense_factorizations"] = static_cast<double>(gen.dense_factorizations());
+  }
+}
+BENCHMARK(BM_GenNetworkFilled)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
+// The time-order buffer as a batch run drives it: 60 simultaneous RSSI packets per instant (20
+// firefighters heard by 3 nodes), each pushed and the earlier instants released.
+void BM_TimeOrderBuffer(benchmark::State& state) {
+  std::vector<MissionRow> rows;
+  for (int i = 0; i < 60000; ++i) {
+    rows.emplace_back(RssiPacket{0.5 * (i / 60), "ff" + std::to_string(i % 20 + 1),
+                                 "b" + std::to_string(i % 3), -60.0});
+  }
+  std::size_t released = 0;
+  for (auto _ : state) {
+    TimeOrderBuffer buffer;
+    for (const MissionRow& r : rows) {
+      buffer.Push(r);
+      buffer.ReleaseBefore(RowTime(r), [&](const MissionRow&) { ++released; });
+    }
+    buffer.ReleaseAll([&](const MissionRow&) { ++released; });
+  }
+  benchmark::DoNotOptimize(released);
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(rows.size()));
+}
+BENCHMARK(BM_TimeOrderBuffer)->Unit(benchmark::kMillisecond);
 
 // The full ZUPT INS (15-state error-state KF, adaptive SHOE detector, step output) on a
 // synthetic gait at 200 Hz: samples per second.

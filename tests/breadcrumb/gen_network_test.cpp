@@ -287,5 +287,69 @@ TEST(GenNetwork, GeneralLinearEdgesWithMarginalizationEqualBlue) {
   }
 }
 
+// The dense path (GenOptions::dense_fill_share) against the sparse one: a walker among crumbs
+// that range to each other, its old states marginalized so that every crumb it heard is linked
+// to every other (the fill that makes the network dense), re-solved at every step. Both paths
+// must give the same estimates and marginals at every step, through the Gauss-Newton
+// re-linearizations of the persistent edges.
+TEST(GenNetwork, TheDenseFactorEqualsTheSparseOneAtEveryStep) {
+  GenOptions sparse_options;
+  sparse_options.dense_fill_share = 1.0;  // never dense
+  GenOptions dense_options;
+  dense_options.dense_fill_share = 0.0;  // dense whenever the pattern holds
+  GenNetwork sparse(sparse_options), dense(dense_options);
+  Random rng(31);
+  const int crumbs = 12;
+  std::vector<Vec2> crumb_truth;
+  ScalarModel range;
+  for (int c = 0; c < crumbs; ++c) {
+    crumb_truth.emplace_back(rng.Uniform(-15, 15), rng.Uniform(-15, 15));
+    const Vec2 start = crumb_truth.back() + Vec2(rng.Normal(0, 1), rng.Normal(0, 1));
+    for (GenNetwork* g : {&sparse, &dense}) {
+      g->AddNode(start);
+      g->AddPrior(c, start, Mat2::Identity() * 2.0);
+    }
+  }
+  for (int c = 1; c < crumbs; c += 2) {  // persistent crumb-crumb ranges (re-linearized)
+    const double z = (crumb_truth[c] - crumb_truth[c - 1]).norm() + rng.Normal(0, 0.1);
+    for (GenNetwork* g : {&sparse, &dense})
+      g->AccumulatePersistent(g->AddPersistent(c, c - 1, range), z, 0.01);
+  }
+  Vec2 pos = Vec2::Zero();
+  NodeIndex state = -1;
+  for (GenNetwork* g : {&sparse, &dense}) {
+    state = g->AddNode(pos);
+    g->AddPrior(state, pos, Mat2::Identity() * 0.01);
+  }
+  for (int k = 0; k < 120; ++k) {
+    const Vec2 step(0.6 * std::cos(k * 0.13), 0.6 * std::sin(k * 0.07));
+    pos += step;
+    const Vec2 meas = step + Vec2(rng.Normal(0, 0.05), rng.Normal(0, 0.05));
+    const int c = static_cast<int>(rng.Uniform(0, crumbs - 1e-9));
+    const double z = (pos - crumb_truth[c]).norm() + rng.Normal(0, 0.3);
+    for (GenNetwork* g : {&sparse, &dense}) {
+      // AddNode -> AddMeasurement -> DeleteNode, the new state taking the old one's slot.
+      const NodeIndex next = g->AddNode(g->Estimate(state) + meas);
+      g->AddRelative(next, state, meas, Mat2::Identity() * 0.01);
+      g->DeleteNode(state);
+      ASSERT_EQ(g->MoveNode(next, state), state);
+      g->AddScalar(state, c, z, 0.09, range);
+      ASSERT_TRUE(g->Solve());
+    }
+    for (NodeIndex i = 0; i <= crumbs; ++i) {
+      ASSERT_LT((dense.Estimate(i) - sparse.Estimate(i)).norm(), 1e-9)
+          << "step " << k << " node " << i;
+    }
+    const Mat2 agent = sparse.Covariance(state);
+    ASSERT_LT((dense.Covariance(state) - agent).norm(), 1e-9 * agent.norm()) << "step " << k;
+    const Eigen::Matrix4d joint = sparse.JointCovariance(c, state);
+    ASSERT_LT((dense.JointCovariance(c, state) - joint).norm(), 1e-9 * joint.norm())
+        << "step " << k;
+  }
+  EXPECT_EQ(sparse.dense_factorizations(), 0u);
+  EXPECT_GT(dense.dense_factorizations(), 60u);  // most steps keep the pattern
+  EXPECT_EQ(sparse.factorizations(), dense.factorizations());
+}
+
 }  // namespace
 }  // namespace trailmark::breadcrumb

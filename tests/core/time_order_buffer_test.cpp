@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 
 namespace trailmark {
@@ -47,6 +48,37 @@ TEST(TimeOrderBuffer, ReleasesInTheOrderOfATimeOrderedMerge) {
   buffer.ReleaseBefore(2.0, take);
   EXPECT_EQ(RowNode(out.back()), "x");
   EXPECT_EQ(buffer.size(), 0u);
+}
+
+// Simultaneous rows of one stream whose ids share their first 8 characters (the buffer's key
+// holds 8), equal ids among them: node order, then arrival, as a stable sort gives.
+TEST(TimeOrderBuffer, IdsThatShareTheirFirstEightCharactersAreOrderedByTheWholeId) {
+  std::mt19937 rng(5);
+  const std::vector<std::string> ids = {"landmark-1", "landmark-10", "landmark-2", "landmark",
+                                        "landmar",    "lm",          "landmark-1b"};
+  std::vector<MissionRow> rows;
+  for (int i = 0; i < 300; ++i) {
+    const double t = std::floor(i / 60.0);  // five instants, in time order as a batch feeds them
+    const std::string& rx = ids[std::uniform_int_distribution<std::size_t>(0, ids.size() - 1)(rng)];
+    rows.emplace_back(RssiPacket{t, rx, "b", -60.0 - i});  // rssi tells the arrival
+  }
+  std::vector<MissionRow> expected = rows;
+  std::stable_sort(expected.begin(), expected.end(), [](const MissionRow& a, const MissionRow& b) {
+    if (RowTime(a) != RowTime(b)) return RowTime(a) < RowTime(b);
+    return RowNode(a) < RowNode(b);
+  });
+  TimeOrderBuffer buffer;
+  std::vector<MissionRow> out;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    buffer.Push(rows[i]);
+    buffer.ReleaseBefore(RowTime(rows[i]), [&](const MissionRow& r) { out.push_back(r); });
+  }
+  buffer.ReleaseAll([&](const MissionRow& r) { out.push_back(r); });
+  ASSERT_EQ(out.size(), expected.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(std::get<RssiPacket>(out[i]).rssi_dbm, std::get<RssiPacket>(expected[i]).rssi_dbm)
+        << i;
+  }
 }
 
 }  // namespace

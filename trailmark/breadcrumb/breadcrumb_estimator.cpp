@@ -35,6 +35,11 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real("covariance_period_s", &L::covariance_period_s, "s", nonneg,
            "refresh a node's marginal covariance at most this often (between: the last one "
            "plus the PDR's variance since; 0: at every estimate)");
+    t.Real(
+        "dense_fill_share", [](L& o) -> double& { return o.gen.dense_fill_share; }, "",
+        OptionBounds::Between(0, 1),
+        "factorize the network as a dense matrix while its sparse factor fills more than this "
+        "share of the lower triangle (the same solution, faster; 1: always sparse)");
     t.Real("max_latency_s", &L::max_latency_s, "s", nonneg,
            "how long a radio measurement may wait for the PDR to cover its time");
     t.Real("step_sigma_floor_m", &L::step_sigma_floor_m, "m", nonneg,
@@ -302,6 +307,10 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["static_nodes_never_localized"] = static_cast<double>(s.pending_uninitialized);
   num["unusable"] = static_cast<double>(s.unusable);
   num["factorizations"] = static_cast<double>(s.factorizations);
+  num["symbolic_analyses"] = static_cast<double>(s.symbolic_analyses);
+  num["dense_factorizations"] = static_cast<double>(s.dense_factorizations);
+  num["network_dimension_max"] = s.max_dimension;
+  num["factor_nonzeros_max"] = static_cast<double>(s.max_factor_nonzeros);
   num["rows_ignored"] = static_cast<double>(ignored_);
   // Per agent: the PDR corrections estimated (heading offset and scale, gyro scale and drift).
   constexpr double kDeg = 180.0 / 3.14159265358979323846;

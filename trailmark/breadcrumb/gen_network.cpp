@@ -357,7 +357,10 @@ NodeIndex GenNetwork::MoveNode(NodeIndex from, NodeIndex to) {
   nodes_[to].compact = compact;
   for (auto& blk : nodes_[to].off) {
     for (auto& back : nodes_[blk.j].off) {
-      if (back.j == from) back.j = to;
+      if (back.j == from) {  // one block per pair
+        back.j = to;
+        break;
+      }
     }
   }
   for (int e : nodes_[to].persistent) {
@@ -384,6 +387,7 @@ void GenNetwork::CompactIndices() {
   for (std::size_t k = 0; same_set && k < order_.size(); ++k) {
     same_set = nodes_[order_[k]].active && nodes_[order_[k]].compact == static_cast<int>(k);
   }
+  active_set_same_ = same_set;
   if (same_set) return;
   order_.clear();
   for (NodeIndex i = 0; i < static_cast<NodeIndex>(nodes_.size()); ++i) {
@@ -436,6 +440,14 @@ void GenNetwork::PreparePattern() {
     pattern_same_ = true;
     return;
   }
+  if (prefer_dense_ && active_set_same_) {
+    // The dense factor needs only the numbering, which holds while the same nodes are active
+    // (a mobile node's new state moved into its old slot): no pattern to compare. The sparse
+    // structures are rebuilt at the next analysis (when the set changes), which re-decides.
+    pattern_same_ = true;
+    pattern_dirty_ = false;
+    return;
+  }
   pattern_same_ = analyses_ > 0 && BlockPattern() == analysed_pattern_;
   if (!pattern_same_) {
     FillReducingOrder();
@@ -444,9 +456,37 @@ void GenNetwork::PreparePattern() {
   pattern_dirty_ = false;
 }
 
+bool GenNetwork::FactorizeDense(int n, const std::vector<Eigen::Triplet<double>>& extra_L) {
+  // The lower triangle of L in the compact numbering, then a blocked dense Cholesky (LLT reads
+  // the lower triangle only).
+  dense_A_.resize(n, n);
+  dense_A_.triangularView<Eigen::Lower>().setZero();
+  for (NodeIndex slot : order_) {
+    const Node& node = nodes_[slot];
+    const int r = node.compact * 2;
+    dense_A_(r, r) = node.L_ii(0, 0);
+    dense_A_(r + 1, r) = node.L_ii(1, 0);
+    dense_A_(r + 1, r + 1) = node.L_ii(1, 1);
+    for (const auto& blk : node.off) {
+      const int c = nodes_[blk.j].compact * 2;
+      if (c < r) dense_A_.block<2, 2>(r, c) = blk.L;
+    }
+  }
+  for (const auto& t : extra_L) dense_A_(t.row(), t.col()) += t.value();
+  dense_llt_.compute(dense_A_);
+  dense_ = true;
+  ++factorizations_;
+  ++dense_factorizations_;
+  max_dimension_ = std::max(max_dimension_, n);
+  factor_valid_ =
+      dense_llt_.info() == Eigen::Success && (dense_llt_.matrixLLT().diagonal().array() > 0).all();
+  return factor_valid_;
+}
+
 bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L) {
   const int n = static_cast<int>(order_.size()) * 2;
   const bool same_pattern = pattern_same_ && matrix_.rows() == n && analyses_ > 0;
+  if (same_pattern && prefer_dense_) return FactorizeDense(n, extra_L);
   if (same_pattern) {
     // Values only, in place, column by column (no triplets, no sort, no search): block (r, c)
     // of the lower triangle is the transpose of block (c, r) kept in column node c's list.
@@ -503,7 +543,16 @@ bool GenNetwork::Factorize(const std::vector<Eigen::Triplet<double>>& extra_L) {
     etree_valid_ = false;
   }
   solver_.factorize(matrix_);
+  dense_ = false;
   ++factorizations_;
+  max_dimension_ = std::max(max_dimension_, n);
+  const auto factor_nonzeros =
+      static_cast<std::size_t>(solver_.matrixL().nestedExpression().nonZeros());
+  max_factor_nonzeros_ = std::max(max_factor_nonzeros_, factor_nonzeros);
+  if (!same_pattern) {  // the strictly lower triangle holds n (n - 1) / 2 entries
+    prefer_dense_ = static_cast<double>(factor_nonzeros) >
+                    options_.dense_fill_share * 0.5 * static_cast<double>(n) * (n - 1);
+  }
   factor_valid_ = solver_.info() == Eigen::Success && (solver_.vectorD().array() > 0).all();
   return factor_valid_;
 }
@@ -545,7 +594,7 @@ bool GenNetwork::Solve() {
       }
     }
     if (!Factorize(extra)) return false;
-    const Eigen::VectorXd x = solver_.solve(rhs);
+    const Eigen::VectorXd x = dense_ ? Eigen::VectorXd(dense_llt_.solve(rhs)) : solver_.solve(rhs);
     if (!x.allFinite()) {
       factor_valid_ = false;
       return false;
@@ -563,6 +612,19 @@ bool GenNetwork::Solve() {
 }
 
 Eigen::MatrixXd GenNetwork::MarginalOfRows(const std::vector<int>& rows) {
+  if (dense_) {
+    // A = L L^T  =>  (A^-1)_ab = y_a^T y_b with y = L^-1 e, zero above the smallest row: one
+    // triangular solve on the trailing block (the fill-reducing numbering puts the agents, the
+    // nodes of most links, last, so the block is small).
+    const int n = static_cast<int>(dense_A_.rows());
+    const int K = static_cast<int>(rows.size());
+    const int start = *std::min_element(rows.begin(), rows.end());
+    const int m = n - start;
+    Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(m, K);
+    for (int k = 0; k < K; ++k) Y(rows[k] - start, k) = 1.0;
+    dense_llt_.matrixLLT().bottomRightCorner(m, m).triangularView<Eigen::Lower>().solveInPlace(Y);
+    return Y.transpose() * Y;
+  }
   // A = P^T L D L^T P  =>  A^-1 = P^T L^-T D^-1 L^-1 P, so for unit vectors e_a, e_b:
   // (A^-1)_ab = y_a^T D^-1 y_b with y = L^-1 P e. L^-1 of a unit vector is non-zero only on the
   // path from its position to the root of the elimination tree: a forward solve along the union

@@ -27,6 +27,7 @@
 /// floors are separate levels in our missions and z is carried by the PDR, not estimated here.
 /// Not thread-safe.
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseCore>
@@ -73,6 +74,10 @@ struct GenOptions {
   /// Gauss-Newton iterations over the persistent edges per Solve().
   int max_relinearization_iterations = 3;
   double relinearization_tolerance_m = 1e-4;
+  /// When the sparse LDL^T factor of the last symbolic analysis filled more than this share of
+  /// the dense lower triangle (agents marginalized out link every crumb they heard), the system
+  /// is factorized as a dense matrix (blocked Cholesky) until the pattern changes. 1: never.
+  double dense_fill_share = 0.5;
 };
 
 class GenNetwork {
@@ -146,7 +151,11 @@ class GenNetwork {
   int active_nodes() const { return active_count_; }
   std::size_t off_diagonal_blocks() const;  ///< counted once per pair
   std::size_t factorizations() const { return factorizations_; }
+  /// Largest system solved so far: its dimension and the non-zeros of its LDL^T factor.
+  int max_dimension() const { return max_dimension_; }
+  std::size_t max_factor_nonzeros() const { return max_factor_nonzeros_; }
   std::size_t symbolic_analyses() const { return analyses_; }
+  std::size_t dense_factorizations() const { return dense_factorizations_; }
   bool dirty() const { return dirty_; }
 
   /// Dense L and b over the active nodes in slot order (tests, small graphs only); persistent
@@ -199,6 +208,7 @@ class GenNetwork {
   void FillReducingOrder();
   void PreparePattern();
   bool pattern_same_ = false;
+  bool active_set_same_ = false;  ///< CompactIndices kept the numbering
 
   GenOptions options_;
   std::vector<Node> nodes_;
@@ -230,6 +240,15 @@ class GenNetwork {
   std::vector<int> path_;
   std::size_t factorizations_ = 0;
   std::size_t analyses_ = 0;
+  // The dense path (GenOptions::dense_fill_share): same compact numbering as the sparse one.
+  bool FactorizeDense(int n, const std::vector<Eigen::Triplet<double>>& extra_L);
+  bool dense_ = false;         ///< the current factor is dense_llt_ (else solver_)
+  bool prefer_dense_ = false;  ///< the analysed pattern fills: factorize it dense
+  Eigen::MatrixXd dense_A_;
+  Eigen::LLT<Eigen::MatrixXd> dense_llt_;
+  std::size_t dense_factorizations_ = 0;
+  int max_dimension_ = 0;
+  std::size_t max_factor_nonzeros_ = 0;
 };
 
 }  // namespace trailmark::breadcrumb

@@ -1033,6 +1033,10 @@ TimeS BreadcrumbLocalizer::AgentTime(const std::string& id) const {
 LocalizerSummary BreadcrumbLocalizer::summary() const {
   LocalizerSummary s = summary_;
   s.factorizations = gen_.factorizations();
+  s.symbolic_analyses = gen_.symbolic_analyses();
+  s.dense_factorizations = gen_.dense_factorizations();
+  s.max_dimension = gen_.max_dimension();
+  s.max_factor_nonzeros = gen_.max_factor_nonzeros();
   s.pending_uninitialized = 0;
   for (const auto& [id, n] : static_) s.pending_uninitialized += n.index < 0 ? 1 : 0;
   return s;

@@ -204,7 +204,9 @@ struct LocalizerSummary {
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   std::size_t unusable = 0;  ///< measurements that could not be attached (with reasons in notes)
-  std::size_t solves = 0, factorizations = 0;
+  std::size_t solves = 0, factorizations = 0, symbolic_analyses = 0, dense_factorizations = 0;
+  int max_dimension = 0;                ///< of the network's largest system
+  std::size_t max_factor_nonzeros = 0;  ///< of its LDL^T factor
   std::size_t calibrations = 0, calibration_pairs = 0;
   std::optional<radio::PathLossFit> calibration;  ///< the latest online fit
   std::vector<std::string> notes;

@@ -25,8 +25,18 @@ class TimeOrderBuffer {
   void Push(MissionRow row) {
     const TimeS t = RowTime(row);
     if (t < released_t_) ++late_;
-    heap_.push_back({t, row.index(), arrivals_++, std::move(row)});
-    std::push_heap(heap_.begin(), heap_.end(), Later);
+    std::uint32_t slot;
+    if (free_.empty()) {
+      slot = static_cast<std::uint32_t>(rows_.size());
+      rows_.push_back(std::move(row));
+    } else {
+      slot = free_.back();
+      free_.pop_back();
+      rows_[slot] = std::move(row);
+    }
+    heap_.push_back({t, static_cast<std::uint32_t>(rows_[slot].index()), slot,
+                     NodePrefix(RowNode(rows_[slot])), arrivals_++});
+    std::push_heap(heap_.begin(), heap_.end(), Later{&rows_});
   }
   /// Hands every held row with time < `until` to `out(const MissionRow&)`, in order.
   template <class Out>
@@ -42,29 +52,51 @@ class TimeOrderBuffer {
   std::size_t late() const { return late_; }
 
  private:
-  struct Held {
+  /// The heap holds small keys; the rows stay in their slots (a heap of rows moved every row
+  /// several times, strings included).
+  struct Key {
     TimeS t;
-    std::size_t stream;
+    std::uint32_t stream;
+    std::uint32_t slot;
+    std::uint64_t node_prefix;  ///< the node's first 8 bytes, big-endian (NodePrefix)
     std::uint64_t arrival;
-    MissionRow row;
   };
-  /// The heap's order (a max-heap of "later"): time, stream, node, arrival; the node is read
-  /// from the rows only for simultaneous rows of one stream.
-  static bool Later(const Held& a, const Held& b) {
-    if (a.t != b.t) return a.t > b.t;
-    if (a.stream != b.stream) return a.stream > b.stream;
-    if (const int c = RowNode(a.row).compare(RowNode(b.row)); c != 0) return c > 0;
-    return a.arrival > b.arrival;
+  /// The first 8 bytes of an id, zero-padded, as a big-endian number: two ids whose prefixes
+  /// differ compare as their strings do (ids hold no NUL); equal prefixes need the strings.
+  static std::uint64_t NodePrefix(const std::string& id) {
+    std::uint64_t key = 0;
+    for (std::size_t k = 0; k < 8; ++k) {
+      key = (key << 8) | (k < id.size() ? static_cast<unsigned char>(id[k]) : 0u);
+    }
+    return key;
   }
+  /// The heap's order (a max-heap of "later"): time, stream, node, arrival; the node's strings
+  /// are compared only for simultaneous rows of one stream whose ids share 8 bytes.
+  struct Later {
+    const std::vector<MissionRow>* rows;
+    bool operator()(const Key& a, const Key& b) const {
+      if (a.t != b.t) return a.t > b.t;
+      if (a.stream != b.stream) return a.stream > b.stream;
+      if (a.node_prefix != b.node_prefix) return a.node_prefix > b.node_prefix;
+      if (const int c = RowNode((*rows)[a.slot]).compare(RowNode((*rows)[b.slot])); c != 0)
+        return c > 0;
+      return a.arrival > b.arrival;
+    }
+  };
   template <class Out>
   void Pop(Out& out) {
-    std::pop_heap(heap_.begin(), heap_.end(), Later);
-    Held held = std::move(heap_.back());
+    std::pop_heap(heap_.begin(), heap_.end(), Later{&rows_});
+    const Key key = heap_.back();
     heap_.pop_back();
-    released_t_ = std::max(released_t_, held.t);
-    out(held.row);
+    released_t_ = std::max(released_t_, key.t);
+    // Out of its slot before `out` runs (which may push, and so grow the slots).
+    const MissionRow row = std::move(rows_[key.slot]);
+    free_.push_back(key.slot);
+    out(row);
   }
-  std::vector<Held> heap_;
+  std::vector<MissionRow> rows_;
+  std::vector<std::uint32_t> free_;
+  std::vector<Key> heap_;
   std::uint64_t arrivals_ = 0;
   TimeS released_t_ = -1e300;
   std::size_t late_ = 0;

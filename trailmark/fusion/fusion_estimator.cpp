@@ -208,7 +208,12 @@ void FusionEstimator::OnMemberEstimate(std::size_t member, const Estimate& e) {
     h.push_back(e);
     // A time already fused (a member that caught up late) is not fused again.
     const auto done = current_.find(e.id);
-    if (done == current_.end() || e.t > done->second.t) pending_[e.id].insert(e.t);
+    if (done == current_.end() || e.t > done->second.t) {
+      pending_[e.id].times.insert(e.t);
+      pending_[e.id].Touch();
+    } else if (const auto p = pending_.find(e.id); p != pending_.end()) {
+      p->second.Touch();  // a member's latest changed: Due may change
+    }
     // Keep what a pending row can still ask for.
     const TimeS keep_from = now_ - (options_.max_wait_s + options_.stale_s + 1.0);
     while (h.size() > 1 && h[1].t <= keep_from) h.pop_front();
@@ -249,7 +254,9 @@ void FusionEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
   }
   if (const Step* step = std::get_if<Step>(&row); step != nullptr && IsAgent(info_, step->agent)) {
-    pending_[step->agent].insert(step->t1);
+    PendingTimes& pending = pending_[step->agent];
+    pending.times.insert(step->t1);
+    pending.Touch();
     auto& steps = steps_[step->agent];
     steps.emplace_back(step->t0, step->t1);
     const TimeS keep_from = now_ - (options_.max_wait_s + options_.hat_window_s + 10.0);
@@ -281,23 +288,37 @@ std::optional<Estimate> FusionEstimator::Current(const std::string& node) const 
   return it->second;
 }
 
-bool FusionEstimator::Due(const Pending& p) const {
+bool FusionEstimator::Due(const Pending& p, TimeS* blocking_latest) const {
   if (now_ > p.t + options_.max_wait_s) return true;
+  bool due = true;
   for (std::size_t m = 0; m < members_.size(); ++m) {
     const auto it = agent_history_[m].find(p.agent);
     if (it == agent_history_[m].end() || it->second.empty()) continue;  // does not estimate it
     const TimeS latest = it->second.back().t;
     // A member that has fallen behind by more than the wait is not waited for.
-    if (latest < p.t - 1e-9 && latest >= now_ - options_.max_wait_s) return false;
+    if (latest < p.t - 1e-9 && latest >= now_ - options_.max_wait_s) {
+      if (blocking_latest == nullptr) return false;
+      *blocking_latest = due ? latest : std::min(*blocking_latest, latest);
+      due = false;
+    }
   }
-  return true;
+  return due;
 }
 
 void FusionEstimator::Resolve(EstimateSink& sink, bool all) {
-  for (auto& [agent, times] : pending_) {
+  for (auto& [agent, pending] : pending_) {
+    std::set<TimeS>& times = pending.times;
+    if (times.empty()) continue;
+    // Nothing of the agent changed since its first time was found waiting: it stays waiting
+    // until a member it waits for falls behind or the wait ends (Due, without its look-ups).
+    if (!all && !(now_ - options_.max_wait_s > pending.blocked_until_behind) &&
+        !(now_ > *times.begin() + options_.max_wait_s)) {
+      continue;
+    }
+    pending.Touch();
     while (!times.empty()) {
       const Pending p{agent, *times.begin()};
-      if (!all && !Due(p)) break;
+      if (!all && !Due(p, &pending.blocked_until_behind)) break;
       EmitAgent(p, sink);
       times.erase(times.begin());
     }
@@ -569,8 +590,9 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
   track.emplace_back(fused.t, fused.position_n.head<2>());
   while (track.size() > 2 && track[1].first <= fused.t - 2.0 - options_.predict_baseline_s)
     track.pop_front();
-  TimeS& written = last_written_t_[p.agent];
-  written = std::max(written, fused.t);
+  Written& written = last_written_t_[p.agent];
+  written.t = std::max(written.t, fused.t);
+  written.no_prediction = false;
   sink.Add(fused);
 }
 
@@ -605,11 +627,16 @@ std::optional<Estimate> FusionEstimator::PredictedAt(const std::string& agent, T
 
 void FusionEstimator::Predict(EstimateSink& sink) {
   for (auto& [agent, written] : last_written_t_) {
-    if (now_ < written + options_.predict_period_s - 1e-9) continue;
+    if (written.no_prediction || now_ < written.t + options_.predict_period_s - 1e-9) continue;
     if (const std::optional<Estimate> e = PredictedAt(agent, now_)) {
-      written = now_;
+      written.t = now_;
       ++summary_.predicted_rows;
       sink.Add(*e);
+    } else if (const auto track = fused_track_.find(agent); track != fused_track_.end() &&
+                                                            !track->second.empty() &&
+                                                            now_ > track->second.back().first) {
+      // Past the last fused row, PredictedAt's reasons to refuse hold until the next one.
+      written.no_prediction = true;
     }
   }
 }

@@ -26,6 +26,7 @@
 /// docs/fusion.md for what the track-level fusion can and cannot gain.
 
 #include <deque>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -172,7 +173,10 @@ class FusionEstimator : public OnlineEstimator {
   void OnMemberEstimate(std::size_t member, const Estimate& e);
   /// Emits the pending agent rows that are due (all of them when `all`).
   void Resolve(EstimateSink& sink, bool all);
-  bool Due(const Pending& p) const;
+  /// Whether p's row is due now. When not: *blocking_latest is the earliest latest estimate of
+  /// the members it waits for (the row cannot become due before one of them falls behind, at
+  /// now_ - max_wait_s > *blocking_latest, or the wait ends, unless a member estimates more).
+  bool Due(const Pending& p, TimeS* blocking_latest = nullptr) const;
   void EmitAgent(const Pending& p, EstimateSink& sink);
   void EmitStatic(const std::string& node, TimeS t, EstimateSink& sink);
   /// Predicted rows at now_ for agents between fused rows (FusionOptions::predict_fraction).
@@ -200,7 +204,14 @@ class FusionEstimator : public OnlineEstimator {
   TimeS now_ = -1e300;
   /// Per agent, the times a fused row is asked for (its steps' ends, and every time a member
   /// used estimates it), resolved in time order.
-  std::map<std::string, std::set<TimeS>> pending_;
+  struct PendingTimes {
+    std::set<TimeS> times;
+    /// Resolve skips the agent while nothing of it changed and now_ has not passed this
+    /// (Due's blocking_latest of its first time); -inf: check.
+    TimeS blocked_until_behind = -std::numeric_limits<double>::infinity();
+    void Touch() { blocked_until_behind = -std::numeric_limits<double>::infinity(); }
+  };
+  std::map<std::string, PendingTimes> pending_;
   /// Per member, per agent: its recent estimates (time order).
   std::vector<std::map<std::string, std::deque<Estimate>>> agent_history_;
   /// Per member, per static node: its latest estimate.
@@ -210,7 +221,11 @@ class FusionEstimator : public OnlineEstimator {
   /// Per agent: its recent fused rows (time, position; the prediction's baseline) and the time
   /// of its last row written (fused or predicted).
   std::map<std::string, std::deque<std::pair<TimeS, Vec2>>> fused_track_;
-  std::map<std::string, TimeS> last_written_t_;
+  struct Written {
+    TimeS t = 0;                 ///< of the agent's last row written (fused or predicted)
+    bool no_prediction = false;  ///< none possible until its next fused row (PredictedAt)
+  };
+  std::map<std::string, Written> last_written_t_;
   std::map<std::string, std::vector<SourceShare>> sources_;  ///< of each node's latest row
   /// The N-cornered hat of one agent: time-averaged squared differences of each pair of
   /// members (per axis, m^2) and each member's stated variance (per axis, m^2).

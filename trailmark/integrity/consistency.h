@@ -20,6 +20,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "trailmark/core/online_estimator.h"
@@ -133,7 +134,7 @@ class RepeatDetector {
   };
   std::string what_;
   std::size_t max_repeats_;
-  std::map<std::string, Run> runs_;
+  std::unordered_map<std::string, Run> runs_;  ///< hashed: one look-up per radio row
   std::vector<IntegrityNote> notes_;
   std::size_t refused_ = 0;
 };

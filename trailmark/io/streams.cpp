@@ -1,11 +1,12 @@
 // SPDX-License-Identifier: MIT
 #include "trailmark/io/streams.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
-
-#include <fmt/format.h>
 
 #include "trailmark/core/error.h"
 
@@ -22,6 +23,17 @@ struct ColumnSpec {
 
 template <class Row>
 struct Layout;
+
+/// A row's node ids (one or two), without an allocation per row.
+struct RowIds {
+  std::array<std::string_view, 2> id;
+  std::size_t n = 0;
+  RowIds(std::string_view a) : id{a, {}}, n(1) {}
+  RowIds(std::string_view a, std::string_view b) : id{a, b}, n(2) {}
+  std::string_view front() const { return id[0]; }
+  const std::string_view* begin() const { return id.data(); }
+  const std::string_view* end() const { return id.data() + n; }
+};
 
 // Plausibility bounds: values outside them are a wrong unit or a corrupted row, not data.
 constexpr double kMaxAbsTimeS = 1e10;        // ~317 years: Unix-epoch seconds still fit
@@ -100,7 +112,7 @@ struct Layout<ImuSample> {
                          r.gyro_b.cwiseAbs().maxCoeff(), kMaxGyroRadps));
     }
   }
-  static std::vector<std::string_view> Ids(const ImuSample& r) { return {r.agent}; }
+  static RowIds Ids(const ImuSample& r) { return {r.agent}; }
   static void Format(CsvWriter& w, const ImuSample& r) {
     w.Add(r.t).Add(r.agent).Add(r.accel_b.x()).Add(r.accel_b.y()).Add(r.accel_b.z());
     w.Add(r.gyro_b.x()).Add(r.gyro_b.y()).Add(r.gyro_b.z());
@@ -137,7 +149,7 @@ struct Layout<Step> {
       r.variance_m2.reset();
     }
   }
-  static std::vector<std::string_view> Ids(const Step& r) { return {r.agent}; }
+  static RowIds Ids(const Step& r) { return {r.agent}; }
   static void Format(CsvWriter& w, const Step& r) {
     w.Add(r.t0).Add(r.t1).Add(r.agent).Add(r.delta_n.x()).Add(r.delta_n.y()).Add(r.delta_n.z());
     if (r.variance_m2) {
@@ -164,7 +176,7 @@ struct Layout<RssiPacket> {
                          r.rssi_dbm, kMinRssiDbm, kMaxRssiDbm));
     }
   }
-  static std::vector<std::string_view> Ids(const RssiPacket& r) { return {r.rx, r.tx}; }
+  static RowIds Ids(const RssiPacket& r) { return {r.rx, r.tx}; }
   static void Format(CsvWriter& w, const RssiPacket& r) {
     w.Add(r.t).Add(r.rx).Add(r.tx).Add(r.rssi_dbm);
   }
@@ -188,7 +200,7 @@ struct Layout<RangeMeasurement> {
     r.kind = k[5] >= 0 ? std::string(TrimCell(c.Field(k[5]))) : std::string();
     if (!r.kind.empty()) CheckName(c, "kind", r.kind, kRangeKinds, "a range kind");
   }
-  static std::vector<std::string_view> Ids(const RangeMeasurement& r) { return {r.a, r.b}; }
+  static RowIds Ids(const RangeMeasurement& r) { return {r.a, r.b}; }
   static void Format(CsvWriter& w, const RangeMeasurement& r) {
     w.Add(r.t).Add(r.a).Add(r.b).Add(r.range_m).Add(r.sigma_m).Add(r.kind);
   }
@@ -209,7 +221,7 @@ struct Layout<BearingMeasurement> {
     if (r.sigma_rad && *r.sigma_rad <= 0) c.Fail("column 'sigma': must be positive");
     if (r.sigma_rad) CheckAtMost(c, "sigma", *r.sigma_rad, kMaxAngleSigmaRad, "rad");
   }
-  static std::vector<std::string_view> Ids(const BearingMeasurement& r) { return {r.a, r.b}; }
+  static RowIds Ids(const BearingMeasurement& r) { return {r.a, r.b}; }
   static void Format(CsvWriter& w, const BearingMeasurement& r) {
     w.Add(r.t).Add(r.a).Add(r.b).Add(r.bearing_rad).Add(r.sigma_rad);
   }
@@ -230,9 +242,9 @@ struct Layout<MissionEvent> {
     if (k[3] >= 0 && !TrimCell(c.Field(k[3])).empty()) r.node.assign(c.NodeId(k[3]));
     if (r.event == "drop" && r.node.empty()) c.Fail("a 'drop' event needs the dropped node id");
   }
-  static std::vector<std::string_view> Ids(const MissionEvent& r) {
-    if (r.node.empty()) return {r.agent};
-    return {r.agent, r.node};
+  static RowIds Ids(const MissionEvent& r) {
+    if (r.node.empty()) return RowIds(r.agent);
+    return RowIds(r.agent, r.node);
   }
   static void Format(CsvWriter& w, const MissionEvent& r) {
     w.Add(r.t).Add(r.agent).Add(r.event).Add(r.node);
@@ -253,7 +265,7 @@ struct Layout<BaroSample> {
                          r.pressure_hpa, kMinPressureHpa, kMaxPressureHpa));
     }
   }
-  static std::vector<std::string_view> Ids(const BaroSample& r) { return {r.agent}; }
+  static RowIds Ids(const BaroSample& r) { return {r.agent}; }
   static void Format(CsvWriter& w, const BaroSample& r) {
     w.Add(r.t).Add(r.agent).Add(r.pressure_hpa);
   }
@@ -285,7 +297,7 @@ struct Layout<TruthSample> {
     r.position_n = Vec3(c.Double(k[2]), c.Double(k[3]), c.OptionalDouble(k[4]).value_or(0.0));
     r.floor = OptionalLevel(c, k[5]);
   }
-  static std::vector<std::string_view> Ids(const TruthSample& r) { return {r.id}; }
+  static RowIds Ids(const TruthSample& r) { return {r.id}; }
   static void Format(CsvWriter& w, const TruthSample& r) {
     w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
   }
@@ -310,7 +322,7 @@ struct Layout<Estimate> {
     r.floor = OptionalLevel(c, k[9]);
     if (r.sxx < 0 || r.syy < 0 || (r.szz && *r.szz < 0)) c.Fail("negative variance");
   }
-  static std::vector<std::string_view> Ids(const Estimate& r) { return {r.id}; }
+  static RowIds Ids(const Estimate& r) { return {r.id}; }
   static void Format(CsvWriter& w, const Estimate& r) {
     w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
     w.Add(r.sxx).Add(r.sxy).Add(r.syy);

@@ -11,18 +11,26 @@
 
 #include <algorithm>
 #include <functional>
+#include <map>
 #include <set>
 #include <stdexcept>
+#include <string>
 #include <string_view>
 #include <type_traits>
-#include <map>
-#include <string>
+#include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "trailmark/core/measurements.h"
 #include "trailmark/io/csv.h"
 
 namespace trailmark {
+
+/// Hashes strings and string views alike (look-ups by std::string_view without a copy).
+struct StringHash {
+  using is_transparent = void;
+  std::size_t operator()(std::string_view s) const { return std::hash<std::string_view>{}(s); }
+};
 
 /// Ids a stream may use: those declared in mission.json plus crumbs introduced by drops.
 class NodeRegistry {
@@ -32,7 +40,7 @@ class NodeRegistry {
   std::size_t size() const { return ids_.size(); }
 
  private:
-  std::set<std::string, std::less<>> ids_;
+  std::unordered_set<std::string, StringHash, std::equal_to<>> ids_;
 };
 
 /// Column layout and parsing of one row kind (specialised in streams.cpp).
@@ -66,7 +74,8 @@ class RowReader {
   std::size_t last_t_line_ = 0;
   std::size_t rows_ = 0;
   /// Per device (the row's first id): its latest time and line.
-  std::map<std::string, std::pair<double, std::size_t>, std::less<>> device_;
+  std::unordered_map<std::string, std::pair<double, std::size_t>, StringHash, std::equal_to<>>
+      device_;
   decltype(device_)::iterator last_device_ = device_.end();  ///< the previous row's device
 };
 
