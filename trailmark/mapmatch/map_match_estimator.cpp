@@ -201,6 +201,7 @@ struct MapMatchEstimator::Impl {
   const LevelSource* level_source = nullptr;
   EstimatorSummary setup;
   std::size_t icp_runs = 0, icp_abandoned = 0, ignored = 0;
+  std::size_t icp_iterations_abandoned = 0, icp_iterations_kept = 0;
   TimeS t_last = 0;
 
   std::vector<std::pair<TimeS, TimeS>> Alarms(const AgentTrack& a) const {
@@ -478,6 +479,8 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
           ComparePatterns(trajectory, m.levels[a.level].sequences, m.o.comparison);
       m.icp_runs += pc.icp_runs;
       m.icp_abandoned += pc.icp_abandoned;
+      m.icp_iterations_abandoned += pc.icp_iterations_abandoned;
+      m.icp_iterations_kept += pc.icp_iterations_kept;
       // The odometry's walking direction over its last metre.
       Vec2 dir = Vec2::Zero();
       for (auto h = a.history.rbegin(); h != a.history.rend(); ++h) {
@@ -598,6 +601,8 @@ EstimatorSummary MapMatchEstimator::Summary() const {
   }
   summary.numbers["icp_runs"] = static_cast<double>(m.icp_runs);
   summary.numbers["icp_abandoned"] = static_cast<double>(m.icp_abandoned);
+  summary.numbers["icp_iterations_abandoned"] = static_cast<double>(m.icp_iterations_abandoned);
+  summary.numbers["icp_iterations_kept"] = static_cast<double>(m.icp_iterations_kept);
   summary.numbers["rows_ignored"] = static_cast<double>(m.ignored);
   return summary;
 }

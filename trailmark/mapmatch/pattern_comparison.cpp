@@ -229,7 +229,10 @@ PatternComparison ComparePatterns(const std::vector<Vec2>& trajectory,
         const Mat2 Ri = Rot(seq.grid_axis_rad + i * kPi / 2);
         const IcpResult r = Icp(x, pattern, Ri, cp - Ri * cx, o.icp);
         ++out.icp_runs;
-        out.icp_abandoned += r.rmse_m > o.icp.abandon_rmse_m;
+        const bool abandoned = r.rmse_m > o.icp.abandon_rmse_m;
+        out.icp_abandoned += abandoned;
+        (abandoned ? out.icp_iterations_abandoned : out.icp_iterations_kept) +=
+            static_cast<std::size_t>(r.iterations);
         const Vec2 xk = r.Apply(x.back());
         const int end = (xk - first).norm() < (xk - last).norm() ? 0 : 1;
         sc.rmse_m[eta][end] = std::min(sc.rmse_m[eta][end], r.rmse_m);

@@ -70,6 +70,8 @@ struct PatternComparison {
   std::vector<SequenceComparison> sequences;
   double principal_rotation_rad = 0;
   std::size_t icp_runs = 0, icp_abandoned = 0;
+  /// ICP iterations (closest-point passes) of the abandoned runs and of the others.
+  std::size_t icp_iterations_abandoned = 0, icp_iterations_kept = 0;
 };
 
 /// Algorithm 1 for the odometry `trajectory` (navigation frame, oldest first; its length
