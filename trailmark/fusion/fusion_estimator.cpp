@@ -209,8 +209,9 @@ void FusionEstimator::OnMemberEstimate(std::size_t member, const Estimate& e) {
     // A time already fused (a member that caught up late) is not fused again.
     const auto done = current_.find(e.id);
     if (done == current_.end() || e.t > done->second.t) {
-      pending_[e.id].times.insert(e.t);
-      pending_[e.id].Touch();
+      PendingTimes& pending = pending_[e.id];
+      pending.times.insert(e.t);
+      pending.Touch();
     } else if (const auto p = pending_.find(e.id); p != pending_.end()) {
       p->second.Touch();  // a member's latest changed: Due may change
     }
