@@ -30,6 +30,7 @@ MissionInfo TwoStoreys() {
 double OtherFloor(bool gate, int agent_level) {
   LandmarkEstimatorOptions o;
   o.tracking = Tracking::kUkf;
+  o.fix_fusion = FixFusion::kIndependent;
   o.gate_other_floors = gate;
   LandmarkEstimator e(TwoStoreys(), o);
   SetLevels levels;

@@ -6,6 +6,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <stdexcept>
+
 #include "trailmark/core/random.h"
 #include "trailmark/landmarks/energy.h"
 
@@ -115,6 +119,110 @@ TEST(StopAndGo, RobustLossResistsNlosOutliers) {
     }
   }
   EXPECT_LT(err_huber, 0.7 * err_sq);
+}
+
+// The standing prior and landmark priors (ours): the solution minimizes the ranges' cost plus
+// both priors. Reference: that cost written out here — its numerical gradient vanishes at the
+// solution, and the inverse of its numerical Gauss-Newton matrix is the joint covariance.
+TEST(StopAndGo, StandingPriorIsTheMinimumOfRangesAndPriors) {
+  Random rng(5);
+  StopAndGoProblem p = Exact(false, false);
+  const std::size_t B = kLandmarks.size(), q = kStanding.size();
+  for (auto& row : p.range_m) {
+    for (auto& z : row) *z += rng.Normal(0, 0.1);
+  }
+  // Landmark 0 surveyed (sigma 0.2 m, 0.15 m off); the others unknown, found by grid search.
+  p.landmark_prior_sigma_m.assign(B, 0.0);
+  p.landmark_prior_sigma_m[0] = 0.2;
+  p.landmarks[0] = kLandmarks[0] + Vec2(0.1, -0.11);
+  // The prior: the walk turned by 3 degrees about its start (a heading error shared by all
+  // stops) and shifted; its covariance that of such a heading error plus white noise.
+  const double a = 0.052;
+  Eigen::MatrixXd lever(2 * q, 1);
+  for (std::size_t k = 0; k < q; ++k) {
+    const Vec2 d = kStanding[k] - kStanding[0];
+    p.standing[k] =
+        kStanding[0] + Vec2(0.2, 0.1) +
+        Vec2(std::cos(a) * d.x() - std::sin(a) * d.y(), std::sin(a) * d.x() + std::cos(a) * d.y());
+    lever(2 * k, 0) = -d.y();
+    lever(2 * k + 1, 0) = d.x();
+  }
+  const Eigen::MatrixXd prior_cov =
+      0.06 * 0.06 * lever * lever.transpose() + 0.09 * Eigen::MatrixXd::Identity(2 * q, 2 * q);
+  p.standing_prior_information = prior_cov.inverse();
+  StopAndGoOptions o;
+  o.loss = Loss::kSquared;
+  const StopAndGoResult r = SolveStopAndGo(p, o);
+  EXPECT_TRUE(r.solvable);
+  ASSERT_EQ(r.standing_joint_cov.rows(), static_cast<Eigen::Index>(2 * q));
+  // Unknowns [landmarks (2B); standing (2q)]; residuals: ranges, then priors (whitened).
+  const Eigen::Index n = static_cast<Eigen::Index>(2 * (B + q));
+  Eigen::VectorXd mean(2 * q);
+  for (std::size_t k = 0; k < q; ++k) mean.segment<2>(2 * k) = p.standing[k];
+  const Eigen::MatrixXd whiten =
+      Eigen::LLT<Eigen::MatrixXd>(p.standing_prior_information).matrixU();
+  const auto residuals = [&](const Eigen::VectorXd& u) {
+    std::vector<double> out;
+    for (std::size_t k = 0; k < q; ++k) {
+      for (std::size_t j = 0; j < B; ++j) {
+        const double d = (u.segment<2>(2 * (B + k)) - u.segment<2>(2 * j)).norm();
+        out.push_back((d - *p.range_m[k][j]) / p.sigma_m[k][j]);
+      }
+    }
+    const Eigen::VectorXd w = whiten * (u.tail(2 * q) - mean);
+    for (Eigen::Index i = 0; i < w.size(); ++i) out.push_back(w(i));
+    out.push_back((u(0) - p.landmarks[0].x()) / 0.2);
+    out.push_back((u(1) - p.landmarks[0].y()) / 0.2);
+    return Eigen::Map<Eigen::VectorXd>(out.data(), static_cast<Eigen::Index>(out.size())).eval();
+  };
+  Eigen::VectorXd u(n);
+  for (std::size_t j = 0; j < B; ++j) u.segment<2>(2 * j) = r.landmarks[j];
+  for (std::size_t k = 0; k < q; ++k) u.segment<2>(2 * (B + k)) = r.standing[k];
+  const Eigen::VectorXd f0 = residuals(u);
+  EXPECT_NEAR(0.5 * f0.squaredNorm(), r.cost, 1e-9 * r.cost);
+  Eigen::MatrixXd J(f0.size(), n);
+  const double h = 1e-6;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    Eigen::VectorXd up = u, dn = u;
+    up(i) += h;
+    dn(i) -= h;
+    J.col(i) = (residuals(up) - residuals(dn)) / (2 * h);
+  }
+  const Eigen::VectorXd gradient = J.transpose() * f0;
+  EXPECT_LT(gradient.norm(), 1e-4) << gradient.transpose();
+  // The covariance: (J^T J)^-1, scaled by the residual variance when above 1 (documented).
+  const double dof = static_cast<double>(f0.size() - n);
+  const double scale = std::max(1.0, 2.0 * r.cost / dof);
+  const Eigen::MatrixXd cov = scale * (J.transpose() * J).inverse();
+  const Eigen::MatrixXd standing_cov = cov.bottomRightCorner(2 * q, 2 * q);
+  EXPECT_LT((r.standing_joint_cov - standing_cov).norm(), 1e-5 * standing_cov.norm());
+  for (std::size_t j = 0; j < B; ++j) {
+    EXPECT_LT((r.landmark_cov[j] - cov.block<2, 2>(2 * j, 2 * j)).norm(), 1e-5 * cov.norm()) << j;
+  }
+  // The radio took out most of the prior's turn: every stop closer to the truth than its prior.
+  for (std::size_t k = 1; k < q; ++k) {
+    EXPECT_LT((r.standing[k] - kStanding[k]).norm(), (p.standing[k] - kStanding[k]).norm()) << k;
+  }
+}
+
+// Without ranges, the standing positions are their prior: mean and joint covariance.
+TEST(StopAndGo, StandingPriorAloneIsItself) {
+  StopAndGoProblem p = Exact(true, false);
+  for (auto& row : p.range_m) {
+    for (auto& z : row) z.reset();
+  }
+  for (std::size_t k = 0; k < kStanding.size(); ++k)
+    p.standing[k] = kStanding[k] + Vec2(0.1 * k, -0.2);
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Identity(14, 14) * 0.5;
+  cov(0, 2) = cov(2, 0) = 0.3;
+  p.standing_prior_information = cov.inverse();
+  const StopAndGoResult r = SolveStopAndGo(p);
+  for (std::size_t k = 0; k < kStanding.size(); ++k) {
+    EXPECT_LT((r.standing[k] - p.standing[k]).norm(), 1e-12) << k;
+  }
+  EXPECT_LT((r.standing_joint_cov - cov).norm(), 1e-9);
+  p.standing_prior_information = Eigen::MatrixXd::Identity(4, 4);  // not 14 x 14
+  EXPECT_THROW(SolveStopAndGo(p), std::invalid_argument);
 }
 
 TEST(Energy, PaperSleepLifetimeAndOperatingTime) {

@@ -111,6 +111,44 @@ TEST(LandmarksPipeline, IntersectionFusionKeepsTheEllipseHonest) {
   }, ::testing::ThrowsMessage<std::invalid_argument>(::testing::HasSubstr("fix_fusion")));
 }
 
+// The default stop fixes (fix_fusion=joint): the stops solved with the landmarks under the dead
+// reckoning's joint prior. With the corridor's radio model given stale (intercept 12 dB off,
+// exponent 3.0 for 7.1), every solve is tested against its stated noise, fails, and is solved
+// again with the ranges' calibration as unknowns: the track stays near dead reckoning's while
+// the paper's independent fixes follow the stale model off; the ellipses stay honest.
+TEST(LandmarksPipeline, JointFixesHoldWithAStaleRadioModel) {
+  double joint_p75 = 0, paper_p75 = 0, pdr_p75 = 0, joint_in95 = 0;
+  for (std::uint64_t seed = 1; seed <= 3; ++seed) {
+    SimulatedMission sim = SimulateScenario("landmark-corridor", seed);
+    ASSERT_TRUE(sim.data.info.radio.has_value());
+    sim.data.info.radio->alpha_dbm -= 12;
+    sim.data.info.radio->path_loss_exponent = 3.0;
+    testing::TempDir dir;
+    WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+    const MissionDirectory mission(dir.path());
+    VectorSink joint, paper, pdr;
+    const EstimatorSummary s = RunBatch(RequirePipeline("landmarks-stopgo"), {mission, {}}, joint);
+    RunBatch(RequirePipeline("landmarks-stopgo"), {mission, {{"fix_fusion", "independent"}}},
+             paper);
+    RunBatch(RequirePipeline("pdr"), {mission, {}}, pdr);
+    EXPECT_GT(s.numbers.at("joint_solves_inconsistent"), 0.0);
+    // Ranges read e^a d^b of the distance d: b = 7.1 / 3.0 = 2.37 (the prior pulls toward 1).
+    EXPECT_GT(s.numbers.at("range_exponent_ratio"), 1.5);
+    for (const auto& e : joint.rows) {
+      ASSERT_TRUE(e.position_n.allFinite());
+      ASSERT_GT(e.sxx * e.syy - e.sxy * e.sxy, 0);
+    }
+    const Metrics mj = Evaluate(sim.data.info, sim.data.truth, joint.rows);
+    joint_p75 += mj.agents.stats.p75_m / 3;
+    joint_in95 += mj.agents.stats.in95 / 3;
+    paper_p75 += Evaluate(sim.data.info, sim.data.truth, paper.rows).agents.stats.p75_m / 3;
+    pdr_p75 += Evaluate(sim.data.info, sim.data.truth, pdr.rows).agents.stats.p75_m / 3;
+  }
+  EXPECT_LT(joint_p75, 1.1 * pdr_p75);
+  EXPECT_LT(joint_p75, paper_p75);
+  EXPECT_GT(joint_in95, 0.85);
+}
+
 // Without a calibration in mission.json the radio model is fitted online from the stops' RSSI
 // of the surveyed landmark, and the unknown landmarks are still localized.
 TEST(LandmarksPipeline, FitsTheRadioOnlineWithoutCalibration) {

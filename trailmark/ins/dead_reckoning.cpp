@@ -76,6 +76,7 @@ void DeadReckoning::AddStep(const Step& step) {
     q(kHeading, kHeading) = options_.heading_walk_sigma_rad * options_.heading_walk_sigma_rad;
   error_cov_ = fg * error_cov_ * fg.transpose() + q;
   error_cov_ = 0.5 * (error_cov_ + error_cov_.transpose());
+  last_transition_ = fg;
   position_n_ += step.delta_n;
 }
 

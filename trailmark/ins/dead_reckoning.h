@@ -79,6 +79,10 @@ class DeadReckoning {
   static constexpr int kSharedErrors = 4;
   const Vec3& position_n() const { return position_n_; }
   Mat2 covariance() const { return error_cov_.topLeftCorner<2, 2>(); }
+  /// The last step's error transition: the error after it is this times the error before it,
+  /// plus the step's own noise (identity before the first step). What a caller needs to carry
+  /// the correlation of an earlier error with the current one (DeadReckoningClones).
+  const ErrorCovariance& last_transition() const { return last_transition_; }
 
  private:
   using Mat6 = ErrorCovariance;
@@ -86,6 +90,7 @@ class DeadReckoning {
   PdrOptions options_;
   Vec3 position_n_;
   Mat6 error_cov_;
+  Mat6 last_transition_ = Mat6::Identity();
   std::optional<TimeS> last_t_;
   std::optional<double> last_direction_rad_;  ///< of the last step >= turn_min_step_m
 };

@@ -24,6 +24,9 @@ constexpr double kRadioEmitPeriodS = 0.5;
 constexpr double kTimeTolS = 1e-6;
 /// A position fix needs ranges to three landmarks (two leave a mirror ambiguity).
 constexpr int kRangesForFix = 3;
+/// FixFusion::kJoint: an error of each stop that no other shares, (1 mm)^2 per axis (keeps the
+/// stops' prior positive definite when two stops have no step between them).
+constexpr double kStopOwnVarianceM2 = 1e-6;
 }  // namespace
 
 bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
@@ -32,8 +35,13 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     return false;
   }
   if (!(min_range_sigma_m > 0) || !(known_start_sigma_m > 0) || !(unknown_start_sigma_m > 0) ||
-      !(surveyed_sigma_m > 0) || min_stops_heard < 1 || !(regrid_growth >= 1)) {
-    if (why) *why = "sigmas must be > 0, min_stops_heard >= 1, regrid_growth >= 1";
+      !(surveyed_sigma_m > 0) || min_stops_heard < 1 || !(regrid_growth >= 1) ||
+      joint_window_stops < 1 || !(joint_false_alarm > 0 && joint_false_alarm < 1)) {
+    if (why) {
+      *why =
+          "sigmas must be > 0, min_stops_heard >= 1, regrid_growth >= 1, "
+          "joint_window_stops >= 1, 0 < joint_false_alarm < 1";
+    }
     return false;
   }
   if (tracking == Tracking::kUkf && fix_fusion != FixFusion::kIndependent) {
@@ -67,13 +75,22 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
            std::vector<std::pair<std::string, Loss>>{
                {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
            "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
-  t.Choice("fix_fusion", [](O& o) -> FixFusion& { return o.fix_fusion; },
-           std::vector<std::pair<std::string, FixFusion>>{
-               {"independent", FixFusion::kIndependent},
-               {"intersection", FixFusion::kIntersection}},
-           "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
-           "intersection: shared PDR errors and covariance intersection, honest)");
+  t.Choice(
+      "fix_fusion", [](O& o) -> FixFusion& { return o.fix_fusion; },
+      std::vector<std::pair<std::string, FixFusion>>{{"independent", FixFusion::kIndependent},
+                                                     {"intersection", FixFusion::kIntersection},
+                                                     {"joint", FixFusion::kJoint}},
+      "stop-and-go: a stop's fix with the dead reckoning (independent: the paper; "
+      "intersection: shared PDR errors and covariance intersection, honest; joint: the "
+      "stops solved with the landmarks under the dead reckoning's joint prior)");
   if (!tracker) {
+    t.Integer("joint_window_stops", &O::joint_window_stops, OptionBounds::AtLeast(1),
+              "fix_fusion=joint: an agent's latest stops solved with its dead reckoning's prior");
+    t.Flag("joint_range_calibration", &O::joint_range_calibration,
+           "fix_fusion=joint: a solve that fails its chi-square test is solved again with an "
+           "intercept and exponent error of the ranges as unknowns");
+    t.Real("joint_false_alarm", &O::joint_false_alarm, "", OptionBounds::Between(1e-9, 0.5),
+           "fix_fusion=joint: the chi-square test's false-alarm probability");
     t.Choice("drift", [](O& o) -> DriftModel& { return o.drift; },
              std::vector<std::pair<std::string, DriftModel>>{
                  {"white", DriftModel::kWhite}, {"dead-reckoning", DriftModel::kDeadReckoning}},
@@ -168,11 +185,15 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     a.cov = Mat2::Identity() * s * s;
     a.pdr_position = a.position;
     a.z_m = start ? start->z() : 0.0;
-    if (options_.tracking != Tracking::kUkf &&
-        (options_.fix_fusion == FixFusion::kIntersection ||
-         options_.drift == DriftModel::kDeadReckoning)) {
+    if (options_.tracking != Tracking::kUkf && (options_.fix_fusion == FixFusion::kIntersection ||
+                                                (options_.fix_fusion == FixFusion::kIndependent &&
+                                                 options_.drift == DriftModel::kDeadReckoning))) {
       a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
                    n.start_heading_sigma_rad);
+    }
+    if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kJoint) {
+      a.clones.emplace(DeadReckoning(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
+                                     n.start_heading_sigma_rad));
     }
     if (!start) {
       setup_notes_.push_back(
@@ -292,11 +313,113 @@ void LandmarkEstimator::Refit() {
   }
 }
 
+void LandmarkEstimator::StartLandmarks(const std::vector<int>& heard, StopAndGoProblem* prob) {
+  for (std::size_t j = 0; j < ids_.size(); ++j) {
+    const bool warm = !known_[j] && estimate_[j] && heard[j] > options_.regrid_below_stops &&
+                      heard[j] < options_.regrid_growth * grid_heard_[j];
+    if (!known_[j] && !warm) grid_heard_[j] = heard[j];
+    prob->landmarks.push_back(known_[j] || warm ? *estimate_[j] : Vec2::Zero());
+    prob->landmark_start_given.push_back(warm);
+  }
+}
+
+void LandmarkEstimator::SolveJoint(TimeS t, const std::string& id, Agent& a, EstimateSink& sink) {
+  const int B = static_cast<int>(ids_.size());
+  a.clones->Clone(kStopOwnVarianceM2);
+  std::vector<int> heard(B, 0);
+  for (const auto& st : stops_) {
+    for (int j = 0; j < B; ++j) heard[j] += st.rssi[j].has_value();
+  }
+  // The landmarks: surveyed ones with their survey's prior (not fixed: their error is a shared
+  // error of every range to them); unknown ones once heard at min_stops_heard stops; the ranges
+  // to the others left out (a landmark heard at one or two stops takes what they say).
+  StopAndGoProblem prob;
+  StartLandmarks(heard, &prob);
+  std::vector<bool> used(B, true);
+  for (int j = 0; j < B; ++j) {
+    used[j] = known_[j] || heard[j] >= options_.min_stops_heard;
+    prob.landmark_known.push_back(!used[j]);
+    prob.landmark_prior_sigma_m.push_back(known_[j] ? std::sqrt(0.5 * estimate_cov_[j].trace())
+                                                    : 0.0);
+  }
+  // The stops: this agent's latest (its clones) unknown, with the dead reckoning's joint prior
+  // (mean: the dead reckoning's positions there); every other stop at its latest solution.
+  std::size_t next_clone = 0;
+  for (std::size_t k = 0; k < stops_.size(); ++k) {
+    const bool mine = next_clone < a.clone_stops.size() && a.clone_stops[next_clone] == k;
+    prob.standing.push_back(mine ? a.clones->clone_position_n(static_cast<int>(next_clone))
+                                 : stops_[k].standing);
+    prob.standing_known.push_back(!mine);
+    next_clone += mine;
+    std::vector<std::optional<double>> r;
+    std::vector<double> sg;
+    RangesOf(stops_[k], &r, &sg);
+    for (int j = 0; j < B; ++j) {
+      if (!used[j]) r[j].reset();
+    }
+    prob.range_m.push_back(r);
+    prob.sigma_m.push_back(sg);
+  }
+  const Eigen::MatrixXd& prior = a.clones->clone_covariance();
+  prob.standing_prior_information =
+      prior.llt().solve(Eigen::MatrixXd::Identity(prior.rows(), prior.cols()));
+  StopAndGoResult res = SolveStopAndGo(prob, options_.stop_and_go);
+  // The solve's consistency: ranges that disagree with the prior beyond their noise are read
+  // through a wrong radio model; solved again with its error as unknowns.
+  range_log_scale_ = 0, range_exponent_ratio_ = 1;
+  if (res.dof > 0 &&
+      2 * res.cost > integrity::ChiSquareQuantile(res.dof, 1 - options_.joint_false_alarm)) {
+    ++joint_inconsistent_;
+    if (options_.joint_range_calibration) {
+      prob.range_calibration = StopAndGoProblem::RangeCalibration{};
+      // From the first solve's landmarks (no second grid search).
+      for (int j = 0; j < B; ++j) {
+        if (!known_[j] && used[j]) {
+          prob.landmarks[j] = res.landmarks[j];
+          prob.landmark_start_given[j] = true;
+        }
+      }
+      res = SolveStopAndGo(prob, options_.stop_and_go);
+      range_log_scale_ = res.range_log_scale;
+      range_exponent_ratio_ = res.range_exponent_ratio;
+    }
+  }
+  solve_notes_.clear();
+  for (const auto& n : res.notes) solve_notes_.insert(n);
+  const int clones = a.clones->clones();
+  Eigen::VectorXd posterior(2 * clones);
+  for (int i = 0; i < clones; ++i) posterior.segment<2>(2 * i) = res.standing[a.clone_stops[i]];
+  bool finite = posterior.allFinite() && res.standing_joint_cov.allFinite() &&
+                res.standing_joint_cov.rows() == 2 * clones;
+  for (int j = 0; j < B; ++j) finite = finite && res.landmarks[j].allFinite();
+  if (finite) {
+    for (int j = 0; j < B; ++j) {
+      if (known_[j] || !used[j]) continue;
+      estimate_[j] = res.landmarks[j];
+      estimate_cov_[j] = res.landmark_cov[j] + Mat2::Identity() * kCovarianceFloorM2;
+    }
+    a.clones->Condition(posterior, res.standing_joint_cov);
+    for (int i = 0; i < clones; ++i)
+      stops_[a.clone_stops[i]].standing = res.standing[a.clone_stops[i]];
+    ++fixes_;
+  }
+  if (clones > options_.joint_window_stops) {
+    a.clones->DropOldest();
+    a.clone_stops.erase(a.clone_stops.begin());
+  }
+  a.position = a.clones->position_n();
+  a.cov = a.clones->covariance() + Mat2::Identity() * kStepVarianceFloorM2;
+  EmitLandmarks(t, sink);
+  a.t = t;
+  EmitAgent(t, id, a, sink);
+}
+
 void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, EstimateSink& sink) {
   const int B = static_cast<int>(ids_.size());
   a.stopped = false;
   Stop s;
   s.standing = options_.fix_fusion == FixFusion::kIntersection ? a.pdr_position : a.position;
+  if (a.clones) a.clone_stops.push_back(stops_.size());
   for (int j = 0; j < B; ++j) {
     s.rssi.push_back(a.count[j] ? std::optional<double>(a.sum[j] / a.count[j]) : std::nullopt);
   }
@@ -313,20 +436,18 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
     }
     Refit();
   }
+  if (a.clones) {
+    SolveJoint(t, id, a, sink);
+    return;
+  }
   // Landmarks from every stop so far (standing positions from the PDR, sec. 6.2).
   std::vector<int> heard(B, 0);
   for (const auto& st : stops_) {
     for (int j = 0; j < B; ++j) heard[j] += st.rssi[j].has_value();
   }
   StopAndGoProblem prob;
-  for (int j = 0; j < B; ++j) {
-    const bool warm = !known_[j] && estimate_[j] && heard[j] > options_.regrid_below_stops &&
-                      heard[j] < options_.regrid_growth * grid_heard_[j];
-    if (!known_[j] && !warm) grid_heard_[j] = heard[j];
-    prob.landmarks.push_back(known_[j] || warm ? *estimate_[j] : Vec2::Zero());
-    prob.landmark_known.push_back(known_[j]);
-    prob.landmark_start_given.push_back(warm);
-  }
+  StartLandmarks(heard, &prob);
+  for (int j = 0; j < B; ++j) prob.landmark_known.push_back(known_[j]);
   for (const auto& st : stops_) {
     prob.standing.push_back(st.standing);
     prob.standing_known.push_back(true);
@@ -426,7 +547,11 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     const double s = options_.drift_per_m * d.norm();
     a.pdr_position += d;
     if (a.dr) a.dr->AddStep(*step);
-    if (options_.fix_fusion == FixFusion::kIntersection) {
+    if (a.clones) {
+      a.clones->AddStep(*step);
+      a.position = a.clones->position_n();
+      a.cov = a.clones->covariance() + Mat2::Identity() * kStepVarianceFloorM2;
+    } else if (options_.fix_fusion == FixFusion::kIntersection) {
       a.position = a.dr->position_n().head<2>();
       a.cov = a.dr->covariance() + Mat2::Identity() * kStepVarianceFloorM2;
     } else {
@@ -536,6 +661,13 @@ EstimatorSummary LandmarkEstimator::Summary() const {
   summary.numbers["radio_refits"] = refits_;
   summary.numbers["radio_path_loss_exponent"] = model_.path_loss_exponent;
   summary.numbers["radio_alpha_dbm"] = model_.alpha_dbm;
+  if (options_.fix_fusion == FixFusion::kJoint) {
+    // Joint solves that failed their chi-square test, and the latest one's range calibration
+    // (ranges read e^a d^b of the distance d; 0 and 1 when not estimated).
+    summary.numbers["joint_solves_inconsistent"] = static_cast<double>(joint_inconsistent_);
+    summary.numbers["range_log_scale"] = range_log_scale_;
+    summary.numbers["range_exponent_ratio"] = range_exponent_ratio_;
+  }
   summary.numbers["rows_ignored"] = static_cast<double>(ignored_);
   if (options_.tracking == Tracking::kUkf) landmark_integrity_.Report(summary);
   // The error-state tracker's own estimates of each agent's motion and radio errors.

@@ -25,6 +25,7 @@
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
 #include "trailmark/ins/dead_reckoning.h"
+#include "trailmark/ins/dead_reckoning_clones.h"
 #include "trailmark/integrity/consistency.h"
 #include "trailmark/landmarks/landmark_tracker.h"
 #include "trailmark/landmarks/landmark_ukf.h"
@@ -44,6 +45,13 @@ enum class FixFusion {
   /// unknown (the map was built from the same dead reckoning); the map from the dead reckoning's
   /// standing positions. Honest (docs/landmarks.md), less accurate on the corridor.
   kIntersection,
+  /// Ours (issue 21): the agent's standing positions solved together with the landmarks, under
+  /// the dead reckoning's joint prior of those positions (its shared heading, drift-rate and scale
+  /// errors make them correlated: ins/dead_reckoning_clones.h), surveyed landmarks with their
+  /// survey's sigma; the current position conditioned on that solution. A fix counts only for
+  /// what the radio adds to the dead reckoning; the map is no longer built from positions taken
+  /// as exact.
+  kJoint,
 };
 
 /// The covariance stop-and-go tracking reports between fixes (FixFusion::kIndependent). Both
@@ -82,7 +90,9 @@ struct LandmarkEstimatorOptions {
   /// Error-state: unknown landmarks placed by each agent's tracker from its moving packets and
   /// then estimated jointly with its track (LandmarkTracker::UpdateRssiUnknown; issue 24 item 3).
   bool slam = true;
-  FixFusion fix_fusion = FixFusion::kIndependent;
+  /// Ours: kJoint (2026-12-05; the paper's kIndependent before, docs/landmarks.md). Continuous
+  /// tracking (Tracking::kUkf) has no stop fixes and takes kIndependent only.
+  FixFusion fix_fusion = FixFusion::kJoint;
   DriftModel drift = DriftModel::kDeadReckoning;
   /// PDR drift, 1 sigma per metre walked (ours: 5 %); not used by FixFusion::kIntersection,
   /// which propagates the dead reckoning's own error model (`pdr`'s defaults and the agent's
@@ -112,6 +122,17 @@ struct LandmarkEstimatorOptions {
   /// from 4 stops on, 2 of 8 corridor seeds ended 0.4-0.8 m worse, so few stops keep the grid).
   int regrid_below_stops = 20;
   double regrid_growth = 1.5;
+  /// FixFusion::kJoint: an agent's latest stops solved with its dead reckoning's prior; older
+  /// stops stay in the map's problem at their last solution (ours: bounds each solve's size).
+  int joint_window_stops = 30;
+  /// FixFusion::kJoint: when a solve fails its chi-square test at `joint_false_alarm` (the
+  /// ranges disagree with the dead reckoning's prior beyond their stated noise: a stale or
+  /// default radio model, or none), it is solved again with the ranges' calibration (an
+  /// intercept and an exponent error common to every link, StopAndGoProblem::range_calibration)
+  /// as unknowns, a priori sigmas 1 in the log (about 10 dB at exponent 2.3) and 0.5 in the
+  /// exponent's ratio (ours, issues 21 and 24). Off: never.
+  bool joint_range_calibration = true;
+  double joint_false_alarm = 0.01;
   double min_range_sigma_m = 0.1;         ///< m; floor of an RSSI range's sigma
   double known_start_sigma_m = 0.05;      ///< m; a start without start_sigma
   double unknown_start_sigma_m = 100.0;   ///< m; an agent without a start
@@ -161,8 +182,14 @@ class LandmarkEstimator : public OnlineEstimator {
     std::optional<LandmarkTracker> tracker;
     double z_m = 0;  ///< the start's z plus every step's dz (when no height channel)
     bool stepped = false;  ///< a step was seen (the error-state tracker writes its start first)
+    /// FixFusion::kJoint: the dead reckoning with its error at each of the latest stops, and
+    /// those stops' indices in stops_ (one per clone, in order).
+    std::optional<DeadReckoningClones> clones;
+    std::vector<std::size_t> clone_stops;
   };
   struct Stop {
+    /// The standing position: the dead reckoning's, or with FixFusion::kJoint the latest
+    /// solution's.
     Vec2 standing = Vec2::Zero();
     std::vector<std::optional<double>> rssi;  ///< averaged per landmark
   };
@@ -173,6 +200,11 @@ class LandmarkEstimator : public OnlineEstimator {
   std::optional<std::pair<Vec2, Mat2>> LandmarkOf(std::size_t j) const;
   void RangesOf(const Stop& s, std::vector<std::optional<double>>* r, std::vector<double>* sg) const;
   void EndOfStop(TimeS t, const std::string& id, Agent& a, EstimateSink& sink);
+  /// FixFusion::kJoint's solve at the end of a stop (stops_.back(), the agent's).
+  void SolveJoint(TimeS t, const std::string& id, Agent& a, EstimateSink& sink);
+  /// Where each landmark's descent starts (`prob.landmarks`, `landmark_start_given`) given how
+  /// many stops heard it: a warm start from its estimate, or a grid search (regrid_*).
+  void StartLandmarks(const std::vector<int>& heard, StopAndGoProblem* prob);
   void Refit();
   Vec2 PositionOf(const Agent& a) const;
   Mat2 CovarianceOf(const Agent& a) const;
@@ -198,6 +230,8 @@ class LandmarkEstimator : public OnlineEstimator {
   TimeS t_last_ = -1e300;  ///< the latest row's time
   bool first_ = true;
   int refits_ = 0;
+  double range_log_scale_ = 0, range_exponent_ratio_ = 1;  ///< the latest joint solve's
+  std::size_t joint_inconsistent_ = 0;  ///< joint solves that failed the chi-square test
   std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0, other_floor_ = 0;
   const LevelSource* levels_ = nullptr;
   MissionInfo info_;

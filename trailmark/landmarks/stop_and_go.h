@@ -15,6 +15,7 @@
 /// landmarks: a mirror solution) checked and reported. Positions may be known (fixed), e.g.
 /// standing positions from the IMU, or landmarks for handheld localization. No I/O.
 
+#include <Eigen/Core>
 #include <optional>
 #include <string>
 #include <vector>
@@ -53,6 +54,26 @@ struct StopAndGoProblem {
   std::vector<std::vector<std::optional<double>>> range_m;
   /// Per-measurement sigma (metres; same shape), e.g. from the distance-dependent RSSI model.
   std::vector<std::vector<double>> sigma_m;
+  /// Ours, beyond the paper: a joint Gaussian prior on the unknown standing positions, e.g. the
+  /// dead reckoning's (its heading and scale errors are shared by all of them, so the prior is
+  /// not diagonal). Its mean is their entries in `standing` (where the descent starts; no grid
+  /// search), this its information matrix (inverse covariance), 2u x 2u over the u unknown
+  /// standing positions in their order. Empty: no prior.
+  Eigen::MatrixXd standing_prior_information;
+  /// Ours: > 0 gives an unknown landmark a prior N(landmarks[j], sigma^2 I) and starts it there
+  /// (a surveyed landmark with its survey's sigma, instead of fixed). Empty or 0: none.
+  std::vector<double> landmark_prior_sigma_m;
+  /// Ours: the ranges' calibration estimated with the positions. Ranges read from RSSI through
+  /// a log-distance model whose intercept or exponent is off (stale, default, another radio)
+  /// are z = e^a d^b of the true distance d for every link alike (a: the intercept's error,
+  /// b: the exponent's ratio), so each range is corrected to (ln z - a) / b in the log and two
+  /// unknowns with priors a ~ N(0, log_scale_sigma^2), b ~ N(1, exponent_ratio_sigma^2) join
+  /// the problem. Empty: the ranges are taken as they are (the paper).
+  struct RangeCalibration {
+    double log_scale_sigma = 1.0;
+    double exponent_ratio_sigma = 0.5;
+  };
+  std::optional<RangeCalibration> range_calibration;
 };
 
 struct StopAndGoResult {
@@ -60,8 +81,17 @@ struct StopAndGoResult {
   /// Marginal covariances from the final Gauss-Newton information (pseudo-inverse), scaled by
   /// the residual variance when it exceeds the stated sigmas; zero for known positions.
   std::vector<Mat2> landmark_cov, standing_cov;
+  /// With a standing prior: the joint covariance of the unknown standing positions (2u x 2u, in
+  /// their order), scaled as the marginals are.
+  Eigen::MatrixXd standing_joint_cov;
+  /// With range_calibration: the estimated a (log scale) and b (exponent ratio) and their sigmas.
+  double range_log_scale = 0, range_exponent_ratio = 1;
+  double range_log_scale_sigma = 0, range_exponent_ratio_sigma = 0;
   int gd_iterations = 0, gn_iterations = 0;
   double cost = 0;                 ///< final robust cost
+  /// Degrees of freedom: measurements (priors included) minus unknowns; 2 x cost against the
+  /// chi-square quantile of these is the solve's consistency test.
+  int dof = 0;
   double rms_residual_m = 0;
   bool solvable = true;            ///< eq. (8) / observation count check
   bool degenerate = false;         ///< mirror ambiguity from collinear geometry

@@ -306,6 +306,7 @@ std::vector<PipelineSpec> BuildRegistry() {
     landmarks::LandmarkEstimatorOptions defaults;
     defaults.tracking = ukf ? landmarks::Tracking::kUkf : landmarks::Tracking::kStopAndGo;
     if (!ukf) defaults.filter = landmarks::TrackingFilter::kPaper;  // no continuous tracker
+    if (ukf) defaults.fix_fusion = landmarks::FixFusion::kIndependent;  // no stop fixes
     out.push_back(Make<landmarks::LandmarkEstimatorOptions>(
         s, defaults, landmarks::LandmarkOptionTable(defaults.tracking), Front::kGlobal,
         [](const EstimatorInputs& in, const landmarks::LandmarkEstimatorOptions& o) {
