@@ -295,8 +295,10 @@ std::vector<PipelineSpec> BuildRegistry() {
               "error-state filter (ours, issue 24: PDR heading, drift, turn and step scale, each "
               "phone's path loss and each link's shadowing as states, unknown landmarks placed "
               "from the walk); filter=paper: the paper's UKF (sec. 5.4)"
-            : "radio-landmarks paper: stop-and-go localization of landmarks and stops, dead "
-              "reckoning re-anchored at each stop (sec. 5.3, 6.2)";
+            : "radio-landmarks paper: stop-and-go localization of landmarks and stops (sec. "
+              "5.3, 6.2); by default the stops solved with the landmarks under the dead "
+              "reckoning's joint prior and the track conditioned on them (ours, issue 21); "
+              "fix_fusion=independent: the paper's re-anchoring at each stop";
     s.needs = {kStepStreams, {Stream::kRssi}};
     s.uses = {Stream::kSteps, Stream::kImu, Stream::kRssi, Stream::kEvents, Stream::kBaro};
     s.min_landmarks = 3;
