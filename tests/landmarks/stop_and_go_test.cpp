@@ -8,6 +8,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
+#include <cmath>
 #include <stdexcept>
 
 #include "trailmark/core/random.h"
@@ -203,6 +204,40 @@ TEST(StopAndGo, StandingPriorIsTheMinimumOfRangesAndPriors) {
   for (std::size_t k = 1; k < q; ++k) {
     EXPECT_LT((r.standing[k] - kStanding[k]).norm(), (p.standing[k] - kStanding[k]).norm()) << k;
   }
+}
+
+// The ranges' calibration (ours): ranges read through a radio model with the wrong intercept
+// and exponent are z = e^a d^b of the true distances; from exact such ranges the solve recovers
+// a and b and the geometry (the data outweigh the calibration's priors).
+TEST(StopAndGo, RangeCalibrationRecoversTheModelsError) {
+  StopAndGoProblem p = Exact(false, false);
+  const double a = 0.3, b = 1.4;
+  for (std::size_t k = 0; k < kStanding.size(); ++k) {
+    for (std::size_t j = 0; j < kLandmarks.size(); ++j) {
+      const double d = (kStanding[k] - kLandmarks[j]).norm();
+      p.range_m[k][j] = std::exp(a) * std::pow(d, b);
+      p.sigma_m[k][j] = 0.001 * *p.range_m[k][j];  // 0.1 % of the reading
+    }
+    p.standing[k] = kStanding[k];
+  }
+  p.landmark_prior_sigma_m.assign(kLandmarks.size(), 0.0);
+  p.landmark_prior_sigma_m[0] = 0.2;
+  p.landmarks[0] = kLandmarks[0];
+  p.standing_prior_information = Eigen::MatrixXd::Identity(14, 14) / (0.3 * 0.3);
+  p.range_calibration = StopAndGoProblem::RangeCalibration{};
+  const StopAndGoResult r = SolveStopAndGo(p);
+  EXPECT_NEAR(r.range_log_scale, a, 1e-2);
+  EXPECT_NEAR(r.range_exponent_ratio, b, 1e-2);
+  EXPECT_GT(r.range_exponent_ratio_sigma, 0.0);
+  for (std::size_t j = 0; j < kLandmarks.size(); ++j) {
+    EXPECT_LT((r.landmarks[j] - kLandmarks[j]).norm(), 0.02) << j;
+  }
+  // 35 ranges + 14 + 2 + 2 prior rows, 24 + 2 unknowns.
+  EXPECT_EQ(r.dof, 35 + 14 + 2 + 2 - 26);
+  // Without the calibration the same ranges cannot be fitted.
+  p.range_calibration.reset();
+  const StopAndGoResult plain = SolveStopAndGo(p);
+  EXPECT_GT(plain.cost, 1e3 * std::max(r.cost, 1e-6));
 }
 
 // Without ranges, the standing positions are their prior: mean and joint covariance.

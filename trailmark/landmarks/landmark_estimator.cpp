@@ -67,6 +67,8 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
          "PDR drift, 1 sigma per metre walked");
   t.Real("rssi_sigma_db", &O::rssi_sigma_db, "dB", OptionBounds::Positive(),
          "UKF: sigma of one RSSI answer");
+  t.Integer("min_stops_heard", &O::min_stops_heard, OptionBounds::AtLeast(1),
+            "an unknown landmark is placed (and used) once heard at this many stops");
   t.Integer("regrid_below_stops", &O::regrid_below_stops, OptionBounds::NonNegative(),
             "a landmark heard at up to this many stops is grid-searched at every solve");
   t.Real("regrid_growth", &O::regrid_growth, "", OptionBounds::AtLeast(1),
@@ -371,14 +373,9 @@ void LandmarkEstimator::SolveJoint(TimeS t, const std::string& id, Agent& a, Est
       2 * res.cost > integrity::ChiSquareQuantile(res.dof, 1 - options_.joint_false_alarm)) {
     ++joint_inconsistent_;
     if (options_.joint_range_calibration) {
+      // The unknown landmarks searched again on the corrected ranges (the first solve's were
+      // placed by the wrong model; stop_and_go.h).
       prob.range_calibration = StopAndGoProblem::RangeCalibration{};
-      // From the first solve's landmarks (no second grid search).
-      for (int j = 0; j < B; ++j) {
-        if (!known_[j] && used[j]) {
-          prob.landmarks[j] = res.landmarks[j];
-          prob.landmark_start_given[j] = true;
-        }
-      }
       res = SolveStopAndGo(prob, options_.stop_and_go);
       range_log_scale_ = res.range_log_scale;
       range_exponent_ratio_ = res.range_exponent_ratio;

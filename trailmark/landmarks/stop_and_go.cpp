@@ -341,6 +341,32 @@ StopAndGoResult SolveStopAndGo(StopAndGoProblem problem, const StopAndGoOptions&
     result.notes.push_back("known landmarks nearly collinear: handheld positions have a mirror");
   }
 
+  // With the range calibration and landmarks to grid-search (ours): the calibration first,
+  // from the landmarks that have priors alone, so that the grid searches read corrected ranges
+  // (ranges 2x too long place a landmark in another basin).
+  double grid_a = 0, grid_b = 1;
+  if (calibrate) {
+    bool anchored = false, searched = false;
+    for (int j = 0; j < B; ++j) {
+      if (problem.landmark_known[j]) continue;
+      anchored = anchored || problem.landmark_prior_sigma_m[j] > 0;
+      searched =
+          searched || (problem.landmark_prior_sigma_m[j] <= 0 && !problem.landmark_start_given[j]);
+    }
+    if (anchored && searched) {
+      StopAndGoProblem stage = problem;
+      for (int j = 0; j < B; ++j) {
+        if (stage.landmark_known[j] || stage.landmark_prior_sigma_m[j] > 0) continue;
+        stage.landmark_known[j] = true;
+        for (int p = 0; p < q; ++p) stage.range_m[p][j].reset();
+      }
+      const StopAndGoResult first = SolveStopAndGo(std::move(stage), o);
+      if (std::isfinite(first.range_log_scale) && first.range_exponent_ratio > 0.1) {
+        grid_a = first.range_log_scale;
+        grid_b = first.range_exponent_ratio;
+      }
+    }
+  }
   // Initialization: unknown landmarks by grid search against the standing positions, then
   // unknown standing positions against the landmarks.
   for (int j = 0; j < B; ++j) {
@@ -350,8 +376,12 @@ StopAndGoResult SolveStopAndGo(StopAndGoProblem problem, const StopAndGoOptions&
     for (int p = 0; p < q; ++p) {
       if (problem.range_m[p][j]) {
         anchors.push_back(problem.standing[p]);
-        r.push_back(*problem.range_m[p][j]);
-        s.push_back(problem.sigma_m[p][j]);
+        // z = e^a d^b read back as d (identity without a calibration).
+        const double z = *problem.range_m[p][j];
+        const double d = std::exp((std::log(std::max(z, kMinLogDistanceM)) - grid_a) / grid_b);
+        r.push_back(calibrate ? d : z);
+        s.push_back(calibrate ? problem.sigma_m[p][j] * d / (grid_b * std::max(z, 1e-6))
+                              : problem.sigma_m[p][j]);
       }
     }
     const bool prior = problem.landmark_prior_sigma_m[j] > 0;
