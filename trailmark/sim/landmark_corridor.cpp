@@ -68,6 +68,7 @@ SimulatedMission SimulateLandmarkMission(const LandmarkCorridorOptions& o, std::
       "stop-and-go walk with 7 stops, wake-ups every 3 s while walking; simulated, seed " +
       std::to_string(seed);
   const Vec2 start(-2.0, 0.0);
+  // start_heading: the walk's, set below.
   m.info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(start.x(), start.y(), 0), 0.05, 0.0, 0.02));
   for (int j = 0; j < o.landmarks; ++j) {
     NodeInfo n;
@@ -94,6 +95,9 @@ SimulatedMission SimulateLandmarkMission(const LandmarkCorridorOptions& o, std::
   route.waypoints.push_back(start);
   WalkerOptions wo;
   const Walk walk = WalkRoute(route, wo, 0.0, walk_rng);
+  // The start heading is the walk's own (it was written as 0 while the first leg heads ~13°
+  // off the x axis: the INS of an --imu-only mission aligned its yaw 13° off, 4 m at the far end).
+  m.info.nodes.front().start_heading_rad = walk.truth.front().heading_rad;
   sim.walks.emplace_back("ff1", walk);
   PdrErrorModel pdr(PdrErrorOptions{}, pdr_rng);
   for (const auto& st : walk.steps) {
