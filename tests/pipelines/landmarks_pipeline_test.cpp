@@ -149,6 +149,30 @@ TEST(LandmarksPipeline, JointFixesHoldWithAStaleRadioModel) {
   EXPECT_GT(joint_in95, 0.85);
 }
 
+// The fusion takes the joint stop fixes as a member only when asked (use.stopgo, off by
+// default: docs/fusion.md); with them its estimates change, and the member's summary shows.
+TEST(LandmarksPipeline, TheFusionTakesTheStopFixesWhenAsked) {
+  const SimulatedMission sim = SimulateScenario("landmark-corridor", 1);
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  VectorSink plain, with_stops;
+  const EstimatorSummary a = RunBatch(RequirePipeline("fusion"), {mission, {}}, plain);
+  const EstimatorSummary b =
+      RunBatch(RequirePipeline("fusion"), {mission, {{"use.stopgo", "true"}}}, with_stops);
+  const auto has_member = [](const EstimatorSummary& s) {
+    return std::any_of(s.numbers.begin(), s.numbers.end(),
+                       [](const auto& kv) { return kv.first.rfind("landmarks-stopgo.", 0) == 0; });
+  };
+  EXPECT_FALSE(has_member(a));
+  EXPECT_TRUE(has_member(b));
+  bool differ = plain.rows.size() != with_stops.rows.size();
+  for (std::size_t i = 0; !differ && i < plain.rows.size(); ++i) {
+    differ = plain.rows[i].position_n != with_stops.rows[i].position_n;
+  }
+  EXPECT_TRUE(differ);
+}
+
 // Without a calibration in mission.json the radio model is fitted online from the stops' RSSI
 // of the surveyed landmark, and the unknown landmarks are still localized.
 TEST(LandmarksPipeline, FitsTheRadioOnlineWithoutCalibration) {

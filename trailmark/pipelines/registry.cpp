@@ -156,6 +156,7 @@ struct FusionPipelineOptions {
   bool use_breadcrumb = true;
   bool use_beacons = true;
   bool use_landmarks = true;
+  bool use_stopgo = false;
   bool use_mapmatch = true;
   bool IsValid(std::string* why) const { return fusion.IsValid(why); }
 };
@@ -173,6 +174,9 @@ const OptionTable<FusionPipelineOptions>& FusionPipelineOptionTable() {
            "member: the beacon trail's EKF (beacons-ekf), when the mission has ranges");
     t.Flag("use.landmarks", &F::use_landmarks,
            "member: the landmark filter (landmarks-ukf), with 3+ landmarks and RSSI");
+    t.Flag("use.stopgo", &F::use_stopgo,
+           "member: the landmarks' stop fixes (landmarks-stopgo), with 3+ landmarks, RSSI and "
+           "stop/go events");
     t.Flag("use.mapmatch", &F::use_mapmatch,
            "member: map matching (mapmatch), when the mission has a floor plan");
     return t;
@@ -195,6 +199,7 @@ std::vector<fusion::FusionMember> FusionMembers(const EstimatorInputs& in,
       {"breadcrumb", o.use_breadcrumb, {Stream::kRssi, Stream::kRanges}, 2},
       {"beacons-ekf", o.use_beacons, {Stream::kRanges, Stream::kBearings}, 0},
       {"landmarks-ukf", o.use_landmarks, {Stream::kRssi}, 1},
+      {"landmarks-stopgo", o.use_stopgo, {Stream::kRssi}, 1},
       {"mapmatch", o.use_mapmatch, {}, 3}};
   // Members get steps from the fusion's front end: imu.csv feeds them as steps.csv does. The
   // streams only spare members that would never see their evidence (the estimates are the
