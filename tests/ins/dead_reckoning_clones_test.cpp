@@ -80,16 +80,21 @@ Step WalkStep(int k) {
   return Step{t0, t0 + 0.5, "ff1", Vec3(len * std::cos(heading), len * std::sin(heading), 0)};
 }
 
+/// Steps k, k + 1, ... (n of them) into both; k ends after them.
+void Walk(DeadReckoningClones& clones, AugmentedFilter& ref, int* k, int n) {
+  for (int i = 0; i < n; ++i, ++*k) {
+    clones.AddStep(WalkStep(*k));
+    ref.AddStep(WalkStep(*k));
+  }
+}
+
 TEST(DeadReckoningClones, IsTheAugmentedKalmanFilterBeforeAndAfterConditioning) {
   const DeadReckoning dr(Vec3(2, -1, 0), 0.2, PdrOptions{}, 0.05);
   DeadReckoningClones clones(dr);
   AugmentedFilter ref(dr);
   int k = 0;
   for (int stop = 0; stop < 3; ++stop) {
-    for (int i = 0; i < 15; ++i, ++k) {
-      clones.AddStep(WalkStep(k));
-      ref.AddStep(WalkStep(k));
-    }
+    Walk(clones, ref, &k, 15);
     clones.Clone(1e-6);
     ref.Clone(1e-6);
     // Cloning does not move the current position or its covariance.
@@ -115,16 +120,10 @@ TEST(DeadReckoningClones, IsTheAugmentedKalmanFilterBeforeAndAfterConditioning) 
   EXPECT_LT((clones.position_n() - ref.position()).norm(), 1e-9);
   EXPECT_LT((clones.covariance() - ref.position_cov()).norm(), 1e-9);
   // It stays so as steps and a new clone are added.
-  for (int i = 0; i < 25; ++i, ++k) {
-    clones.AddStep(WalkStep(k));
-    ref.AddStep(WalkStep(k));
-  }
+  Walk(clones, ref, &k, 25);
   clones.Clone(1e-6);
   ref.Clone(1e-6);
-  for (int i = 0; i < 5; ++i, ++k) {
-    clones.AddStep(WalkStep(k));
-    ref.AddStep(WalkStep(k));
-  }
+  Walk(clones, ref, &k, 5);
   EXPECT_LT((clones.position_n() - ref.position()).norm(), 1e-9);
   EXPECT_LT((clones.covariance() - ref.position_cov()).norm(), 1e-9);
   // The radio's information shrank the current position's ellipse below the dead reckoning's.
@@ -145,10 +144,7 @@ TEST(DeadReckoningClones, DroppingTheOldestConditionsOnTheRest) {
   AugmentedFilter ref(dr);
   int k = 0;
   for (int stop = 0; stop < 3; ++stop) {
-    for (int i = 0; i < 12; ++i, ++k) {
-      clones.AddStep(WalkStep(k));
-      ref.AddStep(WalkStep(k));
-    }
+    Walk(clones, ref, &k, 12);
     clones.Clone(0.0);
     ref.Clone(0.0);
   }
@@ -159,10 +155,7 @@ TEST(DeadReckoningClones, DroppingTheOldestConditionsOnTheRest) {
   ref.Measure(H, y, Eigen::MatrixXd::Identity(6, 6) * 0.04);
   const auto [post_n, post_cov] = ref.ClonePosterior();
   clones.Condition(post_n, post_cov);
-  for (int i = 0; i < 6; ++i, ++k) {
-    clones.AddStep(WalkStep(k));
-    ref.AddStep(WalkStep(k));
-  }
+  Walk(clones, ref, &k, 6);
   clones.DropOldest();
   ASSERT_EQ(clones.clones(), 2);
   // Reference: the prior joint of [current; clone 2; clone 3] propagated by the same steps,

@@ -315,6 +315,14 @@ void LandmarkEstimator::Refit() {
   }
 }
 
+std::vector<int> LandmarkEstimator::HeardAtStops() const {
+  std::vector<int> heard(ids_.size(), 0);
+  for (const auto& st : stops_) {
+    for (std::size_t j = 0; j < ids_.size(); ++j) heard[j] += st.rssi[j].has_value();
+  }
+  return heard;
+}
+
 void LandmarkEstimator::StartLandmarks(const std::vector<int>& heard, StopAndGoProblem* prob) {
   for (std::size_t j = 0; j < ids_.size(); ++j) {
     const bool warm = !known_[j] && estimate_[j] && heard[j] > options_.regrid_below_stops &&
@@ -328,10 +336,8 @@ void LandmarkEstimator::StartLandmarks(const std::vector<int>& heard, StopAndGoP
 void LandmarkEstimator::SolveJoint(TimeS t, const std::string& id, Agent& a, EstimateSink& sink) {
   const int B = static_cast<int>(ids_.size());
   a.clones->Clone(kStopOwnVarianceM2);
-  std::vector<int> heard(B, 0);
-  for (const auto& st : stops_) {
-    for (int j = 0; j < B; ++j) heard[j] += st.rssi[j].has_value();
-  }
+  a.clone_stops.push_back(stops_.size() - 1);  // this stop, the last
+  const std::vector<int> heard = HeardAtStops();
   // The landmarks: surveyed ones with their survey's prior (not fixed: their error is a shared
   // error of every range to them); unknown ones once heard at min_stops_heard stops; the ranges
   // to the others left out (a landmark heard at one or two stops takes what they say).
@@ -416,7 +422,6 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
   a.stopped = false;
   Stop s;
   s.standing = options_.fix_fusion == FixFusion::kIntersection ? a.pdr_position : a.position;
-  if (a.clones) a.clone_stops.push_back(stops_.size());
   for (int j = 0; j < B; ++j) {
     s.rssi.push_back(a.count[j] ? std::optional<double>(a.sum[j] / a.count[j]) : std::nullopt);
   }
@@ -438,10 +443,7 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
     return;
   }
   // Landmarks from every stop so far (standing positions from the PDR, sec. 6.2).
-  std::vector<int> heard(B, 0);
-  for (const auto& st : stops_) {
-    for (int j = 0; j < B; ++j) heard[j] += st.rssi[j].has_value();
-  }
+  const std::vector<int> heard = HeardAtStops();
   StopAndGoProblem prob;
   StartLandmarks(heard, &prob);
   for (int j = 0; j < B; ++j) prob.landmark_known.push_back(known_[j]);

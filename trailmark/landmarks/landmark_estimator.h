@@ -205,6 +205,8 @@ class LandmarkEstimator : public OnlineEstimator {
   /// Where each landmark's descent starts (`prob.landmarks`, `landmark_start_given`) given how
   /// many stops heard it: a warm start from its estimate, or a grid search (regrid_*).
   void StartLandmarks(const std::vector<int>& heard, StopAndGoProblem* prob);
+  /// How many stops heard each landmark.
+  std::vector<int> HeardAtStops() const;
   void Refit();
   Vec2 PositionOf(const Agent& a) const;
   Mat2 CovarianceOf(const Agent& a) const;
