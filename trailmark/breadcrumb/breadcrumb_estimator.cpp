@@ -108,6 +108,9 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real("gate_sigma", &L::gate_sigma, "", pos,
            "reject a measurement whose innovation exceeds this many sigma (IV-F)");
     t.Real("huber_k", &L::huber_k, "", pos, "Huber down-weighting beyond this many sigma");
+    t.Flag("second_order", &L::second_order,
+           "an agent's range edges carry their model's second-order terms at the nodes' "
+           "uncertainty (mean shift and variance) when linearized and committed (issue 25)");
     t.Flag("detect_moved", &L::detect_moved, "detect kicked crumbs (sec. V-C)");
     t.Real("moved_sigma_m", &L::moved_sigma_m, "m", pos, "size of a kick (\"1 to 2 metres\")");
     t.Real("max_speed_mps", &L::max_speed_mps, "m/s", pos,

@@ -29,6 +29,29 @@ double ScalarModel::Predict(double d) const { return Linearize(d).predicted; }
 
 double ScalarModel::Slope(double d) const { return Linearize(d).slope; }
 
+ScalarModel::SecondOrder ScalarModel::SecondOrderTerms(const Vec2& delta_n,
+                                                       const Mat2& cov_m2) const {
+  const double d = delta_n.norm();
+  if (!(d > min_distance_m) || !cov_m2.allFinite()) return {};
+  const Vec2 u = delta_n / d, w(-u.y(), u.x());
+  const double p_rr = u.dot(cov_m2 * u), p_tt = w.dot(cov_m2 * w), p_rt = u.dot(cov_m2 * w);
+  const double slope = Slope(d);
+  // h''(d): 0 for a range; for RSSI the slope's own derivative (central difference, which also
+  // covers the truncated mean).
+  double curvature = 0;
+  if (kind == Kind::kRssiDb) {
+    const double eps = 1e-4 * d;
+    curvature = (Slope(d + eps) - Slope(d - eps)) / (2 * eps);
+  }
+  const double a = curvature, b = slope / d;  // H2 in the (u, w) basis: diag(a, b)
+  SecondOrder s;
+  s.mean_shift = 0.5 * (a * p_rr + b * p_tt);
+  s.variance = 0.5 * (a * a * p_rr * p_rr + 2 * a * b * p_rt * p_rt + b * b * p_tt * p_tt);
+  const double cap = std::abs(slope) * std::sqrt(std::max(p_rr + p_tt, 0.0));
+  s.mean_shift = std::clamp(s.mean_shift, -cap, cap);
+  return s;
+}
+
 GenNetwork::GenNetwork(GenOptions options) : options_(options) {}
 
 NodeIndex GenNetwork::AddNode(const Vec2& initial_estimate) {

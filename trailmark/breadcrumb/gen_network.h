@@ -65,6 +65,21 @@ struct ScalarModel {
     double slope;
   };
   Linear Linearize(double distance_m) const;
+  /// The second-order terms of h(|delta|) for a difference of positions delta ~ N(delta_n,
+  /// cov_m2) (the Gaussian second-order filter: Gelb, Applied Optimal Estimation, 1974, sec.
+  /// 6.1; Bar-Shalom, Li, Kirubarajan 2001, sec. 10.3.2). With the Hessian of h in delta,
+  /// H2 = h''(d) u u^T + h'(d) / d (I - u u^T), u = delta / d:
+  ///   E[h] ~ h(d) + 1/2 tr(H2 P)   (mean_shift),   Var[h] ~ h'^2 u^T P u + 1/2 tr((H2 P)^2)
+  /// (variance: the second term only; the first is the linearized one). A range to a node
+  /// whose position is uncertain across the line of sight is longer than the distance between
+  /// the estimates by about sigma_t^2 / (2 d): committed at the estimate, every such edge pulls
+  /// the same way. The shift is kept within the first-order spread |h'| sqrt(tr P), beyond
+  /// which the expansion does not hold. Zero at or below min_distance_m.
+  struct SecondOrder {
+    double mean_shift = 0;
+    double variance = 0;
+  };
+  SecondOrder SecondOrderTerms(const Vec2& delta_n, const Mat2& cov_m2) const;
 };
 
 struct GenOptions {

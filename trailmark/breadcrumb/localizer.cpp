@@ -565,8 +565,19 @@ void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& 
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
   const ScalarModel::Linear lin = model.Linearize(d);
   const double slope = lin.slope;
-  const double S = variance + slope * slope * u.dot((cov_i + cov_j) * u);
   const Vec2 bias_hat = bias >= 0 ? gen_.Estimate(bias) : Vec2::Zero();
+  if (options_.second_order && model.kind == ScalarModel::Kind::kRange) {
+    // z = (1 + scale) h(d) + offset: the expected h at the nodes' uncertainty, not at their
+    // estimates. Their difference's covariance is taken as the marginals' sum (the cross-
+    // covariance is not formed): for ranges to beacons being placed that is the node's own,
+    // but an agent and the crumbs it dropped share its PDR error, and the sum overstates
+    // their difference: RSSI edges are left first-order (measured, docs/breadcrumb.md).
+    const ScalarModel::SecondOrder so = model.SecondOrderTerms(diff, cov_i + cov_j);
+    const double f = 1.0 + bias_hat.y();
+    z -= f * so.mean_shift;
+    variance += f * f * so.variance;
+  }
+  const double S = variance + slope * slope * u.dot((cov_i + cov_j) * u);
   const double nu = z - (1.0 + bias_hat.y()) * lin.predicted - bias_hat.x();
   const double normalized = std::abs(nu) / std::sqrt(S);
   if (source != nullptr && !node_integrity_.Record(*source, t, nu * nu / S, 1)) {

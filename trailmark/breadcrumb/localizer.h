@@ -164,6 +164,13 @@ struct LocalizerOptions {
   // robustness
   double gate_sigma = 5.0;                   ///< reject when |innovation| > gate * sigma_S
   double huber_k = 1.5;                      ///< variance x (|nu| / (k sigma_S)) beyond k
+  /// A range edge of an agent is linearized once, at the estimates of that moment, and folded
+  /// into the network when the agent's state leaves. With this, the edge carries the
+  /// second-order terms of its model at the two nodes' uncertainty (ScalarModel::
+  /// SecondOrderTerms: the expected range is longer than the estimates' distance by about
+  /// sigma_t^2 / 2d, and less certain), so that edges to a beacon still poorly placed do not
+  /// all pull one way (issue 25, item 2; ours). RSSI edges stay first-order (localizer.cpp).
+  bool second_order = true;
   /// RSSI is attenuated by walls, bodies and smoke, seldom amplified: a packet weaker than
   /// predicted (nu < 0) is down-weighted beyond this many sigma (one-sided NLOS robustness).
   double rssi_nlos_k = 0.5;
