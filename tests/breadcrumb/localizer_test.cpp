@@ -574,6 +574,83 @@ TEST(BreadcrumbLocalizer, AHeadingDriftIsLearntAndCarriedThroughAStandstill) {
   EXPECT_LT(still.final_error_m, 0.5);
 }
 
+// A zigzag walk with UWB ranges (0.3 m) to three anchors every 1.5 s; the PDR's steps state
+// 5 cm per axis, but when `lying` their heading is off by a carrying mode that jumps between
+// -30 and +30 degrees every 20 steps (a hand-held phone's). Returns the agent's motion-noise
+// factor, its mean error and the share of its estimates whose 95 % ellipse holds the truth.
+struct LyingPdrWalk {
+  double motion_noise_scale = 0;
+  double mean_error_m = 0;
+  double in95 = 0;
+};
+LyingPdrWalk WalkWithALyingPdr(bool lying, bool adapt, double anchor_a1_offset_m = 0) {
+  LocalizerOptions o;
+  o.adapt_motion_noise = adapt;
+  BreadcrumbLocalizer loc(o);
+  const std::vector<Vec2> anchors = {{-5, -5}, {40, -5}, {15, 40}};
+  for (std::size_t k = 0; k < anchors.size(); ++k)
+    loc.AddKnownNode("a" + std::to_string(k), anchors[k], 1e-3);
+  loc.AddAgent("ff1", Vec2::Zero(), 0.05, 0.02);
+  Vec2 truth = Vec2::Zero();
+  TimeS t = 0;
+  double sum_error = 0;
+  int n = 0, inside = 0;
+  std::uint32_t noise = 4242;  // a fixed pseudo-random +-0.52 m (sigma 0.3 m) per range
+  for (int leg = 0; leg < 24; ++leg) {
+    const Vec2 dir = leg % 2 == 0 ? Vec2(0.7, 0) : Vec2(0, leg % 4 == 1 ? 0.7 : -0.7);
+    for (int k = 0; k < 15; ++k) {
+      const int step = leg * 15 + k;
+      const double mode = lying ? ((step / 20) % 2 == 0 ? 0.52 : -0.52) : 0.0;
+      const Vec2 reported = Eigen::Rotation2Dd(mode) * dir;
+      loc.AddStep(
+          {t, t + 0.5, "ff1", Vec3(reported.x(), reported.y(), 0), Vec3(0.0025, 0.0025, 0.01)});
+      truth += dir;
+      t += 0.5;
+      if (k % 3 == 0) {
+        for (std::size_t a = 0; a < anchors.size(); ++a) {
+          noise = noise * 1664525u + 1013904223u;
+          const double e = 1.04 * (noise / 4294967296.0 - 0.5);
+          const double offset = a == 1 ? anchor_a1_offset_m : 0.0;
+          loc.AddRange({t, "ff1", "a" + std::to_string(a), (truth - anchors[a]).norm() + e + offset,
+                        0.3, "uwb"});
+        }
+      }
+      loc.AdvanceTo(t);
+      const auto est = loc.Estimate("ff1");
+      const Vec2 err = est->position_n - truth;
+      sum_error += err.norm();
+      inside += err.dot(est->covariance.ldlt().solve(err)) <= 5.991;  // chi2(2), 95 %
+      ++n;
+    }
+  }
+  loc.Finish();
+  return {*loc.MotionNoiseScale("ff1"), sum_error / n, static_cast<double>(inside) / n};
+}
+
+// The PDR checked against its stated noise (adapt_motion_noise): steps whose heading jumps by
+// 60 degrees while they claim 5 cm make the ranges' innovations far larger than stated, and the
+// agent's step and heading noise grow until its ellipses hold the truth again; honest steps
+// leave them as stated, and so does one anchor that lies.
+TEST(BreadcrumbLocalizer, APdrThatLiesAboutItsNoiseIsScaledUp) {
+  const LyingPdrWalk adapted = WalkWithALyingPdr(true, true);
+  const LyingPdrWalk fixed = WalkWithALyingPdr(true, false);
+  // Without it the node check blames the anchors (all three at once) and refuses their ranges:
+  // 1.8 against 5.3 m mean error, ellipses holding the truth 64 % against 17 % of the time (the
+  // factor grows over the first minute).
+  EXPECT_GT(adapted.motion_noise_scale, 4.0);
+  EXPECT_EQ(fixed.motion_noise_scale, 1.0);
+  EXPECT_GT(adapted.in95, fixed.in95 + 0.3) << adapted.in95 << " vs " << fixed.in95;
+  EXPECT_LT(adapted.mean_error_m, 0.5 * fixed.mean_error_m)
+      << adapted.mean_error_m << " vs " << fixed.mean_error_m;
+  const LyingPdrWalk honest = WalkWithALyingPdr(false, true);
+  EXPECT_LT(honest.motion_noise_scale, 2.0) << honest.motion_noise_scale;
+  EXPECT_GT(honest.in95, 0.9) << honest.in95;
+  EXPECT_LT(honest.mean_error_m, 0.5) << honest.mean_error_m;
+  // One anchor that lies (4 m long) is its own: the median over the nodes is not moved.
+  const LyingPdrWalk liar = WalkWithALyingPdr(false, true, 4.0);
+  EXPECT_LT(liar.motion_noise_scale, 2.0) << liar.motion_noise_scale;
+}
+
 // The zigzag walk above, PDR exact, UWB ranges to three anchors holding the position; three
 // crumbs at known places send RSSI by the stated model, crumb k2 `offset_db` louder.
 struct OffsetWalk {

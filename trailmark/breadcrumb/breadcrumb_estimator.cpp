@@ -19,6 +19,10 @@ bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "sigmas, gates and periods must be positive";
     return false;
   }
+  if (!(l.motion_noise_scale_max >= 1) || !std::isfinite(l.motion_noise_scale_max)) {
+    if (why) *why = "motion_noise_scale_max must be finite and >= 1";
+    return false;
+  }
   return l.integrity.IsValid(why);
 }
 
@@ -108,6 +112,11 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real("gate_sigma", &L::gate_sigma, "", pos,
            "reject a measurement whose innovation exceeds this many sigma (IV-F)");
     t.Real("huber_k", &L::huber_k, "", pos, "Huber down-weighting beyond this many sigma");
+    t.Flag("adapt_motion_noise", &L::adapt_motion_noise,
+           "each agent's step and heading noise scaled up while its radio and range edges' "
+           "innovations exceed one measurement's noise plus the stated position uncertainty");
+    t.Real("motion_noise_scale_max", &L::motion_noise_scale_max, "", OptionBounds::AtLeast(1),
+           "the largest such factor (in variance)");
     t.Flag("second_order", &L::second_order,
            "an agent's range edges carry their model's second-order terms at the nodes' "
            "uncertainty (mean shift and variance) when linearized and committed (issue 25)");
@@ -322,6 +331,7 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
       num[id + ".heading_correction_deg"] = hs->x() * kDeg;
       num[id + ".step_scale_error"] = hs->y();
     }
+    if (const auto m = loc_->MotionNoiseScale(id)) num[id + ".motion_noise_scale"] = *m;
     if (const auto kb = loc_->GyroScaleRate(id)) {
       num[id + ".gyro_scale_error"] = kb->x();
       num[id + ".heading_rate_deg_per_min"] = kb->y() * kDeg * 60.0;

@@ -16,6 +16,16 @@ namespace {
 
 Mat2 Diag(const Vec2& v) { return v.asDiagonal(); }
 
+/// adapt_motion_noise: each node's running mean over about 10 edges (counted from 3), the
+/// nodes heard in the last 30 s (at least 3), the factor's integral gain per edge (about 100
+/// edges) from the agent's 20th edge on.
+constexpr double kMotionNodeWeight = 0.1;
+constexpr std::size_t kMotionNodeMinEdges = 3;
+constexpr double kMotionNodeWindowS = 30.0;
+constexpr std::size_t kMotionMinNodes = 3;
+constexpr double kMotionGain = 0.01;
+constexpr std::size_t kMotionWarmEdges = 20;
+
 double Huber(double r, double k) {
   const double a = std::abs(r);
   return a <= k ? 0.5 * r * r : k * (a - 0.5 * k);
@@ -271,6 +281,12 @@ std::optional<Vec2> BreadcrumbLocalizer::HeadingScale(const std::string& id) con
   return gen_.Estimate(it->second.theta);
 }
 
+std::optional<double> BreadcrumbLocalizer::MotionNoiseScale(const std::string& id) const {
+  const auto it = agents_.find(id);
+  if (it == agents_.end()) return std::nullopt;
+  return it->second.motion_noise_scale;
+}
+
 std::optional<Vec2> BreadcrumbLocalizer::GyroScaleRate(const std::string& id) const {
   auto it = agents_.find(id);
   if (it == agents_.end() || it->second.gyro < 0) return std::nullopt;
@@ -495,7 +511,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   double turn_t = 0, turn_signed_t = 0;
   const Vec2 cum_t = CumAt(a, t, &var_t, &turn_t, &turn_signed_t);
   const Vec2 delta = cum_t - a.state_cum;
-  const Vec2 q = (var_t - a.state_cum_var).cwiseMax(options_.min_step_variance_m2);
+  const Vec2 q =
+      (var_t - a.state_cum_var).cwiseMax(options_.min_step_variance_m2) * a.motion_noise_scale;
   const Vec2 predicted = Corrected(a, delta);
   const NodeIndex next = gen_.AddNode(gen_.Estimate(a.state) + predicted);
   if (a.theta < 0) {
@@ -516,8 +533,10 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
     const Mat2 cov = Rm * Diag(q) * Rm.transpose();
     const double dt = t - a.state_t;
     const double turn = turn_t - a.state_cum_turn;
-    const double q_psi = options_.heading_rw_rad_per_sqrt_s * options_.heading_rw_rad_per_sqrt_s * dt +
-                         std::pow(options_.heading_per_turn_sigma * turn, 2);
+    const double q_psi =
+        (options_.heading_rw_rad_per_sqrt_s * options_.heading_rw_rad_per_sqrt_s * dt +
+         std::pow(options_.heading_per_turn_sigma * turn, 2)) *
+        a.motion_noise_scale;
     const double q_s = options_.scale_rw_per_sqrt_s * options_.scale_rw_per_sqrt_s * dt;
     const double turned = turn_signed_t - a.state_cum_turn_signed;
     const Vec2 kb_hat = a.gyro >= 0 ? gen_.Estimate(a.gyro) : Vec2::Zero();
@@ -555,11 +574,10 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   while (a.knots.size() > 2 && a.knots[1].t < t - 30.0) a.knots.pop_front();
 }
 
-void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i,
-                                          const Mat2& cov_j, double z, double variance,
-                                          const ScalarModel& model, const Vec2& offset,
-                                          double k_negative, NodeIndex bias,
-                                          const std::string* source, TimeS t) {
+std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScalarRobust(
+    NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j, double z, double variance,
+    const ScalarModel& model, const Vec2& offset, double k_negative, NodeIndex bias,
+    const std::string* source, TimeS t) {
   const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
@@ -577,16 +595,22 @@ void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& 
     z -= f * so.mean_shift;
     variance += f * f * so.variance;
   }
-  const double S = variance + slope * slope * u.dot((cov_i + cov_j) * u);
+  const double position_variance = slope * slope * u.dot((cov_i + cov_j) * u);
+  const double S = variance + position_variance;
   const double nu = z - (1.0 + bias_hat.y()) * lin.predicted - bias_hat.x();
   const double normalized = std::abs(nu) / std::sqrt(S);
+  EdgeInnovation edge{nu, position_variance, false};
+  if (!std::isfinite(normalized)) {
+    ++summary_.gated;
+    return std::nullopt;
+  }
   if (source != nullptr && !node_integrity_.Record(*source, t, nu * nu / S, 1)) {
     ++summary_.refused;
-    return;
+    return edge;
   }
-  if (!std::isfinite(normalized) || normalized > options_.gate_sigma) {
+  if (normalized > options_.gate_sigma) {
     ++summary_.gated;
-    return;
+    return edge;
   }
   const double k = nu < 0 ? k_negative : options_.huber_k;
   if (normalized > k) {
@@ -594,6 +618,41 @@ void BreadcrumbLocalizer::AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& 
     ++summary_.downweighted;
   }
   gen_.AddScalar(i, j, z, variance, model, offset, bias);
+  edge.added = true;
+  return edge;
+}
+
+void BreadcrumbLocalizer::ObserveMotion(Agent& a, const std::string& node, TimeS t,
+                                        const std::optional<EdgeInnovation>& edge,
+                                        double measurement_variance) {
+  if (!options_.adapt_motion_noise || !edge) return;
+  const double cap = options_.gate_sigma * options_.gate_sigma;
+  const double e2 = std::min(
+      edge->nu * edge->nu / std::max(measurement_variance + edge->position_variance, 1e-12), cap);
+  Agent::NodeNis& m = a.motion_nis[node];
+  m.mean = m.edges == 0 ? e2 : m.mean + kMotionNodeWeight * (e2 - m.mean);
+  ++m.edges;
+  m.t = t;
+  // The median over the nodes heard lately (each with a few edges): the agent's motion, not
+  // one node, when most of them disagree.
+  std::vector<double> means;
+  for (auto it = a.motion_nis.begin(); it != a.motion_nis.end();) {
+    if (it->second.t < t - kMotionNodeWindowS) {
+      it = a.motion_nis.erase(it);
+      continue;
+    }
+    if (it->second.edges >= kMotionNodeMinEdges) means.push_back(it->second.mean);
+    ++it;
+  }
+  if (means.size() < kMotionMinNodes) return;
+  auto mid = means.begin() + static_cast<std::ptrdiff_t>(means.size() / 2);
+  std::nth_element(means.begin(), mid, means.end());
+  const double median = *mid;
+  if (++a.motion_edges >= kMotionWarmEdges) {  // integral control toward a median of 1
+    a.motion_noise_scale =
+        std::clamp(a.motion_noise_scale * std::pow(std::max(median, 1e-3), kMotionGain), 1.0,
+                   options_.motion_noise_scale_max);
+  }
 }
 
 NodeIndex BreadcrumbLocalizer::RangeBiasNode(const std::string& kind) {
@@ -748,16 +807,22 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
         }
         z -= o;
       }
-      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, z, var, model, offset,
-                      options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t);
+      const auto edge =
+          AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, z, var, model, offset,
+                          options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t);
+      // One packet's noise: the calibrated sigma (var is inflated for the link's correlation).
+      ObserveMotion(
+          a, p.other, p.t, edge,
+          options_.radio.sigma_db * options_.radio.sigma_db + slope * slope * offset_var.mean());
       ++summary_.rssi_agent_used;
       break;
     }
     case Kind::kRange: {
       const double var = p.sigma * p.sigma + offset_var.mean();
-      AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value, var,
-                      ScalarModel{}, offset, options_.huber_k, RangeBiasNode(p.range_kind),
-                      &p.other, p.t);
+      const auto edge = AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value,
+                                        var, ScalarModel{}, offset, options_.huber_k,
+                                        RangeBiasNode(p.range_kind), &p.other, p.t);
+      ObserveMotion(a, p.other, p.t, edge, var);
       ++summary_.ranges_used;
       break;
     }

@@ -171,6 +171,17 @@ struct LocalizerOptions {
   /// sigma_t^2 / 2d, and less certain), so that edges to a beacon still poorly placed do not
   /// all pull one way (issue 25, item 2; ours). RSSI edges stay first-order (localizer.cpp).
   bool second_order = true;
+  /// The PDR checked against its stated noise (issue 21; ours). Each agent's radio and range
+  /// edges' innovations, normalized by one measurement's noise plus the position uncertainty
+  /// the network states (not the edges' correlation-inflated variance; refused and gated
+  /// edges count too, capped at the gate), are averaged per node it hears; the median over the
+  /// nodes heard in the last 30 s (at least 3) is the agent's: one node that lies moves its
+  /// own mean, an agent whose motion lies moves every node's. While that median is above 1
+  /// the agent's step and heading noise for new states are scaled up (integral control toward
+  /// 1, between 1 and motion_noise_scale_max, in variance). A phone's steps claiming a foot's
+  /// noise, a drift beyond the a-priori sigmas.
+  bool adapt_motion_noise = true;
+  double motion_noise_scale_max = 100.0;
   /// RSSI is attenuated by walls, bodies and smoke, seldom amplified: a packet weaker than
   /// predicted (nu < 0) is down-weighted beyond this many sigma (one-sided NLOS robustness).
   double rssi_nlos_k = 0.5;
@@ -248,6 +259,8 @@ class BreadcrumbLocalizer {
   std::optional<Vec2> HeadingScale(const std::string& id) const;
   /// Estimated gyro scale-factor error and PDR heading drift rate (rad/s) of an agent.
   std::optional<Vec2> GyroScaleRate(const std::string& id) const;
+  /// The factor on the agent's step and heading noise (adapt_motion_noise; 1: as stated).
+  std::optional<double> MotionNoiseScale(const std::string& id) const;
   /// The agents, by id.
   std::vector<std::string> AgentIds() const;
 
@@ -325,6 +338,16 @@ class BreadcrumbLocalizer {
     Mat2 cached_theta = Mat2::Zero();
     TimeS cov_t = -1e300;  ///< when cached_cov was computed
     Vec2 cov_cum_var = Vec2::Zero();  ///< PDR variance at that time
+    /// adapt_motion_noise: the edges' normalized innovations' running mean, their count and
+    /// the factor on this agent's step and heading noise.
+    struct NodeNis {
+      double mean = 0;  ///< running mean of the normalized innovations (about 10 edges)
+      std::size_t edges = 0;
+      TimeS t = 0;  ///< the latest
+    };
+    std::map<std::string, NodeNis> motion_nis;
+    std::size_t motion_edges = 0;
+    double motion_noise_scale = 1.0;
   };
   struct InitObservation {
     Vec2 from;
@@ -362,10 +385,23 @@ class BreadcrumbLocalizer {
   void AttachState(Agent& a, TimeS t);
   void ApplyPending(Agent& a, const Pending& p);
   /// `source` (a static node's id, may be null) and `t`: the integrity check of that node.
-  void AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j,
-                       double z, double variance, const ScalarModel& model, const Vec2& offset,
-                       double k_negative, NodeIndex bias = -1, const std::string* source = nullptr,
-                       TimeS t = 0);
+  /// An edge's innovation, its variance's position part (slope^2 u^T (cov_i + cov_j) u) and
+  /// whether the edge was added (not refused or gated).
+  struct EdgeInnovation {
+    double nu = 0;
+    double position_variance = 0;
+    bool added = false;
+  };
+  /// Empty when the innovation is not finite.
+  std::optional<EdgeInnovation> AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i,
+                                                const Mat2& cov_j, double z, double variance,
+                                                const ScalarModel& model, const Vec2& offset,
+                                                double k_negative, NodeIndex bias = -1,
+                                                const std::string* source = nullptr, TimeS t = 0);
+  /// adapt_motion_noise: one edge of agent `a` to `node` at t, with the variance of one
+  /// measurement.
+  void ObserveMotion(Agent& a, const std::string& node, TimeS t,
+                     const std::optional<EdgeInnovation>& edge, double measurement_variance);
   NodeIndex RangeBiasNode(const std::string& kind);
   /// The node's RSSI offset state (created with its prior on first use); -1 when not estimated.
   NodeIndex RssiOffsetNode(StaticNode& node);
