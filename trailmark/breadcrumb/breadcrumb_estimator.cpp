@@ -309,6 +309,7 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["range_edges"] = static_cast<double>(s.ranges_used);
   num["gated"] = static_cast<double>(s.gated);
   num["refused_by_integrity"] = static_cast<double>(s.refused);
+  num["refusals_blamed_on_motion"] = static_cast<double>(s.refusals_blamed_on_motion);
   loc_->node_integrity().Report(summary);
   num["downweighted"] = static_cast<double>(s.downweighted);
   num["encounters"] = static_cast<double>(s.encounters);

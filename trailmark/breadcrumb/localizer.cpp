@@ -25,6 +25,8 @@ constexpr double kMotionNodeWindowS = 30.0;
 constexpr std::size_t kMotionMinNodes = 3;
 constexpr double kMotionGain = 0.01;
 constexpr std::size_t kMotionWarmEdges = 20;
+/// A flagged node whose mean is within this factor of the agent's median is like its peers.
+constexpr double kMotionPeerFactor = 4.0;
 
 double Huber(double r, double k) {
   const double a = std::abs(r);
@@ -577,7 +579,7 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
 std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScalarRobust(
     NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j, double z, double variance,
     const ScalarModel& model, const Vec2& offset, double k_negative, NodeIndex bias,
-    const std::string* source, TimeS t) {
+    const std::string* source, TimeS t, const Agent* agent) {
   const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
@@ -605,8 +607,11 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
     return std::nullopt;
   }
   if (source != nullptr && !node_integrity_.Record(*source, t, nu * nu / S, 1)) {
-    ++summary_.refused;
-    return edge;
+    if (agent == nullptr || !BlameMotion(*agent, *source)) {
+      ++summary_.refused;
+      return edge;
+    }
+    ++summary_.refusals_blamed_on_motion;
   }
   if (normalized > options_.gate_sigma) {
     ++summary_.gated;
@@ -620,6 +625,12 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
   gen_.AddScalar(i, j, z, variance, model, offset, bias);
   edge.added = true;
   return edge;
+}
+
+bool BreadcrumbLocalizer::BlameMotion(const Agent& a, const std::string& node) const {
+  if (!options_.adapt_motion_noise || !(a.motion_median > 1.0)) return false;
+  const auto it = a.motion_nis.find(node);
+  return it != a.motion_nis.end() && it->second.mean <= kMotionPeerFactor * a.motion_median;
 }
 
 void BreadcrumbLocalizer::ObserveMotion(Agent& a, const std::string& node, TimeS t,
@@ -644,10 +655,14 @@ void BreadcrumbLocalizer::ObserveMotion(Agent& a, const std::string& node, TimeS
     if (it->second.edges >= kMotionNodeMinEdges) means.push_back(it->second.mean);
     ++it;
   }
-  if (means.size() < kMotionMinNodes) return;
+  if (means.size() < kMotionMinNodes) {
+    a.motion_median = 0;
+    return;
+  }
   auto mid = means.begin() + static_cast<std::ptrdiff_t>(means.size() / 2);
   std::nth_element(means.begin(), mid, means.end());
   const double median = *mid;
+  a.motion_median = median;
   if (++a.motion_edges >= kMotionWarmEdges) {  // integral control toward a median of 1
     a.motion_noise_scale =
         std::clamp(a.motion_noise_scale * std::pow(std::max(median, 1e-3), kMotionGain), 1.0,
@@ -809,7 +824,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       }
       const auto edge =
           AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, z, var, model, offset,
-                          options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t);
+                          options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t, &a);
       // One packet's noise: the calibrated sigma (var is inflated for the link's correlation).
       ObserveMotion(
           a, p.other, p.t, edge,
@@ -821,7 +836,7 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const double var = p.sigma * p.sigma + offset_var.mean();
       const auto edge = AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value,
                                         var, ScalarModel{}, offset, options_.huber_k,
-                                        RangeBiasNode(p.range_kind), &p.other, p.t);
+                                        RangeBiasNode(p.range_kind), &p.other, p.t, &a);
       ObserveMotion(a, p.other, p.t, edge, var);
       ++summary_.ranges_used;
       break;

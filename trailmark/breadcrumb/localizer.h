@@ -219,6 +219,7 @@ struct LocalizerSummary {
   std::size_t ranges_used = 0;
   std::size_t gated = 0, downweighted = 0;
   std::size_t refused = 0;  ///< by the integrity check (a static node inconsistent with its noise)
+  std::size_t refusals_blamed_on_motion = 0;  ///< flagged nodes used anyway (BlameMotion)
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   std::size_t unusable = 0;  ///< measurements that could not be attached (with reasons in notes)
@@ -348,6 +349,7 @@ class BreadcrumbLocalizer {
     std::map<std::string, NodeNis> motion_nis;
     std::size_t motion_edges = 0;
     double motion_noise_scale = 1.0;
+    double motion_median = 0;  ///< the latest median over the nodes (0: fewer than 3 heard)
   };
   struct InitObservation {
     Vec2 from;
@@ -397,7 +399,12 @@ class BreadcrumbLocalizer {
                                                 const Mat2& cov_j, double z, double variance,
                                                 const ScalarModel& model, const Vec2& offset,
                                                 double k_negative, NodeIndex bias = -1,
-                                                const std::string* source = nullptr, TimeS t = 0);
+                                                const std::string* source = nullptr, TimeS t = 0,
+                                                const Agent* agent = nullptr);
+  /// Whether the node check's verdict on `node` is the agent's motion, not the node's: the
+  /// agent's median over the nodes it hears is above 1 and this node's mean is like its peers'
+  /// (within kMotionPeerFactor of the median): then its edges are not refused.
+  bool BlameMotion(const Agent& a, const std::string& node) const;
   /// adapt_motion_noise: one edge of agent `a` to `node` at t, with the variance of one
   /// measurement.
   void ObserveMotion(Agent& a, const std::string& node, TimeS t,
