@@ -89,7 +89,12 @@ try {
   const s3 = await stats();
   if (s3.zoom !== s2.zoom || Math.hypot(s3.center[0] - s2.center[0], s3.center[1] - s2.center[1]) > 0.01) fail(`a live update moved the view: ${JSON.stringify(s2)} -> ${JSON.stringify(s3)}`);
   if (!(s3.appends > s2.appends)) fail(`trails did not grow live: ${s2.appends} -> ${s3.appends} appends`);
-  if (s3.rebuilds !== s2.rebuilds) fail(`live rows redrew whole trails: ${s2.rebuilds} -> ${s3.rebuilds} rebuilds`);
+  // A history fetch that fills a gap (the live stream lagged: a loaded machine) redraws that
+  // trail by design; any other redraw while rows arrive is a failure.
+  if (s3.rebuilds - s3.gapFills !== s2.rebuilds - s2.gapFills) {
+    fail(`live rows redrew whole trails: ${s2.rebuilds} -> ${s3.rebuilds} rebuilds (${s2.gapFills} -> ${s3.gapFills} of them gap fills)`);
+  }
+  if (s3.gapFills !== s2.gapFills) console.log(`dashboard: live stream lagged: ${s3.gapFills - s2.gapFills} gap fill(s) redrew a trail`);
   await page.click('#fit');
   await page.waitForTimeout(300);
   const s4 = await stats();

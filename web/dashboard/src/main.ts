@@ -65,7 +65,7 @@ function mergeHistory(h: History): void {
     trails[id] = old.filter((r) => r[0] < first).concat(rows, old.filter((r) => r[0] > end));
     for (const r of rows) trailBounds.add(r[1], r[2]);
     if (following) {
-      if (gap) incidentMap.rebuildTrail(id, trails[id]);
+      if (gap) incidentMap.rebuildTrail(id, trails[id], null, true);
       else incidentMap.appendTrail(id, rows);
     } // else the timeline shows the past: drawn when it returns
     boundTrail(id);

@@ -52,6 +52,8 @@ interface AgentDrawing {
 export interface MapStats {
   appends: number;
   rebuilds: number;
+  /** Of the rebuilds, those that filled a gap with fetched history (the live stream lagged). */
+  gapFills: number;
   planLevel: number | null;
   planSegments: number;
   zoom: number;
@@ -82,6 +84,7 @@ export class IncidentMap {
   private planSegments = 0;
   private appends = 0;
   private rebuilds = 0;
+  private gapFills = 0;
   private fitted = false;
   follow = false;
 
@@ -209,8 +212,9 @@ export class IncidentMap {
     }
   }
 
-  /** Draws the trail anew from its rows up to `t` (the timeline dragged, a gap filled). */
-  rebuildTrail(id: string, rows: TrailRow[], t: number | null = null): void {
+  /** Draws the trail anew from its rows up to `t` (the timeline dragged, a gap filled:
+   *  `gapFill`, counted apart, a trail thinned). */
+  rebuildTrail(id: string, rows: TrailRow[], t: number | null = null, gapFill = false): void {
     const a = this.agent(id);
     const points: L.LatLng[] = [];
     a.times = [];
@@ -223,6 +227,7 @@ export class IncidentMap {
     }
     this.setPoints(a, points);
     this.rebuilds++;
+    if (gapFill) this.gapFills++;
   }
 
   /** Whether rows fetched over [first, end] would fill a gap in the drawn trail. */
@@ -333,6 +338,7 @@ export class IncidentMap {
     return {
       appends: this.appends,
       rebuilds: this.rebuilds,
+      gapFills: this.gapFills,
       planLevel: this.shownLevel,
       planSegments: this.planSegments,
       zoom,
