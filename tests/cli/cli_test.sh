@@ -5,7 +5,7 @@
 set -euo pipefail
 TM="$1"
 dir=$(mktemp -d)
-trap 'rm -rf "$dir"' EXIT
+trap 'status=$?; pids=$(jobs -p); [ -z "$pids" ] || kill $pids 2>/dev/null; rm -rf "$dir"; exit $status' EXIT  # no server left behind
 fail() { echo "FAIL: $*"; exit 1; }
 # Runs a command that must fail; leaves its exit code in $rc and its stderr in $dir/err.
 # `cmd | matches PATTERN`: like grep -q, but reads to the end — grep -q stops at the first
@@ -307,11 +307,19 @@ run_failing "$TM" serve --replay "$dir/bt" --port 0 --token x --tls-cert "$dir/b
 mkdir -p "$dir/live"
 cp "$dir/m2/mission.json" "$dir/live/"
 start_live() {
+  # The restart writes the same log: removed first, so that the wait below cannot read the
+  # killed server's "listening on" before the new one has truncated the file (the background
+  # job's redirection runs after this shell goes on: CI failed on that race once).
+  rm -f "$dir/live.log"
   "$TM" serve --live "$dir/live" --journal "$dir/j.db" --pipeline pdr --port 0 --token T > "$dir/live.log" 2>&1 &
   live_pid=$!
-  for _ in $(seq 300); do grep -q "listening on" "$dir/live.log" && break; sleep 0.1; done
-  lport=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/live.log")
-  [ -n "$lport" ] || { cat "$dir/live.log"; fail "live serve did not start"; }
+  lport=""
+  for _ in $(seq 300); do
+    lport=$(sed -n 's|.*listening on http://127.0.0.1:\([0-9]*\)/.*|\1|p' "$dir/live.log" 2>/dev/null)
+    [ -n "$lport" ] && break
+    sleep 0.1
+  done
+  [ -n "$lport" ] || { cat "$dir/live.log"; kill $live_pid 2>/dev/null; fail "live serve did not start"; }
 }
 header=$(head -1 "$dir/m2/steps.csv")
 tail -n +2 "$dir/m2/steps.csv" | split -l 20 - "$dir/chunk."
