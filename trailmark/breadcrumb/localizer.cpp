@@ -586,22 +586,23 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
   const ScalarModel::Linear lin = model.Linearize(d);
   const double slope = lin.slope;
   const Vec2 bias_hat = bias >= 0 ? gen_.Estimate(bias) : Vec2::Zero();
+  const Mat2 cov_sum = cov_i + cov_j;
   if (options_.second_order && model.kind == ScalarModel::Kind::kRange) {
     // z = (1 + scale) h(d) + offset: the expected h at the nodes' uncertainty, not at their
     // estimates. Their difference's covariance is taken as the marginals' sum (the cross-
     // covariance is not formed): for ranges to beacons being placed that is the node's own,
     // but an agent and the crumbs it dropped share its PDR error, and the sum overstates
     // their difference: RSSI edges are left first-order (measured, docs/breadcrumb.md).
-    const ScalarModel::SecondOrder so = model.SecondOrderTerms(diff, cov_i + cov_j);
+    const ScalarModel::SecondOrder so = model.SecondOrderTerms(diff, cov_sum);
     const double f = 1.0 + bias_hat.y();
     z -= f * so.mean_shift;
     variance += f * f * so.variance;
   }
-  const double position_variance = slope * slope * u.dot((cov_i + cov_j) * u);
+  const double position_variance = slope * slope * u.dot(cov_sum * u);
   const double S = variance + position_variance;
   const double nu = z - (1.0 + bias_hat.y()) * lin.predicted - bias_hat.x();
   const double normalized = std::abs(nu) / std::sqrt(S);
-  EdgeInnovation edge{nu, position_variance, false};
+  const EdgeInnovation edge{nu, position_variance};
   if (!std::isfinite(normalized)) {
     ++summary_.gated;
     return std::nullopt;
@@ -623,7 +624,6 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
     ++summary_.downweighted;
   }
   gen_.AddScalar(i, j, z, variance, model, offset, bias);
-  edge.added = true;
   return edge;
 }
 
@@ -646,7 +646,8 @@ void BreadcrumbLocalizer::ObserveMotion(Agent& a, const std::string& node, TimeS
   m.t = t;
   // The median over the nodes heard lately (each with a few edges): the agent's motion, not
   // one node, when most of them disagree.
-  std::vector<double> means;
+  std::vector<double>& means = motion_means_;
+  means.clear();
   for (auto it = a.motion_nis.begin(); it != a.motion_nis.end();) {
     if (it->second.t < t - kMotionNodeWindowS) {
       it = a.motion_nis.erase(it);

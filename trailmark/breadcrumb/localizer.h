@@ -339,8 +339,8 @@ class BreadcrumbLocalizer {
     Mat2 cached_theta = Mat2::Zero();
     TimeS cov_t = -1e300;  ///< when cached_cov was computed
     Vec2 cov_cum_var = Vec2::Zero();  ///< PDR variance at that time
-    /// adapt_motion_noise: the edges' normalized innovations' running mean, their count and
-    /// the factor on this agent's step and heading noise.
+    /// adapt_motion_noise: per node heard, its edges' normalized innovations' running mean;
+    /// the agent's edges counted, the factor on its step and heading noise and the median.
     struct NodeNis {
       double mean = 0;  ///< running mean of the normalized innovations (about 10 edges)
       std::size_t edges = 0;
@@ -387,12 +387,11 @@ class BreadcrumbLocalizer {
   void AttachState(Agent& a, TimeS t);
   void ApplyPending(Agent& a, const Pending& p);
   /// `source` (a static node's id, may be null) and `t`: the integrity check of that node.
-  /// An edge's innovation, its variance's position part (slope^2 u^T (cov_i + cov_j) u) and
-  /// whether the edge was added (not refused or gated).
+  /// An edge's innovation and its variance's position part (slope^2 u^T (cov_i + cov_j) u),
+  /// whether the edge was added or refused or gated.
   struct EdgeInnovation {
     double nu = 0;
     double position_variance = 0;
-    bool added = false;
   };
   /// Empty when the innovation is not finite.
   std::optional<EdgeInnovation> AddScalarRobust(NodeIndex i, NodeIndex j, const Mat2& cov_i,
@@ -453,6 +452,7 @@ class BreadcrumbLocalizer {
   bool SolveThrottled();
   LocalizerSummary summary_;
   integrity::ConsistencyMonitor node_integrity_;
+  std::vector<double> motion_means_;  ///< ObserveMotion's scratch (no allocation per edge)
   std::vector<radio::CalibrationPair> calibration_pairs_;
   std::map<std::string, NodeIndex> range_bias_;
   bool calibrated_ = false;
