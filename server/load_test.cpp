@@ -11,15 +11,18 @@
 #include <condition_variable>
 #include <deque>
 #include <fstream>
+#include <limits>
 #include <mutex>
 #include <set>
 #include <thread>
+#include <type_traits>
 
 #include "server/incident_server.h"
 #include "server/journal.h"
 #include "trailmark/eval/metrics.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/io/streams.h"
+#include "trailmark/pipelines/batch_run.h"
 #include "trailmark/pipelines/registry.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
@@ -36,22 +39,27 @@ using Clock = std::chrono::steady_clock;
 
 struct Request {
   std::string stream, body;  ///< stream empty: a bundle of the device's streams (JSON)
-  double t_last = 0;   ///< IMU: the batch's last sample time (latency matching)
-  double t_first = 0;  ///< IMU: its first sample time
-  bool has_imu = false;
+  double t_last = 0;   ///< a clock batch (IMU, else steps): its last row's time (latency matching)
+  double t_first = 0;  ///< its first row's time
+  bool has_clock = false;  ///< holds a batch of the device's clock stream
 };
 
 /// One firefighter's rows (its own ids), each stream in time order.
 struct DeviceRows {
   std::vector<ImuSample> imu;
+  std::vector<Step> steps;
   std::vector<RssiPacket> rssi;
   std::vector<RangeMeasurement> ranges;
   std::vector<BearingMeasurement> bearings;
   std::vector<MissionEvent> events;
+  std::vector<BaroSample> baro;
+  std::size_t other_rows() const {
+    return rssi.size() + ranges.size() + bearings.size() + events.size() + baro.size();
+  }
 };
 
 template <class Row>
-void AddBody(const std::vector<Row>& rows, std::size_t& next, double until, const char* stream,
+void AddBody(const std::vector<Row>& rows, std::size_t& next, double until,
              std::vector<Request>& out) {
   std::vector<Row> window;
   for (; next < rows.size() && RowTime(MissionRow(rows[next])) <= until; ++next)
@@ -59,37 +67,119 @@ void AddBody(const std::vector<Row>& rows, std::size_t& next, double until, cons
   if (window.empty()) return;
   std::string body;
   for (const auto& line : FormatAll(window)) body += line + "\n";
-  out.push_back({stream, std::move(body)});
+  out.push_back({StreamFileName<Row>(), std::move(body)});
 }
 
-/// One firefighter's requests in send order: IMU batches, each followed by the rows of the
-/// other streams of its time window — one request per stream, or (`bundle`) the window's
-/// streams in one request (POST /api/ingest).
-std::vector<Request> Requests(const DeviceRows& d, double batch_s, bool bundle) {
+template <class Row>
+double NextTime(const std::vector<Row>& rows, std::size_t next) {
+  return next < rows.size() ? RowTime(MissionRow(rows[next]))
+                            : std::numeric_limits<double>::infinity();
+}
+
+/// One firefighter's requests in send order, one per window of batch_s from its next row: the
+/// window's rows of its clock stream (`clock`: the foot IMU, or the steps of a device without
+/// one), then those of the other streams — one request per stream, or (`bundle`) the window's
+/// streams in one request (POST /api/ingest). A window without a clock row (a firefighter
+/// standing still sends no steps, but still hears packets) is sent all the same.
+template <class ClockRow>
+std::vector<Request> Batches(const std::vector<ClockRow>& clock, const DeviceRows& d,
+                             double batch_s, bool bundle) {
   std::vector<Request> out;
-  std::size_t r = 0, g = 0, b = 0, e = 0;
-  for (std::size_t i = 0; i < d.imu.size();) {
-    const double end = d.imu[i].t + batch_s - 1e-9;
-    std::vector<ImuSample> batch;
-    for (; i < d.imu.size() && d.imu[i].t <= end; ++i) batch.push_back(d.imu[i]);
-    std::string body;
-    for (const auto& line : FormatAll(batch)) body += line + "\n";
+  std::size_t c = 0, r = 0, g = 0, b = 0, e = 0, p = 0, s = 0;
+  constexpr bool kImuClock = std::is_same_v<ClockRow, ImuSample>;
+  for (;;) {
+    double start = std::min({NextTime(clock, c), NextTime(d.events, e), NextTime(d.ranges, g),
+                             NextTime(d.bearings, b), NextTime(d.baro, p), NextTime(d.rssi, r)});
+    if constexpr (kImuClock) start = std::min(start, NextTime(d.steps, s));
+    if (!std::isfinite(start)) break;
+    const double end = start + batch_s - 1e-9;
     const std::size_t first = out.size();
-    out.push_back({"imu.csv", std::move(body), batch.back().t, batch.front().t, true});
-    const double until = batch.back().t;
-    AddBody(d.events, e, until, "events.csv", out);
-    AddBody(d.ranges, g, until, "ranges.csv", out);
-    AddBody(d.bearings, b, until, "bearings.csv", out);
-    AddBody(d.rssi, r, until, "rssi.csv", out);
-    if (bundle) {
+    std::vector<ClockRow> batch;
+    for (; c < clock.size() && RowTime(MissionRow(clock[c])) <= end; ++c) batch.push_back(clock[c]);
+    if (!batch.empty()) {
+      std::string body;
+      for (const auto& line : FormatAll(batch)) body += line + "\n";
+      out.push_back({StreamFileName<ClockRow>(), std::move(body), RowTime(MissionRow(batch.back())),
+                     RowTime(MissionRow(batch.front())), true});
+    }
+    AddBody(d.events, e, end, out);
+    if constexpr (kImuClock) AddBody(d.steps, s, end, out);
+    AddBody(d.ranges, g, end, out);
+    AddBody(d.bearings, b, end, out);
+    AddBody(d.baro, p, end, out);
+    AddBody(d.rssi, r, end, out);
+    if (bundle && out.size() > first) {
       nlohmann::ordered_json sections;
       for (std::size_t k = first; k < out.size(); ++k) sections[out[k].stream] = out[k].body;
-      Request one{"", sections.dump(), out[first].t_last, out[first].t_first, true};
+      Request one{"", sections.dump(), out[first].t_last, out[first].t_first, !batch.empty()};
       out.resize(first);
       out.push_back(std::move(one));
     }
   }
   return out;
+}
+
+std::vector<Request> Requests(const DeviceRows& d, double batch_s, bool bundle) {
+  return d.imu.empty() ? Batches(d.steps, d, batch_s, bundle) : Batches(d.imu, d, batch_s, bundle);
+}
+
+/// What the devices send: the incident's nodes, each firefighter's requests in send order.
+struct LoadPlan {
+  MissionInfo info;
+  std::vector<std::string> ids;
+  std::vector<std::vector<Request>> requests;
+  std::size_t imu_rows = 0, step_rows = 0, other_rows = 0;
+  std::optional<FloorPlan> plan;
+  LevelPlans levels;
+  std::string scenario;
+  double duration_s = 0;
+};
+
+void Count(const DeviceRows& d, LoadPlan& plan) {
+  plan.imu_rows += d.imu.size();
+  plan.step_rows += d.steps.size();
+  plan.other_rows += d.other_rows();
+}
+
+/// A recorded or simulated mission replayed as it is: each agent with a motion stream (IMU or
+/// steps) is a device sending its own rows (RowNode: its IMU and steps, its events, what it
+/// receives, its barometer); the rows of the other nodes' devices (crumb-to-crumb packets,
+/// beacon ranges) go with the first device's.
+LoadPlan ReplayedLoad(const LoadTestOptions& o, const PipelineSpec& spec) {
+  const MissionDirectory mission(o.mission);
+  MissionData data = ReadMissionData(mission);
+  LoadPlan plan;
+  plan.info = data.info;
+  plan.scenario = o.mission.string();
+  std::map<std::string, DeviceRows> devices;
+  for (const auto& s : data.imu) devices[s.agent];
+  for (const auto& s : data.steps) devices[s.agent];
+  if (devices.empty())
+    throw std::invalid_argument("bench load: " + o.mission.string() +
+                                " has no imu.csv or steps.csv rows: no device to replay");
+  for (const auto& [id, rows] : devices) plan.ids.push_back(id);
+  double t0 = std::numeric_limits<double>::infinity(), t1 = -t0;
+  auto device = [&](const auto& row) -> DeviceRows& {
+    const MissionRow r(row);
+    t0 = std::min(t0, RowTime(r)), t1 = std::max(t1, RowTime(r));
+    const auto it = devices.find(RowNode(r));
+    return it != devices.end() ? it->second : devices.at(plan.ids.front());
+  };
+  for (const auto& x : data.imu) device(x).imu.push_back(x);
+  for (const auto& x : data.steps) device(x).steps.push_back(x);
+  for (const auto& x : data.rssi) device(x).rssi.push_back(x);
+  for (const auto& x : data.ranges) device(x).ranges.push_back(x);
+  for (const auto& x : data.bearings) device(x).bearings.push_back(x);
+  for (const auto& x : data.events) device(x).events.push_back(x);
+  for (const auto& x : data.baro) device(x).baro.push_back(x);
+  plan.duration_s = std::max(t1 - t0, 1e-9);
+  for (const auto& id : plan.ids) {
+    const DeviceRows& d = devices.at(id);
+    plan.requests.push_back(Requests(d, o.batch_s, o.bundle && o.mqtt_uri.empty()));
+    Count(d, plan);
+  }
+  plan.plan = LoadPipelineFloor(spec, mission, o.pipeline_options, nullptr, &plan.levels);
+  return plan;
 }
 
 double CpuSeconds() {
@@ -105,13 +195,8 @@ double PeakRssMb() {
   return u.ru_maxrss / 1024.0;
 }
 
-}  // namespace
-
-nlohmann::json RunLoadTest(const LoadTestOptions& o) {
-  if (o.firefighters < 1 || !(o.minutes > 0) || !(o.batch_s > 0) || !(o.imu_hz > 0) ||
-      !(o.stagger_s >= 0) || !std::isfinite(o.stagger_s))
-    throw std::invalid_argument(
-        "bench load: firefighters >= 1; minutes, batch, rate > 0; stagger >= 0");
+/// The simulated load (see RunLoadTest's comment below).
+LoadPlan SimulatedLoad(const LoadTestOptions& o, const PipelineSpec& spec) {
   // The scenario: the simulated experiment of the pipeline's paper, else the office loop (it
   // ends where it began), with a foot IMU; one walk repeated until the incident time is covered;
   // every firefighter sends it under its own id.
@@ -125,7 +210,6 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   //    new crumbs ("ff3-r2-b01" in the third): a longer incident has more of them, as a real
   //    one would; the same crumbs dropped again where the dead reckoning has drifted to would
   //    be a contradiction no incident has.
-  const PipelineSpec& spec = RequirePipeline(o.pipeline);
   const bool paper = !spec.paper_scenarios.empty();
   SimulatedMission sim = paper ? SimulateScenario(spec.paper_scenarios.front(), o.seed)
                                : SimulateOfficeLoop(OfficeLoopOptions{}, o.seed);
@@ -149,12 +233,11 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       if (e.event == "drop" && !e.node.empty()) crumbs.insert(e.node);
     }
   }
-  MissionInfo info;
+  LoadPlan plan;
+  MissionInfo& info = plan.info;
   info.name = "load test";
   info.radio = sim.data.info.radio;
-  std::vector<std::string> ids;
-  std::vector<std::vector<Request>> requests;
-  std::size_t imu_rows = 0, other_rows = 0;
+  std::vector<std::string>& ids = plan.ids;
   for (int k = 1; k <= o.firefighters; ++k) {
     const std::string ff = fmt::format("ff{}", k);
     ids.push_back(ff);
@@ -209,19 +292,40 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       }
     }
     // The requests now: the rows themselves are not kept (peak memory).
-    requests.push_back(Requests(d, o.batch_s, o.bundle && o.mqtt_uri.empty()));
-    imu_rows += d.imu.size();
-    other_rows += d.rssi.size() + d.ranges.size() + d.bearings.size() + d.events.size();
+    plan.requests.push_back(Requests(d, o.batch_s, o.bundle && o.mqtt_uri.empty()));
+    Count(d, plan);
   }
+  if (spec.needs_floor_plan) plan.plan = sim.plan;
+  plan.scenario = paper ? spec.paper_scenarios.front() : std::string("office-loop");
+  plan.duration_s = duration_s;
+  return plan;
+}
+
+}  // namespace
+
+nlohmann::json RunLoadTest(const LoadTestOptions& o) {
+  if (!(o.batch_s > 0) ||
+      (o.mission.empty() && (o.firefighters < 1 || !(o.minutes > 0) || !(o.imu_hz > 0) ||
+                             !(o.stagger_s >= 0) || !std::isfinite(o.stagger_s))))
+    throw std::invalid_argument(
+        "bench load: firefighters >= 1; minutes, batch, rate > 0; stagger >= 0");
+  const PipelineSpec& spec = RequirePipeline(o.pipeline);
+  const LoadPlan load = o.mission.empty() ? SimulatedLoad(o, spec) : ReplayedLoad(o, spec);
+  const MissionInfo& info = load.info;
+  const std::vector<std::string>& ids = load.ids;
+  const std::vector<std::vector<Request>>& requests = load.requests;
+  // Steps count among the other streams' rows where a device has a foot IMU too.
+  const std::size_t imu_rows = load.imu_rows, other_rows = load.other_rows + load.step_rows;
+  const double duration_s = load.duration_s;
   const std::filesystem::path dir = o.work_dir / "load-test";
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir / "incident");
   WriteMissionInfo(dir / "incident" / "mission.json", info);
 
-  std::size_t rows_total = imu_rows + other_rows, requests_total = 0, imu_batches = 0;
+  std::size_t rows_total = imu_rows + other_rows, requests_total = 0, clock_batches = 0;
   for (const auto& device : requests) {
     requests_total += device.size();
-    for (const auto& r : device) imu_batches += r.has_imu;
+    for (const auto& r : device) clock_batches += r.has_clock;
   }
 
   ServerOptions so;
@@ -229,7 +333,8 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   so.journal_file = dir / "journal.db";
   so.pipeline = o.pipeline;
   so.pipeline_options = o.pipeline_options;
-  if (spec.needs_floor_plan) so.floor_plan = sim.plan;
+  so.floor_plan = load.plan;
+  so.floor_levels = load.levels;
   so.port = 0;
   if (!o.mqtt_uri.empty()) {
     so.mqtt.uri = o.mqtt_uri;
@@ -317,7 +422,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
     }
   };
   auto sent = [&](std::size_t k, const Request& r) {
-    if (r.has_imu) {
+    if (r.has_clock) {
       std::lock_guard<std::mutex> lock(flight_mutex);
       in_flight[ids[k]].push_back({r.t_first, r.t_last, Clock::now()});
       holding[ids[k]].push_back({r.t_first, r.t_last, Clock::now()});
@@ -355,14 +460,14 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   std::vector<double> progress(ids.size(), -1e300);
   for (std::size_t k = 0; k < ids.size(); ++k) {
     for (const Request& r : requests[k]) {
-      if (r.has_imu) {
+      if (r.has_clock) {
         progress[k] = r.t_first - o.batch_s;
         break;
       }
     }
   }
   auto pace = [&](std::size_t k, const Request& r) {
-    if (!(o.max_skew_s > 0) || !r.has_imu) return;
+    if (!(o.max_skew_s > 0) || !r.has_clock) return;
     std::unique_lock<std::mutex> lock(pace_mutex);
     pace_cv.wait(lock, [&] {
       return *std::min_element(progress.begin(), progress.end()) >= r.t_last - o.max_skew_s ||
@@ -370,10 +475,19 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
     });
   };
   auto paced = [&](std::size_t k, const Request& r) {
-    if (!(o.max_skew_s > 0) || !r.has_imu) return;
+    if (!(o.max_skew_s > 0) || !r.has_clock) return;
     {
       std::lock_guard<std::mutex> lock(pace_mutex);
       progress[k] = r.t_last;
+    }
+    pace_cv.notify_all();
+  };
+  // A device that has sent everything holds no one back (a replayed mission's devices end at
+  // different times).
+  auto finished = [&](std::size_t k) {
+    {
+      std::lock_guard<std::mutex> lock(pace_mutex);
+      progress[k] = std::numeric_limits<double>::infinity();
     }
     pace_cv.notify_all();
   };
@@ -399,6 +513,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
             refuse(e.what());
           }
         }
+        finished(k);
         for (auto& t : window) t->wait();
         return;
       }
@@ -412,12 +527,15 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
                              : client.Post("/api/ingest/" + r.stream, auth, r.body, "text/csv");
         paced(k, r);
         if (!res || res->status != 200) {
-          refuse(res ? fmt::format("HTTP {} {}", res->status, res->body)
-                     : httplib::to_string(res.error()));
+          refuse(fmt::format("{} ({} bytes of {} at t {:.2f} s)",
+                             res ? fmt::format("HTTP {} {}", res->status, res->body)
+                                 : httplib::to_string(res.error()),
+                             r.body.size(), ids[k], r.t_last));
           continue;
         }
         accepted += nlohmann::json::parse(res->body).at("accepted").get<std::size_t>();
       }
+      finished(k);
     });
   }
   for (auto& d : devices) d.join();
@@ -442,7 +560,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       std::lock_guard<std::mutex> lock(flight_mutex);
       now_seen = latencies_ms.size();
     }
-    if (now_seen >= imu_batches) break;
+    if (now_seen >= clock_batches) break;
     if (now_seen != seen) seen = now_seen, last_change = Clock::now();
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -463,8 +581,9 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
         "bench load: {} requests refused (first: {}), {} rows accepted, {} journaled of {} sent",
         refused.load(), first_refusal, accepted.load(), journaled, rows_total));
   }
-  return {{"firefighters", o.firefighters},
-          {"incident_minutes", o.minutes},
+  return {{"firefighters", ids.size()},
+          {"incident_minutes", duration_s / 60.0},
+          {"mission", o.mission.string()},
           {"imu_hz", o.imu_hz},
           {"batch_s", o.batch_s},
           {"pipeline", o.pipeline},
@@ -475,8 +594,9 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"devices_connect_s", connect_s},
           {"requests", requests_total},
           {"rows", rows_total},
-          {"scenario", paper ? spec.paper_scenarios.front() : std::string("office-loop")},
+          {"scenario", load.scenario},
           {"imu_rows", imu_rows},
+          {"step_rows", load.step_rows},
           {"other_rows", other_rows},
           {"ingest_wall_s", ingest_s},
           {"rows_per_s", rows_total / ingest_s},

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 /// The live server under load (issue 7, item 7), on loopback in one process: N simulated
-/// firefighters, each a client thread that POSTs its foot IMU (100 Hz) in batches and its RSSI
-/// packets as fast as the server acknowledges them, and one dashboard client on the event
+/// firefighters (or the agents of a given mission: LoadTestOptions::mission), each a client
+/// thread that POSTs its foot IMU (100 Hz; else its steps) in batches and its other rows as
+/// fast as the server acknowledges them, and one dashboard client on the event
 /// stream (server-sent events). Reports sustained rows/s, end-to-end latency (the POST of a
 /// batch -> the first event whose state has that firefighter's estimate at or past the batch's
 /// last sample), journal commits, CPU and peak memory. Not a unit test: `trailmark bench load`.
@@ -38,6 +39,12 @@ struct LoadTestOptions {
   /// publish to with QoS 1 and the server subscribes to.
   std::string mqtt_uri;
   std::uint64_t seed = 1;
+  /// Not empty: this mission directory is replayed as it is, instead of a simulation
+  /// (firefighters, minutes, imu_hz, stagger_s and seed then do not apply): each agent with
+  /// an imu.csv or steps.csv stream is a device that sends the rows it is the device of, in
+  /// batches of batch_s of its IMU (else of its steps); the other nodes' rows go with the
+  /// first device's; the pipeline gets the mission's floor plan.
+  std::filesystem::path mission;
 };
 
 /// Runs the load test; throws std::runtime_error when the server refuses rows or loses any

@@ -167,7 +167,10 @@ int main(int argc, char** argv) {
                     "INS on a mission's imu.csv, core and end to end (--mission)");
   std::string bench_mission;
   int bench_runs = 7;
-  bench->add_option("--mission", bench_mission, "ins: the mission directory whose imu.csv is run")
+  bench
+      ->add_option("--mission", bench_mission,
+                   "ins: the mission directory whose imu.csv is run; load: the mission replayed "
+                   "(its agents as the devices) instead of a simulation")
       ->check(CLI::ExistingDirectory);
   bench->add_option("--runs", bench_runs, "ins: runs of each measurement (the best is reported)")
       ->check(CLI::Range(1, 1000000));
@@ -439,6 +442,7 @@ int main(int argc, char** argv) {
       }
       if (bench_what == "load") {
         load.work_dir = load_dir;
+        load.mission = bench_mission;
         load.pipeline_options = ParseKeyValues(bench_options);
         load.bundle = !load_per_stream;
         return cli::BenchLoad(load, bench_json);

@@ -203,23 +203,33 @@ int Serve(const ServeOptions& o) {
 }
 
 int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::path& json_out) {
+  const std::string what =
+      !options.mission.empty()
+          ? fmt::format("the mission {} replayed (its agents as the devices)",
+                        options.mission.string())
+          : fmt::format("{} firefighters x {:g} min of {:g} Hz IMU + radio{}", options.firefighters,
+                        options.minutes, options.imu_hz,
+                        options.stagger_s > 0
+                            ? fmt::format(" (starts {:g} s apart)", options.stagger_s)
+                            : std::string(" (all in step)"));
   fmt::print(
-      "bench load: {} firefighters x {:g} min of {:g} Hz IMU + radio{}, {:g} s per request, "
+      "bench load: {}, {:g} s per request, "
       "pipeline {}, {}, journal under {}\n",
-      options.firefighters, options.minutes, options.imu_hz,
-      options.stagger_s > 0 ? fmt::format(" (starts {:g} s apart)", options.stagger_s)
-                            : std::string(" (all in step)"),
-      options.batch_s, options.pipeline,
+      what, options.batch_s, options.pipeline,
       !options.mqtt_uri.empty() ? "MQTT QoS 1 via " + options.mqtt_uri
       : options.bundle          ? std::string("HTTP POST, a window's streams in one request")
                                 : std::string("HTTP POST, one request per stream"),
       std::filesystem::absolute(options.work_dir).string());
   std::fflush(stdout);
   const nlohmann::json r = server::RunLoadTest(options);
-  fmt::print("rows sent and journaled   {} ({} IMU, {} of the other streams) in {} requests ({})\n",
-             r["rows"].get<std::size_t>(), r["imu_rows"].get<std::size_t>(),
-             r["other_rows"].get<std::size_t>(), r["requests"].get<std::size_t>(),
-             r["scenario"].get<std::string>());
+  fmt::print(
+      "rows sent and journaled   {} ({} IMU, {} steps, {} of the other streams) in {} requests "
+      "({}, {} devices, {:.1f} min)\n",
+      r["rows"].get<std::size_t>(), r["imu_rows"].get<std::size_t>(),
+      r["step_rows"].get<std::size_t>(),
+      r["other_rows"].get<std::size_t>() - r["step_rows"].get<std::size_t>(),
+      r["requests"].get<std::size_t>(), r["scenario"].get<std::string>(),
+      r["firefighters"].get<std::size_t>(), r["incident_minutes"].get<double>());
   fmt::print(
       "sustained                 {:.0f} rows/s, {:.0f} requests/s ({:.0f}x real time per "
       "firefighter)\n",

@@ -429,6 +429,20 @@ run_failing "$TM" bench load --firefighters 1 --minutes 0.1 --pipeline nope --di
   --json "$dir/load.json" > "$dir/load.log" 2>&1 \
   && grep -q "starts 2 s apart" "$dir/load.log" && grep -q '"stagger_s": 2' "$dir/load.json" \
   || { cat "$dir/load.log"; fail "bench load --stagger"; }
+# A given mission replayed (--mission: its agents as the devices, steps as their clock; the two
+# firefighters of the training building stand still at times, and the packets they hear then
+# still go): every row of every stream journaled, no more and no fewer.
+"$TM" bench load --mission "$dir/tb" --pipeline breadcrumb --dir "$dir/load" --json "$dir/load.json" \
+  > "$dir/load.log" 2>&1 || { cat "$dir/load.log"; fail "bench load --mission"; }
+tb_rows=0
+for f in "$dir"/tb/*.csv; do
+  case "$f" in */truth.csv) ;; *) tb_rows=$((tb_rows + $(tail -n +2 "$f" | wc -l)));; esac
+done
+grep -q "\"rows\": $tb_rows," "$dir/load.json" && grep -q '"firefighters": 2,' "$dir/load.json" \
+  && grep -q "replayed" "$dir/load.log" || { cat "$dir/load.log" "$dir/load.json"; fail "bench load --mission rows ($tb_rows)"; }
+mkdir -p "$dir/nomotion" && cp "$dir/tb/mission.json" "$dir/nomotion/"
+run_failing "$TM" bench load --mission "$dir/nomotion" --pipeline breadcrumb --dir "$dir/load"
+[ $rc -ne 0 ] && matches "no imu.csv or steps.csv rows" "$dir/err" || { cat "$dir/err"; fail "bench load --mission without motion"; }
 # bench breadcrumb takes the pipeline's options; a wrong one is refused before the incident is made
 run_failing "$TM" bench breadcrumb --option heading_rate=maybe
 [ $rc -ne 0 ] && matches "heading_rate" "$dir/err" || { cat "$dir/err"; fail "bench breadcrumb --option heading_rate=maybe"; }
