@@ -713,23 +713,42 @@ void IncidentServer::LiveLoop() {
   auto last_publish = std::chrono::steady_clock::now() - std::chrono::hours(1);
   auto last_integrity = last_publish;
   VectorSink sink;
+  // The rows committed and not yet estimated, in commit order; [next, end) are left.
   std::vector<MissionRow> rows;
+  std::size_t next = 0;
   std::map<std::string, std::string> refusals;  // node -> last reason logged
+  const auto pass_limit = std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+      std::chrono::duration<double>(std::max(options_.estimator_pass_s, 0.0)));
   while (!stop_) {
     {
       std::unique_lock<std::mutex> lock(live_->feed_mutex);
-      live_->feed_cv.wait_for(lock, std::chrono::milliseconds(100),
-                              [&] { return stop_.load() || !live_->feed.empty(); });
-      rows.clear();
-      rows.swap(live_->feed);
+      if (next == rows.size()) {
+        live_->feed_cv.wait_for(lock, std::chrono::milliseconds(100),
+                                [&] { return stop_.load() || !live_->feed.empty(); });
+        rows.clear();
+        next = 0;
+        rows.swap(live_->feed);
+      } else if (!live_->feed.empty()) {
+        rows.insert(rows.end(), std::make_move_iterator(live_->feed.begin()),
+                    std::make_move_iterator(live_->feed.end()));
+        live_->feed.clear();
+      }
     }
-    if (rows.empty()) continue;
+    if (next == rows.size()) continue;
     TimeS newest = -1e300;
     sink.rows.clear();
     std::vector<std::pair<std::string, TimeS>> heard;
-    heard.reserve(rows.size());
     std::unique_lock<std::mutex> estimator_lock(live_->estimator_mutex);
-    for (const MissionRow& row : rows) {
+    const auto pass_end = std::chrono::steady_clock::now() + pass_limit;
+    const std::size_t pass_first = next;
+    for (; next < rows.size(); ++next) {
+      // The clock is read every 64 rows: a pass ends within 64 rows of its limit (0: a pass
+      // is one row).
+      if (next > pass_first &&
+          (options_.estimator_pass_s <= 0 ||
+           ((next - pass_first) % 64 == 0 && std::chrono::steady_clock::now() > pass_end)))
+        break;
+      const MissionRow& row = rows[next];
       heard.emplace_back(RowNode(row), RowTime(row));
       newest = std::max(newest, RowTime(row));
       try {
@@ -757,7 +776,11 @@ void IncidentServer::LiveLoop() {
       if (n.kind == NodeKind::kAgent) sources.emplace_back(n.id, live_->estimator->Sources(n.id));
     }
     estimator_lock.unlock();
-    stats_.estimated_rows += rows.size();
+    stats_.estimated_rows += next - pass_first;
+    if (next > 4096 && 2 * next > rows.size()) {  // drop the rows done (amortized)
+      rows.erase(rows.begin(), rows.begin() + static_cast<std::ptrdiff_t>(next));
+      next = 0;
+    }
     std::vector<std::pair<std::string, std::string>> to_publish;
     const bool publish = mqtt_ && std::chrono::steady_clock::now() - last_publish >
                                       std::chrono::milliseconds(500);

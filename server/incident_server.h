@@ -67,6 +67,11 @@ struct ServerOptions {
   std::size_t max_request_bytes = 1 << 20;
   /// Server-sent events: at most one state message per client this often (coalescing).
   double events_min_interval_s = 0.01;
+  /// The estimator takes the rows committed since its last pass, but at most this long of
+  /// them per pass (wall time, s): the state and the event streams are updated between
+  /// passes, so that a backlog (an estimator slower than the devices) shows its progress
+  /// instead of freezing the dashboard until all of it is done. 0: one row per pass.
+  double estimator_pass_s = 0.05;
   std::size_t http_threads = 64;  ///< each connected device and dashboard holds one
   /// Plain HTTP: a request's line and headers must arrive within this (s) of its first byte,
   /// and one client address may hold at most this many connections at once (0: no cap; a

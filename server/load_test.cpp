@@ -42,6 +42,7 @@ struct Request {
   double t_last = 0;   ///< a clock batch (IMU, else steps): its last row's time (latency matching)
   double t_first = 0;  ///< its first row's time
   bool has_clock = false;  ///< holds a batch of the device's clock stream
+  double t_window = 0;     ///< the start of its window (pacing: every request, clock or not)
 };
 
 /// One firefighter's rows (its own ids), each stream in time order.
@@ -108,10 +109,12 @@ std::vector<Request> Batches(const std::vector<ClockRow>& clock, const DeviceRow
     AddBody(d.bearings, b, end, out);
     AddBody(d.baro, p, end, out);
     AddBody(d.rssi, r, end, out);
+    for (std::size_t k = first; k < out.size(); ++k) out[k].t_window = start;
     if (bundle && out.size() > first) {
       nlohmann::ordered_json sections;
       for (std::size_t k = first; k < out.size(); ++k) sections[out[k].stream] = out[k].body;
-      Request one{"", sections.dump(), out[first].t_last, out[first].t_first, !batch.empty()};
+      Request one{"",   sections.dump(), out[first].t_last, out[first].t_first, !batch.empty(),
+                  start};
       out.resize(first);
       out.push_back(std::move(one));
     }
@@ -455,30 +458,28 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   // that ran ahead by more than an estimator's reorder window would make the others' rows late).
   std::mutex pace_mutex;
   std::condition_variable pace_cv;
-  // The last IMU batch time sent; before the first, the device's start (a team not yet
-  // entered is not behind the others).
+  // The window of the last request sent; before the first, the device's start (a team not yet
+  // entered is not behind the others). Every request counts, with or without a clock batch: a
+  // device whose firefighter stands still (no steps) still sends the packets it hears, and
+  // paced on its steps alone it ran minutes of mission time ahead of the others (most rows then
+  // reached the estimator late).
   std::vector<double> progress(ids.size(), -1e300);
   for (std::size_t k = 0; k < ids.size(); ++k) {
-    for (const Request& r : requests[k]) {
-      if (r.has_clock) {
-        progress[k] = r.t_first - o.batch_s;
-        break;
-      }
-    }
+    if (!requests[k].empty()) progress[k] = requests[k].front().t_window - o.batch_s;
   }
   auto pace = [&](std::size_t k, const Request& r) {
-    if (!(o.max_skew_s > 0) || !r.has_clock) return;
+    if (!(o.max_skew_s > 0)) return;
     std::unique_lock<std::mutex> lock(pace_mutex);
     pace_cv.wait(lock, [&] {
-      return *std::min_element(progress.begin(), progress.end()) >= r.t_last - o.max_skew_s ||
+      return *std::min_element(progress.begin(), progress.end()) >= r.t_window - o.max_skew_s ||
              progress[k] <= *std::min_element(progress.begin(), progress.end());
     });
   };
   auto paced = [&](std::size_t k, const Request& r) {
-    if (!(o.max_skew_s > 0) || !r.has_clock) return;
+    if (!(o.max_skew_s > 0)) return;
     {
       std::lock_guard<std::mutex> lock(pace_mutex);
-      progress[k] = r.t_last;
+      progress[k] = r.t_window;
     }
     pace_cv.notify_all();
   };

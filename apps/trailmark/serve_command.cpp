@@ -244,6 +244,10 @@ int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::pat
              r["data_to_estimate_ms_p50"].get<double>(), r["data_to_estimate_ms_p99"].get<double>(),
              r["data_to_estimate_ms_max"].get<double>(),
              r["data_to_estimate_samples"].get<std::size_t>());
+  if (const auto late = r["estimator"].find("rows_late"); late != r["estimator"].end()) {
+    fmt::print("rows late at the estimator {:.0f} (after its reorder window)\n",
+               late->get<double>());
+  }
   fmt::print(
       "CPU                       {:.1f} s, {:.2f} cores busy (server and clients, one "
       "process)\n",

@@ -118,31 +118,47 @@ TEST(DeadReckoningGuard, FallbackEmitsDeadReckoningWhileTheEstimateIsOutsideItsR
 }
 
 TEST(DeadReckoningGuard, GrowKeepsTheEstimateAndItsEllipseCoversDeadReckoning) {
-  for (const double offset_m : {40.0, 100.0, 300.0}) {
-    const MissionInfo info = OneAgent();
-    DeadReckoningGuard guard(info, {}, std::make_unique<Lying>(info, Vec3(offset_m, 0, 0), 30, 60));
-    Lying lie(info, Vec3(offset_m, 0, 0), 30, 60);
-    const auto grown = Walk(guard);
-    const auto raw = Walk(lie);
-    ASSERT_EQ(grown.size(), raw.size());
-    std::size_t covered = 0, changed = 0;
-    for (std::size_t i = 0; i < raw.size(); ++i) {
-      const Estimate& e = grown[i];
-      EXPECT_EQ(e.position_n, raw[i].position_n);  // the position is the estimator's
-      if (e.id != "ff1" || e.sxx == raw[i].sxx) continue;
-      ++changed;
-      // Dead reckoning (the lie removed) is inside the grown 1-sigma ellipse.
-      const Vec2 d = Vec2(-offset_m, 0);
-      Mat2 c;
-      c << e.sxx, e.sxy, e.sxy, e.syy;
-      EXPECT_GT(c.determinant(), 0);
-      covered += d.dot(c.inverse() * d) < 1.0 + 1e-9;
+  // grow_probability 0.95 (the default): the least growth along d that puts dead reckoning on
+  // the boundary of the grown 95 % ellipse, d^T C^-1 d = chi2_2(0.95) = -2 ln 0.05; 0: by d d^T,
+  // dead reckoning within one sigma.
+  const double q95 = -2.0 * std::log(0.05);
+  for (const double grow_probability : {0.95, 0.0}) {
+    for (const double offset_m : {40.0, 100.0, 300.0}) {
+      const MissionInfo info = OneAgent();
+      GuardOptions options;
+      options.grow_probability = grow_probability;
+      DeadReckoningGuard guard(info, options,
+                               std::make_unique<Lying>(info, Vec3(offset_m, 0, 0), 30, 60));
+      Lying lie(info, Vec3(offset_m, 0, 0), 30, 60);
+      const auto grown = Walk(guard);
+      const auto raw = Walk(lie);
+      ASSERT_EQ(grown.size(), raw.size());
+      std::size_t covered = 0, changed = 0;
+      for (std::size_t i = 0; i < raw.size(); ++i) {
+        const Estimate& e = grown[i];
+        EXPECT_EQ(e.position_n, raw[i].position_n);  // the position is the estimator's
+        if (e.id != "ff1" || e.sxx == raw[i].sxx) continue;
+        ++changed;
+        const Vec2 d = Vec2(-offset_m, 0);  // to dead reckoning (the lie removed)
+        Mat2 c;
+        c << e.sxx, e.sxy, e.sxy, e.syy;
+        EXPECT_GT(c.determinant(), 0);
+        const double d2 = d.dot(c.inverse() * d);
+        if (grow_probability > 0) {
+          EXPECT_NEAR(d2, q95, 1e-6 * q95) << offset_m;  // on the boundary, not beyond it
+          covered += d2 <= q95 * (1 + 1e-6);
+        } else {
+          covered += d2 < 1.0 + 1e-9;
+        }
+        // Only along d: the other axis keeps the estimator's own variance.
+        EXPECT_EQ(e.syy, raw[i].syy);
+      }
+      EXPECT_EQ(changed, 60u) << offset_m;  // the 30 s at 2 Hz of the lie
+      EXPECT_EQ(covered, changed);
+      ASSERT_EQ(guard.Summary().integrity.size(), 2u);
+      EXPECT_EQ(guard.Summary().integrity[0].action, "disagrees");
+      EXPECT_EQ(guard.Summary().integrity[1].action, "agrees");
     }
-    EXPECT_EQ(changed, 60u) << offset_m;  // the 30 s at 2 Hz of the lie
-    EXPECT_EQ(covered, changed);
-    ASSERT_EQ(guard.Summary().integrity.size(), 2u);
-    EXPECT_EQ(guard.Summary().integrity[0].action, "disagrees");
-    EXPECT_EQ(guard.Summary().integrity[1].action, "agrees");
   }
 }
 
@@ -198,6 +214,13 @@ TEST(DeadReckoningGuard, RefusesInconsistentOptions) {
   options.return_probability = 0.9999;  // above leave_probability
   EXPECT_THROW(DeadReckoningGuard(info, options, std::make_unique<Lying>(info, Vec3::Zero(), 0, 0)),
                std::invalid_argument);
+  for (const double p : {1.0, -0.1, std::nan("")}) {
+    GuardOptions bad;
+    bad.grow_probability = p;
+    EXPECT_THROW(DeadReckoningGuard(info, bad, std::make_unique<Lying>(info, Vec3::Zero(), 0, 0)),
+                 std::invalid_argument)
+        << p;
+  }
 }
 
 TEST(DeadReckoningGuard, EveryStepsBasedPipelineButDeadReckoningHasTheIntegrityKeys) {

@@ -101,8 +101,10 @@ ServerOptions LiveOptions(const TempDir& dir, const std::string& pipeline) {
 std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
                               const SimulatedMission& sim, std::size_t* rows_posted,
                               std::size_t* rows_estimated, std::size_t* refusals,
-                              bool bundled = false, nlohmann::json* final_state = nullptr) {
+                              bool bundled = false, nlohmann::json* final_state = nullptr,
+                              double estimator_pass_s = ServerOptions{}.estimator_pass_s) {
   ServerOptions o = LiveOptions(dir, pipeline);
+  o.estimator_pass_s = estimator_pass_s;
   if (!sim.levels.empty()) {
     o.floor_plan = sim.plan;  // the ground floor's
     o.floor_levels = sim.levels;
@@ -157,7 +159,8 @@ std::vector<Estimate> RunLive(const TempDir& dir, const std::string& pipeline,
 /// height then uses the readings received so far, and only its horizontal part is the batch
 /// run's bit for bit.
 void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMission& sim,
-                                bool exact_height = true, bool bundled = false) {
+                                bool exact_height = true, bool bundled = false,
+                                double estimator_pass_s = ServerOptions{}.estimator_pass_s) {
   SCOPED_TRACE(pipeline + (bundled ? " (bundles)" : ""));
   TempDir dir;
   const MissionDirectory mission = WriteMission(dir, sim);
@@ -165,7 +168,7 @@ void ExpectLiveIsTheBatchPrefix(const std::string& pipeline, const SimulatedMiss
   trailmark::testing::RunNamed(pipeline, mission, {}, batch);
   std::size_t rows = 0, estimated = 0, refusals = 0;
   const std::vector<Estimate> live =
-      RunLive(dir, pipeline, sim, &rows, &estimated, &refusals, bundled);
+      RunLive(dir, pipeline, sim, &rows, &estimated, &refusals, bundled, nullptr, estimator_pass_s);
   EXPECT_EQ(estimated, rows);
   EXPECT_EQ(refusals, 0u);
 
@@ -232,6 +235,14 @@ TEST(LiveServer, FusionOnTheJournalIsTheBatchRunAndNamesItsSources) {
     EXPECT_NEAR(sum, 1.0, 1e-9);
   }
   EXPECT_TRUE(any) << state.dump();  // the trail's ranges reached the beacon filter
+}
+
+// With a backlog the estimator works in passes (ServerOptions::estimator_pass_s) and the state
+// is published between them; passes of one row each still give the batch run: no row lost,
+// repeated or reordered at a pass's end.
+TEST(LiveServer, AnEstimatorWorkingInShortPassesGivesTheBatchRunToo) {
+  ExpectLiveIsTheBatchPrefix("breadcrumb", SimulateScenario("training-building", 2), true, false,
+                             0.0);
 }
 
 TEST(LiveServer, BundlesOfADevicesStreamsGiveTheBatchRunToo) {

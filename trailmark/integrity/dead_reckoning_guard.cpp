@@ -19,6 +19,10 @@ bool GuardOptions::IsValid(std::string* why) const {
     if (why) *why = "integrity: overbound must be >= 1";
     return false;
   }
+  if (!(grow_probability >= 0 && grow_probability < 1)) {
+    if (why) *why = "integrity: grow_probability must be in [0, 1)";
+    return false;
+  }
   if (!(return_probability > 0 && return_probability <= leave_probability &&
         leave_probability < 1)) {
     if (why) *why = "integrity: need 0 < return_probability <= leave_probability < 1";
@@ -44,6 +48,10 @@ const OptionTable<GuardOptions>& GuardOptionTable() {
            "region the estimate must be back in to be emitted again (hysteresis)");
     t.Real("integrity.overbound", &GuardOptions::overbound, "", OptionBounds::AtLeast(1),
            "the shadow's shared PDR error sigmas, x the pdr defaults (an overbound)");
+    t.Real("integrity.grow_probability", &GuardOptions::grow_probability, "",
+           OptionBounds{0.0, 1.0, false, true},
+           "grow: just enough to put dead reckoning on the boundary of the grown covariance's "
+           "region of this probability (0: by d d^T, dead reckoning within one sigma)");
     return t;
   }();
   return table;
@@ -92,6 +100,7 @@ DeadReckoningGuard::DeadReckoningGuard(MissionInfo info, GuardOptions options,
       shadow_(std::move(info), Overbounded(typical, options)) {
   leave_d2_ = ChiSquareQuantile(2, options_.leave_probability);
   return_d2_ = ChiSquareQuantile(2, options_.return_probability);
+  if (options_.grow_probability > 0) grow_d2_ = ChiSquareQuantile(2, options_.grow_probability);
 }
 
 void DeadReckoningGuard::Add(const MissionRow& row, EstimateSink& sink) {
@@ -188,13 +197,23 @@ Estimate DeadReckoningGuard::Act(const Estimate& estimate, const Estimate& dr) c
     case GuardAction::kGrow:
       break;
   }
-  // P + d d^T: dead reckoning lies within one sigma of the estimate under the grown
-  // covariance (d^T (P + d d^T)^-1 d = m / (1 + m) < 1, m = d^T P^-1 d), which stays SPD.
+  // P + a d d^T stays SPD for a >= 0. a = 1: dead reckoning lies within one sigma of the
+  // estimate under the grown covariance (d^T (P + d d^T)^-1 d = m / (1 + m) < 1,
+  // m = d^T P^-1 d).
   const Vec2 d = (dr.position_n - estimate.position_n).head<2>();
+  double scale = 1.0;
+  if (grow_d2_ > 0) {
+    // P + a d d^T puts d at m / (1 + a m) (m = d^T P^-1 d, Sherman-Morrison): a = 1/q - 1/m
+    // brings it to q, the p-region's squared radius; none when it is inside already.
+    Mat2 P;
+    P << estimate.sxx, estimate.sxy, estimate.sxy, estimate.syy;
+    const double m = d.dot(P.ldlt().solve(d));
+    scale = std::isfinite(m) && m > 0 ? std::clamp(1.0 / grow_d2_ - 1.0 / m, 0.0, 1.0) : 1.0;
+  }
   Estimate out = estimate;
-  out.sxx += d.x() * d.x();
-  out.sxy += d.x() * d.y();
-  out.syy += d.y() * d.y();
+  out.sxx += scale * d.x() * d.x();
+  out.sxy += scale * d.x() * d.y();
+  out.syy += scale * d.y() * d.y();
   return out;
 }
 
