@@ -269,9 +269,8 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     next_static_ = t + options_.static_period_s;
   }
   // Per-row latency: the row's processing plus any estimate it produced.
-  latency_us_.push_back(static_cast<float>(
-      std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0)
-          .count()));
+  latency_us_.Add(
+      std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - clock0).count());
 }
 
 bool BreadcrumbEstimator::OnOtherFloors(const std::string& a, const std::string& b) const {
@@ -343,16 +342,10 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
     if (const auto o = loc_->RssiOffsetDb(id)) num[id + ".rssi_offset_db"] = *o;
   }
   num["radio_other_floor"] = static_cast<double>(other_floor_);
-  if (!latency_us_.empty()) {
-    std::vector<float> l = latency_us_;
-    auto pct = [&](double q) {
-      const auto k = static_cast<std::size_t>(q / 100.0 * (l.size() - 1));
-      std::nth_element(l.begin(), l.begin() + k, l.end());
-      return static_cast<double>(l[k]);
-    };
-    num["update_latency_us_p50"] = pct(50);
-    num["update_latency_us_p99"] = pct(99);
-    num["update_latency_us_max"] = pct(100);
+  if (latency_us_.count() > 0) {
+    num["update_latency_us_p50"] = latency_us_.Percentile(50);
+    num["update_latency_us_p99"] = latency_us_.Percentile(99);
+    num["update_latency_us_max"] = latency_us_.max();
   }
   num["calibrations"] = static_cast<double>(s.calibrations);
   num["calibration_pairs"] = static_cast<double>(s.calibration_pairs);

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "trailmark/breadcrumb/localizer.h"
+#include "trailmark/core/latency_histogram.h"
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
@@ -64,7 +65,7 @@ class BreadcrumbEstimator : public OnlineEstimator {
   std::vector<std::string> setup_notes_;
   std::map<std::string, Vec2> last_static_;
   std::map<std::string, Estimate> current_;
-  std::vector<float> latency_us_;
+  LatencyHistogram latency_us_;                   ///< per-row processing time (µs)
   TimeS t_last_ = -1e300, next_static_ = -1e300;  ///< t_last_: the latest row's time
   bool any_ = false;
   std::size_t ignored_ = 0;
