@@ -311,7 +311,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
       (o.mission.empty() && (o.firefighters < 1 || !(o.minutes > 0) || !(o.imu_hz > 0) ||
                              !(o.stagger_s >= 0) || !std::isfinite(o.stagger_s))))
     throw std::invalid_argument(
-        "bench load: firefighters >= 1; minutes, batch, rate > 0; stagger >= 0");
+        "bench load: firefighters >= 1; minutes, batch, rate > 0; stagger, speed >= 0");
   const PipelineSpec& spec = RequirePipeline(o.pipeline);
   const LoadPlan load = o.mission.empty() ? SimulatedLoad(o, spec) : ReplayedLoad(o, spec);
   const MissionInfo& info = load.info;
@@ -467,7 +467,16 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
   for (std::size_t k = 0; k < ids.size(); ++k) {
     if (!requests[k].empty()) progress[k] = requests[k].front().t_window - o.batch_s;
   }
+  double t_start = std::numeric_limits<double>::infinity();
+  for (const auto& device : requests) {
+    if (!device.empty()) t_start = std::min(t_start, device.front().t_window);
+  }
   auto pace = [&](std::size_t k, const Request& r) {
+    if (o.speed > 0) {  // the wall clock's schedule
+      std::this_thread::sleep_until(
+          wall0 + std::chrono::duration_cast<Clock::duration>(
+                      std::chrono::duration<double>((r.t_window - t_start) / o.speed)));
+    }
     if (!(o.max_skew_s > 0)) return;
     std::unique_lock<std::mutex> lock(pace_mutex);
     pace_cv.wait(lock, [&] {
@@ -589,6 +598,7 @@ nlohmann::json RunLoadTest(const LoadTestOptions& o) {
           {"batch_s", o.batch_s},
           {"pipeline", o.pipeline},
           {"max_skew_s", o.max_skew_s},
+          {"speed", o.speed},
           {"stagger_s", o.stagger_s},
           {"bundled", o.bundle && o.mqtt_uri.empty()},
           {"transport", o.mqtt_uri.empty() ? "http" : "mqtt"},

@@ -24,6 +24,10 @@ struct LoadTestOptions {
   /// Devices keep within this much mission time of each other (s), as they do in real time;
   /// 0: each sends as fast as it can.
   double max_skew_s = 0.5;
+  /// > 0: devices send at this multiple of real time (a window is sent no earlier than its
+  /// mission time since the first row, divided by speed, after the start), as a live incident
+  /// sends (1) or a replay faster than life; 0: as fast as the server acknowledges.
+  double speed = 0.0;
   /// Firefighter k (1-based) starts its walk (k - 1) x this later (s): teams enter one after
   /// another; 0: all at once and in step (every drop, turn and stop at the same instants).
   double stagger_s = 0.0;

@@ -183,6 +183,10 @@ int main(int argc, char** argv) {
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
   bench->add_option("--batch", load.batch_s, "load: seconds of IMU per request");
   bench->add_option("--pipeline", load.pipeline, "load: the live pipeline (ins, pdr, ...)");
+  bench
+      ->add_option("--speed", load.speed,
+                   "load: send at this multiple of real time (0: as fast as acknowledged)")
+      ->check(CLI::Range(0.0, 1e9));
   bench->add_option("--max-skew", load.max_skew_s,
                     "load: devices keep within this many mission seconds of each other (0: free)");
   bench->add_option("--stagger", load.stagger_s,

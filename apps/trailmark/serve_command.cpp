@@ -213,9 +213,11 @@ int BenchLoad(const server::LoadTestOptions& options, const std::filesystem::pat
                             ? fmt::format(" (starts {:g} s apart)", options.stagger_s)
                             : std::string(" (all in step)"));
   fmt::print(
-      "bench load: {}, {:g} s per request, "
+      "bench load: {}, {:g} s per request{}, "
       "pipeline {}, {}, journal under {}\n",
-      what, options.batch_s, options.pipeline,
+      what, options.batch_s,
+      options.speed > 0 ? fmt::format(" at {:g}x real time", options.speed) : std::string(),
+      options.pipeline,
       !options.mqtt_uri.empty() ? "MQTT QoS 1 via " + options.mqtt_uri
       : options.bundle          ? std::string("HTTP POST, a window's streams in one request")
                                 : std::string("HTTP POST, one request per stream"),

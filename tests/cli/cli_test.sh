@@ -442,6 +442,14 @@ done
 grep -q "\"rows\": $tb_rows," "$dir/load.json" && grep -q '"firefighters": 2,' "$dir/load.json" \
   && grep -q '"rows_late": 0.0,' "$dir/load.json" \
   && grep -q "replayed" "$dir/load.log" || { cat "$dir/load.log" "$dir/load.json"; fail "bench load --mission rows ($tb_rows)"; }
+# --speed: the devices keep to the wall clock's schedule (371 s of mission at 100x: not under
+# 3.5 s), and a negative speed is refused.
+"$TM" bench load --mission "$dir/tb" --pipeline pdr --speed 100 --dir "$dir/load" --json "$dir/load.json" \
+  > "$dir/load.log" 2>&1 || { cat "$dir/load.log"; fail "bench load --speed"; }
+python3 -c "import json,sys; d=json.load(open(sys.argv[1])); sys.exit(0 if d['speed'] == 100 and d['ingest_wall_s'] >= 3.5 else 1)" \
+  "$dir/load.json" || { cat "$dir/load.json"; fail "bench load --speed 100 kept no schedule"; }
+run_failing "$TM" bench load --mission "$dir/tb" --speed -1 --dir "$dir/load"
+[ $rc -ne 0 ] && matches "speed" "$dir/err" || { cat "$dir/err"; fail "bench load --speed -1"; }
 mkdir -p "$dir/nomotion" && cp "$dir/tb/mission.json" "$dir/nomotion/"
 run_failing "$TM" bench load --mission "$dir/nomotion" --pipeline breadcrumb --dir "$dir/load"
 [ $rc -ne 0 ] && matches "no imu.csv or steps.csv rows" "$dir/err" || { cat "$dir/err"; fail "bench load --mission without motion"; }
