@@ -144,6 +144,12 @@ TEST(IpinLogfile, BadRecordsAreRefusedWithTheirLine) {
   // 0.05 deg of latitude is 5.5 km: outside the venue.
   ExpectRefused("POSI;0.1;1;40.30;-3.4;0;0\nPOSI;0.2;2;40.35;-3.4;0;0\n", 2, "outside the venue");
   ExpectRefused("PRES;0.1;0.1;10132.5;0\n", 1, "not a plausible pressure");
+  // What baro.csv's and imu.csv's readers would refuse is refused here, naming the line (the
+  // fuzzer found a converted 1,130 hPa that the mission's own reader refused).
+  ExpectRefused("PRES;0.03;1.0;1130.25;0\n", 1, "not a plausible pressure");
+  ExpectRefused("PRES;0.03;1.0;250;0\n", 1, "not a plausible pressure");
+  ExpectRefused("ACCE;0.1;0.1;9.8;0;2e4;3\n", 1, "acceleration of 20000");
+  ExpectRefused("GYRO;0.1;0.1;0;300;0;3\n", 1, "angular rate of 300");
   ExpectRefused("BLE4;0.1;iBeacon;;-70;-59;1;2;u\n", 1, "empty MAC");
   ExpectRefused("WIFI;0.1;0.1;ssid;a,b;2412;-50\n", 1, "is not a MAC address");
   ExpectRefused("", 0, "no records");

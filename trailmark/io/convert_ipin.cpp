@@ -13,9 +13,10 @@
 
 #include "trailmark/core/error.h"
 #include "trailmark/io/csv.h"
-#include "trailmark/io/json_input.h"
 #include "trailmark/io/geo.h"
+#include "trailmark/io/json_input.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/io/streams.h"
 
 namespace trailmark {
 namespace {
@@ -140,6 +141,13 @@ IpinLogfile ReadIpinLogfile(const std::filesystem::path& logfile, const IpinOpti
       r.Require(6, "type;AppTimestamp;SensorTimestamp;X;Y;Z");
       const double t = clocks.Check(r, r.Number(1, "AppTimestamp"));
       const Vec3 v(r.Number(3, "X"), r.Number(4, "Y"), r.Number(5, "Z"));
+      // The limits imu.csv's reader checks (the samples are interpolated between these).
+      if (type == "ACCE" && v.cwiseAbs().maxCoeff() > plausible::kMaxAccelMps2)
+        r.Fail(fmt::format("an acceleration of {:g} m/s^2 is not plausible (|a| <= {:g})",
+                           v.cwiseAbs().maxCoeff(), plausible::kMaxAccelMps2));
+      if (type == "GYRO" && v.cwiseAbs().maxCoeff() > plausible::kMaxGyroRadps)
+        r.Fail(fmt::format("an angular rate of {:g} rad/s is not plausible (|w| <= {:g}; deg/s?)",
+                           v.cwiseAbs().maxCoeff(), plausible::kMaxGyroRadps));
       if (type == "ACCE") {
         accel.emplace_back(t, v);
       } else if (type == "GYRO") {
@@ -151,7 +159,10 @@ IpinLogfile ReadIpinLogfile(const std::filesystem::path& logfile, const IpinOpti
       r.Require(4, "PRES;AppTimestamp;SensorTimestamp;Pres(mbar)");
       const double t = clocks.Check(r, r.Number(1, "AppTimestamp"));
       const double hpa = r.Number(3, "Pres");
-      if (hpa < 100 || hpa > 1200) r.Fail(fmt::format("{} mbar is not a plausible pressure", hpa));
+      if (hpa < plausible::kMinPressureHpa || hpa > plausible::kMaxPressureHpa) {
+        r.Fail(fmt::format("{} mbar is not a plausible pressure ({:g} to {:g}, as baro.csv)", hpa,
+                           plausible::kMinPressureHpa, plausible::kMaxPressureHpa));
+      }
       m.baro.push_back({t, agent, hpa});
     } else if (type == "POSI") {
       r.Require(6, "POSI;Timestamp;Counter;Latitude;Longitude;FloorID");

@@ -40,10 +40,10 @@ constexpr double kMaxAbsTimeS = 1e10;        // ~317 years: Unix-epoch seconds s
 constexpr double kMinRssiDbm = -200.0;       // far below any receiver's sensitivity
 constexpr double kMaxRssiDbm = 60.0;         // above any transmitter's power (1 kW)
 constexpr double kMaxStepLengthM = 100.0;    // one row of steps.csv
-constexpr double kMaxAccelMps2 = 1e4;        // ~1,000 g: beyond every accelerometer (high-g: 400 g)
-constexpr double kMaxGyroRadps = 200.0;      // beyond any MEMS range (2000 deg/s = 35 rad/s)
-constexpr double kMinPressureHpa = 300.0;    // above the summit of Everest (~330 hPa)
-constexpr double kMaxPressureHpa = 1100.0;   // below the deepest mine's air (~1080 hPa)
+using plausible::kMaxAccelMps2;              // (high-g accelerometers: 400 g)
+using plausible::kMaxGyroRadps;
+using plausible::kMaxPressureHpa;
+using plausible::kMinPressureHpa;
 constexpr double kMaxStepVarianceM2 = kMaxStepLengthM * kMaxStepLengthM;  // a step's own scale
 constexpr double kMaxRangeM = 1e5;           // 100 km: beyond any ranging radio or ultrasound
 constexpr double kMaxRangeSigmaM = 1e4;      // a range known to 10 km says nothing

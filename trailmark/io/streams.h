@@ -26,6 +26,16 @@
 
 namespace trailmark {
 
+/// The readers' plausibility limits that a converter writing these streams keeps to as well: a
+/// converted mission that our own readers refuse is a converter's bug (the fuzzer found an IPIN
+/// logfile's 1,130 hPa, 2026-12-05).
+namespace plausible {
+inline constexpr double kMaxAccelMps2 = 1e4;      ///< ~1,000 g: beyond every accelerometer
+inline constexpr double kMaxGyroRadps = 200.0;    ///< beyond any MEMS range (2000 deg/s = 35 rad/s)
+inline constexpr double kMinPressureHpa = 300.0;  ///< above the summit of Everest (~330 hPa)
+inline constexpr double kMaxPressureHpa = 1100.0;  ///< below the deepest mine's air (~1080 hPa)
+}  // namespace plausible
+
 /// Hashes strings and string views alike (look-ups by std::string_view without a copy).
 struct StringHash {
   using is_transparent = void;
