@@ -168,13 +168,14 @@ LoadPlan ReplayedLoad(const LoadTestOptions& o, const PipelineSpec& spec) {
     const auto it = devices.find(RowNode(r));
     return it != devices.end() ? it->second : devices.at(plan.ids.front());
   };
-  for (const auto& x : data.imu) device(x).imu.push_back(x);
-  for (const auto& x : data.steps) device(x).steps.push_back(x);
-  for (const auto& x : data.rssi) device(x).rssi.push_back(x);
-  for (const auto& x : data.ranges) device(x).ranges.push_back(x);
-  for (const auto& x : data.bearings) device(x).bearings.push_back(x);
-  for (const auto& x : data.events) device(x).events.push_back(x);
-  for (const auto& x : data.baro) device(x).baro.push_back(x);
+  // Moved, not copied: a 4-hour mission's rows are held once (the device is found first).
+  for (auto& x : data.imu) device(x).imu.push_back(std::move(x));
+  for (auto& x : data.steps) device(x).steps.push_back(std::move(x));
+  for (auto& x : data.rssi) device(x).rssi.push_back(std::move(x));
+  for (auto& x : data.ranges) device(x).ranges.push_back(std::move(x));
+  for (auto& x : data.bearings) device(x).bearings.push_back(std::move(x));
+  for (auto& x : data.events) device(x).events.push_back(std::move(x));
+  for (auto& x : data.baro) device(x).baro.push_back(std::move(x));
   plan.duration_s = std::max(t1 - t0, 1e-9);
   for (const auto& id : plan.ids) {
     const DeviceRows& d = devices.at(id);
@@ -307,7 +308,7 @@ LoadPlan SimulatedLoad(const LoadTestOptions& o, const PipelineSpec& spec) {
 }  // namespace
 
 nlohmann::json RunLoadTest(const LoadTestOptions& o) {
-  if (!(o.batch_s > 0) ||
+  if (!(o.batch_s > 0) || !(o.speed >= 0) || !std::isfinite(o.speed) ||
       (o.mission.empty() && (o.firefighters < 1 || !(o.minutes > 0) || !(o.imu_hz > 0) ||
                              !(o.stagger_s >= 0) || !std::isfinite(o.stagger_s))))
     throw std::invalid_argument(

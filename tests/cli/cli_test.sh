@@ -448,8 +448,10 @@ grep -q "\"rows\": $tb_rows," "$dir/load.json" && grep -q '"firefighters": 2,' "
   > "$dir/load.log" 2>&1 || { cat "$dir/load.log"; fail "bench load --speed"; }
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); sys.exit(0 if d['speed'] == 100 and d['ingest_wall_s'] >= 3.5 else 1)" \
   "$dir/load.json" || { cat "$dir/load.json"; fail "bench load --speed 100 kept no schedule"; }
-run_failing "$TM" bench load --mission "$dir/tb" --speed -1 --dir "$dir/load"
-[ $rc -ne 0 ] && matches "speed" "$dir/err" || { cat "$dir/err"; fail "bench load --speed -1"; }
+for bad_speed in -1 nan inf; do
+  run_failing "$TM" bench load --mission "$dir/tb" --speed "$bad_speed" --dir "$dir/load"
+  [ $rc -ne 0 ] && matches "speed" "$dir/err" || { cat "$dir/err"; fail "bench load --speed $bad_speed"; }
+done
 mkdir -p "$dir/nomotion" && cp "$dir/tb/mission.json" "$dir/nomotion/"
 run_failing "$TM" bench load --mission "$dir/nomotion" --pipeline breadcrumb --dir "$dir/load"
 [ $rc -ne 0 ] && matches "no imu.csv or steps.csv rows" "$dir/err" || { cat "$dir/err"; fail "bench load --mission without motion"; }
