@@ -50,6 +50,28 @@ TEST(TimeOrderBuffer, ReleasesInTheOrderOfATimeOrderedMerge) {
   EXPECT_EQ(buffer.size(), 0u);
 }
 
+// A simultaneous row that sorts before the last one released (a packet heard by another
+// receiver, whose device's batch came later) is late too; one that sorts after it is not.
+TEST(TimeOrderBuffer, ASimultaneousRowThatSortsFirstIsLate) {
+  TimeOrderBuffer buffer;
+  std::vector<MissionRow> out;
+  auto take = [&](const MissionRow& r) { out.push_back(r); };
+  buffer.Push(RssiPacket{5.0, "ff2", "c1", -60});
+  buffer.ReleaseBefore(5.5, take);
+  ASSERT_EQ(out.size(), 1u);
+  buffer.Push(RssiPacket{5.0, "ff3", "c1", -61});  // after ff2 in the order: in time
+  EXPECT_EQ(buffer.late(), 0u);
+  buffer.Push(ImuSample{5.0, "ff1", Vec3(0, 0, 9.8), Vec3::Zero()});  // IMU after RSSI
+  EXPECT_EQ(buffer.late(), 0u);
+  buffer.Push(RssiPacket{5.0, "ff1", "c1", -62});  // ff1 before ff2: late
+  EXPECT_EQ(buffer.late(), 1u);
+  buffer.Push(Step{4.5, 5.0, "ff9", Vec3::Zero(), {}});  // steps before RSSI: late
+  EXPECT_EQ(buffer.late(), 2u);
+  buffer.ReleaseBefore(5.5, take);
+  buffer.Push(RssiPacket{5.0, "ff4", "c1", -63});  // after the IMU sample released: late
+  EXPECT_EQ(buffer.late(), 3u);
+}
+
 // Simultaneous rows of one stream whose ids share their first 8 characters (the buffer's key
 // holds 8), equal ids among them: node order, then arrival, as a stable sort gives.
 TEST(TimeOrderBuffer, IdsThatShareTheirFirstEightCharactersAreOrderedByTheWholeId) {

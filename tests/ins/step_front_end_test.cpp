@@ -332,6 +332,130 @@ TEST(StepFrontEnd, LiveRowsOfInterleavedDevicesComeOutInTimeOrder) {
   ExpectSameRows(w.expected, seen);
 }
 
+TEST(ReorderWindow, IsTheCapUntilTheFeedHasRunTenSeconds) {
+  ReorderWindow w(1.0);
+  EXPECT_EQ(w.seconds(), 1.0);
+  w.Observe(100.0, -1e300);
+  w.Observe(100.1, 100.0);
+  w.Observe(109.9, 100.1);
+  EXPECT_EQ(w.seconds(), 1.0);
+  w.Observe(110.0, 109.9);  // 10 s of feed, no row behind the newest: the least window
+  EXPECT_DOUBLE_EQ(w.seconds(), ReorderWindow::kFloorS);
+  w.Observe(103.0, 103.0);  // a simultaneous row is not late
+  EXPECT_DOUBLE_EQ(w.peak_lateness_s(), 0.0);
+}
+
+TEST(ReorderWindow, FollowsTheLargestLatenessOfItsMemoryWithinTheCap) {
+  ReorderWindow w(1.0);
+  TimeS newest = -1e300;
+  auto feed = [&](TimeS t) {
+    w.Observe(t, newest);
+    newest = std::max(newest, t);
+  };
+  // Two devices 0.1 s at a time, the second's batch after the first's: rows up to 0.1 s late.
+  for (int k = 0; k < 110; ++k) {  // 11 s
+    for (int i = 0; i < 10; ++i) feed(0.1 * k + 0.01 * i);
+    for (int i = 0; i < 10; ++i) feed(0.1 * k + 0.01 * i);
+  }
+  EXPECT_NEAR(w.peak_lateness_s(), 0.09, 1e-9);
+  EXPECT_NEAR(w.seconds(), 2 * 0.09 + 0.05, 1e-9);
+  // Devices 0.2 s at a time: rows up to 0.19 s late.
+  for (int k = 0; k < 50; ++k) {  // 10 s
+    for (int i = 0; i < 20; ++i) feed(11.0 + 0.2 * k + 0.01 * i);
+    for (int i = 0; i < 20; ++i) feed(11.0 + 0.2 * k + 0.01 * i);
+  }
+  EXPECT_NEAR(w.seconds(), 2 * 0.19 + 0.05, 1e-9);
+  // A row 0.4 s late widens the window at once, to the cap at most.
+  feed(newest - 0.4);
+  EXPECT_NEAR(w.seconds(), 0.85, 1e-9);
+  feed(newest - 5.0);
+  EXPECT_EQ(w.seconds(), 1.0);
+  // 30 s of rows in order later, the memory has forgotten both: the window shrinks.
+  const TimeS t0 = newest;
+  for (int k = 1; k <= 310; ++k) feed(t0 + 0.1 * k);
+  EXPECT_DOUBLE_EQ(w.seconds(), ReorderWindow::kFloorS);
+  // A cap of 0 is kept (every row released as it comes); a non-finite time is not a lateness.
+  ReorderWindow none(0.0);
+  none.Observe(1.0, -1e300);
+  none.Observe(10.0, 1.0);
+  none.Observe(2.0, 10.0);
+  EXPECT_EQ(none.seconds(), 0.0);
+  w.Observe(std::numeric_limits<double>::quiet_NaN(), newest);
+  EXPECT_DOUBLE_EQ(w.seconds(), ReorderWindow::kFloorS);
+}
+
+/// Steps and RSSI of the two walkers as devices deliver them: each node's rows of `batch_s`
+/// seconds together, the nodes' batches of a period in a shuffled order.
+std::vector<MissionRow> StepsAndRssiByDevice(const SimulatedMission& sim, double batch_s,
+                                             std::vector<MissionRow>* merged) {
+  for (const auto& s : sim.data.steps) merged->emplace_back(s);
+  for (const auto& p : sim.data.rssi) merged->emplace_back(p);
+  std::stable_sort(merged->begin(), merged->end(), [](const MissionRow& a, const MissionRow& b) {
+    if (RowTime(a) != RowTime(b)) return RowTime(a) < RowTime(b);
+    if (a.index() != b.index()) return a.index() < b.index();
+    return RowNode(a) < RowNode(b);
+  });
+  std::map<std::pair<long, std::string>, std::vector<MissionRow>> batches;
+  for (const MissionRow& r : *merged) {
+    batches[{static_cast<long>(std::floor(RowTime(r) / batch_s)), RowNode(r)}].push_back(r);
+  }
+  Random rng(11);
+  std::vector<MissionRow> out;
+  for (auto it = batches.begin(); it != batches.end();) {
+    const long period = it->first.first;
+    std::vector<const std::vector<MissionRow>*> now;
+    for (; it != batches.end() && it->first.first == period; ++it) now.push_back(&it->second);
+    for (std::size_t i = now.size(); i > 1; --i) {
+      std::swap(now[i - 1], now[static_cast<std::size_t>(rng.Uniform() * i) % i]);
+    }
+    for (const auto* b : now) out.insert(out.end(), b->begin(), b->end());
+  }
+  return out;
+}
+
+TEST(StepFrontEnd, LiveRowsWaitForTheFeedsLatenessNotTheWholeReorderWindow) {
+  TrainingBuildingOptions o;
+  o.rooms_per_side = 1;
+  const SimulatedMission sim = SimulateTrainingBuilding(o, 2);
+  std::vector<MissionRow> merged;
+  const std::vector<MissionRow> arrivals = StepsAndRssiByDevice(sim, 0.1, &merged);
+  ASSERT_GT(merged.size(), 500u);
+  ASSERT_NE(arrivals.front().index(), arrivals.back().index());
+  // How far the feed had gone past each row while it was still held (the newest row before
+  // the one whose arrival released it), after 11 s: the wait in mission time.
+  auto run = [&](bool adaptive, double* lag_max, double* late) {
+    std::vector<MissionRow> seen;
+    StepFrontEndOptions options;
+    options.reorder_s = 1.0;
+    options.reorder_adaptive = adaptive;
+    StepFrontEnd front(sim.data.info, options, RowOrder::kGlobal, Feed::kLive,
+                       std::make_unique<Recorder>(&seen));
+    NullSink sink;
+    TimeS newest = -1e300;
+    const TimeS t0 = RowTime(arrivals.front());
+    *lag_max = 0;
+    for (const MissionRow& r : arrivals) {
+      const std::size_t before = seen.size();
+      front.Add(r, sink);
+      for (std::size_t i = before; i < seen.size(); ++i) {
+        if (RowTime(seen[i]) > t0 + 11.0) *lag_max = std::max(*lag_max, newest - RowTime(seen[i]));
+      }
+      newest = std::max(newest, RowTime(r));
+    }
+    front.Finish(sink);
+    *late = front.Summary().numbers.at("rows_late");
+    ExpectSameRows(merged, seen);
+  };
+  double lag_adaptive = 0, lag_fixed = 0, late_adaptive = -1, late_fixed = -1;
+  run(true, &lag_adaptive, &late_adaptive);
+  run(false, &lag_fixed, &late_fixed);
+  EXPECT_EQ(late_adaptive, 0.0);
+  EXPECT_EQ(late_fixed, 0.0);
+  // Rows come at most ~0.1 s late here: a window of 2 x 0.1 + 0.05 s, and a batch behind it.
+  EXPECT_LT(lag_adaptive, 0.4);
+  EXPECT_GT(lag_fixed, 0.95);
+}
+
 TEST(StepFrontEnd, AnAgentsFirstSourceWinsAndTheOtherIsCounted) {
   MissionInfo info;
   info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));

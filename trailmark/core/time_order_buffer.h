@@ -20,11 +20,20 @@ namespace trailmark {
 
 class TimeOrderBuffer {
  public:
-  /// Holds `row`. A row older than one already released is late: counted, and released with
-  /// the next call (it cannot go back in time).
+  /// Holds `row`. A row that sorts before one already released (older, or simultaneous and of a
+  /// stream or node that comes first) is late: counted, and released with the next call (it
+  /// cannot go back in time).
   void Push(MissionRow row) {
     const TimeS t = RowTime(row);
-    if (t < released_t_) ++late_;
+    const auto stream = static_cast<std::uint32_t>(row.index());
+    const std::uint64_t prefix = NodePrefix(RowNode(row));
+    // Late: it sorts before the last row released (a simultaneous row of a node that sorts
+    // first counts too; ids sharing their first 8 bytes are not told apart here).
+    if (t < released_t_ ||
+        (t == released_t_ && (stream < released_stream_ ||
+                              (stream == released_stream_ && prefix < released_prefix_)))) {
+      ++late_;
+    }
     std::uint32_t slot;
     if (free_.empty()) {
       slot = static_cast<std::uint32_t>(rows_.size());
@@ -34,8 +43,7 @@ class TimeOrderBuffer {
       free_.pop_back();
       rows_[slot] = std::move(row);
     }
-    heap_.push_back({t, static_cast<std::uint32_t>(rows_[slot].index()), slot,
-                     NodePrefix(RowNode(rows_[slot])), arrivals_++});
+    heap_.push_back({t, stream, slot, prefix, arrivals_++});
     std::push_heap(heap_.begin(), heap_.end(), Later{&rows_});
   }
   /// Hands every held row with time < `until` to `out(const MissionRow&)`, in order.
@@ -88,7 +96,11 @@ class TimeOrderBuffer {
     std::pop_heap(heap_.begin(), heap_.end(), Later{&rows_});
     const Key key = heap_.back();
     heap_.pop_back();
-    released_t_ = std::max(released_t_, key.t);
+    if (key.t >= released_t_) {
+      released_t_ = key.t;
+      released_stream_ = key.stream;
+      released_prefix_ = key.node_prefix;
+    }
     // Out of its slot before `out` runs (which may push, and so grow the slots).
     const MissionRow row = std::move(rows_[key.slot]);
     free_.push_back(key.slot);
@@ -98,7 +110,9 @@ class TimeOrderBuffer {
   std::vector<std::uint32_t> free_;
   std::vector<Key> heap_;
   std::uint64_t arrivals_ = 0;
-  TimeS released_t_ = -1e300;
+  TimeS released_t_ = -1e300;  ///< the last released row's sort key (a late row's is less)
+  std::uint32_t released_stream_ = 0;
+  std::uint64_t released_prefix_ = 0;
   std::size_t late_ = 0;
 };
 

@@ -43,42 +43,16 @@ SegmentIndex::SegmentIndex(std::vector<Segment2> segments, Options options)
   stamp_.assign(segments_.size(), 0);
 }
 
-std::int64_t SegmentIndex::CellOf(double v, int axis) const {
-  const double lo = axis == 0 ? bounds_.min.x() : bounds_.min.y();
-  const std::int64_t n = axis == 0 ? nx_ : ny_;
-  const double c = std::floor((v - lo) / cell_);
-  if (!(c >= 0)) return 0;  // also catches NaN
-  return std::min<std::int64_t>(static_cast<std::int64_t>(std::min(c, 9e15)), n - 1);
-}
-
-void SegmentIndex::ForEachCandidate(const Box2& box,
-                                    const std::function<void(std::size_t)>& visit) const {
-  if (segments_.empty() || box.Empty()) return;
-  if (box.max.x() < bounds_.min.x() || box.max.y() < bounds_.min.y() ||
-      box.min.x() > bounds_.max.x() || box.min.y() > bounds_.max.y()) {
-    return;
-  }
-  if (++query_id_ == 0) {  // wrapped: reset stamps
-    std::fill(stamp_.begin(), stamp_.end(), 0);
-    query_id_ = 1;
-  }
-  const std::int64_t x0 = CellOf(box.min.x(), 0), x1 = CellOf(box.max.x(), 0);
-  const std::int64_t y0 = CellOf(box.min.y(), 1), y1 = CellOf(box.max.y(), 1);
-  for (std::int64_t y = y0; y <= y1; ++y) {
-    for (std::int64_t x = x0; x <= x1; ++x) {
-      const std::size_t c = static_cast<std::size_t>(y * nx_ + x);
-      for (std::uint32_t k = cell_start_[c]; k < cell_start_[c + 1]; ++k) {
-        const std::uint32_t i = items_[k];
-        if (stamp_[i] == query_id_) continue;
-        stamp_[i] = query_id_;
-        visit(i);
-      }
-    }
-  }
-}
-
 bool SegmentIndex::Intersects(const Segment2& query) const {
-  return CountIntersections(query) > 0;
+  Box2 box;
+  box.Extend(query.a);
+  box.Extend(query.b);
+  bool hit = false;
+  ForEachCandidate(box, [&](std::size_t i) {
+    hit = SegmentsIntersect(query, segments_[i]);
+    return !hit;  // the first crossing answers
+  });
+  return hit;
 }
 
 int SegmentIndex::CountIntersections(const Segment2& query) const {

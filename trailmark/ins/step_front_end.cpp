@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace trailmark {
@@ -30,21 +32,52 @@ const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable() {
   static const OptionTable<StepFrontEndOptions> table = [] {
     OptionTable<StepFrontEndOptions> t = StepSourceOptionTable();
     t.Real("reorder_s", &StepFrontEndOptions::reorder_s, "s", OptionBounds::NonNegative(),
-           "live: how long a row waits for older rows of other devices (estimates lag by it)");
+           "live: the longest a row waits for older rows of other devices (estimates lag by "
+           "the window)");
+    t.Flag("reorder_adaptive", &StepFrontEndOptions::reorder_adaptive,
+           "live: the window is 2 x the feed's largest lateness of the last 20-30 s + 50 ms, "
+           "at least 0.2 s, at most reorder_s, which it is for the first 10 s (false: always "
+           "reorder_s)");
     return t;
   }();
   return table;
 }
 
-StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrder order,
-                           Feed feed, std::unique_ptr<OnlineEstimator> inner)
+void ReorderWindow::Observe(TimeS t, TimeS newest) {
+  if (!std::isfinite(t)) return;
+  if (std::isnan(first_)) first_ = t;
+  const TimeS now = std::max(t, newest);
+  newest_ = std::max(newest_, now);
+  const auto bucket = static_cast<std::int64_t>(std::floor((newest_ - first_) / kBucketS));
+  if (bucket > bucket_) {
+    const std::int64_t shift = std::min<std::int64_t>(bucket - bucket_, 3);
+    for (std::int64_t k = 0; k < shift; ++k) {
+      peak_[2] = peak_[1];
+      peak_[1] = peak_[0];
+      peak_[0] = 0;
+    }
+    bucket_ = bucket;
+  }
+  if (newest > t) peak_[0] = std::max(peak_[0], newest - t);
+}
+
+double ReorderWindow::peak_lateness_s() const { return std::max({peak_[0], peak_[1], peak_[2]}); }
+
+double ReorderWindow::seconds() const {
+  if (std::isnan(first_) || newest_ - first_ < kWarmUpS) return cap_s_;
+  return std::min(cap_s_, std::max(kFloorS, kMargin * peak_lateness_s() + kSlackS));
+}
+
+StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrder order, Feed feed,
+                           std::unique_ptr<OnlineEstimator> inner)
     : info_(info),
       options_(options),
       order_(order),
       feed_(feed),
       inner_(std::move(inner)),
       ins_(info, options.ins),
-      height_(std::move(info), options.height) {
+      height_(std::move(info), options.height),
+      window_(options.reorder_s) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument(why);
   inner_->UseLevels(&height_);
@@ -83,7 +116,8 @@ void StepFrontEnd::Deliver(const MissionRow& row, EstimateSink& sink) {
 
 void StepFrontEnd::Release(EstimateSink& sink) {
   const bool live = feed_ == Feed::kLive;
-  TimeS until = live ? newest_ - options_.reorder_s : newest_;
+  const double wait_s = options_.reorder_adaptive ? window_.seconds() : options_.reorder_s;
+  TimeS until = live ? newest_ - wait_s : newest_;
   if (const auto b = ins_.EarliestNextStepEndOfActive(live ? until : -1e300)) {
     until = std::min(until, *b);
   }
@@ -92,6 +126,7 @@ void StepFrontEnd::Release(EstimateSink& sink) {
 
 void StepFrontEnd::Add(const MissionRow& row, EstimateSink& sink) {
   sink_ = &sink;
+  if (feed_ == Feed::kLive) window_.Observe(RowTime(row), newest_);
   newest_ = std::max(newest_, RowTime(row));
   if (const auto* imu = std::get_if<ImuSample>(&row)) {
     if (UseSource(imu->agent, true)) ins_.Add(*imu);
@@ -137,7 +172,12 @@ EstimatorSummary StepFrontEnd::Summary() const {
   if (order_ == RowOrder::kGlobal) {
     s.numbers["rows_late"] = static_cast<double>(buffer_.late());
     s.numbers["rows_waiting"] = static_cast<double>(buffer_.size());
-    if (feed_ == Feed::kLive) s.numbers["reorder_s"] = options_.reorder_s;
+    if (feed_ == Feed::kLive) {
+      s.numbers["reorder_s"] = options_.reorder_s;
+      s.numbers["reorder_window_s"] =
+          options_.reorder_adaptive ? window_.seconds() : options_.reorder_s;
+      s.numbers["reorder_peak_lateness_s"] = window_.peak_lateness_s();
+    }
   }
   return s;
 }

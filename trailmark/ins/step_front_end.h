@@ -7,12 +7,15 @@
 ///  - an estimator that needs every row in global time order (RowOrder::kGlobal) gets them
 ///    through a TimeOrderBuffer: a row is released once no earlier row can still come — in a
 ///    time-ordered feed (a batch merge of the mission's files) when every INS has processed
-///    past it; in a live feed also `reorder_s` behind the newest row, since devices deliver
-///    their own rows in order but not in step with each other. Steps of an agent's INS are put
-///    in their place by their end time t1, as if read from steps.csv.
+///    past it; in a live feed also a reorder window behind the newest row, since devices deliver
+///    their own rows in order but not in step with each other: by default the window follows
+///    the feed's measured lateness (ReorderWindow), at most `reorder_s`. Steps of an agent's
+///    INS are put in their place by their end time t1, as if read from steps.csv.
 /// The inner estimator sees steps, never IMU samples. Every row it gets also feeds the agents'
 /// height channel (ins/height.h), which sets z, szz and floor of what it estimates. No I/O.
 
+#include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 
@@ -27,17 +30,54 @@ namespace trailmark {
 
 struct StepFrontEndOptions {
   ins::InsOptions ins;  ///< for agents whose steps come from their foot IMU
-  /// Live feed, global order: how long (s) a row waits behind the newest row for older rows of
-  /// other devices (ours: 1 s covers a batch of 0.1-1 s per device; estimates lag by it).
+  /// Live feed, global order: the longest (s) a row waits behind the newest row for older rows
+  /// of other devices (1 s covers a batch of 0.1-1 s per device); with `reorder_adaptive` off,
+  /// every row waits this long (estimates lag by it).
   double reorder_s = 1.0;
+  /// Live feed, global order: the window follows the feed's lateness instead (ReorderWindow):
+  /// twice the largest lateness of the last 20-30 s of rows plus 50 ms, at least 0.2 s, at
+  /// most `reorder_s`; `reorder_s` until the feed has spanned 10 s.
+  bool reorder_adaptive = true;
   /// Every agent's height channel (`height.` keys): z, szz and floor of the estimates.
   HeightOptions height;
   bool IsValid(std::string* why) const;
 };
 /// The `ins.` keys (the INS options with the prefix).
 const OptionTable<StepFrontEndOptions>& StepSourceOptionTable();
-/// The `ins.` keys and `reorder_s`, for estimators that need global time order.
+/// The `ins.` keys, `reorder_s` and `reorder_adaptive`, for estimators that need global time
+/// order.
 const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable();
+
+/// How long a live row waits behind the newest row for older rows of other devices, from what
+/// the feed shows: a row's lateness is how far its time is behind the newest row seen before
+/// it (a device's batch that comes after another's, network delay, a clock behind). The window
+/// is twice the largest lateness of the current and the two previous 10 s buckets of mission
+/// time, plus 50 ms, at least 0.2 s (sparse rows show a device's lateness only slowly) and at
+/// most the cap; the cap until the feed has spanned 10 s (many batches of every device: they
+/// send 0.1-1 s at a time). A row later than the window is late (TimeOrderBuffer counts it); a
+/// feed that gets later widens the window with its first late row. O(1) a row, no allocation.
+class ReorderWindow {
+ public:
+  static constexpr double kBucketS = 10.0;  ///< mission seconds per lateness bucket
+  static constexpr double kMargin = 2.0;    ///< window / largest lateness
+  static constexpr double kSlackS = 0.05;   ///< added to the window, s
+  static constexpr double kFloorS = 0.2;    ///< the least window, s (below the cap)
+  static constexpr double kWarmUpS = 10.0;  ///< mission seconds at the cap first
+  explicit ReorderWindow(double cap_s) : cap_s_(cap_s) {}
+  /// A row of time `t` arrived when the newest row seen before it was `newest` (-inf: none).
+  void Observe(TimeS t, TimeS newest);
+  /// The window (s) now.
+  double seconds() const;
+  /// The largest lateness (s) in the window's memory.
+  double peak_lateness_s() const;
+
+ private:
+  double cap_s_;
+  TimeS first_ = std::numeric_limits<double>::quiet_NaN();
+  TimeS newest_ = -std::numeric_limits<double>::infinity();
+  std::int64_t bucket_ = 0;     ///< the current bucket's index
+  double peak_[3] = {0, 0, 0};  ///< the current bucket's and the two before it
+};
 
 /// Whether the inner estimator needs all rows in global time order or only each agent's.
 enum class RowOrder { kPerAgent, kGlobal };
@@ -78,6 +118,7 @@ class StepFrontEnd : public OnlineEstimator {
   HeightChannel height_;
   EstimateSink* sink_ = nullptr;
   TimeOrderBuffer buffer_;
+  ReorderWindow window_;
   std::map<std::string, bool> source_is_imu_;
   TimeS newest_ = -1e300;
   std::size_t ignored_ = 0, ins_steps_ = 0;

@@ -376,7 +376,8 @@ void MapParticleFilter::Predict(const Vec2& d) {
   NoteConvergence();
   const double len = d.norm();
   const FloorPlan& plan = grid_.plan();
-  const std::vector<Particle> before = particles_;
+  before_step_ = particles_;  // the scratch keeps its capacity: no allocation per step
+  const std::vector<Particle>& before = before_step_;
   // When every particle hits a wall, the step is tried again from the same particles with
   // wider noise (a backtracking step, cf. Widyawan et al. 2008) before giving up.
   for (int attempt = 0; attempt < 4; ++attempt) {
@@ -385,7 +386,8 @@ void MapParticleFilter::Predict(const Vec2& d) {
       particles_ = before;
       ++summary_.backtracks;
     }
-    std::vector<char> dead(particles_.size(), 0);
+    std::vector<char>& dead = dead_;
+    dead.assign(particles_.size(), 0);
     std::size_t n_dead = 0;
     double mass_dead = 0, mass = 0;
     for (std::size_t i = 0; i < particles_.size(); ++i) {

@@ -293,6 +293,8 @@ class MapParticleFilter {
   Options options_;
   Random rng_;
   std::vector<Particle> particles_;
+  std::vector<Particle> before_step_;  ///< Predict's particles before the step (scratch)
+  std::vector<char> dead_;             ///< Predict's eliminated particles (scratch)
   std::vector<Vec2> inside_centers_;
   Vec2 inside_mean_ = Vec2::Zero();    ///< of the inside centres
   Mat2 inside_second_ = Mat2::Zero();  ///< their mean of p p^T
