@@ -456,6 +456,50 @@ TEST(StepFrontEnd, LiveRowsWaitForTheFeedsLatenessNotTheWholeReorderWindow) {
   EXPECT_GT(lag_fixed, 0.95);
 }
 
+// What the window that follows the feed costs: a device whose rows once come later than the
+// window (a radio stall) has those rows late — counted, and handed on at once, out of order —
+// until its first late row widens the window; a fixed window of the whole `reorder_s` has none.
+TEST(StepFrontEnd, AStallLongerThanTheLearnedWindowMakesOneBatchLateThenWidensIt) {
+  TrainingBuildingOptions o;
+  o.rooms_per_side = 1;
+  const SimulatedMission sim = SimulateTrainingBuilding(o, 2);
+  std::vector<MissionRow> merged;
+  std::vector<MissionRow> arrivals = StepsAndRssiByDevice(sim, 0.1, &merged);
+  // ff1's rows of [30, 30.6) s come after everyone's rows up to 30.6 s.
+  std::vector<MissionRow> stalled, rest;
+  for (const MissionRow& r : arrivals) {
+    (RowNode(r) == "ff1" && RowTime(r) >= 30.0 && RowTime(r) < 30.6 ? stalled : rest).push_back(r);
+  }
+  ASSERT_GT(stalled.size(), 3u);
+  const auto at = std::find_if(rest.begin(), rest.end(),
+                               [](const MissionRow& r) { return RowTime(r) >= 30.6; });
+  const std::size_t after_stall = static_cast<std::size_t>(at - rest.begin()) + stalled.size();
+  rest.insert(at, stalled.begin(), stalled.end());
+  auto late_rows = [&](bool adaptive, double* window_after) {
+    std::vector<MissionRow> seen;
+    StepFrontEndOptions options;
+    options.reorder_adaptive = adaptive;
+    StepFrontEnd front(sim.data.info, options, RowOrder::kGlobal, Feed::kLive,
+                       std::make_unique<Recorder>(&seen));
+    NullSink sink;
+    for (std::size_t i = 0; i < rest.size(); ++i) {
+      front.Add(rest[i], sink);
+      if (i + 1 == after_stall) *window_after = front.Summary().numbers.at("reorder_window_s");
+    }
+    front.Finish(sink);
+    EXPECT_EQ(seen.size(), merged.size());  // late rows are handed on, not lost
+    return front.Summary().numbers.at("rows_late");
+  };
+  double window_adaptive = 0, window_fixed = 0;
+  const double late_adaptive = late_rows(true, &window_adaptive);
+  EXPECT_EQ(late_rows(false, &window_fixed), 0.0);
+  EXPECT_GT(late_adaptive, 0.0);
+  EXPECT_LE(late_adaptive, static_cast<double>(stalled.size()));
+  // Once the stalled rows are in, the window covers them (2 x ~0.6 + 0.05 s: the cap).
+  EXPECT_EQ(window_fixed, 1.0);
+  EXPECT_EQ(window_adaptive, 1.0);
+}
+
 TEST(StepFrontEnd, AnAgentsFirstSourceWinsAndTheOtherIsCounted) {
   MissionInfo info;
   info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
