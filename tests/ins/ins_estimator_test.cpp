@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <map>
+#include <stdexcept>
 
 #include "trailmark/core/random.h"
 #include "trailmark/sim/imu_sim.h"
@@ -62,6 +63,67 @@ std::map<double, const InsState*> ByTime(const Output& out) {
   return m;
 }
 
+/// What mission.json says of the start that the filter leaves out (ins_estimator.h), written
+/// out: the start position's variance, and the start heading's beyond the filter's initial yaw
+/// variance, turning the walk about the start.
+const NodeInfo& FirstAgent(const MissionInfo& info) {
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind == NodeKind::kAgent) return n;
+  }
+  throw std::logic_error("no agent");
+}
+
+Mat2 StartVariance(const MissionInfo& info, const InsState& st) {
+  const NodeInfo& n = FirstAgent(info);
+  const double sp = n.start_sigma_m.value_or(0.0);
+  const double sh = n.start_heading_rad ? n.start_heading_sigma_rad.value_or(0.0) : 0.0;
+  const double own = InsOptions{}.initial_yaw_sigma_rad;
+  const Vec2 from = st.position_n.head<2>() - info.AgentStart(n).value_or(Vec3::Zero()).head<2>();
+  const Vec2 u(-from.y(), from.x());
+  return sp * sp * Mat2::Identity() + std::max(0.0, sh * sh - own * own) * u * u.transpose();
+}
+
+TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
+  Walked w = SimulatedFoot();
+  const auto agent_it = std::find_if(w.info.nodes.begin(), w.info.nodes.end(),
+                                     [](const NodeInfo& n) { return n.kind == NodeKind::kAgent; });
+  ASSERT_NE(agent_it, w.info.nodes.end());
+  NodeInfo& agent = *agent_it;
+  ASSERT_TRUE(agent.start_heading_rad);
+  // Stated exactly (the filter's own yaw sigma): the filter's covariance as it is.
+  agent.start_sigma_m = 0.0;
+  agent.start_heading_sigma_rad = InsOptions{}.initial_yaw_sigma_rad;
+  const Output exact = RunEstimator(w, {});
+  // Stated as a door a firefighter walks in by: 0.2 m, 0.05 rad.
+  agent.start_sigma_m = 0.2;
+  agent.start_heading_sigma_rad = 0.05;
+  const Output door = RunEstimator(w, {});
+  ASSERT_EQ(exact.estimates.size(), door.estimates.size());
+  ASSERT_GT(door.estimates.size(), 100u);
+  const auto states = ByTime(door);
+  double far = 0;
+  for (std::size_t i = 0; i < door.estimates.size(); ++i) {
+    const Estimate& a = exact.estimates[i];
+    const Estimate& b = door.estimates[i];
+    ASSERT_EQ(a.position_n, b.position_n) << i;  // the filter is the same
+    const InsState& st = *states.at(b.t);
+    EXPECT_EQ(a.sxx, st.position_cov(0, 0));
+    const Mat2 extra = StartVariance(w.info, st);
+    EXPECT_NEAR(b.sxx, st.position_cov(0, 0) + extra(0, 0), 1e-12);
+    EXPECT_NEAR(b.sxy, st.position_cov(0, 1) + extra(0, 1), 1e-12);
+    EXPECT_NEAR(b.syy, st.position_cov(1, 1) + extra(1, 1), 1e-12);
+    far = std::max(far, (b.position_n - *w.info.AgentStart(agent)).head<2>().norm());
+  }
+  // 20 m from the door the heading's share alone is (0.05^2 - 0.01^2) x 400 m^2 = 0.96 m^2.
+  ASSERT_GT(far, 20.0);
+  // The steps are differences: the same either way.
+  ASSERT_EQ(exact.steps.size(), door.steps.size());
+  for (std::size_t i = 0; i < door.steps.size(); ++i) {
+    EXPECT_EQ(exact.steps[i].delta_n, door.steps[i].delta_n);
+    EXPECT_EQ(exact.steps[i].variance_m2, door.steps[i].variance_m2);
+  }
+}
+
 TEST(InsEstimator, RateOutputKeepsEveryStepEndAndTheLastState) {
   const Walked w = SimulatedFoot();
   InsEstimatorOptions o;  // defaults: rate, 50 Hz
@@ -79,7 +141,7 @@ TEST(InsEstimator, RateOutputKeepsEveryStepEndAndTheLastState) {
     EXPECT_EQ(e.position_n.z(), 0.0);
     ASSERT_TRUE(e.szz && e.floor);
     EXPECT_EQ(*e.floor, 0);
-    EXPECT_EQ(e.sxx, it->second->position_cov(0, 0));
+    EXPECT_EQ(e.sxx, it->second->position_cov(0, 0) + StartVariance(w.info, *it->second)(0, 0));
     times.push_back(e.t);
   }
   ASSERT_TRUE(std::is_sorted(times.begin(), times.end()));

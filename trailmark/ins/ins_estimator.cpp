@@ -192,9 +192,22 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
 }
 
 InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
-    : options_(options), ins_(info, options.ins), height_(std::move(info), options.height) {
+    : options_(options), ins_(info, options.ins), height_(info, options.height) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("ins: " + why);
+  for (const NodeInfo& n : info.nodes) {
+    if (n.kind != NodeKind::kAgent) continue;
+    StartPrior prior;
+    if (const auto start = info.AgentStart(n)) prior.start = start->head<2>();
+    if (n.start_sigma_m) prior.position_var_m2 = *n.start_sigma_m * *n.start_sigma_m;
+    // The filter starts its yaw at the stated heading with its own sigma (MultiAgentIns).
+    if (n.start_heading_rad && n.start_heading_sigma_rad) {
+      const double own = options_.ins.initial_yaw_sigma_rad;
+      prior.extra_yaw_var_rad2 =
+          std::max(0.0, *n.start_heading_sigma_rad * *n.start_heading_sigma_rad - own * own);
+    }
+    start_prior_[n.id] = prior;
+  }
   ins_.on_state = [this](const std::string& id, const InsState& st) {
     if (sink_ == nullptr || options_.output != InsOutput::kRate) return;
     const auto written = written_.find(id);
@@ -220,10 +233,21 @@ void InsEstimator::Write(const std::string& agent, const InsState& st) {
     if (st.t <= it->second) return;  // (a step end the rate wrote already)
     it->second = st.t;
   }
-  const auto& c = st.position_cov;
+  sink_->Add(ToEstimate(agent, st));
+}
+
+Estimate InsEstimator::ToEstimate(const std::string& agent, const InsState& st) const {
+  Mat2 c = st.position_cov.topLeftCorner<2, 2>();
+  if (const auto it = start_prior_.find(agent); it != start_prior_.end()) {
+    const StartPrior& prior = it->second;
+    // A start heading error turns the walk about the start: d(p) = dpsi * u.
+    const Vec2 from = st.position_n.head<2>() - prior.start;
+    const Vec2 u(-from.y(), from.x());
+    c += prior.position_var_m2 * Mat2::Identity() + prior.extra_yaw_var_rad2 * u * u.transpose();
+  }
   Estimate e{st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)};
   height_.Annotate(e);
-  sink_->Add(e);
+  return e;
 }
 
 void InsEstimator::Add(const MissionRow& row, EstimateSink& sink) {
@@ -251,10 +275,7 @@ void InsEstimator::Finish(EstimateSink& sink) {
 std::optional<Estimate> InsEstimator::Current(const std::string& node) const {
   const auto st = ins_.State(node);
   if (!st) return std::nullopt;
-  const auto& c = st->position_cov;
-  Estimate e{st->t, node, st->position_n, c(0, 0), c(0, 1), c(1, 1)};
-  height_.Annotate(e);
-  return e;
+  return ToEstimate(node, *st);
 }
 
 EstimatorSummary InsEstimator::Summary() const {

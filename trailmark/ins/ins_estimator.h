@@ -84,6 +84,11 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable();
 /// `ins`: each agent's INS position (with its horizontal covariance) at `output_hz` (or every
 /// sample) and at every step end, or at the step ends only; each agent's last state at the end
 /// of data. Agents are independent: each agent's samples in time order is all it needs.
+/// The covariance written is the filter's plus what mission.json says of the start, which the
+/// filter leaves out (its position starts exact, its yaw at `initial_yaw_sigma_rad`): the start
+/// position's variance, and a start heading error beyond the filter's own, which turns the
+/// whole walk about the start — the variance (sigma_h^2 - sigma_filter^2) u u^T with
+/// u = (-(y - y0), x - x0) (the steps it emits are differences: neither enters them).
 class InsEstimator : public OnlineEstimator {
  public:
   InsEstimator(MissionInfo info, InsEstimatorOptions options);
@@ -97,6 +102,16 @@ class InsEstimator : public OnlineEstimator {
   MultiAgentIns ins_;
   HeightChannel height_;
   void Write(const std::string& agent, const InsState& state);
+  /// The estimate of `agent` in state `st`, its covariance with the start's uncertainty.
+  Estimate ToEstimate(const std::string& agent, const InsState& st) const;
+  /// Per agent: the start (x, y), its variance (m^2) and the start heading's variance beyond
+  /// the filter's initial yaw variance (rad^2).
+  struct StartPrior {
+    Vec2 start = Vec2::Zero();
+    double position_var_m2 = 0;
+    double extra_yaw_var_rad2 = 0;
+  };
+  std::map<std::string, StartPrior> start_prior_;
   EstimateSink* sink_ = nullptr;
   std::map<std::string, TimeS> written_;  ///< per agent: the time of the last state written
   std::size_t ignored_ = 0;

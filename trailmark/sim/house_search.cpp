@@ -160,17 +160,7 @@ SimulatedMission SimulateSearch(const FloorPlan& world, FloorPlan map, const Vec
 
   MissionData& m = sim.data;
   m.info.floorplan = "floorplan.geojson";
-  // The start heading is the walk's first step's, which the simulated foot IMU faces from the
-  // start (sim/imu_sim.cpp): the entry direction was written, while the wall-following walk
-  // turns ~30 deg off it in its first steps, so an --imu-only INS aligned its yaw 30 deg off
-  // (house 1, seed 7: `ins` 3.17 -> 0.79 m mean, docs/ins.md).
-  double start_heading = heading;
-  if (!walk.steps.empty()) {
-    const Vec2 first = walk.steps.front().to - walk.steps.front().from;
-    if (first.norm() > 1e-6) start_heading = std::atan2(first.y(), first.x());
-  }
-  m.info.nodes.push_back(
-      NodeInfo::Agent("ff1", Vec3(entry.x(), entry.y(), 0), 0.2, start_heading, 0.05));
+  m.info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(entry.x(), entry.y(), 0), 0.2, heading, 0.05));
   PdrErrorModel pdr(o.pdr, pdr_rng);
   AppendPdrWalk(pdr, walk, "ff1", m);
   m.events.push_back({0.0, "ff1", "enter", ""});

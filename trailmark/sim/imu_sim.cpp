@@ -93,7 +93,7 @@ ImuGrade ImuGrade::ByName(const std::string& name) {
 }
 
 SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const ImuSimOptions& o,
-                             Random rng) {
+                             Random rng, std::optional<double> start_yaw_rad) {
   if (walk.steps.empty()) throw std::invalid_argument("SimulateFootImu: a walk without steps");
   if (!(o.rate_hz > 0)) throw std::invalid_argument("SimulateFootImu: rate must be > 0");
   // The instrumented foot's strides: it rests during even steps and swings during odd ones,
@@ -120,7 +120,10 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   Vec3 foot(walk.steps.front().from.x(), walk.steps.front().from.y(), walk.steps.front().z0);
   double climbed = 0;
   const Vec2 first_dir = walk.steps.front().to - walk.steps.front().from;
-  double yaw = std::atan2(first_dir.y(), first_dir.x());
+  // The stated start heading, which an INS aligns its yaw to (a search's walk sets off up to
+  // ~30 deg from the direction it entered by: the foot faced the first step before, and the
+  // INS of an --imu-only house search ran 30 deg off).
+  double yaw = start_yaw_rad ? *start_yaw_rad : std::atan2(first_dir.y(), first_dir.x());
   auto add_stride = [&](const TrueStep& s, double rise_m) {
     climbed += rise_m;
     const Vec3 to(s.to.x(), s.to.y(), s.z1 + climbed);
@@ -229,7 +232,9 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
 void AddFootImu(SimulatedMission& sim, const ImuSimOptions& options, std::uint64_t seed) {
   Random rng(seed);
   for (const auto& [id, walk] : sim.walks) {
-    const SimulatedImu s = SimulateFootImu(walk, id, options, rng.Fork());
+    const NodeInfo* node = sim.data.info.Find(id);
+    const SimulatedImu s = SimulateFootImu(walk, id, options, rng.Fork(),
+                                           node ? node->start_heading_rad : std::nullopt);
     sim.data.imu.insert(sim.data.imu.end(), s.samples.begin(), s.samples.end());
   }
   std::stable_sort(sim.data.imu.begin(), sim.data.imu.end(),

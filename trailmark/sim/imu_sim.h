@@ -16,6 +16,7 @@
 /// noise-free run matches the INS's exponential-map mechanization.
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -73,12 +74,16 @@ struct SimulatedImu {
 };
 
 /// The walk's steps alternate feet; the instrumented foot (agent `agent`) lands on every
-/// second footprint. Deterministic given `rng`.
+/// second footprint. The foot rests facing `start_yaw_rad` (the mission's stated start heading:
+/// an INS aligns its yaw to it) and turns toward its strides from its first swing on; without
+/// it, facing the first step. Deterministic given `rng`.
 SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent,
-                             const ImuSimOptions& options, Random rng);
+                             const ImuSimOptions& options, Random rng,
+                             std::optional<double> start_yaw_rad = std::nullopt);
 
-/// Adds a foot IMU to every walking agent of a simulated mission (`data.imu`, in time order).
-/// Deterministic given `seed`.
+/// Adds a foot IMU to every walking agent of a simulated mission (`data.imu`, in time order),
+/// each foot resting at first as the agent's stated start heading says. Deterministic given
+/// `seed`.
 void AddFootImu(SimulatedMission& sim, const ImuSimOptions& options, std::uint64_t seed);
 
 }  // namespace trailmark
