@@ -13,6 +13,7 @@
 #include <map>
 #include <stdexcept>
 
+#include "device_batches.h"
 #include "trailmark/core/random.h"
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/sim/imu_sim.h"
@@ -384,8 +385,9 @@ TEST(ReorderWindow, FollowsTheLargestLatenessOfItsMemoryWithinTheCap) {
   EXPECT_DOUBLE_EQ(w.seconds(), ReorderWindow::kFloorS);
 }
 
-/// Steps and RSSI of the two walkers as devices deliver them: each node's rows of `batch_s`
-/// seconds together, the nodes' batches of a period in a shuffled order.
+/// Steps and RSSI of the two walkers in the batch run's order (`merged`) and as devices
+/// deliver them: each node's rows of `batch_s` seconds together, the nodes' batches of a period
+/// in a shuffled order.
 std::vector<MissionRow> StepsAndRssiByDevice(const SimulatedMission& sim, double batch_s,
                                              std::vector<MissionRow>* merged) {
   for (const auto& s : sim.data.steps) merged->emplace_back(s);
@@ -395,22 +397,7 @@ std::vector<MissionRow> StepsAndRssiByDevice(const SimulatedMission& sim, double
     if (a.index() != b.index()) return a.index() < b.index();
     return RowNode(a) < RowNode(b);
   });
-  std::map<std::pair<long, std::string>, std::vector<MissionRow>> batches;
-  for (const MissionRow& r : *merged) {
-    batches[{static_cast<long>(std::floor(RowTime(r) / batch_s)), RowNode(r)}].push_back(r);
-  }
-  Random rng(11);
-  std::vector<MissionRow> out;
-  for (auto it = batches.begin(); it != batches.end();) {
-    const long period = it->first.first;
-    std::vector<const std::vector<MissionRow>*> now;
-    for (; it != batches.end() && it->first.first == period; ++it) now.push_back(&it->second);
-    for (std::size_t i = now.size(); i > 1; --i) {
-      std::swap(now[i - 1], now[static_cast<std::size_t>(rng.Uniform() * i) % i]);
-    }
-    for (const auto* b : now) out.insert(out.end(), b->begin(), b->end());
-  }
-  return out;
+  return testing::DeviceBatches(*merged, batch_s, 11);
 }
 
 TEST(StepFrontEnd, LiveRowsWaitForTheFeedsLatenessNotTheWholeReorderWindow) {
@@ -420,7 +407,12 @@ TEST(StepFrontEnd, LiveRowsWaitForTheFeedsLatenessNotTheWholeReorderWindow) {
   std::vector<MissionRow> merged;
   const std::vector<MissionRow> arrivals = StepsAndRssiByDevice(sim, 0.1, &merged);
   ASSERT_GT(merged.size(), 500u);
-  ASSERT_NE(arrivals.front().index(), arrivals.back().index());
+  // Both streams are in the feed.
+  ASSERT_TRUE(std::any_of(arrivals.begin(), arrivals.end(),
+                          [](const MissionRow& r) { return std::holds_alternative<Step>(r); }));
+  ASSERT_TRUE(std::any_of(arrivals.begin(), arrivals.end(), [](const MissionRow& r) {
+    return std::holds_alternative<RssiPacket>(r);
+  }));
   // How far the feed had gone past each row while it was still held (the newest row before
   // the one whose arrival released it), after 11 s: the wait in mission time.
   auto run = [&](bool adaptive, double* lag_max, double* late) {

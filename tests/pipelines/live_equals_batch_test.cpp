@@ -12,6 +12,7 @@
 #include <random>
 #include <set>
 
+#include "device_batches.h"
 #include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/io/mission_io.h"
@@ -22,6 +23,7 @@
 namespace trailmark {
 namespace {
 
+using testing::DeviceBatches;
 using testing::RunNamed;
 using testing::TempDir;
 
@@ -70,26 +72,6 @@ std::vector<MissionRow> MergedRows(const PipelineSpec& spec, const MissionData& 
     return RowTime(a) != RowTime(b) ? RowTime(a) < RowTime(b) : a.index() < b.index();
   });
   return rows;
-}
-
-/// As devices deliver them: every node sends its rows in batches of `batch_s` seconds; in
-/// each period the nodes' batches come in a shuffled order.
-std::vector<MissionRow> DeviceBatches(const std::vector<MissionRow>& merged, double batch_s,
-                                      std::uint32_t seed) {
-  std::map<std::pair<long, std::string>, std::vector<MissionRow>> batches;
-  for (const MissionRow& r : merged) {
-    batches[{static_cast<long>(std::floor(RowTime(r) / batch_s)), RowNode(r)}].push_back(r);
-  }
-  std::mt19937 rng(seed);
-  std::vector<MissionRow> out;
-  for (auto it = batches.begin(); it != batches.end();) {
-    const long period = it->first.first;
-    std::vector<const std::vector<MissionRow>*> now;
-    for (; it != batches.end() && it->first.first == period; ++it) now.push_back(&it->second);
-    std::shuffle(now.begin(), now.end(), rng);
-    for (const auto* b : now) out.insert(out.end(), b->begin(), b->end());
-  }
-  return out;
 }
 
 struct Fed {

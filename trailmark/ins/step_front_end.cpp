@@ -46,8 +46,7 @@ const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable() {
 void ReorderWindow::Observe(TimeS t, TimeS newest) {
   if (!std::isfinite(t)) return;
   if (std::isnan(first_)) first_ = t;
-  const TimeS now = std::max(t, newest);
-  newest_ = std::max(newest_, now);
+  newest_ = std::max({newest_, t, newest});
   const auto bucket = static_cast<std::int64_t>(std::floor((newest_ - first_) / kBucketS));
   if (bucket > bucket_) {
     const std::int64_t shift = std::min<std::int64_t>(bucket - bucket_, 3);
@@ -126,7 +125,7 @@ void StepFrontEnd::Release(EstimateSink& sink) {
 
 void StepFrontEnd::Add(const MissionRow& row, EstimateSink& sink) {
   sink_ = &sink;
-  if (feed_ == Feed::kLive) window_.Observe(RowTime(row), newest_);
+  if (feed_ == Feed::kLive && order_ == RowOrder::kGlobal) window_.Observe(RowTime(row), newest_);
   newest_ = std::max(newest_, RowTime(row));
   if (const auto* imu = std::get_if<ImuSample>(&row)) {
     if (UseSource(imu->agent, true)) ins_.Add(*imu);
