@@ -37,7 +37,7 @@ const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable() {
     t.Flag("reorder_adaptive", &StepFrontEndOptions::reorder_adaptive,
            "live: the window is 2 x the feed's largest lateness of the last 20-30 s + 50 ms, "
            "at least 0.2 s, at most reorder_s, which it is for the first 10 s (false: always "
-           "reorder_s)");
+           "reorder_s; on: lower latency, a row late when a device falls further behind)");
     return t;
   }();
   return table;
