@@ -6,6 +6,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <optional>
+
 #include "trailmark/eval/trajectory_metrics.h"
 #include "trailmark/ins/zupt_ins.h"
 #include "trailmark/sim/scenarios.h"
@@ -17,14 +20,18 @@ struct InsRun {
   double end_error_m = 0, distance_m = 0, z_error_m = 0, stance_agreement = 0;
 };
 
+/// `stated_start`: the foot rests facing the mission's start heading, as AddFootImu has it (else
+/// facing its first step).
 InsRun RunInsOn(const std::string& scenario, const ImuGrade& grade, FootMotion motion,
-                std::uint64_t seed) {
+                std::uint64_t seed, bool stated_start = false) {
   const SimulatedMission sim = SimulateScenario(scenario, seed);
   ImuSimOptions o;
   o.grade = grade;
   o.motion = motion;
   const auto& [id, walk] = sim.walks.front();
-  const SimulatedImu imu = SimulateFootImu(walk, id, o, Random(seed + 100));
+  const std::optional<double> start_yaw =
+      stated_start ? sim.data.info.Find(id)->start_heading_rad : std::nullopt;
+  const SimulatedImu imu = SimulateFootImu(walk, id, o, Random(seed + 100), start_yaw);
   ins::InsOptions io;
   io.initial_yaw_rad = sim.data.info.Find(id)->start_heading_rad.value_or(0.0);
   io.initial_position_n = imu.foot_truth.front().position_n;
@@ -106,6 +113,58 @@ TEST(ImuSim, ShortStridesIntoStopsStayWithinGyroRange) {
       }
       EXPECT_LT(peak_gyro, 20.0) << scenario << " " << id;  // walking peaks ~10-15 rad/s
       EXPECT_GT(peak_gyro, 3.0) << scenario << " " << id;   // the feet do swing
+    }
+  }
+}
+
+// A foot swings for about 0.4 s whatever the pace (a slower walker rests longer). Before
+// 2026-12-05 a slow search's steps of up to 2 s swung for their whole length (the pitch rate
+// then stood still while the foot moved at ~1 m/s, which a ZUPT detector takes for a stance)
+// and a step cut short before a stop swung in 0.13 s (house searches: longest swing 1.2 / 2.2 s,
+// 3 of ~110 / ~240 swings under 0.3 s, peak specific force 22 / 19 g). Now every swing of the
+// slow searches lasts 0.3-0.6 s, and no foot of the searches or of the stop-and-go training
+// walk (whose landings can be closer than a swing: two swings may then touch) exceeds 10 g.
+// What the swings' duration meant for the INS: on the slow searches its detector took a long
+// swing's still pitch for a stance and lost the stride (2-7 strides of ~0.9 m each per search,
+// the `ins` pipeline 0.28-1.42 m mean, in95 18-96 % on seeds 7-10). With an industrial IMU the
+// foot's end point is now within 1 % of the distance walked.
+TEST(ImuSim, TheInsLosesNoStrideOfASlowSearch) {
+  for (const std::string scenario : {"house1-search", "house2-search"}) {
+    for (std::uint64_t seed : {7, 9}) {
+      const InsRun r = RunInsOn(scenario, ImuGrade::Industrial(), FootMotion::kWalk, seed, true);
+      EXPECT_GT(r.distance_m, 50.0) << scenario << " " << seed;
+      EXPECT_LT(r.end_error_m, 0.01 * r.distance_m) << scenario << " " << seed;
+    }
+  }
+}
+
+TEST(ImuSim, EverySwingLastsAsAFootsDoesWhateverThePace) {
+  for (const std::string scenario : {"house1-search", "house2-search", "training-building"}) {
+    const SimulatedMission sim = SimulateScenario(scenario, 7);
+    const bool search = scenario != "training-building";
+    ImuSimOptions o;
+    o.grade = ImuGrade::Perfect();
+    o.rate_hz = 100;
+    for (const auto& [id, walk] : sim.walks) {
+      const SimulatedImu imu = SimulateFootImu(walk, id, o, Random(5));
+      std::vector<double> swings_s;  // the runs of samples out of stance
+      double peak_g = 0;
+      std::size_t run = 0;
+      for (std::size_t k = 0; k < imu.samples.size(); ++k) {
+        peak_g = std::max(peak_g, imu.samples[k].accel_b.norm() / 9.80665);
+        if (!imu.stance[k]) {
+          ++run;
+        } else if (run > 0) {
+          swings_s.push_back(static_cast<double>(run) / o.rate_hz);
+          run = 0;
+        }
+      }
+      ASSERT_GT(swings_s.size(), 50u) << scenario << " " << id;
+      EXPECT_LT(peak_g, 10.0) << scenario << " " << id;
+      if (!search) continue;
+      const double sample_s = 1.0 / o.rate_hz;
+      EXPECT_LE(*std::max_element(swings_s.begin(), swings_s.end()), 0.6 + 1.5 * sample_s) << id;
+      EXPECT_GE(*std::min_element(swings_s.begin(), swings_s.end()), 0.3 - 1.5 * sample_s) << id;
     }
   }
 }

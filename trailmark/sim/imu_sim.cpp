@@ -102,6 +102,16 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   // proportionally less and turns it at most kMaxSwingYawRate: the motion stays within what a
   // foot does and a MEMS gyro measures; the heading left over is caught up by the next strides.
   constexpr double kFullSwingS = 0.35;
+  // A foot's swing lasts about 0.4 s whatever the walking speed: a slower walker lengthens the
+  // stance, not the swing (e.g. Winter, The Biomechanics and Motor Control of Human Gait;
+  // swing ~0.35-0.45 s from slow to fast walking, ~0.3 s running). A swing is kept within
+  // [kMinSwingS, kMaxSwingS] of the time its step allows; the foot rests the rest of it. (Before
+  // 2026-12-05 a swing took its whole step: a slow search's 1.1 s steps swung for 1.1 s, and
+  // the pitch profile's rate stood still at a third and two thirds of such a swing while the
+  // foot moved at ~1 m/s, which a ZUPT detector takes for a stance; and a step cut short before
+  // a stop swung in 0.13 s, at 18 g.)
+  constexpr double kMinSwingS = 0.3;
+  constexpr double kMaxSwingS = 0.6;
   constexpr double kMaxSwingYawRate = 8.0;  // rad/s, mean over the swing
   constexpr double kMaxMeanSwingSpeed = 4.0;  // m/s: a walking stride's swing averages 2-3 m/s
   struct Stride {
@@ -132,8 +142,8 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
     // A step cut short before a stop can last milliseconds while this foot's stride spans the
     // step before it too: the swing then starts earlier, in this foot's rest, so that its mean
     // speed stays a foot's (the g-forces of a real stride, not thousands of g).
-    double t0 = s.t0;
-    const double min_swing_s = (to - foot).norm() / kMaxMeanSwingSpeed;
+    const double min_swing_s = std::max(kMinSwingS, (to - foot).norm() / kMaxMeanSwingSpeed);
+    double t0 = std::max(s.t0, s.t1 - kMaxSwingS);
     if (s.t1 - t0 < min_swing_s) {
       t0 = std::max(s.t1 - min_swing_s, strides.empty() ? s.t0 - min_swing_s : strides.back().t1);
     }
