@@ -517,6 +517,104 @@ TEST(StepFrontEnd, AnAgentsFirstSourceWinsAndTheOtherIsCounted) {
                std::invalid_argument);
 }
 
+// A phone's step detector reads swaying while standing as steps; the agent's declared stop
+// (events.csv stop .. go) says it stands. Steps of steps.csv that start in a declared stop are
+// not motion: ignored and counted, the step that ends as the stop begins is kept, and the
+// option off (or an estimator that takes each agent's rows in its own order) keeps them all.
+TEST(StepFrontEnd, StepsOfAPhoneDuringADeclaredStopAreNotMotion) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3::Zero(), 0.1));
+  auto step = [](TimeS t0, TimeS t1, const char* agent) {
+    return MissionRow(Step{t0, t1, agent, Vec3(0.6, 0, 0), std::nullopt});
+  };
+  auto event = [](TimeS t, const char* what) {
+    return MissionRow(MissionEvent{t, "ff1", what, ""});
+  };
+  const std::vector<MissionRow> rows = {
+      step(0.0, 0.5, "ff1"), step(0.5, 0.9, "ff1"), event(0.9, "stop"),
+      step(0.9, 1.4, "ff1"),  // sway, from the stop on
+      step(1.0, 1.5, "ff2"),  // another agent walks on
+      step(2.0, 2.5, "ff1"),  // sway
+      event(5.0, "go"),      step(5.0, 5.5, "ff1"), step(5.5, 6.0, "ff1")};
+  auto run = [&](bool ignore, RowOrder order, double* ignored) {
+    std::vector<MissionRow> seen;
+    StepFrontEndOptions options;
+    options.ignore_steps_in_stops = ignore;
+    StepFrontEnd front(info, options, order, Feed::kTimeOrdered, std::make_unique<Recorder>(&seen));
+    NullSink sink;
+    for (const MissionRow& r : rows) front.Add(r, sink);
+    front.Finish(sink);
+    const EstimatorSummary summary = front.Summary();
+    const auto it = summary.numbers.find("steps_in_declared_stops");
+    *ignored = it == summary.numbers.end() ? -1.0 : it->second;
+    std::vector<TimeS> ends;  // the steps the inner estimator got, by end time
+    for (const MissionRow& r : seen) {
+      if (const auto* s = std::get_if<Step>(&r)) ends.push_back(s->t1);
+    }
+    return ends;
+  };
+  double ignored = 0;
+  EXPECT_EQ(run(true, RowOrder::kGlobal, &ignored), (std::vector<TimeS>{0.5, 0.9, 1.5, 5.5, 6.0}));
+  EXPECT_EQ(ignored, 2.0);
+  EXPECT_EQ(run(false, RowOrder::kGlobal, &ignored).size(), 7u);
+  EXPECT_EQ(run(true, RowOrder::kPerAgent, &ignored).size(), 7u);
+}
+
+// A stop whose go never comes (a lost event) explains away a sway, not a walk: after
+// kMaxStepsInStop steps the agent is walking again, and a note says so.
+TEST(StepFrontEnd, AStopWithoutGoEndsWhenTheStepsAreMoreThanASway) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  std::vector<MissionRow> seen;
+  StepFrontEnd front(info, {}, RowOrder::kGlobal, Feed::kTimeOrdered,
+                     std::make_unique<Recorder>(&seen));
+  NullSink sink;
+  front.Add(MissionEvent{1.0, "ff1", "stop", ""}, sink);
+  const int n = StepFrontEndOptions::kMaxStepsInStop + 3;
+  for (int k = 0; k < n; ++k) {
+    front.Add(Step{1.0 + 0.5 * k, 1.5 + 0.5 * k, "ff1", Vec3(0.6, 0, 0), std::nullopt}, sink);
+  }
+  front.Finish(sink);
+  EXPECT_EQ(seen.size(), 4u);  // the stop event and the last 3 steps
+  const EstimatorSummary summary = front.Summary();
+  EXPECT_EQ(summary.numbers.at("steps_in_declared_stops"),
+            static_cast<double>(StepFrontEndOptions::kMaxStepsInStop));
+  EXPECT_TRUE(std::any_of(summary.notes.begin(), summary.notes.end(), [](const std::string& n) {
+    return n.find("without a go") != std::string::npos;
+  }));
+}
+
+// A foot INS measures its displacement: its steps are kept in a declared stop.
+TEST(StepFrontEnd, AFootInsStepsAreKeptInADeclaredStop) {
+  const TwoWalkers w = MakeTwoWalkers();
+  std::vector<MissionRow> rows = w.merged;
+  const TimeS t_stop = RowTime(rows[rows.size() / 4]), t_go = RowTime(rows[rows.size() / 2]);
+  rows.emplace_back(MissionEvent{t_stop, "ff1", "stop", ""});
+  rows.emplace_back(MissionEvent{t_go, "ff1", "go", ""});
+  std::stable_sort(rows.begin(), rows.end(), [](const MissionRow& a, const MissionRow& b) {
+    return RowTime(a) != RowTime(b) ? RowTime(a) < RowTime(b) : a.index() < b.index();
+  });
+  std::vector<MissionRow> seen;
+  StepFrontEnd front(w.sim.data.info, {}, RowOrder::kGlobal, Feed::kTimeOrdered,
+                     std::make_unique<Recorder>(&seen));
+  NullSink sink;
+  for (const MissionRow& r : rows) front.Add(r, sink);
+  front.Finish(sink);
+  auto steps = [](const std::vector<MissionRow>& v) {
+    return std::count_if(v.begin(), v.end(),
+                         [](const MissionRow& r) { return std::holds_alternative<Step>(r); });
+  };
+  const auto in_stop =
+      std::count_if(w.expected.begin(), w.expected.end(), [&](const MissionRow& r) {
+        const auto* s = std::get_if<Step>(&r);
+        return s && s->agent == "ff1" && s->t0 >= t_stop && s->t1 < t_go;
+      });
+  ASSERT_GT(in_stop, 5);  // the walker does walk in the declared stop
+  EXPECT_EQ(steps(seen), steps(w.expected));
+  EXPECT_EQ(front.Summary().numbers.at("steps_in_declared_stops"), 0.0);
+}
+
 TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
   MissionInfo info;
   info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(1, 1, 0), 0.2));

@@ -34,6 +34,9 @@ const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable() {
     t.Real("reorder_s", &StepFrontEndOptions::reorder_s, "s", OptionBounds::NonNegative(),
            "live: the longest a row waits for older rows of other devices (estimates lag by "
            "the window)");
+    t.Flag("ignore_steps_in_stops", &StepFrontEndOptions::ignore_steps_in_stops,
+           "a steps.csv step that starts after the agent's declared stop (events.csv) and "
+           "before its go is not motion: ignored and counted (a phone reads swaying as steps)");
     t.Flag("reorder_adaptive", &StepFrontEndOptions::reorder_adaptive,
            "live: the window is 2 x the feed's largest lateness of the last 20-30 s + 50 ms, "
            "at least 0.2 s, at most reorder_s, which it is for the first 10 s (false: always "
@@ -100,6 +103,25 @@ bool StepFrontEnd::UseSource(const std::string& agent, bool imu) {
 }
 
 void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
+  if (options_.ignore_steps_in_stops && order_ == RowOrder::kGlobal) {
+    // Rows come here in time order: a declared stop holds until the agent's go.
+    if (const auto* e = std::get_if<MissionEvent>(&row)) {
+      if (e->event == "stop") stopped_.try_emplace(e->agent, DeclaredStop{e->t, 0});
+      if (e->event == "go") stopped_.erase(e->agent);
+    } else if (const auto* step = std::get_if<Step>(&row)) {
+      const auto stop = stopped_.find(step->agent);
+      if (stop != stopped_.end() && step->t0 >= stop->second.since &&
+          !source_is_imu_[step->agent]) {
+        if (stop->second.steps < StepFrontEndOptions::kMaxStepsInStop) {
+          ++stop->second.steps;
+          ++steps_in_stops_;
+          return;
+        }
+        stopped_.erase(stop);  // more steps than a sway: walking, the go was never sent
+        ++stops_without_go_;
+      }
+    }
+  }
   height_.Add(row);
   HeightAnnotatingSink annotated(height_, sink);
   inner_->Add(row, annotated);
@@ -169,6 +191,20 @@ EstimatorSummary StepFrontEnd::Summary() const {
   height_.AddToSummary(s);
   s.numbers["rows_ignored"] += static_cast<double>(ignored_);
   if (order_ == RowOrder::kGlobal) {
+    if (options_.ignore_steps_in_stops) {
+      s.numbers["steps_in_declared_stops"] = static_cast<double>(steps_in_stops_);
+      if (steps_in_stops_ > 0) {
+        s.notes.push_back(fmt::format(
+            "{} steps of steps.csv started during a declared stop (events.csv stop .. go): not "
+            "motion, ignored (ignore_steps_in_stops)",
+            steps_in_stops_));
+      }
+      if (stops_without_go_ > 0) {
+        s.notes.push_back(fmt::format(
+            "{} declared stop(s) without a go: more than {} steps followed, taken as walking",
+            stops_without_go_, StepFrontEndOptions::kMaxStepsInStop));
+      }
+    }
     s.numbers["rows_late"] = static_cast<double>(buffer_.late());
     s.numbers["rows_waiting"] = static_cast<double>(buffer_.size());
     if (feed_ == Feed::kLive) {

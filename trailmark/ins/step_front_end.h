@@ -8,9 +8,12 @@
 ///    through a TimeOrderBuffer: a row is released once no earlier row can still come — in a
 ///    time-ordered feed (a batch merge of the mission's files) when every INS has processed
 ///    past it; in a live feed also a reorder window behind the newest row, since devices deliver
-///    their own rows in order but not in step with each other: by default the window follows
-///    the feed's measured lateness (ReorderWindow), at most `reorder_s`. Steps of an agent's
-///    INS are put in their place by their end time t1, as if read from steps.csv.
+///    their own rows in order but not in step with each other: `reorder_s` by default, or
+///    with `reorder_adaptive` the feed's measured lateness (ReorderWindow), at most `reorder_s`.
+///    Steps of an agent's
+///    INS are put in their place by their end time t1, as if read from steps.csv;
+///  - in global order, a steps.csv step that starts in its agent's declared stop (events.csv
+///    `stop` .. `go`) is not motion and is not passed on (`ignore_steps_in_stops`).
 /// The inner estimator sees steps, never IMU samples. Every row it gets also feeds the agents'
 /// height channel (ins/height.h), which sets z, szz and floor of what it estimates. No I/O.
 
@@ -40,6 +43,14 @@ struct StepFrontEndOptions {
   /// whose lateness grows past the learned window has rows late (out of order) once, which the
   /// fixed window avoids up to `reorder_s` (seen in the CLI test's free-running replay).
   bool reorder_adaptive = false;
+  /// Global order: a step of steps.csv that starts after its agent's declared stop (events.csv
+  /// `stop`) and before the next `go` is not motion: it is ignored and counted. A hand-held
+  /// phone's step detector reads swaying while standing as steps; the stop/go events say the
+  /// agent stands (the stop-and-go paper's premise). Steps of a foot INS are measured
+  /// displacement and always kept. A stop explains away at most kMaxStepsInStop steps: more
+  /// is walking, and the stop is taken as ended (its `go` missing; noted).
+  bool ignore_steps_in_stops = true;
+  static constexpr int kMaxStepsInStop = 4;
   /// Every agent's height channel (`height.` keys): z, szz and floor of the estimates.
   HeightOptions height;
   bool IsValid(std::string* why) const;
@@ -122,6 +133,13 @@ class StepFrontEnd : public OnlineEstimator {
   TimeOrderBuffer buffer_;
   ReorderWindow window_;
   std::map<std::string, bool> source_is_imu_;
+  /// Agents standing by a declared stop (events.csv), and since when (global order only).
+  struct DeclaredStop {
+    TimeS since = 0;
+    int steps = 0;  ///< steps ignored in it so far
+  };
+  std::map<std::string, DeclaredStop> stopped_;
+  std::size_t steps_in_stops_ = 0, stops_without_go_ = 0;
   TimeS newest_ = -1e300;
   std::size_t ignored_ = 0, ins_steps_ = 0;
 };
