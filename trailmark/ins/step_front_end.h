@@ -10,8 +10,8 @@
 ///    past it; in a live feed also a reorder window behind the newest row, since devices deliver
 ///    their own rows in order but not in step with each other: `reorder_s` by default, or
 ///    with `reorder_adaptive` the feed's measured lateness (ReorderWindow), at most `reorder_s`.
-///    Steps of an agent's
-///    INS are put in their place by their end time t1, as if read from steps.csv;
+///    Steps of an agent's INS are put in their place by their end time t1, as if read from
+///    steps.csv;
 ///  - in global order, a steps.csv step that starts in its agent's declared stop (events.csv
 ///    `stop` .. `go`) is not motion and is not passed on (`ignore_steps_in_stops`).
 /// The inner estimator sees steps, never IMU samples. Every row it gets also feeds the agents'

@@ -109,7 +109,7 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   // 2026-12-05 a swing took its whole step: a slow search's 1.1 s steps swung for 1.1 s, and
   // the pitch profile's rate stood still at a third and two thirds of such a swing while the
   // foot moved at ~1 m/s, which a ZUPT detector takes for a stance; and a step cut short before
-  // a stop swung in 0.13 s, at 18 g.)
+  // a stop swung in 0.13 s, at up to 22 g.)
   constexpr double kMinSwingS = 0.3;
   constexpr double kMaxSwingS = 0.6;
   constexpr double kMaxSwingYawRate = 8.0;  // rad/s, mean over the swing
