@@ -271,7 +271,10 @@ SimulatedMission SimulateMultiFloor(const MultiFloorOptions& o, std::uint64_t se
       m.baro.push_back({t, id, p});
     }
     if (o.foot_imu) {
-      const SimulatedImu imu = SimulateFootImu(walk, id, o.imu, rng.Fork());
+      // The foot rests facing the agent's stated start heading, as AddFootImu has it.
+      const NodeInfo* node = m.info.Find(id);
+      const SimulatedImu imu = SimulateFootImu(walk, id, o.imu, rng.Fork(),
+                                               node ? node->start_heading_rad : std::nullopt);
       m.imu.insert(m.imu.end(), imu.samples.begin(), imu.samples.end());
     }
   }
