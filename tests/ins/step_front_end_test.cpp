@@ -26,6 +26,7 @@ namespace {
 PdrOptions WhiteOnly() {
   PdrOptions o;
   o.start_heading_sigma_rad = o.heading_drift_sigma_rad_per_s = o.heading_walk_sigma_rad = 0;
+  o.track_heading_offset_sigma_rad = 0;
   o.step_scale_sigma = o.turn_scale_sigma = 0;
   return o;
 }
@@ -144,6 +145,7 @@ TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
   o.heading_walk_sigma_rad = 0.01;
   o.step_scale_sigma = 0.03;
   o.turn_scale_sigma = 0.02;  // 9 deg over the walk's 450 deg: small angles still
+  o.track_heading_offset_sigma_rad = 0.03;
   std::vector<Step> steps;
   TimeS t = 0;
   const std::array<Vec3, 4> sides = {Vec3(0.7, 0, 0), Vec3(0, 0.7, 0), Vec3(-0.7, 0, 0),
@@ -161,7 +163,9 @@ TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
   std::vector<Vec2> ends;
   Vec2 mean = Vec2::Zero();
   for (int k = 0; k < n; ++k) {
-    double heading = rng.Normal(0, o.start_heading_sigma_rad);
+    // The start heading's error and the track's own offset (two independent draws).
+    double heading =
+        rng.Normal(0, o.start_heading_sigma_rad) + rng.Normal(0, o.track_heading_offset_sigma_rad);
     const double rate = rng.Normal(0, o.heading_drift_sigma_rad_per_s);
     const double scale = rng.Normal(0, o.step_scale_sigma);
     const double turn_scale = rng.Normal(0, o.turn_scale_sigma);
@@ -615,6 +619,41 @@ TEST(StepFrontEnd, AFootInsStepsAreKeptInADeclaredStop) {
   EXPECT_EQ(front.Summary().numbers.at("steps_in_declared_stops"), 0.0);
 }
 
+// mission.json states where the responder faced; the device that made the steps may point
+// elsewhere (a boot's toe-out, a phone's carrying mode). Exact: the heading's prior variance is
+// the stated one plus the track's offset. And what it is for: a straight walk whose steps are
+// all turned by 8 deg, stated to 1.1 deg, ends inside the 95 % ellipse only with the offset.
+TEST(DeadReckoning, TheTracksOwnHeadingOffsetAddsToTheStatedStartHeading) {
+  const double stated = 0.02;
+  PdrOptions with;
+  ASSERT_GT(with.track_heading_offset_sigma_rad, 0.0);
+  PdrOptions without = with;
+  without.track_heading_offset_sigma_rad = 0.0;
+  DeadReckoning a(Vec3::Zero(), 0.1, with, stated), b(Vec3::Zero(), 0.1, without, stated);
+  EXPECT_NEAR(a.error_covariance()(2, 2),
+              stated * stated + std::pow(with.track_heading_offset_sigma_rad, 2), 1e-15);
+  EXPECT_NEAR(b.error_covariance()(2, 2), stated * stated, 1e-15);
+  EXPECT_NEAR(with.StartHeadingSigma(std::nullopt),
+              std::hypot(with.start_heading_sigma_rad, with.track_heading_offset_sigma_rad), 1e-15);
+  const double offset = 8.0 * M_PI / 180;
+  Vec2 truth = Vec2::Zero();
+  for (int k = 0; k < 60; ++k) {
+    const Vec2 walked(0.7, 0.0);
+    truth += walked;
+    const Vec2 reported = Eigen::Rotation2Dd(offset) * walked;
+    const Step s{k * 0.5, k * 0.5 + 0.5, "ff1", Vec3(reported.x(), reported.y(), 0),
+                 Vec3(1e-4, 1e-4, 1e-4)};
+    a.AddStep(s);
+    b.AddStep(s);
+  }
+  auto d2 = [&](const DeadReckoning& dr) {
+    const Vec2 e = dr.position_n().head<2>() - truth;
+    return e.dot(dr.covariance().inverse() * e);
+  };
+  EXPECT_LT(d2(a), 5.991);  // chi-square, 2 dof, 95 %
+  EXPECT_GT(d2(b), 5.991);
+}
+
 TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
   MissionInfo info;
   info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(1, 1, 0), 0.2));
@@ -630,7 +669,11 @@ TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
   // along it, x the start heading sigma across it.
   const PdrOptions o;
   EXPECT_NEAR(sink.rows[1].sxx, 0.04 + 0.01 + std::pow(0.5 * o.step_scale_sigma, 2), 1e-15);
-  EXPECT_NEAR(sink.rows[1].syy, 0.04 + 0.01 + std::pow(0.5 * o.start_heading_sigma_rad, 2), 1e-15);
+  // Across it: the heading's sigma at the start, the default one (no start_heading_sigma
+  // stated) and the track's own offset in quadrature.
+  const double heading_var =
+      std::pow(o.start_heading_sigma_rad, 2) + std::pow(o.track_heading_offset_sigma_rad, 2);
+  EXPECT_NEAR(sink.rows[1].syy, 0.04 + 0.01 + 0.25 * heading_var, 1e-15);
   EXPECT_EQ(est.Current("ff2")->position_n, Vec3(5, 0.5, 0));
   EXPECT_EQ(est.Current("ff2")->t, 1.5);
   EXPECT_EQ(est.Summary().numbers.at("rows_ignored"), 1.0);

@@ -37,7 +37,7 @@ bool SymmetricPositiveDefinite(const Mat& P) {
 TEST(LandmarkTracker, WithoutRadioItsMotionBlockIsTheDeadReckoningsErrorPropagation) {
   // A walk with pauses that turns a quarter left every 15 steps: the motion block, the
   // turn-scale state included (the same model, the same prior), is the dead reckoning's.
-  const PdrOptions pdr;
+  const PdrOptions pdr = LandmarkTrackerOptions{}.pdr;
   LandmarkTracker tracker(Vec3(1, 2, 0), 0.3, 0.05, std::nullopt);
   DeadReckoning dr(Vec3(1, 2, 0), 0.3, pdr, 0.05);
   TimeS t = 0;

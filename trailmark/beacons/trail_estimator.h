@@ -54,8 +54,9 @@ struct BeaconTrailOptions {
   bool drop_within_step = true;
   /// The drop priors of agents with a start come from their own dead reckoning (rotated by
   /// the entry-heading fix), with its covariance of shared errors (heading, drift rate, scale):
-  /// not from the tracker, whose estimate is built on the map (issue 22). Set a priori.
-  PdrOptions drop_dead_reckoning;
+  /// not from the tracker, whose estimate is built on the map (issue 22). Set a priori. The
+  /// track's own heading offset is entry_track_heading_sigma_rad's here.
+  PdrOptions drop_dead_reckoning{.track_heading_offset_sigma_rad = 0.0};
   double entry_track_m = 1.0;  ///< m; PDR track compared with the entry heading (0: never)
   /// An agent with a start but no start_heading: the rotation of its PDR into the navigation
   /// frame is estimated from its first ultrasound measurements of placed beacons, the start as

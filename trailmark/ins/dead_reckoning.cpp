@@ -14,8 +14,8 @@ namespace trailmark {
 
 bool PdrOptions::IsValid(std::string* why) const {
   for (double x : {default_step_noise_m, default_step_relative_sigma, start_heading_sigma_rad,
-                   heading_drift_sigma_rad_per_s, heading_walk_sigma_rad, step_scale_sigma,
-                   turn_scale_sigma, turn_min_step_m}) {
+                   track_heading_offset_sigma_rad, heading_drift_sigma_rad_per_s,
+                   heading_walk_sigma_rad, step_scale_sigma, turn_scale_sigma, turn_min_step_m}) {
     if (!(x >= 0) || !std::isfinite(x)) {
       if (why) {
         *why =
@@ -28,10 +28,14 @@ bool PdrOptions::IsValid(std::string* why) const {
   return true;
 }
 
+double PdrOptions::StartHeadingSigma(std::optional<double> stated_rad) const {
+  return std::hypot(stated_rad.value_or(start_heading_sigma_rad), track_heading_offset_sigma_rad);
+}
+
 DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options,
                              std::optional<double> start_heading_sigma_rad)
     : options_(options), position_n_(start_n) {
-  const double heading = start_heading_sigma_rad.value_or(options_.start_heading_sigma_rad);
+  const double heading = options_.StartHeadingSigma(start_heading_sigma_rad);
   error_cov_.setZero();
   error_cov_(kX, kX) = error_cov_(kY, kY) = start_sigma_m * start_sigma_m;
   error_cov_(kHeading, kHeading) = heading * heading;

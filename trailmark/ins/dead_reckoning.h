@@ -26,6 +26,12 @@ struct PdrOptions {
   /// heading error at the start when mission.json gives no start_heading_sigma (a heading
   /// aligned by hand or compass at the entrance: 5 degrees).
   double start_heading_sigma_rad = 0.087;
+  /// The step stream's own heading offset from the walker's stated start heading, added to
+  /// that heading's sigma in quadrature: mission.json states where the responder faced, not how
+  /// the device that made the steps is aligned with the walking direction (a boot's toe-out, a
+  /// phone's carrying mode). 5 degrees: the spread of the foot progression angle (toe-out) in
+  /// gait studies, set before any run. 0: the steps' heading is exactly the stated one.
+  double track_heading_offset_sigma_rad = 0.087;
   /// heading drift rate (gyro bias left after calibration; it integrates while standing too):
   /// 3 degrees per minute, the order of a consumer MEMS foot INS's yaw drift.
   double heading_drift_sigma_rad_per_s = 0.00087;
@@ -42,6 +48,9 @@ struct PdrOptions {
   /// a turn (shuffling, zero-length steps while standing); the next longer step's turn is
   /// counted from the last longer step.
   double turn_min_step_m = 0.2;
+  /// The heading's sigma at the start: the stated one (else start_heading_sigma_rad) with the
+  /// track's own offset, in quadrature.
+  double StartHeadingSigma(std::optional<double> stated_rad) const;
   bool IsValid(std::string* why) const;
 };
 

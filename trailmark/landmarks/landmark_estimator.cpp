@@ -11,6 +11,11 @@
 namespace trailmark::landmarks {
 
 namespace {
+
+/// The stops' dead reckoning (the fixes' drift between stops) keeps the heading prior the
+/// mission states: with the track's own offset added (ins/dead_reckoning.h) the stop fixes
+/// pulled right corridor walks off (docs/robustness.md, measured 2026-12-05).
+const PdrOptions kStopDeadReckoning{.track_heading_offset_sigma_rad = 0.0};
 /// Added to solved covariances so that they stay positive definite: (1 cm)^2.
 constexpr double kCovarianceFloorM2 = 1e-4;
 /// Added to a step's drift variance so that it is never zero: (0.1 mm)^2.
@@ -190,12 +195,12 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     if (options_.tracking != Tracking::kUkf && (options_.fix_fusion == FixFusion::kIntersection ||
                                                 (options_.fix_fusion == FixFusion::kIndependent &&
                                                  options_.drift == DriftModel::kDeadReckoning))) {
-      a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
+      a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, kStopDeadReckoning,
                    n.start_heading_sigma_rad);
     }
     if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kJoint) {
-      a.clones.emplace(DeadReckoning(Vec3(a.position.x(), a.position.y(), 0.0), s, PdrOptions{},
-                                     n.start_heading_sigma_rad));
+      a.clones.emplace(DeadReckoning(Vec3(a.position.x(), a.position.y(), 0.0), s,
+                                     kStopDeadReckoning, n.start_heading_sigma_rad));
     }
     if (!start) {
       setup_notes_.push_back(

@@ -78,7 +78,9 @@ LandmarkTracker::LandmarkTracker(const Vec3& start_n, double start_sigma_m,
   x_(kAlpha) = radio ? radio->alpha_dbm : options_.default_alpha_dbm;
   x_(kExponent) = std::clamp(radio ? radio->path_loss_exponent : options_.default_exponent,
                              options_.min_exponent, options_.max_exponent);
-  const double heading = start_heading_sigma_rad.value_or(options_.pdr.start_heading_sigma_rad);
+  // The options' track offset is 0 by default here (landmark_tracker.h:
+  // LandmarkTrackerOptions::pdr).
+  const double heading = options_.pdr.StartHeadingSigma(start_heading_sigma_rad);
   const double alpha_sigma = radio ? options_.given_alpha_sigma_db : options_.default_alpha_sigma_db;
   const double n_sigma = radio ? options_.given_exponent_sigma : options_.default_exponent_sigma;
   P_(kPx, kPx) = P_(kPy, kPy) = start_sigma_m * start_sigma_m;

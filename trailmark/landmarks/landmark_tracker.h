@@ -47,8 +47,10 @@ namespace trailmark::landmarks {
 struct LandmarkTrackerOptions {
   /// The dead reckoning's error model as the prior of psi, omega, s, g (turn scale: shorter
   /// steps than pdr.turn_min_step_m do not say where the walker turned) and the step noise
-  /// (`pdr`'s defaults, set a priori: ins/dead_reckoning.h).
-  PdrOptions pdr;
+  /// (`pdr`'s defaults, set a priori: ins/dead_reckoning.h) — but not the track's heading
+  /// offset: with it the few landmarks of a corridor rotated a straight walk that was right
+  /// (docs/robustness.md, measured 2026-12-05), so the heading prior stays the stated one.
+  PdrOptions pdr{.track_heading_offset_sigma_rad = 0.0};
   /// The radio model's prior when mission.json gives one: a device's offset (about 10 dB
   /// between two phones on recorded BLE, issue 24) and a stale exponent are still possible.
   double given_alpha_sigma_db = 4.0;

@@ -44,6 +44,9 @@ const OptionTable<PdrOptions>& PdrOptionTable() {
     t.Real("start_heading_sigma_rad", &PdrOptions::start_heading_sigma_rad, "rad",
            OptionBounds::NonNegative(),
            "heading error at the start where mission.json gives no start_heading_sigma");
+    t.Real("track_heading_offset_sigma_rad", &PdrOptions::track_heading_offset_sigma_rad, "rad",
+           OptionBounds::NonNegative(),
+           "the steps' own heading offset from the stated start heading, added in quadrature");
     t.Real("heading_drift_sigma_rad_per_s", &PdrOptions::heading_drift_sigma_rad_per_s, "rad/s",
            OptionBounds::NonNegative(),
            "heading drift rate shared by all steps (grows while standing too), 1 sigma");
