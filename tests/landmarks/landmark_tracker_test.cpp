@@ -36,9 +36,15 @@ bool SymmetricPositiveDefinite(const Mat& P) {
 
 TEST(LandmarkTracker, WithoutRadioItsMotionBlockIsTheDeadReckoningsErrorPropagation) {
   // A walk with pauses that turns a quarter left every 15 steps: the motion block, the
-  // turn-scale state included (the same model, the same prior), is the dead reckoning's.
-  const PdrOptions pdr = LandmarkTrackerOptions{}.pdr;
+  // turn-scale state included (the same model, the same prior), is the dead reckoning's. The
+  // track's own heading offset is not a state of the tracker but a consider parameter: the
+  // filter's covariance is dead reckoning's without it, and the covariance it reports is dead
+  // reckoning's with it (both linear propagations of the same errors: exact).
+  PdrOptions pdr = LandmarkTrackerOptions{}.pdr;
+  ASSERT_GT(pdr.track_heading_offset_sigma_rad, 0.0);
   LandmarkTracker tracker(Vec3(1, 2, 0), 0.3, 0.05, std::nullopt);
+  DeadReckoning with_offset(Vec3(1, 2, 0), 0.3, pdr, 0.05);
+  pdr.track_heading_offset_sigma_rad = 0.0;
   DeadReckoning dr(Vec3(1, 2, 0), 0.3, pdr, 0.05);
   TimeS t = 0;
   for (int k = 0; k < 60; ++k) {
@@ -46,11 +52,19 @@ TEST(LandmarkTracker, WithoutRadioItsMotionBlockIsTheDeadReckoningsErrorPropagat
     const Step s = MakeStep(t, Eigen::Rotation2Dd(M_PI / 2 * (k / 15)) * Vec2(0.6, 0.25));
     tracker.AddStep(s);
     dr.AddStep(s);
+    with_offset.AddStep(s);
+    if (k == 29) {  // half way round (at the loop's end an offset's error cancels)
+      EXPECT_LT((tracker.reported_position_cov() - with_offset.covariance()).cwiseAbs().maxCoeff(),
+                1e-12 * with_offset.covariance().cwiseAbs().maxCoeff());
+      EXPECT_GT(tracker.reported_position_cov().trace(), 1.1 * tracker.position_cov().trace());
+    }
   }
   EXPECT_LT((tracker.position() - dr.position_n().head<2>()).norm(), 1e-12);
   const Mat ours = tracker.covariance().topLeftCorner<6, 6>();
   EXPECT_LT((ours - Mat(dr.error_covariance())).cwiseAbs().maxCoeff(),
             1e-12 * dr.error_covariance().cwiseAbs().maxCoeff());
+  EXPECT_LT((tracker.reported_position_cov() - with_offset.covariance()).cwiseAbs().maxCoeff(),
+            1e-12 * with_offset.covariance().cwiseAbs().maxCoeff());
 }
 
 /// The tracker's measurement model for a test: h(x) at the state's first kFixed entries plus

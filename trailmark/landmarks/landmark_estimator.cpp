@@ -124,6 +124,12 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
     t.Real(
         "turn_scale_sigma", [](O& o) -> double& { return o.tracker.pdr.turn_scale_sigma; }, "",
         OptionBounds::Positive(), "error-state: prior sigma of the PDR's turn-scale error");
+    t.Real(
+        "track_heading_offset_sigma_rad",
+        [](O& o) -> double& { return o.tracker.pdr.track_heading_offset_sigma_rad; }, "rad",
+        OptionBounds::NonNegative(),
+        "error-state: the steps' own heading offset, a consider parameter (reported covariance "
+        "only; 0: none)");
     t.Flag("adapt_noise", [](O& o) -> bool& { return o.tracker.adapt_noise; },
            "error-state: the RSSI variances scaled up while the packets' mean NIS is above 1");
     t.Flag("slam", &O::slam,
@@ -238,7 +244,7 @@ Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {
 }
 
 Mat2 LandmarkEstimator::CovarianceOf(const Agent& a) const {
-  if (a.tracker) return a.tracker->position_cov();
+  if (a.tracker) return a.tracker->reported_position_cov();
   if (a.ukf) return a.ukf->position_cov();
   // Independent fixes, DriftModel::kDeadReckoning: the estimate is the paper's, its covariance
   // the dead reckoning's since the last fix (set there to the fused one).

@@ -78,9 +78,8 @@ LandmarkTracker::LandmarkTracker(const Vec3& start_n, double start_sigma_m,
   x_(kAlpha) = radio ? radio->alpha_dbm : options_.default_alpha_dbm;
   x_(kExponent) = std::clamp(radio ? radio->path_loss_exponent : options_.default_exponent,
                              options_.min_exponent, options_.max_exponent);
-  // The options' track offset is 0 by default here (landmark_tracker.h:
-  // LandmarkTrackerOptions::pdr).
-  const double heading = options_.pdr.StartHeadingSigma(start_heading_sigma_rad);
+  // The stated heading alone: the track's own offset is the consider parameter (sens_).
+  const double heading = start_heading_sigma_rad.value_or(options_.pdr.start_heading_sigma_rad);
   const double alpha_sigma = radio ? options_.given_alpha_sigma_db : options_.default_alpha_sigma_db;
   const double n_sigma = radio ? options_.given_exponent_sigma : options_.default_exponent_sigma;
   P_(kPx, kPx) = P_(kPy, kPy) = start_sigma_m * start_sigma_m;
@@ -91,6 +90,14 @@ LandmarkTracker::LandmarkTracker(const Vec3& start_n, double start_sigma_m,
   P_(kTurnScale, kTurnScale) = options_.pdr.turn_scale_sigma * options_.pdr.turn_scale_sigma;
   P_(kAlpha, kAlpha) = alpha_sigma * alpha_sigma;
   P_(kExponent, kExponent) = n_sigma * n_sigma;
+  sens_ = Eigen::VectorXd::Zero(kFixed);
+  sens_(kHeading) = 1.0;
+}
+
+Mat2 LandmarkTracker::reported_position_cov() const {
+  const double c = options_.pdr.track_heading_offset_sigma_rad;
+  const Vec2 s = sens_.head<2>();
+  return position_cov() + c * c * s * s.transpose();
 }
 
 double LandmarkTracker::alpha_sigma_db() const { return std::sqrt(P_(kAlpha, kAlpha)); }
@@ -113,6 +120,7 @@ void LandmarkTracker::DecayShadowing(double distance_m, double dt_s) {
   for (int i = kFixed; i < n; ++i) {
     if (extra_kind_[i - kFixed] != 'b') continue;
     x_(i) *= rho;
+    sens_(i) *= rho;
     P_.row(i) *= rho;
     P_.col(i) *= rho;
     P_(i, i) += q;
@@ -140,6 +148,7 @@ void LandmarkTracker::DropStaleBiases() {
   }
   // Marginalizing a Gaussian: drop its rows and columns.
   x_ = Eigen::VectorXd(x_(keep));
+  sens_ = Eigen::VectorXd(sens_(keep));
   P_ = Eigen::MatrixXd(P_(keep, keep));
   extra_kind_ = std::move(kind);
   extra_landmark_ = std::move(landmark);
@@ -156,6 +165,8 @@ int LandmarkTracker::BiasState(int landmark) {
   const int n = static_cast<int>(x_.size());
   x_.conservativeResize(n + 1);
   x_(n) = 0;
+  sens_.conservativeResize(n + 1);
+  sens_(n) = 0;  // a new link's shadowing: independent of the track's heading
   P_.conservativeResize(n + 1, n + 1);
   P_.row(n).setZero();
   P_.col(n).setZero();
@@ -190,6 +201,7 @@ void LandmarkTracker::Propagate(TimeS t) {
   t_ = t;
   // psi += omega dt: F = I + dt e_psi e_omega^T, applied to rows then columns.
   x_(kHeading) += x_(kRate) * dt;
+  sens_(kHeading) += dt * sens_(kRate);
   P_.row(kHeading) += dt * P_.row(kRate);
   P_.col(kHeading) += dt * P_.col(kRate);
   DecayShadowing(0.0, dt);
@@ -205,6 +217,7 @@ void LandmarkTracker::AddStep(const Step& step) {
     if (direction_rad_) {
       const double turn = std::remainder(direction - *direction_rad_, 2 * M_PI);
       x_(kHeading) += x_(kTurnScale) * turn;
+      sens_(kHeading) += turn * sens_(kTurnScale);
       P_.row(kHeading) += turn * P_.row(kTurnScale);
       P_.col(kHeading) += turn * P_.col(kTurnScale);
     }
@@ -216,6 +229,8 @@ void LandmarkTracker::AddStep(const Step& step) {
   // p += (1 + s) R(psi) d; its Jacobians: d/dpsi = (1 + s) (-rd_y, rd_x), d/ds = rd.
   const double jx_psi = -f * rd.y(), jy_psi = f * rd.x();
   x_.head<2>() += f * rd;
+  sens_(kPx) += jx_psi * sens_(kHeading) + rd.x() * sens_(kScale);
+  sens_(kPy) += jy_psi * sens_(kHeading) + rd.y() * sens_(kScale);
   {
     const Eigen::RowVectorXd r_psi = P_.row(kHeading), r_s = P_.row(kScale);
     P_.row(kPx) += jx_psi * r_psi + rd.x() * r_s;
@@ -406,6 +421,10 @@ void LandmarkTracker::PlaceLandmark(int landmark) {
   const int i = static_cast<int>(x_.size());
   x_.conservativeResize(i + 2);
   x_.segment<2>(i) = theta.head<2>();
+  // Placed from the track's positions, in the track's frame: it moves with the track's offset
+  // error as the position does now (first order).
+  sens_.conservativeResize(i + 2);
+  sens_.segment<2>(i) = sens_.head<2>();
   P_.conservativeResize(i + 2, i + 2);
   P_.bottomRows(2).setZero();
   P_.rightCols(2).setZero();
@@ -416,6 +435,7 @@ void LandmarkTracker::PlaceLandmark(int landmark) {
   }
   const int b = BiasState(landmark);
   x_(b) = theta(2);
+  sens_(b) = 0;
   P_.row(b).setZero();
   P_.col(b).setZero();
   const int idx[3] = {i, i + 1, b};
@@ -527,6 +547,9 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
     if (moved < 1e-7) break;  // m (0.01 m per dB of alpha)
   }
   x_ = xi;
+  // The consider sensitivity through the update: (I - k h^T) S, the final iterate's gain and
+  // Jacobian (the packet does not see the offset, so it corrects only what it sees of it).
+  sens_ -= k * dot_h(l, sens_);
   // Joseph form for any gain: P - k u^T - u k^T + S k k^T, u = P H^T (the consider gain too).
   P_ -= k * ph.transpose() + ph * k.transpose();
   P_ += s * k * k.transpose();

@@ -47,10 +47,12 @@ namespace trailmark::landmarks {
 struct LandmarkTrackerOptions {
   /// The dead reckoning's error model as the prior of psi, omega, s, g (turn scale: shorter
   /// steps than pdr.turn_min_step_m do not say where the walker turned) and the step noise
-  /// (`pdr`'s defaults, set a priori: ins/dead_reckoning.h) — but not the track's heading
-  /// offset: with it the few landmarks of a corridor rotated a straight walk that was right
-  /// (docs/robustness.md, measured 2026-12-05), so the heading prior stays the stated one.
-  PdrOptions pdr{.track_heading_offset_sigma_rad = 0.0};
+  /// (`pdr`'s defaults, set a priori: ins/dead_reckoning.h). The track's own heading offset
+  /// (`pdr.track_heading_offset_sigma_rad`) is a consider parameter, not a state: estimated,
+  /// the few landmarks of a corridor rotated straight walks that were right (docs/robustness.md,
+  /// measured 2026-12-05). Its effect on the estimate is carried as a sensitivity and added to
+  /// the reported covariance only (reported_position_cov).
+  PdrOptions pdr;
   /// The radio model's prior when mission.json gives one: a device's offset (about 10 dB
   /// between two phones on recorded BLE, issue 24) and a stale exponent are still possible.
   double given_alpha_sigma_db = 4.0;
@@ -136,6 +138,13 @@ class LandmarkTracker {
 
   Vec2 position() const { return x_.head<2>(); }
   Mat2 position_cov() const { return P_.topLeftCorner<2, 2>(); }
+  /// The position covariance with the consider parameter's share (consider covariance analysis,
+  /// Tapley, Schutz & Born 2004, sec. 6.3): P + sigma_c^2 S S^T, where S is the state error's
+  /// sensitivity to the track's heading offset, which no update estimates. The estimate is the
+  /// filter's own; only what it claims of its error grows.
+  Mat2 reported_position_cov() const;
+  /// The sensitivity S (one entry per state).
+  const Eigen::VectorXd& offset_sensitivity() const { return sens_; }
   double heading_correction_rad() const { return x_(kHeading); }
   double heading_rate_rad_per_s() const { return x_(kRate); }
   double scale_correction() const { return x_(kScale); }
@@ -176,6 +185,9 @@ class LandmarkTracker {
   double sigma_shadow_db_ = 0, sigma_fast_db_ = 0;
   Eigen::VectorXd x_;
   Eigen::MatrixXd P_;
+  /// d(state error) / d(track heading offset): starts at e_psi (the offset acts as a heading
+  /// error at the start), transformed as the error is by every propagation and update.
+  Eigen::VectorXd sens_;
   /// The states after kFixed: a link's shadowing bias ('b') or an unknown landmark's x or y
   /// ('x', 'y'); the landmark of each; for a bias, the distance walked when it was last heard.
   std::vector<char> extra_kind_;
