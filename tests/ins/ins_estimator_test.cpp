@@ -64,8 +64,8 @@ std::map<double, const InsState*> ByTime(const Output& out) {
 }
 
 /// What mission.json says of the start that the filter leaves out (ins_estimator.h), written
-/// out: the start position's variance, and the start heading's beyond the filter's initial yaw
-/// variance, turning the walk about the start.
+/// out: the start position's variance, and the start heading's (with the foot's own offset)
+/// beyond the filter's initial yaw variance, turning the walk about the start.
 const NodeInfo& FirstAgent(const MissionInfo& info) {
   for (const NodeInfo& n : info.nodes) {
     if (n.kind == NodeKind::kAgent) return n;
@@ -73,14 +73,15 @@ const NodeInfo& FirstAgent(const MissionInfo& info) {
   throw std::logic_error("no agent");
 }
 
-Mat2 StartVariance(const MissionInfo& info, const InsState& st) {
+Mat2 StartVariance(const MissionInfo& info, const InsState& st, double offset_rad) {
   const NodeInfo& n = FirstAgent(info);
   const double sp = n.start_sigma_m.value_or(0.0);
-  const double sh = n.start_heading_rad ? n.start_heading_sigma_rad.value_or(0.0) : 0.0;
   const double own = InsOptions{}.initial_yaw_sigma_rad;
+  const double sh = n.start_heading_sigma_rad.value_or(own);
+  const double yaw_var = n.start_heading_rad ? sh * sh + offset_rad * offset_rad - own * own : 0.0;
   const Vec2 from = st.position_n.head<2>() - info.AgentStart(n).value_or(Vec3::Zero()).head<2>();
   const Vec2 u(-from.y(), from.x());
-  return sp * sp * Mat2::Identity() + std::max(0.0, sh * sh - own * own) * u * u.transpose();
+  return sp * sp * Mat2::Identity() + std::max(0.0, yaw_var) * u * u.transpose();
 }
 
 TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
@@ -90,13 +91,19 @@ TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
   ASSERT_NE(agent_it, w.info.nodes.end());
   NodeInfo& agent = *agent_it;
   ASSERT_TRUE(agent.start_heading_rad);
-  // Stated exactly (the filter's own yaw sigma): the filter's covariance as it is.
+  // Stated exactly (the filter's own yaw sigma) and the foot taken to point as stated: the
+  // filter's covariance as it is.
   agent.start_sigma_m = 0.0;
   agent.start_heading_sigma_rad = InsOptions{}.initial_yaw_sigma_rad;
-  const Output exact = RunEstimator(w, {});
-  // Stated as a door a firefighter walks in by: 0.2 m, 0.05 rad.
+  InsEstimatorOptions as_stated;
+  as_stated.track_heading_offset_sigma_rad = 0.0;
+  const Output exact = RunEstimator(w, as_stated);
+  // Stated as a door a firefighter walks in by: 0.2 m, 0.05 rad; the foot's own offset (toe-out)
+  // at its default.
   agent.start_sigma_m = 0.2;
   agent.start_heading_sigma_rad = 0.05;
+  const double offset = InsEstimatorOptions{}.track_heading_offset_sigma_rad;
+  ASSERT_GT(offset, 0.0);
   const Output door = RunEstimator(w, {});
   ASSERT_EQ(exact.estimates.size(), door.estimates.size());
   ASSERT_GT(door.estimates.size(), 100u);
@@ -108,7 +115,7 @@ TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
     ASSERT_EQ(a.position_n, b.position_n) << i;  // the filter is the same
     const InsState& st = *states.at(b.t);
     EXPECT_EQ(a.sxx, st.position_cov(0, 0));
-    const Mat2 extra = StartVariance(w.info, st);
+    const Mat2 extra = StartVariance(w.info, st, offset);
     EXPECT_NEAR(b.sxx, st.position_cov(0, 0) + extra(0, 0), 1e-12);
     EXPECT_NEAR(b.sxy, st.position_cov(0, 1) + extra(0, 1), 1e-12);
     EXPECT_NEAR(b.syy, st.position_cov(1, 1) + extra(1, 1), 1e-12);
@@ -141,7 +148,9 @@ TEST(InsEstimator, RateOutputKeepsEveryStepEndAndTheLastState) {
     EXPECT_EQ(e.position_n.z(), 0.0);
     ASSERT_TRUE(e.szz && e.floor);
     EXPECT_EQ(*e.floor, 0);
-    EXPECT_EQ(e.sxx, it->second->position_cov(0, 0) + StartVariance(w.info, *it->second)(0, 0));
+    EXPECT_EQ(e.sxx,
+              it->second->position_cov(0, 0) +
+                  StartVariance(w.info, *it->second, o.track_heading_offset_sigma_rad)(0, 0));
     times.push_back(e.t);
   }
   ASSERT_TRUE(std::is_sorted(times.begin(), times.end()));

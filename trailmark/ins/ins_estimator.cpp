@@ -171,6 +171,10 @@ bool InsEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "output_hz must be >= 0 and finite";
     return false;
   }
+  if (!(track_heading_offset_sigma_rad >= 0) || !std::isfinite(track_heading_offset_sigma_rad)) {
+    if (why) *why = "track_heading_offset_sigma_rad must be >= 0 and finite";
+    return false;
+  }
   return true;
 }
 
@@ -185,6 +189,10 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
              "(every step end only)");
     t.Real("output_hz", &InsEstimatorOptions::output_hz, "Hz", OptionBounds::NonNegative(),
            "output=rate: estimates per agent per second, step ends besides (0: every sample)");
+    t.Real("track_heading_offset_sigma_rad", &InsEstimatorOptions::track_heading_offset_sigma_rad,
+           "rad", OptionBounds::NonNegative(),
+           "the foot's own heading offset from the stated start heading (toe-out), in the "
+           "covariance written");
     t.Include("height.", &InsEstimatorOptions::height, HeightOptionTable());
     return t;
   }();
@@ -200,11 +208,13 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
     StartPrior prior;
     if (const auto start = info.AgentStart(n)) prior.start = start->head<2>();
     if (n.start_sigma_m) prior.position_var_m2 = *n.start_sigma_m * *n.start_sigma_m;
-    // The filter starts its yaw at the stated heading with its own sigma (MultiAgentIns).
-    if (n.start_heading_rad && n.start_heading_sigma_rad) {
+    // The filter starts its yaw at the stated heading with its own sigma (MultiAgentIns); the
+    // stated sigma (the filter's own when none is stated) and the foot's offset are beyond it.
+    if (n.start_heading_rad) {
       const double own = options_.ins.initial_yaw_sigma_rad;
-      prior.extra_yaw_var_rad2 =
-          std::max(0.0, *n.start_heading_sigma_rad * *n.start_heading_sigma_rad - own * own);
+      const double stated = n.start_heading_sigma_rad.value_or(own);
+      const double offset = options_.track_heading_offset_sigma_rad;
+      prior.extra_yaw_var_rad2 = std::max(0.0, stated * stated + offset * offset - own * own);
     }
     start_prior_[n.id] = prior;
   }

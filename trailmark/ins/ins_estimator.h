@@ -15,6 +15,7 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/ins/height.h"
 #include "trailmark/ins/zupt_ins.h"
 
@@ -75,6 +76,11 @@ struct InsEstimatorOptions {
   /// ~10 cm between two (swing ~5 m/s), a tenth of the INS's error after a minute's walk, and a
   /// 820 Hz IMU writes 16x fewer rows than samples. Step ends are written whatever the rate.
   double output_hz = 50;
+  /// The foot's own heading offset from the stated start heading (a boot's toe-out: the IMU's
+  /// yaw is aligned with where the responder faced, the foot points a few degrees off), added to
+  /// the start heading's variance in the covariance written (as dead reckoning's,
+  /// PdrOptions::track_heading_offset_sigma_rad); rad. 0: the foot points as stated.
+  double track_heading_offset_sigma_rad = PdrOptions{}.track_heading_offset_sigma_rad;
   /// The height channel (`height.` keys): z, szz and floor from the steps and baro.csv.
   HeightOptions height;
   bool IsValid(std::string* why) const;
