@@ -110,8 +110,9 @@ void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
       if (e->event == "go") stopped_.erase(e->agent);
     } else if (const auto* step = std::get_if<Step>(&row)) {
       const auto stop = stopped_.find(step->agent);
-      if (stop != stopped_.end() && step->t0 >= stop->second.since &&
-          !source_is_imu_[step->agent]) {
+      const auto source = source_is_imu_.find(step->agent);  // a lookup, never an insertion
+      const bool from_foot_ins = source != source_is_imu_.end() && source->second;
+      if (stop != stopped_.end() && step->t0 >= stop->second.since && !from_foot_ins) {
         if (stop->second.steps < StepFrontEndOptions::kMaxStepsInStop) {
           ++stop->second.steps;
           ++steps_in_stops_;
