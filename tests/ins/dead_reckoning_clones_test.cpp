@@ -22,7 +22,19 @@ struct AugmentedFilter {
   Eigen::MatrixXd cov;
   std::vector<Vec2> clone_n;
 
-  explicit AugmentedFilter(const DeadReckoning& d) : dr(d), cov(d.error_covariance()) {}
+  /// With a considered heading offset (the dead reckoning's own covariance excludes it): the
+  /// true error covariance of this filter's estimate, of [the state above; the offset], the
+  /// offset last. The gain stays the one computed without it (Joseph form with that gain).
+  Eigen::MatrixXd with_offset;
+
+  explicit AugmentedFilter(const DeadReckoning& d) : dr(d), cov(d.error_covariance()) {
+    const double sigma = d.considered_offset_sigma_rad();
+    with_offset = Eigen::MatrixXd::Zero(7, 7);
+    with_offset.topLeftCorner<6, 6>() = cov;
+    // The heading error at the start is the stated one plus the offset.
+    with_offset(2, 2) += sigma * sigma;
+    with_offset(2, 6) = with_offset(6, 2) = with_offset(6, 6) = sigma * sigma;
+  }
   void AddStep(const Step& s) {
     const DeadReckoning::ErrorCovariance before = dr.error_covariance();
     dr.AddStep(s);
@@ -36,6 +48,11 @@ struct AugmentedFilter {
     Q.topLeftCorner<6, 6>() = q;
     mean = F * mean;
     cov = F * cov * F.transpose() + Q;
+    Eigen::MatrixXd Fo = Eigen::MatrixXd::Identity(n + 1, n + 1);
+    Fo.topLeftCorner(n, n) = F;
+    Eigen::MatrixXd Qo = Eigen::MatrixXd::Zero(n + 1, n + 1);
+    Qo.topLeftCorner(n, n) = Q;
+    with_offset = Fo * with_offset * Fo.transpose() + Qo;
   }
   void Clone(double own_variance) {
     const Eigen::Index n = cov.rows();
@@ -46,6 +63,12 @@ struct AugmentedFilter {
     cov = J * cov * J.transpose();
     cov.bottomRightCorner<2, 2>() += Mat2::Identity() * own_variance;
     clone_n.push_back(dr.position_n().head<2>());
+    // The offset stays last: the new clone goes before it.
+    Eigen::MatrixXd Jo = Eigen::MatrixXd::Zero(n + 3, n + 1);
+    Jo.topLeftCorner(n, n).setIdentity();
+    Jo(n, 0) = Jo(n + 1, 1) = Jo(n + 2, n) = 1;
+    with_offset = Jo * with_offset * Jo.transpose();
+    with_offset.block<2, 2>(n, n) += Mat2::Identity() * own_variance;
   }
   /// y = H p + v, p the clones' true positions = DR - e.
   void Measure(const Eigen::MatrixXd& H, const Eigen::VectorXd& y, const Eigen::MatrixXd& R) {
@@ -59,6 +82,12 @@ struct AugmentedFilter {
     const Eigen::MatrixXd K = cov * He.transpose() * S.inverse();
     mean += K * innovation;
     cov = cov - K * S * K.transpose();
+    Eigen::MatrixXd Ko = Eigen::MatrixXd::Zero(n + 1, H.rows());
+    Ko.topRows(n) = K;
+    Eigen::MatrixXd Heo = Eigen::MatrixXd::Zero(H.rows(), n + 1);
+    Heo.leftCols(n) = He;
+    const Eigen::MatrixXd IKH = Eigen::MatrixXd::Identity(n + 1, n + 1) - Ko * Heo;
+    with_offset = IKH * with_offset * IKH.transpose() + Ko * R * Ko.transpose();
   }
   Vec2 position() const { return dr.position_n().head<2>() - mean.head<2>(); }
   Mat2 position_cov() const { return cov.topLeftCorner<2, 2>(); }
@@ -182,6 +211,59 @@ TEST(DeadReckoningClones, DroppingTheOldestConditionsOnTheRest) {
   EXPECT_LT((clones.covariance() - cov_cur.topLeftCorner<2, 2>()).norm(), 1e-9);
   // Not the same as keeping the dropped clone's information (the check above can fail).
   EXPECT_GT((clones.position_n() - ref.position()).norm(), 1e-4);
+}
+
+// A considered heading offset (PdrOptions::track_heading_offset_considered): the estimate is
+// the one without it, to the bit; the covariance is the true error covariance of that estimate
+// when the walk's heading carries the offset: the augmented filter's [error; clones; offset],
+// propagated alike and updated in Joseph form with the gain computed without the offset.
+TEST(DeadReckoningClones, AConsideredOffsetIsTheJosephFormOfTheGainWithoutIt) {
+  PdrOptions considered;
+  considered.track_heading_offset_considered = true;
+  PdrOptions none;
+  none.track_heading_offset_sigma_rad = 0.0;
+  const DeadReckoning dr(Vec3(2, -1, 0), 0.2, considered, 0.02);
+  DeadReckoningClones clones(dr), plain(DeadReckoning(Vec3(2, -1, 0), 0.2, none, 0.02));
+  AugmentedFilter ref(dr);
+  int k = 0;
+  for (int stop = 0; stop < 3; ++stop) {
+    for (int i = 0; i < 15; ++i, ++k) plain.AddStep(WalkStep(k));
+    k -= 15;
+    Walk(clones, ref, &k, 15);
+    clones.Clone(1e-6);
+    plain.Clone(1e-6);
+    ref.Clone(1e-6);
+  }
+  // Before any measurement: the dead reckoning's state form (the offset in the heading).
+  EXPECT_LT((clones.covariance() - ref.with_offset.topLeftCorner<2, 2>()).norm(), 1e-12);
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(5, 6);
+  H(0, 0) = H(1, 1) = 1;
+  H(2, 4) = H(3, 5) = 1;
+  H(4, 2) = 0.6, H(4, 3) = -0.8, H(4, 0) = -0.6;
+  Eigen::VectorXd y(5);
+  y << 1.0, -2.0, 9.0, 1.5, 0.4;
+  ref.Measure(H, y, Eigen::MatrixXd::Identity(5, 5) * 0.09);
+  const auto [post_n, post_cov] = ref.ClonePosterior();
+  clones.Condition(post_n, post_cov);
+  plain.Condition(post_n, post_cov);
+  EXPECT_EQ(clones.position_n(), plain.position_n());
+  EXPECT_LT((clones.position_n() - ref.position()).norm(), 1e-9);
+  EXPECT_LT((clones.covariance() - ref.with_offset.topLeftCorner<2, 2>()).norm(), 1e-9);
+  // The offset's share is what the radio left of it, neither none nor all of it.
+  const Mat2 share = clones.covariance() - plain.covariance();
+  EXPECT_GT(share.trace(), 1e-3);
+  EXPECT_LT(share.trace(),
+            0.9 * (clones.dead_reckoning().covariance() - clones.dead_reckoning().own_covariance())
+                      .trace());
+  // Steps on and a new clone: still the reference.
+  for (int i = 0; i < 30; ++i, ++k) plain.AddStep(WalkStep(k));
+  k -= 30;
+  Walk(clones, ref, &k, 25);
+  clones.Clone(1e-6);
+  ref.Clone(1e-6);
+  Walk(clones, ref, &k, 5);
+  EXPECT_LT((clones.position_n() - ref.position()).norm(), 1e-9);
+  EXPECT_LT((clones.covariance() - ref.with_offset.topLeftCorner<2, 2>()).norm(), 1e-9);
 }
 
 TEST(DeadReckoningClones, RefusesAPosteriorOfTheWrongSizeOrNotFinite) {

@@ -654,6 +654,65 @@ TEST(DeadReckoning, TheTracksOwnHeadingOffsetAddsToTheStatedStartHeading) {
   EXPECT_GT(d2(b), 5.991);
 }
 
+// The offset as a consider parameter (PdrOptions::track_heading_offset_considered). Without a
+// fix it is the state form to rounding (linear propagation); a fix is weighed as if there were
+// no offset (estimate and own covariance those of a dead reckoning without it, to the bit), and
+// the reported covariance keeps what the fix leaves of the offset: (I - K) s with K the fix's
+// gain (the intersection's, from its omega; SetPosition's, given) and s s^T sigma^2 the state
+// form's excess before the fix.
+TEST(DeadReckoning, AConsideredHeadingOffsetIsReportedButNotWeighed) {
+  const double stated = 0.02;
+  PdrOptions state;
+  PdrOptions considered = state;
+  considered.track_heading_offset_considered = true;
+  PdrOptions none = state;
+  none.track_heading_offset_sigma_rad = 0.0;
+  DeadReckoning a(Vec3(1, 2, 0), 0.1, state, stated), c(Vec3(1, 2, 0), 0.1, considered, stated),
+      n(Vec3(1, 2, 0), 0.1, none, stated);
+  auto walk = [&](int from, int to) {
+    for (int k = from; k < to; ++k) {
+      const double heading = 0.4 * std::sin(0.2 * k) + (k > 25 ? 1.2 : 0.0);
+      const Step s{k * 0.6, k * 0.6 + 0.5, "ff1",
+                   Vec3(0.7 * std::cos(heading), 0.7 * std::sin(heading), 0)};
+      a.AddStep(s);
+      c.AddStep(s);
+      n.AddStep(s);
+    }
+  };
+  walk(0, 40);
+  EXPECT_EQ(c.position_n(), n.position_n());
+  EXPECT_LT((c.covariance() - a.covariance()).norm(), 1e-12 * a.covariance().norm());
+  EXPECT_LT((c.own_covariance() - n.covariance()).norm(), 1e-15 * n.covariance().norm());
+  EXPECT_GT((a.covariance() - n.covariance()).trace(), 0.05);  // the offset matters here
+  // A covariance-intersection fix.
+  const Mat2 excess = a.covariance() - n.covariance();  // sigma^2 s s^T
+  const Mat2 P = n.covariance();
+  const Mat2 R = Mat2::Identity() * 0.09;
+  const Vec2 fix(20.0, 9.0);
+  const double omega = c.FusePosition(fix, R);
+  ASSERT_EQ(n.FusePosition(fix, R), omega);
+  ASSERT_LT(omega, 1.0);
+  EXPECT_EQ(c.position_n(), n.position_n());
+  EXPECT_EQ(c.own_covariance(), n.covariance());
+  const Mat2 K = (P / omega) * (P / omega + R / (1 - omega)).inverse();
+  const Mat2 kept = Mat2::Identity() - K;
+  EXPECT_LT((c.covariance() - n.covariance() - kept * excess * kept.transpose()).norm(),
+            1e-12 * excess.norm());
+  // Steps on: the offset's share grows again; a fix taken whole with a given kept share.
+  walk(40, 60);
+  EXPECT_EQ(c.position_n(), n.position_n());
+  const Mat2 excess2 = c.covariance() - c.own_covariance();
+  EXPECT_GT(excess2.trace(), (kept * excess * kept.transpose()).trace());
+  const Mat2 half = Mat2::Identity() * 0.5;
+  c.SetPosition(Vec2(3, 4), R, half);
+  n.SetPosition(Vec2(3, 4), R);
+  EXPECT_EQ(c.own_covariance(), n.covariance());
+  EXPECT_LT((c.covariance() - R - 0.25 * excess2).norm(), 1e-12 * excess2.norm());
+  c.SetPosition(Vec2(3, 4), R);  // independent of the walk: none is kept
+  EXPECT_EQ(c.covariance(), R);
+  EXPECT_THROW(c.SetPosition(Vec2(3, 4), R, Mat2::Constant(NAN)), std::invalid_argument);
+}
+
 TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
   MissionInfo info;
   info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(1, 1, 0), 0.2));

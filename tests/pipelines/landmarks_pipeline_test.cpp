@@ -149,6 +149,55 @@ TEST(LandmarksPipeline, JointFixesHoldWithAStaleRadioModel) {
   EXPECT_GT(joint_in95, 0.85);
 }
 
+// The steps' own heading offset (track_heading_offset_sigma_rad, 5 deg) is a consider parameter
+// of the stops' dead reckoning: every fix fusion's estimate is the one without it, to the bit;
+// only the reported covariance grows. On a corridor walk whose steps are all turned by 6 deg
+// (a boot's toe-out; the `pdr` robustness family turns them by 2-10 deg) the ellipse holds the
+// truth with it and does not without it (2026-12-06, docs/robustness.md).
+TEST(LandmarksPipeline, TheStepsHeadingOffsetWidensTheStopFixesEllipseOnly) {
+  const std::vector<std::map<std::string, std::string>> arms{
+      {}, {{"fix_fusion", "intersection"}}, {{"fix_fusion", "independent"}}};
+  double in95_with = 0, in95_without = 0;
+  const int seeds = 3;
+  for (std::uint64_t seed = 1; seed <= seeds; ++seed) {
+    SimulatedMission sim = SimulateScenario("landmark-corridor", seed);
+    const Eigen::Rotation2Dd turn(6.0 * M_PI / 180);
+    for (Step& st : sim.data.steps) st.delta_n.head<2>() = turn * st.delta_n.head<2>();
+    testing::TempDir dir;
+    WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+    const MissionDirectory mission(dir.path());
+    for (std::size_t k = 0; k < arms.size(); ++k) {
+      auto without_options = arms[k];
+      without_options["track_heading_offset_sigma_rad"] = "0";
+      VectorSink with, without;
+      RunBatch(RequirePipeline("landmarks-stopgo"), {mission, arms[k]}, with);
+      RunBatch(RequirePipeline("landmarks-stopgo"), {mission, without_options}, without);
+      ASSERT_EQ(with.rows.size(), without.rows.size());
+      double grew = 0;
+      for (std::size_t i = 0; i < with.rows.size(); ++i) {
+        const Estimate& a = with.rows[i];
+        const Estimate& b = without.rows[i];
+        ASSERT_EQ(a.id, b.id);
+        ASSERT_EQ(a.position_n, b.position_n) << a.id << " " << a.t;
+        // The difference is positive semi-definite (a share sigma^2 s s^T, to rounding).
+        const double dxx = a.sxx - b.sxx, dyy = a.syy - b.syy, dxy = a.sxy - b.sxy;
+        ASSERT_GE(dxx, -1e-9);
+        ASSERT_GE(dyy, -1e-9);
+        ASSERT_GE(dxx * dyy - dxy * dxy, -1e-9 * (1 + dxx + dyy));
+        grew = std::max(grew, dxx + dyy);
+      }
+      EXPECT_GT(grew, 0.05) << k;
+      if (k == 0) {
+        in95_with += Evaluate(sim.data.info, sim.data.truth, with.rows).agents.stats.in95 / seeds;
+        in95_without +=
+            Evaluate(sim.data.info, sim.data.truth, without.rows).agents.stats.in95 / seeds;
+      }
+    }
+  }
+  EXPECT_GT(in95_with, 0.8);
+  EXPECT_LT(in95_without, 0.6);
+}
+
 // The fusion takes the joint stop fixes as a member only when asked (use.stopgo, off by
 // default: docs/fusion.md); with them its estimates change, and the member's summary shows.
 TEST(LandmarksPipeline, TheFusionTakesTheStopFixesWhenAsked) {

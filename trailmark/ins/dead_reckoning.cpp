@@ -35,7 +35,15 @@ double PdrOptions::StartHeadingSigma(std::optional<double> stated_rad) const {
 DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options,
                              std::optional<double> start_heading_sigma_rad)
     : options_(options), position_n_(start_n) {
-  const double heading = options_.StartHeadingSigma(start_heading_sigma_rad);
+  // Considered: the offset is carried beside the state (its sensitivity starts as the heading
+  // error's), not in the start heading's variance.
+  const double heading = options_.track_heading_offset_considered
+                             ? start_heading_sigma_rad.value_or(options_.start_heading_sigma_rad)
+                             : options_.StartHeadingSigma(start_heading_sigma_rad);
+  if (options_.track_heading_offset_considered) {
+    considered_sigma_rad_ = options_.track_heading_offset_sigma_rad;
+    offset_sens_(kHeading) = 1.0;
+  }
   error_cov_.setZero();
   error_cov_(kX, kX) = error_cov_(kY, kY) = start_sigma_m * start_sigma_m;
   error_cov_(kHeading, kHeading) = heading * heading;
@@ -81,7 +89,13 @@ void DeadReckoning::AddStep(const Step& step) {
   error_cov_ = fg * error_cov_ * fg.transpose() + q;
   error_cov_ = 0.5 * (error_cov_ + error_cov_.transpose());
   last_transition_ = fg;
+  offset_sens_ = fg * offset_sens_;  // the error's transition, without the step's own noise
   position_n_ += step.delta_n;
+}
+
+Mat2 DeadReckoning::covariance() const {
+  const Vec2 s = offset_sens_.head<2>();
+  return own_covariance() + considered_sigma_rad_ * considered_sigma_rad_ * s * s.transpose();
 }
 
 namespace {
@@ -103,8 +117,12 @@ Mat2 CheckedFixCovariance(const char* what, const Vec2& fix_n, const Mat2& cov) 
 
 }  // namespace
 
-void DeadReckoning::SetPosition(const Vec2& position_n, const Mat2& cov) {
+void DeadReckoning::SetPosition(const Vec2& position_n, const Mat2& cov, const Mat2& offset_kept) {
   const Mat2 c = CheckedFixCovariance("SetPosition", position_n, cov);
+  if (!offset_kept.allFinite()) {
+    throw std::invalid_argument("DeadReckoning::SetPosition: offset_kept must be finite");
+  }
+  offset_sens_.head<2>() = offset_kept * offset_sens_.head<2>();
   position_n_.head<2>() = position_n;
   error_cov_.topLeftCorner<2, 2>() = c;
   error_cov_.block<2, kSharedErrors>(kX, kHeading).setZero();
@@ -113,7 +131,7 @@ void DeadReckoning::SetPosition(const Vec2& position_n, const Mat2& cov) {
 
 double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
   const Mat2 fix_cov = CheckedFixCovariance("FusePosition", fix_n, fix_cov_in);
-  const Mat2 P = covariance();
+  const Mat2 P = own_covariance();
   // The trace (mean squared error) of the intersection's position covariance,
   // (omega P^-1 + (1 - omega) R^-1)^-1; its minimum over (0, 1) by golden-section search (the
   // trace of the inverse of a matrix affine in omega is convex: one minimum). The trace, not
@@ -148,6 +166,8 @@ double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
   // whatever the correlation: the joint stays positive semi-definite.
   const Mat6 IKH = Mat6::Identity() - K * H;
   error_cov_ = IKH * error_cov_ * IKH.transpose() + K * fix_cov * K.transpose();
+  // The considered offset is not in the fix: the fused error keeps (I - K H) of its sensitivity.
+  offset_sens_ = IKH * offset_sens_;
   const Mat2 I2K = Mat2::Identity() - K2;
   error_cov_.topLeftCorner<2, 2>() =
       I2K * (P / omega) * I2K.transpose() + K2 * (fix_cov / (1 - omega)) * K2.transpose();

@@ -32,6 +32,14 @@ struct PdrOptions {
   /// phone's carrying mode). 5 degrees: the spread of the foot progression angle (toe-out) in
   /// gait studies, set before any run. 0: the steps' heading is exactly the stated one.
   double track_heading_offset_sigma_rad = 0.087;
+  /// How that offset enters. false: a state of the error (its variance added to the start
+  /// heading's). true: a consider parameter (Tapley, Schutz & Born 2004, sec. 6.3): not in the
+  /// covariance a fix is weighed with (FusePosition, SetPosition, a clone's prior: the estimate
+  /// is that of a dead reckoning without it), but in the reported covariance(), its sensitivity
+  /// carried through every step and fix. Without fixes both give the same covariance; with
+  /// fixes, a radio that the offset's prior would let rotate the walk cannot, and the ellipse
+  /// still says what the offset leaves.
+  bool track_heading_offset_considered = false;
   /// heading drift rate (gyro bias left after calibration; it integrates while standing too):
   /// 3 degrees per minute, the order of a consumer MEMS foot INS's yaw drift.
   double heading_drift_sigma_rad_per_s = 0.00087;
@@ -78,8 +86,10 @@ class DeadReckoning {
   /// The position and its covariance replaced (a fix taken whole, e.g. the paper's stop-and-go
   /// update): the shared heading, drift-rate and scale errors keep their covariance, their
   /// correlation with the new position error is dropped (the fix's error is not the dead
-  /// reckoning's). Throws std::invalid_argument as FusePosition does.
-  void SetPosition(const Vec2& position_n, const Mat2& cov);
+  /// reckoning's). `cov` excludes the considered offset; `offset_kept` is what the new position
+  /// error keeps of the old one's sensitivity to it (zero: the fix is independent of the walk;
+  /// I - K for an update with gain K). Throws std::invalid_argument as FusePosition does.
+  void SetPosition(const Vec2& position_n, const Mat2& cov, const Mat2& offset_kept = Mat2::Zero());
   /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale, d_turn_scale].
   static constexpr int kErrors = 6;
   using ErrorCovariance = Eigen::Matrix<double, kErrors, kErrors>;
@@ -87,7 +97,15 @@ class DeadReckoning {
   /// The shared (not white) errors: heading, rate, step scale and turn scale.
   static constexpr int kSharedErrors = 4;
   const Vec3& position_n() const { return position_n_; }
-  Mat2 covariance() const { return error_cov_.topLeftCorner<2, 2>(); }
+  /// The position's covariance as reported: own_covariance() and, if the offset is considered,
+  /// sigma^2 s s^T with s = offset_sensitivity().
+  Mat2 covariance() const;
+  /// The position block of error_covariance(): what a fix is weighed with.
+  Mat2 own_covariance() const { return error_cov_.topLeftCorner<2, 2>(); }
+  /// The considered offset's sigma (rad; 0 when it is a state or none) and the error state's
+  /// sensitivity to it (d error / d offset; zero when not considered).
+  double considered_offset_sigma_rad() const { return considered_sigma_rad_; }
+  const Eigen::Matrix<double, kErrors, 1>& offset_sensitivity() const { return offset_sens_; }
   /// The last step's error transition: the error after it is this times the error before it,
   /// plus the step's own noise (identity before the first step). What a caller needs to carry
   /// the correlation of an earlier error with the current one (DeadReckoningClones).
@@ -100,6 +118,8 @@ class DeadReckoning {
   Vec3 position_n_;
   Mat6 error_cov_;
   Mat6 last_transition_ = Mat6::Identity();
+  double considered_sigma_rad_ = 0.0;
+  Eigen::Matrix<double, kErrors, 1> offset_sens_ = Eigen::Matrix<double, kErrors, 1>::Zero();
   std::optional<TimeS> last_t_;
   std::optional<double> last_direction_rad_;  ///< of the last step >= turn_min_step_m
 };

@@ -32,6 +32,8 @@ int DeadReckoningClones::Clone(double independent_variance_m2) {
   c.rightCols<2>() = P.leftCols<2>();
   cross_ = std::move(c);
   clone_position_n_.push_back(dr_.position_n().head<2>());
+  clone_offset_sens_.conservativeResize(n + 2);
+  clone_offset_sens_.tail<2>() = dr_.offset_sensitivity().head<2>();
   // The conditioning stays on the earlier clones: the current position does not move.
   return k;
 }
@@ -40,12 +42,14 @@ void DeadReckoningClones::DropOldest() {
   if (clone_position_n_.empty()) return;
   const Eigen::Index n = cross_.cols() - 2;
   clone_position_n_.erase(clone_position_n_.begin());
+  clone_offset_sens_ = Eigen::VectorXd(clone_offset_sens_.tail(n));
   clone_cov_ = Eigen::MatrixXd(clone_cov_.bottomRightCorner(n, n));
   cross_ = CrossCovariance(cross_.rightCols(n));
   if (posterior_n_.size() > 0) {
     const Eigen::Index m = posterior_n_.size() - 2;
     posterior_n_ = Eigen::VectorXd(posterior_n_.tail(m));
     posterior_cov_ = Eigen::MatrixXd(posterior_cov_.bottomRightCorner(m, m));
+    posterior_offset_sens_ = Eigen::VectorXd(posterior_offset_sens_.tail(m));
   }
   ConditionOnStored();
 }
@@ -65,6 +69,12 @@ void DeadReckoningClones::Condition(const Eigen::VectorXd& posterior_n,
   }
   posterior_n_ = posterior_n;
   posterior_cov_ = 0.5 * (posterior_cov + posterior_cov.transpose());
+  // d posterior / d offset = posterior_cov S^-1 d prior mean / d offset (the solver's normal
+  // equations at its solution: the prior is the only information that moves with the offset).
+  posterior_offset_sens_ =
+      n > 0 ? Eigen::VectorXd(posterior_cov_ *
+                              Eigen::LLT<Eigen::MatrixXd>(clone_cov_).solve(clone_offset_sens_))
+            : Eigen::VectorXd();
   ConditionOnStored();
 }
 
@@ -73,6 +83,7 @@ void DeadReckoningClones::ConditionOnStored() {
   if (m == 0) {
     gain_.resize(0);
     explained_.resize(0, 0);
+    offset_gain_.resize(0);
     return;
   }
   // The current error e and the clones' errors c are jointly Gaussian with cov(e, c) = C and
@@ -83,6 +94,8 @@ void DeadReckoningClones::ConditionOnStored() {
   Eigen::VectorXd dr_n(m);
   for (Eigen::Index i = 0; i < m / 2; ++i) dr_n.segment<2>(2 * i) = clone_position_n_[i];
   gain_ = llt.solve(dr_n - posterior_n_);
+  // The offset's sensitivity, alike: the estimate's error is e - C S^-1 (e_c - e_posterior).
+  offset_gain_ = llt.solve(clone_offset_sens_.head(m) - posterior_offset_sens_);
   const Eigen::MatrixXd s_inv = llt.solve(Eigen::MatrixXd::Identity(m, m));
   explained_ = s_inv - s_inv * posterior_cov_ * s_inv;
   explained_ = 0.5 * (explained_ + explained_.transpose());
@@ -94,11 +107,20 @@ Vec2 DeadReckoningClones::position_n() const {
   return dr - cross_.topLeftCorner(2, gain_.size()) * gain_;
 }
 
+Vec2 DeadReckoningClones::offset_sensitivity() const {
+  const Vec2 s = dr_.offset_sensitivity().head<2>();
+  if (offset_gain_.size() == 0) return s;
+  return s - cross_.topLeftCorner(2, offset_gain_.size()) * offset_gain_;
+}
+
 Mat2 DeadReckoningClones::covariance() const {
-  const Mat2 p = dr_.covariance();
-  if (gain_.size() == 0) return p;
-  const auto c = cross_.topLeftCorner(2, gain_.size());
-  const Mat2 out = p - c * explained_ * c.transpose();
+  const double sigma = dr_.considered_offset_sigma_rad();
+  const Vec2 s = offset_sensitivity();
+  Mat2 out = dr_.own_covariance() + sigma * sigma * s * s.transpose();
+  if (gain_.size() > 0) {
+    const auto c = cross_.topLeftCorner(2, gain_.size());
+    out -= c * explained_ * c.transpose();
+  }
   return 0.5 * (out + out.transpose());
 }
 

@@ -12,10 +12,6 @@ namespace trailmark::landmarks {
 
 namespace {
 
-/// The stops' dead reckoning (the fixes' drift between stops) keeps the heading prior the
-/// mission states: with the track's own offset added (ins/dead_reckoning.h) the stop fixes
-/// pulled right corridor walks off (docs/robustness.md, measured 2026-12-05).
-const PdrOptions kStopDeadReckoning{.track_heading_offset_sigma_rad = 0.0};
 /// Added to solved covariances so that they stay positive definite: (1 cm)^2.
 constexpr double kCovarianceFloorM2 = 1e-4;
 /// Added to a step's drift variance so that it is never zero: (0.1 mm)^2.
@@ -57,7 +53,8 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "filter=error-state is the continuous tracker of landmarks-ukf";
     return false;
   }
-  return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why);
+  return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why) &&
+         stop_dead_reckoning.IsValid(why);
 }
 
 namespace {
@@ -98,6 +95,12 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
            "intercept and exponent error of the ranges as unknowns");
     t.Real("joint_false_alarm", &O::joint_false_alarm, "", OptionBounds::Between(1e-9, 0.5),
            "fix_fusion=joint: the chi-square test's false-alarm probability");
+    t.Real(
+        "track_heading_offset_sigma_rad",
+        [](O& o) -> double& { return o.stop_dead_reckoning.track_heading_offset_sigma_rad; }, "rad",
+        OptionBounds::NonNegative(),
+        "the steps' own heading offset, a consider parameter of the stops' dead reckoning "
+        "(reported covariance only; 0: none)");
     t.Choice("drift", [](O& o) -> DriftModel& { return o.drift; },
              std::vector<std::pair<std::string, DriftModel>>{
                  {"white", DriftModel::kWhite}, {"dead-reckoning", DriftModel::kDeadReckoning}},
@@ -201,12 +204,12 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     if (options_.tracking != Tracking::kUkf && (options_.fix_fusion == FixFusion::kIntersection ||
                                                 (options_.fix_fusion == FixFusion::kIndependent &&
                                                  options_.drift == DriftModel::kDeadReckoning))) {
-      a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, kStopDeadReckoning,
+      a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, options_.stop_dead_reckoning,
                    n.start_heading_sigma_rad);
     }
     if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kJoint) {
       a.clones.emplace(DeadReckoning(Vec3(a.position.x(), a.position.y(), 0.0), s,
-                                     kStopDeadReckoning, n.start_heading_sigma_rad));
+                                     options_.stop_dead_reckoning, n.start_heading_sigma_rad));
     }
     if (!start) {
       setup_notes_.push_back(
@@ -524,7 +527,9 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
         DeadReckoning intersection = *a.dr;
         intersection.FusePosition(fr.standing[0], c_fix);
         const Vec2 offset = a.position - intersection.position_n().head<2>();
-        a.dr->SetPosition(a.position, intersection.covariance() + offset * offset.transpose());
+        // A considered heading offset: the paper's estimate keeps (I - K) of its sensitivity.
+        a.dr->SetPosition(a.position, intersection.own_covariance() + offset * offset.transpose(),
+                          Mat2::Identity() - K);
       }
     }
     ++fixes_;

@@ -94,6 +94,13 @@ struct LandmarkEstimatorOptions {
   /// tracking (Tracking::kUkf) has no stop fixes and takes kIndependent only.
   FixFusion fix_fusion = FixFusion::kJoint;
   DriftModel drift = DriftModel::kDeadReckoning;
+  /// Stop-and-go: the dead reckoning between the stops (its joint prior for FixFusion::kJoint,
+  /// the drift of kIntersection and of kDeadReckoning). The steps' own heading offset
+  /// (`track_heading_offset_sigma_rad`, ins/dead_reckoning.h) is a consider parameter there: as
+  /// a state of the prior it let the stops' ranges rotate right corridor walks
+  /// (docs/robustness.md, measured 2026-12-05), so the fixes are weighed without it and the
+  /// reported covariance carries what it leaves (2026-12-06).
+  PdrOptions stop_dead_reckoning{.track_heading_offset_considered = true};
   /// PDR drift, 1 sigma per metre walked (ours: 5 %); not used by FixFusion::kIntersection,
   /// which propagates the dead reckoning's own error model (`pdr`'s defaults and the agent's
   /// start_heading_sigma).
