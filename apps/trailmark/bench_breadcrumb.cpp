@@ -37,6 +37,7 @@ struct IncidentRun {
   std::vector<double> latency_us;
   std::vector<std::pair<double, double>> memory;  // (fraction done, resident MB)
   std::size_t factorizations = 0, analyses = 0, agent_states = 0, active_nodes = 0, blocks = 0;
+  std::size_t sensitivity_solves = 0;
   double final_mean_error_m = 0;
 };
 
@@ -75,6 +76,7 @@ IncidentRun RunIncident(const SyntheticIncident& inc, const breadcrumb::Localize
   run.wall_s = std::chrono::duration<double>(Clock::now() - start).count();
   run.factorizations = loc.summary().factorizations;
   run.analyses = loc.network().symbolic_analyses();
+  run.sensitivity_solves = loc.network().sensitivity_solves();
   run.agent_states = loc.summary().agent_states;
   run.active_nodes = static_cast<std::size_t>(loc.network().active_nodes());
   run.blocks = loc.network().off_diagonal_blocks();
@@ -168,6 +170,8 @@ int BenchBreadcrumb(const IncidentOptions& o, double solve_period_s, double cova
   fmt::print("| per-update latency p50 / p99 / max | {:.1f} / {:.1f} / {:.0f} us |\n", p50, p99, max);
   fmt::print("| factorizations (symbolic analyses) / agent states created | {} ({}) / {} |\n",
              run.factorizations, run.analyses, run.agent_states);
+  fmt::print("| heading-offset sensitivity solves (one right-hand side per firefighter) | {} |\n",
+             run.sensitivity_solves);
   fmt::print("| network at the end: nodes / off-diagonal blocks | {} / {} |\n", run.active_nodes,
              run.blocks);
   std::string mem;

@@ -8,6 +8,7 @@
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <memory>
 
 #include "trailmark/breadcrumb/batch_reference.h"
 #include "trailmark/core/random.h"
@@ -350,6 +351,124 @@ TEST(GenNetwork, GeneralLinearEdgesWithMarginalizationEqualBlue) {
     EXPECT_LT((gen.Estimate(inc) - blue.Position(ref)).norm(), 1e-9);
     EXPECT_LT((gen.Covariance(inc) - blue.Covariance(ref)).norm(), 1e-9);
   }
+}
+
+// Consider parameters: each node's sensitivity d x_hat / d theta against finite differences of
+// the whole network built again with every observation moved by eps times its rate. The network
+// is linear in its observations (linear edges, marginalizations, a slot moved into), so the
+// difference is exact to rounding; two parameters (two walkers' heading offsets), the sparse
+// and the dense factor.
+TEST(GenNetwork, ConsiderSensitivitiesAreTheEstimatesDerivatives) {
+  for (const double dense_share : {1.0, 0.0}) {
+    auto build = [&](double eps, std::vector<NodeIndex>* nodes) {
+      GenOptions o = ExactOptions();
+      o.dense_fill_share = dense_share;
+      auto gen = std::make_unique<GenNetwork>(o);
+      Random rng(23);
+      const int c0 = gen->AddConsider(), c1 = gen->AddConsider();
+      EXPECT_EQ(gen->considers(), 2);
+      const NodeIndex crumb = gen->AddNode(Vec2::Zero());
+      gen->AddPrior(crumb, Vec2(5, 5), Mat2::Identity() * 0.5);
+      NodeIndex x = gen->AddNode(Vec2::Zero()), th = gen->AddNode(Vec2::Zero());
+      NodeIndex y = gen->AddNode(Vec2(3, 0));
+      gen->AddPrior(x, Vec2::Zero(), Mat2::Identity() * 0.01);
+      gen->AddPrior(th, Vec2::Zero(), Mat2::Identity() * 0.02);
+      gen->AddPrior(y, Vec2(3, 0), Mat2::Identity() * 0.04);
+      for (int k = 0; k < 24; ++k) {
+        Mat2 Jth;
+        Jth << rng.Normal(0, 1), rng.Normal(0, 1), rng.Normal(0, 1), rng.Normal(0, 1);
+        const Vec2 z(rng.Normal(0.5, 0.1), rng.Normal(0, 0.1));
+        const Vec2 dz(rng.Normal(0, 1), rng.Normal(0, 1));
+        const Mat2 Q = RandomCov(rng) * 0.05;
+        const NodeIndex xn = gen->AddNode(Vec2::Zero()), thn = gen->AddNode(Vec2::Zero());
+        gen->AddRelative(thn, th, Vec2::Zero(), Mat2::Identity() * 1e-3);
+        gen->AddLinear({xn, x, th}, {Mat2::Identity(), -Mat2::Identity(), -Jth}, z + eps * dz, Q,
+                       {{c0, dz}});
+        const NodeIndex old_x = x, old_th = th;
+        gen->DeleteNodes(old_x, old_th);
+        th = gen->MoveNode(thn, old_th);
+        x = gen->MoveNode(xn, old_x);
+        // The second walker: plain relative steps, the slot kept.
+        const Vec2 w(rng.Normal(0, 0.5), rng.Normal(0.4, 0.1)), dw(rng.Normal(0, 1), 0.3);
+        const NodeIndex yn = gen->AddNode(gen->Estimate(y) + w);
+        gen->AddRelative(yn, y, w + eps * dw, Mat2::Identity() * 0.02, {{c1, dw}});
+        gen->DeleteNode(y);
+        y = gen->MoveNode(yn, y);
+        if (k % 5 == 4) {  // both touch the crumb; one edge moves with both parameters
+          const Vec2 zeta(rng.Normal(-5, 1), rng.Normal(-5, 1)), d0(1.0, -0.5), d1(-0.2, 0.7);
+          gen->AddRelative(x, crumb, zeta + eps * (d0 + d1), Mat2::Identity(),
+                           {{c0, d0}, {c1, d1}});
+          gen->AddRelative(y, crumb, zeta, Mat2::Identity() * 2.0);
+        }
+        if (k == 12) gen->Solve();  // a solve half way does not change the result
+      }
+      EXPECT_TRUE(gen->Solve());
+      *nodes = {crumb, x, th, y};
+      return gen;
+    };
+    std::vector<NodeIndex> nodes, nodes_eps;
+    const double eps = 1e-3;
+    const auto base = build(0.0, &nodes);
+    const auto moved = build(eps, &nodes_eps);
+    ASSERT_EQ(nodes, nodes_eps);
+    double largest = 0;
+    for (NodeIndex i : nodes) {
+      const Vec2 fd = (moved->Estimate(i) - base->Estimate(i)) / eps;
+      const Vec2 s = base->Sensitivity(i, 0) + base->Sensitivity(i, 1);
+      EXPECT_LT((s - fd).norm(), 1e-7 * (1 + fd.norm()))
+          << "node " << i << " dense " << dense_share;
+      largest = std::max(largest, fd.norm());
+    }
+    EXPECT_GT(largest, 0.1);
+    // Each parameter alone: the first walker's moves only its own chain's edges.
+    EXPECT_GT(base->Sensitivity(nodes[1], 0).norm(), 0.1);
+    EXPECT_EQ(base->Sensitivity(nodes[1], 7), Vec2::Zero());  // no such parameter: none
+  }
+}
+
+// With range edges (linearized at the estimate, re-linearized persistent ones) the sensitivity
+// is the first-order one: on observations without noise (every residual zero) the finite
+// difference agrees to the step's second order.
+TEST(GenNetwork, ConsiderSensitivitiesThroughRangeEdgesAreFirstOrder) {
+  auto build = [&](double eps) {
+    auto gen = std::make_unique<GenNetwork>(ExactOptions());
+    const int c = gen->AddConsider();
+    const std::vector<Vec2> crumbs = {{4, 3}, {-2, 6}, {7, -3}};
+    for (const Vec2& x : crumbs) {
+      const NodeIndex n = gen->AddNode(x);
+      gen->AddPrior(n, x, Mat2::Identity() * 4.0);
+    }
+    ScalarModel range;
+    gen->AccumulatePersistent(gen->AddPersistent(0, 1, range), (crumbs[0] - crumbs[1]).norm(),
+                              0.01);
+    NodeIndex state = gen->AddNode(Vec2::Zero());
+    gen->AddPrior(state, Vec2::Zero(), Mat2::Identity() * 0.01);
+    Vec2 pos = Vec2::Zero();
+    for (int k = 0; k < 40; ++k) {
+      const Vec2 step(0.5 * std::cos(0.1 * k), 0.5 * std::sin(0.1 * k));
+      const Vec2 rate(-step.y(), step.x());  // the step turned: a heading offset
+      pos += step;
+      const NodeIndex next = gen->AddNode(gen->Estimate(state) + step);
+      gen->AddRelative(next, state, step + eps * rate, Mat2::Identity() * 0.01, {{c, rate}});
+      gen->DeleteNode(state);
+      state = gen->MoveNode(next, state);
+      // A range from half a step further on (offset), noise-free.
+      const Vec2 offset = 0.5 * step;
+      const int j = k % 3;
+      gen->AddScalar(state, j, (pos + offset - crumbs[j]).norm(), 0.04, range,
+                     offset + eps * 0.5 * rate, -1, {{c, 0.5 * rate}});
+      gen->Solve();
+    }
+    return std::make_pair(std::move(gen), state);
+  };
+  const double eps = 1e-6;
+  const auto [base, state] = build(0.0);
+  const auto [moved, state_eps] = build(eps);
+  for (NodeIndex i : {NodeIndex{0}, NodeIndex{1}, NodeIndex{2}, state}) {
+    const Vec2 fd = (moved->Estimate(i) - base->Estimate(i)) / eps;
+    EXPECT_LT((base->Sensitivity(i, 0) - fd).norm(), 1e-4 * (1 + fd.norm())) << "node " << i;
+  }
+  EXPECT_GT(base->Sensitivity(state, 0).norm(), 0.5);
 }
 
 // The dense path (GenOptions::dense_fill_share) against the sparse one: a walker among crumbs

@@ -35,6 +35,7 @@ LocalizerOptions ExactModel() {
   o.huber_k = 1e9;
   o.integrity.exclude = false;
   o.state_period_s = 0;
+  o.track_heading_offset_sigma_rad = 0;  // the simulated steps have none
   return o;
 }
 

@@ -35,6 +35,8 @@ void ExpectValidCovariance(const Mat2& c) {
 
 // With no radio and no heading/scale node, the GEN chain of mobile states is dead reckoning:
 // the estimate is the sum of the steps and the covariance the sum of their variances.
+// With the steps' own heading offset (a consider parameter, track_heading_offset_sigma_rad), the
+// covariance adds sigma^2 s s^T with s the walk turned by 90 degrees (each step turns with it).
 TEST(BreadcrumbLocalizer, PdrOnlyChainEqualsDeadReckoning) {
   LocalizerOptions o;
   o.estimate_heading_scale = false;
@@ -42,8 +44,12 @@ TEST(BreadcrumbLocalizer, PdrOnlyChainEqualsDeadReckoning) {
   o.step_sigma_floor_relative = 0;
   o.state_period_s = 0;  // a new state for every step
   o.gen.regularization_sigma_m = 1e9;
-  BreadcrumbLocalizer loc(o);
+  LocalizerOptions with_offset = o;
+  ASSERT_GT(with_offset.track_heading_offset_sigma_rad, 0.0);
+  o.track_heading_offset_sigma_rad = 0;
+  BreadcrumbLocalizer loc(o), turned(with_offset);
   loc.AddAgent("ff1", Vec2(1, 2), 0.1);
+  turned.AddAgent("ff1", Vec2(1, 2), 0.1);
   Random rng(1);
   Vec2 sum(1, 2);
   Vec2 var(0.01, 0.01);
@@ -51,6 +57,7 @@ TEST(BreadcrumbLocalizer, PdrOnlyChainEqualsDeadReckoning) {
     Step s{k * 0.6, (k + 1) * 0.6, "ff1", Vec3(rng.Normal(0.5, 0.2), rng.Normal(0, 0.3), 0),
            Vec3(0.01 + 0.001 * k, 0.02, 1e-4)};
     loc.AddStep(s);
+    turned.AddStep(s);
     // Radio-free steps create no state; an encounter-free range-free run still must agree.
     sum += s.delta_n.head<2>();
     var += s.variance_m2->head<2>();
@@ -60,6 +67,13 @@ TEST(BreadcrumbLocalizer, PdrOnlyChainEqualsDeadReckoning) {
     EXPECT_NEAR(e->covariance(0, 0), var.x(), 1e-9);
     EXPECT_NEAR(e->covariance(1, 1), var.y(), 1e-9);
     EXPECT_NEAR(e->covariance(0, 1), 0.0, 1e-12);
+    const auto et = turned.Estimate("ff1");
+    ASSERT_TRUE(et);
+    EXPECT_EQ(et->position_n, e->position_n);
+    const Vec2 walk = sum - Vec2(1, 2), sens(-walk.y(), walk.x());
+    const double sigma = with_offset.track_heading_offset_sigma_rad;
+    const Mat2 share = sigma * sigma * sens * sens.transpose();
+    EXPECT_LT((et->covariance - e->covariance - share).norm(), 1e-9 * (1 + share.norm()));
   }
   EXPECT_EQ(loc.summary().steps, 200u);
 }
@@ -194,6 +208,73 @@ TEST(BreadcrumbPipeline, TwoFirefightersShareTheNetwork) {
   for (const auto& [id, t] : last) {
     if (id.rfind("c", 0) == 0 || id == "base") EXPECT_EQ(t, t_end) << id;
   }
+}
+
+// The steps' own heading offset (track_heading_offset_sigma_rad, 5 deg) is a consider
+// parameter per agent: the estimates are the ones without it, to the bit (agents and crumbs,
+// one walker and two sharing the network), only the reported covariances grow (by a positive
+// semi-definite share). On office loops whose steps are all turned by 6 deg (a boot's toe-out;
+// the `pdr` robustness family turns them by 2-10 deg) the agent's ellipse holds the truth with
+// it and does not without it (2026-12-06, docs/breadcrumb.md).
+TEST(BreadcrumbPipeline, TheStepsHeadingOffsetWidensTheEllipsesOnly) {
+  const auto compare = [](const SimulatedMission& sim, const TempDir& dir, double* in95_with,
+                          double* in95_without) {
+    const MissionDirectory mission(dir.path());
+    // The dead-reckoning guard's growth depends on the covariance it is given (a wider one
+    // needs less): the share is checked with the guard only reporting, the estimates both ways.
+    for (const bool guard : {false, true}) {
+      std::map<std::string, std::string> options;
+      if (!guard) options["integrity.on_disagreement"] = "report";
+      auto without_options = options;
+      without_options["track_heading_offset_sigma_rad"] = "0";
+      VectorSink with, without;
+      RunBatch(RequirePipeline("breadcrumb"), {mission, options}, with);
+      RunBatch(RequirePipeline("breadcrumb"), {mission, without_options}, without);
+      ASSERT_EQ(with.rows.size(), without.rows.size());
+      double grew = 0;
+      for (std::size_t i = 0; i < with.rows.size(); ++i) {
+        const Estimate& a = with.rows[i];
+        const Estimate& b = without.rows[i];
+        ASSERT_EQ(a.id, b.id);
+        ASSERT_EQ(a.t, b.t);
+        ASSERT_EQ(a.position_n, b.position_n) << a.id << " " << a.t;
+        if (guard) continue;
+        const double dxx = a.sxx - b.sxx, dyy = a.syy - b.syy, dxy = a.sxy - b.sxy;
+        ASSERT_GE(dxx, -1e-9) << a.id << " " << a.t;
+        ASSERT_GE(dyy, -1e-9) << a.id << " " << a.t;
+        ASSERT_GE(dxx * dyy - dxy * dxy, -1e-9 * (1 + dxx + dyy)) << a.id << " " << a.t;
+        grew = std::max(grew, dxx + dyy);
+      }
+      if (!guard) {
+        EXPECT_GT(grew, 0.05);
+        continue;
+      }
+      *in95_with = Evaluate(sim.data.info, sim.data.truth, with.rows).agents.stats.in95;
+      *in95_without = Evaluate(sim.data.info, sim.data.truth, without.rows).agents.stats.in95;
+    }
+  };
+  double with = 0, without = 0;
+  const int seeds = 3;
+  for (std::uint64_t seed = 1; seed <= seeds; ++seed) {
+    SimulatedMission sim = SimulateScenario("office-loop", seed);
+    const Eigen::Rotation2Dd turn(6.0 * M_PI / 180);
+    for (Step& st : sim.data.steps) st.delta_n.head<2>() = turn * st.delta_n.head<2>();
+    TempDir dir;
+    WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+    double w = 0, wo = 0;
+    compare(sim, dir, &w, &wo);
+    with += w / seeds;
+    without += wo / seeds;
+  }
+  EXPECT_GT(with, 0.9);  // 2026-12-06: 98 % against 69 %
+  EXPECT_LT(without, 0.8);
+  // Two firefighters (agent-to-agent packets move with both offsets).
+  const SimulatedMission two = SimulateScenario("training-building", 1);
+  TempDir dir;
+  WriteMissionDirectory(dir.path(), two.data, &two.plan);
+  double w = 0, wo = 0;
+  compare(two, dir, &w, &wo);
+  EXPECT_GE(w, wo);
 }
 
 // Sec. V-C: a kicked crumb is detected from the jump on its links and allowed to move; no
@@ -370,6 +451,7 @@ TEST(BreadcrumbLocalizer, AStartHeadingSigmaBelowTheFloorIsRaisedToIt) {
     LocalizerOptions o;
     o.start_heading_sigma_floor_rad = floor_rad;
     o.estimate_range_bias = false;
+    o.track_heading_offset_sigma_rad = 0;  // the heading node's prior alone
     BreadcrumbLocalizer loc(o);
     loc.AddKnownNode("far", Vec2(10, 5000), 1e-3);
     loc.AddAgent("ff1", Vec2::Zero(), 0.01, 0.01);  // mission.json: 0.01 rad

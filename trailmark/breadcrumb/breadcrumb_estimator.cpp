@@ -19,6 +19,11 @@ bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "sigmas, gates and periods must be positive";
     return false;
   }
+  if (!(l.track_heading_offset_sigma_rad >= 0) ||
+      !std::isfinite(l.track_heading_offset_sigma_rad)) {
+    if (why) *why = "track_heading_offset_sigma_rad must be finite and >= 0";
+    return false;
+  }
   if (!(l.motion_noise_scale_max >= 1) || !std::isfinite(l.motion_noise_scale_max)) {
     if (why) *why = "motion_noise_scale_max must be finite and >= 1";
     return false;
@@ -62,6 +67,9 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "prior sigma of the heading drift rate");
     t.Real("heading_rw", &L::heading_rw_rad_per_sqrt_s, "rad/sqrt(s)", nonneg,
            "heading random walk over time");
+    t.Real("track_heading_offset_sigma_rad", &L::track_heading_offset_sigma_rad, "rad", nonneg,
+           "the steps' own heading offset, a consider parameter per agent (reported covariance "
+           "only; 0: none)");
     t.Real("start_heading_sigma_floor", &L::start_heading_sigma_floor_rad, "rad", nonneg,
            "a stated start_heading_sigma below this is raised to it (0: as stated)");
     t.Real("min_rssi_dbm", &L::min_rssi_dbm, "dBm", OptionBounds::Any(),
@@ -321,6 +329,7 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["factorizations"] = static_cast<double>(s.factorizations);
   num["symbolic_analyses"] = static_cast<double>(s.symbolic_analyses);
   num["dense_factorizations"] = static_cast<double>(s.dense_factorizations);
+  num["sensitivity_solves"] = static_cast<double>(s.sensitivity_solves);
   num["network_dimension_max"] = s.max_dimension;
   num["factor_nonzeros_max"] = static_cast<double>(s.max_factor_nonzeros);
   num["rows_ignored"] = static_cast<double>(ignored_);

@@ -92,7 +92,26 @@ void GenNetwork::AddPrior(NodeIndex i, const Vec2& mean, const Mat2& cov) {
   AddRelativeToAnchor(i, Vec2::Zero(), mean, cov);
 }
 
-void GenNetwork::AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const Mat2& cov) {
+void GenNetwork::AddRate(NodeIndex i, int c, const Vec2& v) {
+  if (c < 0 || c >= considers_)
+    throw std::invalid_argument("GenNetwork: unknown consider parameter");
+  auto& db = nodes_[i].db;
+  if (db.size() <= static_cast<std::size_t>(c)) db.resize(c + 1, Vec2::Zero());
+  db[c] += v;
+}
+
+Vec2 GenNetwork::Sensitivity(NodeIndex i, int c) {
+  if (!IsActive(i) || c < 0) return Vec2::Zero();
+  if (sensitivities_stale_ && factor_valid_ && !dirty_) {
+    SolveSensitivities();
+    sensitivities_stale_ = false;
+  }
+  const auto& sens = nodes_[i].sens;
+  return static_cast<std::size_t>(c) < sens.size() ? sens[c] : Vec2::Zero();
+}
+
+void GenNetwork::AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const Mat2& cov,
+                             const std::vector<ConsiderRate>& rates) {
   if (!IsActive(i) || !IsActive(j) || i == j) throw std::invalid_argument("AddRelative: bad nodes");
   const Mat2 W = cov.inverse();  // conductance = 1 / resistance, R_k = P_k
   // eq. (11)
@@ -104,11 +123,15 @@ void GenNetwork::AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const M
   }
   nodes_[i].b += W * zeta;
   nodes_[j].b -= W * zeta;
+  for (const ConsiderRate& r : rates) {
+    AddRate(i, r.parameter, W * r.rate);
+    AddRate(j, r.parameter, -(W * r.rate));
+  }
   dirty_ = true;
 }
 
 void GenNetwork::AddLinear(const std::vector<NodeIndex>& nodes, const std::vector<Mat2>& J,
-                           const Vec2& z, const Mat2& cov) {
+                           const Vec2& z, const Mat2& cov, const std::vector<ConsiderRate>& rates) {
   if (nodes.size() != J.size() || nodes.empty()) throw std::invalid_argument("AddLinear: sizes");
   for (std::size_t a = 0; a < nodes.size(); ++a) {
     if (!IsActive(nodes[a])) throw std::invalid_argument("AddLinear: inactive node");
@@ -121,6 +144,7 @@ void GenNetwork::AddLinear(const std::vector<NodeIndex>& nodes, const std::vecto
     const Mat2 JtW = J[a].transpose() * W;
     nodes_[nodes[a]].L_ii += JtW * J[a];
     nodes_[nodes[a]].b += JtW * z;
+    for (const ConsiderRate& r : rates) AddRate(nodes[a], r.parameter, JtW * r.rate);
     for (std::size_t c = a + 1; c < nodes.size(); ++c) {
       const Mat2 block = JtW * J[c];  // L_ac; L_ca = L_ac^T
       OffBlock(nodes[a], nodes[c]) += block;
@@ -143,8 +167,8 @@ void GenNetwork::AddRelativeToAnchor(NodeIndex i, const Vec2& anchor, const Vec2
 }
 
 void GenNetwork::AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z,
-                                     double variance, const ScalarModel& model,
-                                     const Vec2& offset, NodeIndex bias) {
+                                     double variance, const ScalarModel& model, const Vec2& offset,
+                                     NodeIndex bias, const std::vector<ConsiderRate>& rates) {
   const Vec2 xi = nodes_[i].x_hat;
   const Vec2 xj = j >= 0 ? nodes_[j].x_hat : anchor;
   const Vec2 diff = xi + offset - xj;
@@ -170,6 +194,9 @@ void GenNetwork::AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& ancho
   for (int a = 0; a < n; ++a) {
     nodes_[nodes[a]].L_ii += w * rows[a] * rows[a].transpose();
     nodes_[nodes[a]].b += w * rows[a] * r;
+    // r moves with the offset by -h^T d offset (the prediction's slope along it).
+    for (const ConsiderRate& cr : rates)
+      AddRate(nodes[a], cr.parameter, -w * h.dot(cr.rate) * rows[a]);
     for (int c = a + 1; c < n; ++c) {
       const Mat2 block = w * rows[a] * rows[c].transpose();  // L_ac
       OffBlock(nodes[a], nodes[c]) += block;
@@ -182,12 +209,13 @@ void GenNetwork::AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& ancho
 }
 
 void GenNetwork::AddScalar(NodeIndex i, NodeIndex j, double z, double variance,
-                           const ScalarModel& model, const Vec2& offset, NodeIndex bias) {
+                           const ScalarModel& model, const Vec2& offset, NodeIndex bias,
+                           const std::vector<ConsiderRate>& rates) {
   if (!IsActive(i) || !IsActive(j) || i == j || !(variance > 0) ||
       (bias >= 0 && (!IsActive(bias) || bias == i || bias == j))) {
     throw std::invalid_argument("AddScalar: bad nodes or variance");
   }
-  AddLinearizedScalar(i, j, Vec2::Zero(), z, variance, model, offset, bias);
+  AddLinearizedScalar(i, j, Vec2::Zero(), z, variance, model, offset, bias, rates);
 }
 
 void GenNetwork::AddScalarToAnchor(NodeIndex i, const Vec2& anchor, double z, double variance,
@@ -316,11 +344,24 @@ void GenNetwork::Marginalize(const std::array<NodeIndex, K>& ks) {
   const std::size_t N = scratch_neighbours_.size();
   scratch_gain.resize(N);
   scratch_fill_.resize(N * N);
+  // The consider parameters' d b / d theta, alike (b_K's derivative).
+  std::size_t rated = 0;
+  for (NodeIndex k : ks) rated = std::max(rated, nodes_[k].db.size());
+  thread_local std::vector<Eigen::Matrix<double, D, 1>> scratch_db_K;
+  scratch_db_K.assign(rated, Eigen::Matrix<double, D, 1>::Zero());
+  for (int a = 0; a < K; ++a) {
+    const auto& db = nodes_[ks[a]].db;
+    for (std::size_t c = 0; c < db.size(); ++c) scratch_db_K[c].template segment<2>(2 * a) = db[c];
+  }
   for (std::size_t a = 0; a < N; ++a) {
     const MatMK G = scratch_lmk[a] * L_KK_inv;  // L_mK L_KK^-1
     scratch_gain[a] = G;
     Node& m = nodes_[scratch_neighbours_[a]];
     m.b -= G * b_K;
+    for (std::size_t c = 0; c < rated; ++c) {
+      if (!scratch_db_K[c].isZero(0.0))
+        AddRate(scratch_neighbours_[a], static_cast<int>(c), -(G * scratch_db_K[c]));
+    }
     m.L_ii -= G * scratch_lmk[a].transpose();
     m.L_ii = 0.5 * (m.L_ii + m.L_ii.transpose());
   }
@@ -630,8 +671,31 @@ bool GenNetwork::Solve() {
     }
     if (change < options_.relinearization_tolerance_m) break;
   }
+  sensitivities_stale_ = true;
   dirty_ = false;
   return true;
+}
+
+void GenNetwork::SolveSensitivities() {
+  std::size_t rated = 0;
+  for (NodeIndex slot : order_) rated = std::max(rated, nodes_[slot].db.size());
+  if (rated == 0) {
+    for (NodeIndex slot : order_) nodes_[slot].sens.clear();
+    return;
+  }
+  const int n = static_cast<int>(order_.size()) * 2;
+  Eigen::MatrixXd B = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(rated));
+  for (NodeIndex slot : order_) {
+    const auto& db = nodes_[slot].db;
+    for (std::size_t c = 0; c < db.size(); ++c) B.block<2, 1>(nodes_[slot].compact * 2, c) = db[c];
+  }
+  const Eigen::MatrixXd X = dense_ ? Eigen::MatrixXd(dense_llt_.solve(B)) : solver_.solve(B);
+  ++sensitivity_solves_;
+  for (NodeIndex slot : order_) {
+    auto& sens = nodes_[slot].sens;
+    sens.resize(rated);
+    for (std::size_t c = 0; c < rated; ++c) sens[c] = X.block<2, 1>(nodes_[slot].compact * 2, c);
+  }
 }
 
 Eigen::MatrixXd GenNetwork::MarginalOfRows(const std::vector<int>& rows) {

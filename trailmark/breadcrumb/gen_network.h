@@ -95,22 +95,50 @@ struct GenOptions {
   double dense_fill_share = 0.5;
 };
 
+/// How one edge's observation moves with a consider parameter (GenNetwork::AddConsider): for a
+/// linear edge dz/dtheta of its 2-vector z; for a scalar edge the derivative of its known
+/// `offset` displacement.
+struct ConsiderRate {
+  int parameter = -1;
+  Vec2 rate = Vec2::Zero();
+};
+
 class GenNetwork {
  public:
   explicit GenNetwork(GenOptions options = {});
+
+  /// A consider parameter (Tapley, Schutz & Born 2004, sec. 6.3): a scalar error that some
+  /// observations depend on but the network does not estimate (a PDR track's heading offset).
+  /// Edges given its rate (ConsiderRate) add J^T W dz/dtheta to the derivative of b, which
+  /// every marginalization carries like b; Solve() then gives each node's sensitivity
+  /// d x_hat / d theta = L^-1 db/dtheta (first order at the solution; a persistent edge's
+  /// observation does not move with it). Returns its index.
+  int AddConsider() { return considers_++; }
+  int considers() const { return considers_; }
+  /// Node i's sensitivity to consider parameter c at the last successful Solve() (zero for a
+  /// node added since, or when no edge moves with c). Computed for every parameter at once on
+  /// the first call after a solve (one solve with the factor, C right-hand sides), so that a
+  /// network solved more often than its covariances are read does not pay for it at each
+  /// solve; while edges wait for the next Solve() the last values are returned.
+  Vec2 Sensitivity(NodeIndex i, int c);
+  /// Whether Sensitivity() would cost no solve (computed since the last Solve()).
+  bool sensitivities_current() const { return !sensitivities_stale_ && !dirty_; }
+  /// How often the sensitivities were solved for (each: C right-hand sides with the factor).
+  std::size_t sensitivity_solves() const { return sensitivity_solves_; }
 
   /// AddNode, eq. (13): new zero rows/columns, plus the weak regularization prior.
   NodeIndex AddNode(const Vec2& initial_estimate);
   /// A Gaussian prior x_i ~ N(mean, cov): an edge to the ground (an anchor at `mean`), eq. (12).
   void AddPrior(NodeIndex i, const Vec2& mean, const Mat2& cov);
   /// AddMeasurement, eq. (11): zeta = x_i - x_j + e, e ~ N(0, cov).
-  void AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const Mat2& cov);
+  void AddRelative(NodeIndex i, NodeIndex j, const Vec2& zeta, const Mat2& cov,
+                   const std::vector<ConsiderRate>& rates = {});
   /// The general linear edge of the information filter (eqs. (18)-(19) with a linear h):
   ///   z = sum_k J_k x_k + e,  e ~ N(0, cov),
   /// for any number of distinct nodes (e.g. a PDR displacement rotated and scaled by an agent's
   /// heading/scale node). AddRelative is the case J = (I, -I).
   void AddLinear(const std::vector<NodeIndex>& nodes, const std::vector<Mat2>& jacobians,
-                 const Vec2& z, const Mat2& cov);
+                 const Vec2& z, const Mat2& cov, const std::vector<ConsiderRate>& rates = {});
   /// Eq. (12): zeta = x_i - anchor + e with a known anchor position.
   void AddRelativeToAnchor(NodeIndex i, const Vec2& anchor, const Vec2& zeta, const Mat2& cov);
   /// AddMeasurement+, eqs. (18)-(19): z = h(|x_i - x_j + offset|) + e, e ~ N(0, variance),
@@ -118,8 +146,10 @@ class GenNetwork {
   /// displacement between the measurement time and the node's state time).
   /// `bias` (optional): a node (offset, scale) of the measurement, z = (1 + scale) h(d) + offset
   /// + e, e.g. a UWB radio's range offset and clock/propagation scale, estimated with the rest.
+  /// `rates`: how `offset` moves with consider parameters.
   void AddScalar(NodeIndex i, NodeIndex j, double z, double variance, const ScalarModel& model,
-                 const Vec2& offset = Vec2::Zero(), NodeIndex bias = -1);
+                 const Vec2& offset = Vec2::Zero(), NodeIndex bias = -1,
+                 const std::vector<ConsiderRate>& rates = {});
   /// The same with a known point instead of node j.
   void AddScalarToAnchor(NodeIndex i, const Vec2& anchor, double z, double variance,
                          const ScalarModel& model, const Vec2& offset = Vec2::Zero());
@@ -190,7 +220,16 @@ class GenNetwork {
     std::vector<Block> off;           ///< L_ij, j != i
     std::vector<int> persistent;      ///< persistent edges touching the node
     int compact = -1;                 ///< index into the solver's vectors
+    std::vector<Vec2> db;             ///< d b / d theta_c (shorter: zero beyond)
+    std::vector<Vec2> sens;           ///< d x_hat / d theta_c at the last Solve()
   };
+  /// Adds v to node i's d b / d theta_c.
+  void AddRate(NodeIndex i, int c, const Vec2& v);
+  /// L^-1 db for every consider parameter, with the current factor, into Node::sens.
+  void SolveSensitivities();
+  int considers_ = 0;
+  bool sensitivities_stale_ = true;  ///< solved since Node::sens was computed
+  std::size_t sensitivity_solves_ = 0;
   struct Persistent {
     NodeIndex i = -1, j = -1;
     ScalarModel model;
@@ -204,9 +243,9 @@ class GenNetwork {
   };
 
   Mat2& OffBlock(NodeIndex i, NodeIndex j);  ///< creates when missing (pattern change)
-  void AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z,
-                           double variance, const ScalarModel& model, const Vec2& offset,
-                           NodeIndex bias = -1);
+  void AddLinearizedScalar(NodeIndex i, NodeIndex j, const Vec2& anchor, double z, double variance,
+                           const ScalarModel& model, const Vec2& offset, NodeIndex bias = -1,
+                           const std::vector<ConsiderRate>& rates = {});
   void FoldPersistent(int edge);
   /// One persistent range edge linearized at the current estimates (eqs. (18)-(19)):
   /// Jacobian row h (w.r.t. x_i; -h for x_j), weight w = 1/variance and the linearized

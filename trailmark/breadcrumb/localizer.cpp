@@ -15,6 +15,8 @@ namespace trailmark::breadcrumb {
 namespace {
 
 Mat2 Diag(const Vec2& v) { return v.asDiagonal(); }
+/// v turned by +90 degrees: d/dtheta of R(theta) v at theta = 0.
+Vec2 Turn90(const Vec2& v) { return Vec2(-v.y(), v.x()); }
 
 /// adapt_motion_noise: each node's running mean over about 10 edges (counted from 3), the
 /// nodes heard in the last 30 s (at least 3), the factor's integral gain per edge (about 100
@@ -188,6 +190,7 @@ void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Ve
   const double s = start ? std::max(start_sigma_m, 1e-3) : options_.unknown_start_sigma_m;
   a.state = gen_.AddNode(x0);
   gen_.AddPrior(a.state, x0, Mat2::Identity() * s * s);
+  if (options_.track_heading_offset_sigma_rad > 0) a.consider = gen_.AddConsider();
   a.cached_cov = Mat2::Identity() * s * s;
   if (options_.estimate_heading_scale) {
     const double sh = std::max({start_heading_sigma_rad.value_or(options_.heading_sigma0_rad),
@@ -225,6 +228,11 @@ BreadcrumbLocalizer::Agent& BreadcrumbLocalizer::StartedAgent(const std::string&
     a.state_cum_var = Vec2::Zero();
   }
   return a;
+}
+
+std::vector<ConsiderRate> BreadcrumbLocalizer::Turned(const Agent& a, const Vec2& v) const {
+  if (a.consider < 0) return {};
+  return {{a.consider, Turn90(v)}};
 }
 
 Vec2 BreadcrumbLocalizer::Corrected(const Agent& a, const Vec2& raw) const {
@@ -518,7 +526,7 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   const Vec2 predicted = Corrected(a, delta);
   const NodeIndex next = gen_.AddNode(gen_.Estimate(a.state) + predicted);
   if (a.theta < 0) {
-    gen_.AddRelative(next, a.state, delta, Diag(q));
+    gen_.AddRelative(next, a.state, delta, Diag(q), Turned(a, delta));
     const NodeIndex old_state = a.state;
     gen_.DeleteNode(old_state);
     a.state = gen_.MoveNode(next, old_state);
@@ -557,8 +565,18 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
     } else {
       gen_.AddRelative(next_theta, a.theta, Vec2::Zero(), Q_theta);
     }
+    // The observation is linear in delta: with the steps turned by the offset it moves by
+    // itself at delta turned by 90 degrees.
+    std::vector<ConsiderRate> rates;
+    if (a.consider >= 0) {
+      const Vec2 turned = Turn90(delta);
+      Mat2 J_turned;
+      J_turned.col(0) = (1.0 + th.y()) * (dR * turned);
+      J_turned.col(1) = R * turned;
+      rates.push_back({a.consider, Corrected(a, turned) - J_turned * th});
+    }
     gen_.AddLinear({next, a.state, a.theta}, {Mat2::Identity(), -Mat2::Identity(), -J_theta},
-                   predicted - J_theta * th, cov);
+                   predicted - J_theta * th, cov, rates);
     // DeleteNode+ of the old position and heading states together (one 4x4 Schur pivot).
     const NodeIndex old_theta = a.theta, old_state = a.state;
     gen_.DeleteNodes(old_state, old_theta);
@@ -579,7 +597,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
 std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScalarRobust(
     NodeIndex i, NodeIndex j, const Mat2& cov_i, const Mat2& cov_j, double z, double variance,
     const ScalarModel& model, const Vec2& offset, double k_negative, NodeIndex bias,
-    const std::string* source, TimeS t, const Agent* agent) {
+    const std::string* source, TimeS t, const Agent* agent,
+    const std::vector<ConsiderRate>& rates) {
   const Vec2 diff = gen_.Estimate(i) + offset - gen_.Estimate(j);
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
@@ -623,7 +642,7 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
     variance *= normalized / k;  // IV-F: lessen a noisy measurement's effect (Huber weight)
     ++summary_.downweighted;
   }
-  gen_.AddScalar(i, j, z, variance, model, offset, bias);
+  gen_.AddScalar(i, j, z, variance, model, offset, bias, rates);
   return edge;
 }
 
@@ -742,9 +761,10 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     else static_order_.push_back(p.other);
     node.index = gen_.AddNode(here);
     // x_crumb - x_state = offset + e, e ~ N(0, drop^2 + PDR variance since the state)
-    gen_.AddRelative(node.index, a.state, offset,
-                     Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m +
-                         Diag(offset_var));
+    gen_.AddRelative(
+        node.index, a.state, offset,
+        Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m + Diag(offset_var),
+        Turned(a, offset));
     node.cached_cov = cov_here;
     node.init.clear();
     ++summary_.drops;
@@ -766,8 +786,11 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     const Mat2 cov_b = b.cached_cov + Diag((var_b - b.state_cum_var).cwiseAbs());
     ScalarModel model = p.kind == Kind::kRssi ? RssiModel() : ScalarModel{};
     double var = p.kind == Kind::kRssi ? AgentRssiVariance() : p.sigma * p.sigma;
+    std::vector<ConsiderRate> rates = Turned(a, offset);
+    for (const ConsiderRate& r : Turned(b, -off_b)) rates.push_back(r);
     AddScalarRobust(a.state, b.state, cov_here, cov_b, p.value, var, model, offset - off_b,
-                    p.kind == Kind::kRssi ? options_.rssi_nlos_k : options_.huber_k);
+                    p.kind == Kind::kRssi ? options_.rssi_nlos_k : options_.huber_k, -1, nullptr, 0,
+                    nullptr, rates);
     p.kind == Kind::kRssi ? ++summary_.rssi_agent_used : ++summary_.ranges_used;
     return;
   }
@@ -823,9 +846,9 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
         }
         z -= o;
       }
-      const auto edge =
-          AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, z, var, model, offset,
-                          options_.rssi_nlos_k, RssiOffsetNode(*node), &p.other, p.t, &a);
+      const auto edge = AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, z, var,
+                                        model, offset, options_.rssi_nlos_k, RssiOffsetNode(*node),
+                                        &p.other, p.t, &a, Turned(a, offset));
       // One packet's noise: the calibrated sigma (var is inflated for the link's correlation).
       ObserveMotion(
           a, p.other, p.t, edge,
@@ -835,9 +858,9 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     }
     case Kind::kRange: {
       const double var = p.sigma * p.sigma + offset_var.mean();
-      const auto edge = AddScalarRobust(a.state, node->index, cov_here, node->cached_cov, p.value,
-                                        var, ScalarModel{}, offset, options_.huber_k,
-                                        RangeBiasNode(p.range_kind), &p.other, p.t, &a);
+      const auto edge = AddScalarRobust(
+          a.state, node->index, cov_here, node->cached_cov, p.value, var, ScalarModel{}, offset,
+          options_.huber_k, RangeBiasNode(p.range_kind), &p.other, p.t, &a, Turned(a, offset));
       ObserveMotion(a, p.other, p.t, edge, var);
       ++summary_.ranges_used;
       break;
@@ -852,8 +875,8 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
         ++summary_.gated;
         break;
       }
-      gen_.AddRelative(a.state, node->index, -offset,
-                       Mat2::Identity() * s * s + Diag(offset_var));
+      gen_.AddRelative(a.state, node->index, -offset, Mat2::Identity() * s * s + Diag(offset_var),
+                       Turned(a, -offset));
       ++summary_.encounters;
       SetCalibrationAnchor(a, p.other, p.t);
       break;
@@ -1079,6 +1102,16 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
       }
       a.cov_t = now_;
       a.cov_cum_var = a.state_cum_var;
+      if (SensitivitiesDue()) {
+        const int C = gen_.considers();
+        a.cached_sens_state.assign(C, Vec2::Zero());
+        a.cached_sens_theta.assign(C, Vec2::Zero());
+        for (int c = 0; c < C; ++c) {
+          a.cached_sens_state[c] = gen_.Sensitivity(a.state, c);
+          if (a.theta >= 0) a.cached_sens_theta[c] = gen_.Sensitivity(a.theta, c);
+        }
+        a.sens_state_cum = a.state_cum;
+      }
     } else if (a.state_cum_var != a.cov_cum_var) {  // the state moved on: add its PDR variance
       a.cached_cov += Diag((a.state_cum_var - a.cov_cum_var).cwiseAbs());
       a.cov_cum_var = a.state_cum_var;
@@ -1104,6 +1137,7 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
       e.covariance += J * a.cached_theta * J.transpose() + cross + cross.transpose();
       e.covariance = 0.5 * (e.covariance + e.covariance.transpose());
     }
+    if (a.started) e.covariance += ConsiderCovariance(a, cum);
     return e;
   }
   StaticNode* node = FindStatic(id);
@@ -1112,9 +1146,55 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
   if (options_.covariance_period_s <= 0 ||
       (fresh && now_ - node->cov_t >= options_.covariance_period_s)) {
     node->cached_cov = gen_.Covariance(node->index);
+    if (SensitivitiesDue()) {
+      node->cached_consider.setZero();
+      const double sigma = options_.track_heading_offset_sigma_rad;
+      for (int c = 0; c < gen_.considers(); ++c) {
+        const Vec2 s = gen_.Sensitivity(node->index, c);
+        node->cached_consider += sigma * sigma * s * s.transpose();
+      }
+    }
     node->cov_t = now_;
   }
-  return NodeEstimate{id, gen_.Estimate(node->index), node->cached_cov};
+  return NodeEstimate{id, gen_.Estimate(node->index), node->cached_cov + node->cached_consider};
+}
+
+bool BreadcrumbLocalizer::SensitivitiesDue() {
+  // While edges wait for a solve a state may be new in its slot: keep the last values (with
+  // the PDR displacement they were for) until the network is solved.
+  if (gen_.considers() == 0 || gen_.dirty()) return false;
+  if (gen_.sensitivities_current()) return true;
+  if (options_.covariance_period_s > 0 && now_ - last_sensitivity_t_ < options_.covariance_period_s)
+    return false;
+  last_sensitivity_t_ = now_;
+  return true;
+}
+
+Mat2 BreadcrumbLocalizer::ConsiderCovariance(const Agent& a, const Vec2& cum) const {
+  // p = x_state + (1 + s) R(psi) W, W the PDR walked since the state of the last refresh: its
+  // sensitivity to parameter c is the state's, the heading node's through the walk, and (its
+  // own agent's) the walk itself turned.
+  Mat2 out = Mat2::Zero();
+  const int C = gen_.considers();
+  if (C == 0) return out;
+  const Vec2 walked = cum - a.sens_state_cum;
+  Mat2 J = Mat2::Zero();
+  if (a.theta >= 0) {
+    const Vec2 th = gen_.Estimate(a.theta);
+    const Vec2 turned = Eigen::Rotation2Dd(th.x()) * walked;
+    J.col(0) = (1.0 + th.y()) * Turn90(turned);
+    J.col(1) = turned;
+  }
+  const double sigma = options_.track_heading_offset_sigma_rad;
+  const auto cached = [](const std::vector<Vec2>& v, int c) {
+    return static_cast<std::size_t>(c) < v.size() ? v[c] : Vec2::Zero();  // not refreshed yet
+  };
+  for (int c = 0; c < C; ++c) {
+    Vec2 s = cached(a.cached_sens_state, c) + J * cached(a.cached_sens_theta, c);
+    if (c == a.consider) s += Corrected(a, Turn90(walked));
+    out += sigma * sigma * s * s.transpose();
+  }
+  return out;
 }
 
 TimeS BreadcrumbLocalizer::AgentTime(const std::string& id) const {
@@ -1127,6 +1207,7 @@ LocalizerSummary BreadcrumbLocalizer::summary() const {
   s.factorizations = gen_.factorizations();
   s.symbolic_analyses = gen_.symbolic_analyses();
   s.dense_factorizations = gen_.dense_factorizations();
+  s.sensitivity_solves = gen_.sensitivity_solves();
   s.max_dimension = gen_.max_dimension();
   s.max_factor_nonzeros = gen_.max_factor_nonzeros();
   s.pending_uninitialized = 0;

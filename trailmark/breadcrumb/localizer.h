@@ -60,6 +60,14 @@ struct LocalizerOptions {
   // gyro scale-factor error that accrues with every turn), s nearly constant.
   bool estimate_heading_scale = true;
   double heading_sigma0_rad = 0.05;          ///< when mission.json gives no start_heading_sigma
+  /// The steps' own heading offset from the stated start heading (a boot's toe-out, a phone's
+  /// carrying mode; PdrOptions::track_heading_offset_sigma_rad, 5 deg): a consider parameter
+  /// per agent (GenNetwork::AddConsider), not in the heading node's prior. Every edge that
+  /// carries the agent's PDR displacement says how it turns with it; each node's sensitivity
+  /// to it, through every solve, adds sigma^2 s s^T to the reported covariance only: the
+  /// estimates are those without it. As the heading node's prior it made right walks worse
+  /// (plain families p75 1.67 -> 1.98 m, docs/breadcrumb.md). 0: none (no extra solves).
+  double track_heading_offset_sigma_rad = 0.087;
   /// A stated start_heading_sigma below this is raised to it (0: taken as stated).
   double start_heading_sigma_floor_rad = 0.0;
   double scale_sigma0 = 0.05;
@@ -224,6 +232,8 @@ struct LocalizerSummary {
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   std::size_t unusable = 0;  ///< measurements that could not be attached (with reasons in notes)
   std::size_t solves = 0, factorizations = 0, symbolic_analyses = 0, dense_factorizations = 0;
+  std::size_t sensitivity_solves =
+      0;  ///< track_heading_offset_sigma_rad's, C right-hand sides each
   int max_dimension = 0;                ///< of the network's largest system
   std::size_t max_factor_nonzeros = 0;  ///< of its LDL^T factor
   std::size_t calibrations = 0, calibration_pairs = 0;
@@ -339,6 +349,12 @@ class BreadcrumbLocalizer {
     Mat2 cached_theta = Mat2::Zero();
     TimeS cov_t = -1e300;  ///< when cached_cov was computed
     Vec2 cov_cum_var = Vec2::Zero();  ///< PDR variance at that time
+    /// track_heading_offset_sigma_rad: this agent's consider parameter, and at the last
+    /// refresh the state's and theta's sensitivities to every parameter and the state's PDR
+    /// displacement (the walk since turns with the parameter).
+    int consider = -1;
+    std::vector<Vec2> cached_sens_state, cached_sens_theta;
+    Vec2 sens_state_cum = Vec2::Zero();
     /// adapt_motion_noise: per node heard, its edges' normalized innovations' running mean;
     /// the agent's edges counted, the factor on its step and heading noise and the median.
     struct NodeNis {
@@ -362,6 +378,7 @@ class BreadcrumbLocalizer {
     NodeIndex index = -1;  ///< -1 while uninitialized
     bool known = false;
     Mat2 cached_cov = Mat2::Identity() * 100.0;
+    Mat2 cached_consider = Mat2::Zero();  ///< the agents' heading offsets' share, reported only
     TimeS cov_t = -1e300;
     std::vector<InitObservation> init;
     int next_try = 0;
@@ -381,6 +398,10 @@ class BreadcrumbLocalizer {
              double* cum_turn_signed = nullptr) const;
   /// The PDR displacement `raw` corrected by the agent's current heading/scale estimate.
   Vec2 Corrected(const Agent& a, const Vec2& raw) const;
+  /// How a displacement v of agent a's PDR turns with its heading offset (empty: none).
+  std::vector<ConsiderRate> Turned(const Agent& a, const Vec2& v) const;
+  /// The heading offsets' share of an agent's reported covariance at PDR displacement cum.
+  Mat2 ConsiderCovariance(const Agent& a, const Vec2& cum) const;
   /// Walking direction: the last step's direction corrected by the heading estimate.
   double AgentHeading(const Agent& a) const;
   void ProcessAgent(Agent& a, TimeS covered);
@@ -399,7 +420,8 @@ class BreadcrumbLocalizer {
                                                 const ScalarModel& model, const Vec2& offset,
                                                 double k_negative, NodeIndex bias = -1,
                                                 const std::string* source = nullptr, TimeS t = 0,
-                                                const Agent* agent = nullptr);
+                                                const Agent* agent = nullptr,
+                                                const std::vector<ConsiderRate>& rates = {});
   /// Whether the node check's verdict on `node` is the agent's motion, not the node's: the
   /// agent's median over the nodes it hears is above 1 and this node's mean is like its peers'
   /// (within kMotionPeerFactor of the median): then its edges are not refused.
@@ -448,6 +470,11 @@ class BreadcrumbLocalizer {
   void NearFieldPacket(const Agent& a, const std::string& node, TimeS t, double rssi_dbm);
   TimeS now_ = -1e300;
   TimeS last_solve_t_ = -1e300;
+  /// When the heading offsets' sensitivities were last solved for (at most once per
+  /// covariance_period_s of mission time: C more right-hand sides with the factor).
+  TimeS last_sensitivity_t_ = -1e300;
+  /// Whether the sensitivities may be read now (computing them if due).
+  bool SensitivitiesDue();
   /// Solves unless throttled; true when the factor matches the current network.
   bool SolveThrottled();
   LocalizerSummary summary_;
