@@ -66,6 +66,10 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Flag("relative_drop_priors", [](O& o) -> bool& { return o.map.relative_drop_priors; },
          "least squares: drop priors on the displacement between consecutive drops");
   t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
+  t.Flag("close_pass_on_track", &O::close_pass_on_track,
+         "a beacon without drop event is anchored at a close pass as a drop would be: on the "
+         "passer's dead-reckoning track and as a consider state of its tracker (false: at the "
+         "tracker's estimate)");
   t.Flag("drop_within_step", &O::drop_within_step,
          "a drop placed within the step that spans it (false: at the last step's end before it)");
   t.Real("entry_track_m", &O::entry_track_m, "m", OptionBounds::NonNegative(),
@@ -239,6 +243,12 @@ void BeaconTrailEstimator::AdvanceDropDeadReckoning(Agent& a, const Step& step, 
 
 BeaconTrailEstimator::DropDeadReckoningState BeaconTrailEstimator::DropState(const Agent& a) const {
   return {a.drop_dr->position_n().head<2>(), a.drop_dr->covariance(), a.sum_d_n, a.sum_t_perp_n};
+}
+
+void BeaconTrailEstimator::HintTrackPoint(Agent& a, int i, const DropDeadReckoningState& at) {
+  Eigen::Matrix<double, 2, 3> along;
+  along << Vec2(-at.sum_d_n.y(), at.sum_d_n.x()), at.sum_t_perp_n, at.sum_d_n;
+  map_.SetTrackHint(i, a.map_track, at.position_n, at.white, along, -1, at.white);
 }
 
 void BeaconTrailEstimator::HintDrop(Agent& a, int i, const DropDeadReckoningState& at) {
@@ -513,12 +523,25 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     const int beacon = Beacon(a_agent ? r->b : r->a);
     agents_[agent].heard[beacon] = t;
     // A beacon without drop event or survey: anchored where an agent first passes close by.
-    const Agent& passer = agents_[agent];
+    Agent& passer = agents_[agent];
+    // (A beacon whose drop event has come is placed by it, within the step that spans it.)
     if (!map_.HasAnchor(beacon) && r->range_m <= options_.close_pass_m &&
-        !passer.AwaitingHeading()) {
-      const auto [p, cov] = AgentEstimate(passer);
-      if (p) {
-        map_.SetAnchorHint(beacon, *p, *cov + Mat2::Identity() * (r->range_m * r->range_m + 0.1));
+        !passer.AwaitingHeading() && !drop_rank_.count(map_.id(beacon))) {
+      const double pass_var = r->range_m * r->range_m + 0.1;
+      if (passer.drop_dr && options_.close_pass_on_track) {
+        // As a drop would be: on the passer's dead-reckoning track, whose shared heading,
+        // drift-rate and scale errors the map solves with, and a consider state of the tracker
+        // (not the tracker's estimate, which follows the map: each pass anchored the map where
+        // the map had put it).
+        DropDeadReckoningState at = DropState(passer);
+        at.white += Mat2::Identity() * pass_var;
+        HintTrackPoint(passer, beacon, at);
+        if (passer.ekf)
+          passer.deferred.push_back(
+              {t, -1, std::nullopt, std::nullopt, 0.0, map_.id(beacon), std::sqrt(pass_var)});
+        ++close_pass_anchors_;
+      } else if (const auto [p, cov] = AgentEstimate(passer); p) {
+        map_.SetAnchorHint(beacon, *p, *cov + Mat2::Identity() * pass_var);
         ++close_pass_anchors_;
       }
     }
@@ -694,7 +717,8 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
 
 bool BeaconTrailEstimator::Apply(Agent& a, const Deferred& m) {
   if (!m.dropped.empty()) {
-    a.ekf->ConsiderDrop(Beacon(m.dropped), options_.drop_sigma_m);
+    a.ekf->ConsiderDrop(Beacon(m.dropped),
+                        m.drop_sigma_m > 0 ? m.drop_sigma_m : options_.drop_sigma_m);
     return false;
   }
   const auto pos = map_.Position(m.beacon);
