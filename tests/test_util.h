@@ -2,15 +2,18 @@
 #pragma once
 // Helpers for tests: a temporary directory removed at the end, and file writing.
 
-#include <filesystem>
-#include <fstream>
-#include <cstdlib>
-#include <random>
-#include <string>
-
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
 #include "trailmark/core/error.h"
+#include "trailmark/core/measurements.h"
 
 namespace trailmark::testing {
 
@@ -53,6 +56,30 @@ inline std::filesystem::path SharedData(const std::string& sub) {
 #endif
   const auto p = base / sub;
   return std::filesystem::exists(p) ? p : std::filesystem::path();
+}
+
+/// Two runs of one estimator, one with a reported-only error share (a consider parameter) and one
+/// without: the same rows and estimates to the bit; with `psd`, every row's covariance grown by
+/// a positive semi-definite share (to rounding). Returns the largest growth of the trace.
+inline double ExpectSameEstimatesWiderCovariances(const std::vector<Estimate>& with,
+                                                  const std::vector<Estimate>& without, bool psd) {
+  EXPECT_EQ(with.size(), without.size());
+  double grew = 0;
+  for (std::size_t i = 0; i < std::min(with.size(), without.size()); ++i) {
+    const Estimate& a = with[i];
+    const Estimate& b = without[i];
+    const double dxx = a.sxx - b.sxx, dyy = a.syy - b.syy, dxy = a.sxy - b.sxy;
+    const bool same = a.id == b.id && a.t == b.t && a.position_n == b.position_n;
+    const bool wider =
+        !psd || (dxx >= -1e-9 && dyy >= -1e-9 && dxx * dyy - dxy * dxy >= -1e-9 * (1 + dxx + dyy));
+    if (!same || !wider) {
+      ADD_FAILURE() << "row " << i << " " << a.id << " at " << a.t
+                    << (same ? ": covariance not wider" : ": another estimate");
+      return grew;
+    }
+    grew = std::max(grew, dxx + dyy);
+  }
+  return grew;
 }
 
 /// Writes `text` to a file named `name` in a fresh directory and expects `read(path)` to throw

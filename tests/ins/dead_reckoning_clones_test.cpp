@@ -101,6 +101,17 @@ struct AugmentedFilter {
   }
 };
 
+/// A measurement of three clones: two position fixes and a distance-like combination.
+std::pair<Eigen::MatrixXd, Eigen::VectorXd> ThreeClonesMeasured() {
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(5, 6);
+  H(0, 0) = H(1, 1) = 1;
+  H(2, 4) = H(3, 5) = 1;
+  H(4, 2) = 0.6, H(4, 3) = -0.8, H(4, 0) = -0.6;
+  Eigen::VectorXd y(5);
+  y << 1.0, -2.0, 9.0, 1.5, 0.4;
+  return {H, y};
+}
+
 /// A walk with turns, pauses (standing: the drift rate integrates) and a step scale.
 Step WalkStep(int k) {
   const double heading = 0.3 * std::sin(0.15 * k) + (k > 30 ? 1.4 : 0.0);
@@ -134,13 +145,7 @@ TEST(DeadReckoningClones, IsTheAugmentedKalmanFilterBeforeAndAfterConditioning) 
   ASSERT_EQ(S.rows(), 6);
   EXPECT_LT((S - ref.cov.bottomRightCorner(6, 6)).norm(), 1e-12 * S.norm());
   EXPECT_GT(std::abs(S(0, 4)), 1e-4);  // the first and the last stop share errors
-  // A measurement of the clones (two position fixes and a distance-like combination).
-  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(5, 6);
-  H(0, 0) = H(1, 1) = 1;
-  H(2, 4) = H(3, 5) = 1;
-  H(4, 2) = 0.6, H(4, 3) = -0.8, H(4, 0) = -0.6;
-  Eigen::VectorXd y(5);
-  y << 1.0, -2.0, 9.0, 1.5, 0.4;
+  const auto [H, y] = ThreeClonesMeasured();
   Eigen::MatrixXd R = Eigen::MatrixXd::Identity(5, 5) * 0.09;
   R(0, 1) = R(1, 0) = 0.02;
   ref.Measure(H, y, R);
@@ -236,12 +241,7 @@ TEST(DeadReckoningClones, AConsideredOffsetIsTheJosephFormOfTheGainWithoutIt) {
   }
   // Before any measurement: the dead reckoning's state form (the offset in the heading).
   EXPECT_LT((clones.covariance() - ref.with_offset.topLeftCorner<2, 2>()).norm(), 1e-12);
-  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(5, 6);
-  H(0, 0) = H(1, 1) = 1;
-  H(2, 4) = H(3, 5) = 1;
-  H(4, 2) = 0.6, H(4, 3) = -0.8, H(4, 0) = -0.6;
-  Eigen::VectorXd y(5);
-  y << 1.0, -2.0, 9.0, 1.5, 0.4;
+  const auto [H, y] = ThreeClonesMeasured();
   ref.Measure(H, y, Eigen::MatrixXd::Identity(5, 5) * 0.09);
   const auto [post_n, post_cov] = ref.ClonePosterior();
   clones.Condition(post_n, post_cov);
