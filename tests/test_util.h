@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -80,6 +81,16 @@ inline double ExpectSameEstimatesWiderCovariances(const std::vector<Estimate>& w
     grew = std::max(grew, dxx + dyy);
   }
   return grew;
+}
+
+/// Every step of `steps` turned by `deg` degrees (a track's heading offset: a boot's toe-out).
+inline void TurnSteps(std::vector<Step>& steps, double deg) {
+  const double c = std::cos(deg * M_PI / 180), s = std::sin(deg * M_PI / 180);
+  for (Step& st : steps) {
+    const double x = st.delta_n.x(), y = st.delta_n.y();
+    st.delta_n.x() = c * x - s * y;
+    st.delta_n.y() = s * x + c * y;
+  }
 }
 
 /// Writes `text` to a file named `name` in a fresh directory and expects `read(path)` to throw

@@ -244,8 +244,7 @@ TEST(BreadcrumbPipeline, TheStepsHeadingOffsetWidensTheEllipsesOnly) {
   const int seeds = 3;
   for (std::uint64_t seed = 1; seed <= seeds; ++seed) {
     SimulatedMission sim = SimulateScenario("office-loop", seed);
-    const Eigen::Rotation2Dd turn(6.0 * M_PI / 180);
-    for (Step& st : sim.data.steps) st.delta_n.head<2>() = turn * st.delta_n.head<2>();
+    testing::TurnSteps(sim.data.steps, 6.0);
     TempDir dir;
     WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
     double w = 0, wo = 0;

@@ -63,7 +63,8 @@ void DeadReckoningClones::Condition(const Eigen::VectorXd& posterior_n,
   if (!posterior_n.allFinite() || !posterior_cov.allFinite()) {
     throw std::invalid_argument("DeadReckoningClones::Condition: values must be finite");
   }
-  if (n > 0 && Eigen::LLT<Eigen::MatrixXd>(clone_cov_).info() != Eigen::Success) {
+  const Eigen::LLT<Eigen::MatrixXd> prior(clone_cov_);
+  if (n > 0 && prior.info() != Eigen::Success) {
     throw std::invalid_argument(
         "DeadReckoningClones::Condition: the clones' prior is not positive definite");
   }
@@ -72,9 +73,7 @@ void DeadReckoningClones::Condition(const Eigen::VectorXd& posterior_n,
   // d posterior / d offset = posterior_cov S^-1 d prior mean / d offset (the solver's normal
   // equations at its solution: the prior is the only information that moves with the offset).
   posterior_offset_sens_ =
-      n > 0 ? Eigen::VectorXd(posterior_cov_ *
-                              Eigen::LLT<Eigen::MatrixXd>(clone_cov_).solve(clone_offset_sens_))
-            : Eigen::VectorXd();
+      n > 0 ? Eigen::VectorXd(posterior_cov_ * prior.solve(clone_offset_sens_)) : Eigen::VectorXd();
   ConditionOnStored();
 }
 
