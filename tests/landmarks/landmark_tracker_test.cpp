@@ -11,6 +11,7 @@
 #include <Eigen/Dense>
 #include <cmath>
 
+#include "landmarks/tracker_test_util.h"
 #include "trailmark/core/random.h"
 
 namespace trailmark::landmarks {
@@ -18,16 +19,7 @@ namespace {
 
 using Vec = Eigen::VectorXd;
 using Mat = Eigen::MatrixXd;
-
-Step MakeStep(TimeS t, const Vec2& d) {
-  Step s;
-  s.t0 = t - 0.5;
-  s.t1 = t;
-  s.agent = "ff1";
-  s.delta_n = Vec3(d.x(), d.y(), 0);
-  s.variance_m2 = Vec3(0.004, 0.004, 1e-4);
-  return s;
-}
+using namespace trailmark::landmarks::testing;  // NOLINT(google-build-using-namespace)
 
 bool SymmetricPositiveDefinite(const Mat& P) {
   return (P - P.transpose()).cwiseAbs().maxCoeff() < 1e-9 &&
@@ -65,24 +57,6 @@ TEST(LandmarkTracker, WithoutRadioItsMotionBlockIsTheDeadReckoningsErrorPropagat
             1e-12 * dr.error_covariance().cwiseAbs().maxCoeff());
   EXPECT_LT((tracker.reported_position_cov() - with_offset.covariance()).cwiseAbs().maxCoeff(),
             1e-12 * with_offset.covariance().cwiseAbs().maxCoeff());
-}
-
-/// The tracker's measurement model for a test: h(x) at the state's first kFixed entries plus
-/// the bias state `b`.
-double Model(const Vec& x, const Vec2& landmark, double dz, int b) {
-  const double d = std::sqrt((x.head<2>() - landmark).squaredNorm() + dz * dz);
-  return x(LandmarkTracker::kAlpha) - 10 * x(LandmarkTracker::kExponent) * std::log10(d) + x(b);
-}
-
-Vec NumericJacobian(const Vec& x, const Vec2& landmark, double dz, int b) {
-  Vec H(x.size());
-  for (int i = 0; i < x.size(); ++i) {
-    Vec xp = x, xm = x;
-    xp(i) += 1e-6;
-    xm(i) -= 1e-6;
-    H(i) = (Model(xp, landmark, dz, b) - Model(xm, landmark, dz, b)) / 2e-6;
-  }
-  return H;
 }
 
 /// A tracker that has walked (radio moves the position) with a calibrated radio.
@@ -143,6 +117,54 @@ TEST(LandmarkTracker, OneIterationIsTheEkfUpdateAndIteratingReachesTheMap) {
     }
     EXPECT_TRUE(SymmetricPositiveDefinite(tracker.covariance()));
   }
+}
+
+TEST(LandmarkTracker, ASurveysErrorIsAStateThatEveryPacketOfTheLandmarkShares) {
+  // A landmark surveyed to 0.5 m: its first packet appends its position (at the survey, with
+  // the survey's covariance) and its link's bias to the state; the update is the EKF's on that
+  // augmented state, the landmark's position among the states it corrects. The second packet
+  // reads the state, not the survey passed again.
+  LandmarkTrackerOptions o;
+  o.given_alpha_sigma_db = 2.0;
+  o.given_exponent_sigma = 0.2;
+  o.huber_k = 100;
+  o.iterations = 1;
+  const Vec2 survey(4.3, 0.6);
+  const Mat2 survey_cov = Mat2::Identity() * 0.25;
+  const double landmark_z = 1.2, dz = landmark_z - o.handheld_height_m, rssi = -55;
+  LandmarkTracker tracker = Walked(o);
+  ASSERT_TRUE(tracker.RadioMovesPosition());
+  const Vec x0 = tracker.state();
+  const Mat P0 = tracker.covariance();
+  ASSERT_TRUE(tracker.UpdateRssi(2.5, 7, survey, landmark_z, survey_cov, 0.0, rssi));
+  const int n = static_cast<int>(x0.size());
+  ASSERT_EQ(tracker.state().size(), n + 3);  // the landmark's x, y, then the link's bias
+  Vec xa = Vec::Zero(n + 3);
+  xa.head(n) = x0;
+  xa.segment<2>(n) = survey;
+  Mat Pa = Mat::Zero(n + 3, n + 3);
+  Pa.topLeftCorner(n, n) = P0;
+  Pa.block<2, 2>(n, n) = survey_cov;
+  Pa(n + 2, n + 2) = 0.7 * 36;
+  auto model = [&](const Vec& x) { return Model(x, Vec2(x.segment<2>(n)), dz, n + 2); };
+  const Vec H = NumericGradient(model, xa);
+  const double S = H.dot(Pa * H) + 0.3 * 36;
+  const Vec K = Pa * H / S;
+  EXPECT_LT((tracker.state() - (xa + K * (rssi - model(xa)))).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_LT((tracker.covariance() - (Pa - K * S * K.transpose())).cwiseAbs().maxCoeff(), 1e-6);
+  EXPECT_GT((tracker.state().segment<2>(n) - survey).norm(), 1e-4);  // the packet moved it
+  // The second packet: the same state whatever survey is passed again.
+  LandmarkTracker again = tracker;
+  tracker.UpdateRssi(3.0, 7, survey, landmark_z, survey_cov, 0.0, rssi - 2);
+  again.UpdateRssi(3.0, 7, survey + Vec2(5, 5), landmark_z, survey_cov * 9, 0.0, rssi - 2);
+  EXPECT_EQ(tracker.state(), again.state());
+  EXPECT_EQ(tracker.covariance(), again.covariance());
+  EXPECT_TRUE(SymmetricPositiveDefinite(tracker.covariance()));
+  // Off: the survey's covariance is each packet's, and no state is added.
+  o.survey_error_states = false;
+  LandmarkTracker white = Walked(o);
+  white.UpdateRssi(2.5, 7, survey, landmark_z, survey_cov, 0.0, rssi);
+  EXPECT_EQ(white.state().size(), n + 1);
 }
 
 TEST(LandmarkTracker, BeforeTheWalkPacketsCalibrateTheRadioButDoNotMoveTheStart) {

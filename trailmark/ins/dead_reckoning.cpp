@@ -32,6 +32,19 @@ double PdrOptions::StartHeadingSigma(std::optional<double> stated_rad) const {
   return std::hypot(stated_rad.value_or(start_heading_sigma_rad), track_heading_offset_sigma_rad);
 }
 
+PdrOptions PdrOptions::SharedErrorsScaled(double factor) const {
+  if (!(factor > 0) || !std::isfinite(factor)) {
+    throw std::invalid_argument("pdr: a scale of the shared error sigmas must be finite and > 0");
+  }
+  PdrOptions o = *this;
+  o.start_heading_sigma_rad *= factor;
+  o.heading_drift_sigma_rad_per_s *= factor;
+  o.heading_walk_sigma_rad *= factor;
+  o.step_scale_sigma *= factor;
+  o.turn_scale_sigma *= factor;
+  return o;
+}
+
 DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const PdrOptions& options,
                              std::optional<double> start_heading_sigma_rad)
     : options_(options), position_n_(start_n) {

@@ -59,6 +59,9 @@ struct PdrOptions {
   /// The heading's sigma at the start: the stated one (else start_heading_sigma_rad) with the
   /// track's own offset, in quadrature.
   double StartHeadingSigma(std::optional<double> stated_rad) const;
+  /// A poorer device: the shared errors' sigmas (start heading, drift rate, heading walk, step
+  /// and turn scale) times `factor` (> 0); the step noise and the track's offset unchanged.
+  PdrOptions SharedErrorsScaled(double factor) const;
   bool IsValid(std::string* why) const;
 };
 

@@ -83,12 +83,7 @@ class HistorySink : public EstimateSink {
 PdrOptions Overbounded(PdrOptions o, const GuardOptions& guard) {
   std::string why;
   if (!guard.IsValid(&why)) throw std::invalid_argument(why);
-  o.start_heading_sigma_rad *= guard.overbound;
-  o.heading_drift_sigma_rad_per_s *= guard.overbound;
-  o.heading_walk_sigma_rad *= guard.overbound;
-  o.step_scale_sigma *= guard.overbound;
-  o.turn_scale_sigma *= guard.overbound;
-  return o;
+  return o.SharedErrorsScaled(guard.overbound);
 }
 }  // namespace
 

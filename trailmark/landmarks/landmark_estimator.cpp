@@ -46,7 +46,11 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     return false;
   }
   if (tracking == Tracking::kUkf && fix_fusion != FixFusion::kIndependent) {
-    if (why) *why = "fix_fusion=intersection is for stop-and-go tracking (landmarks-stopgo)";
+    if (why) {
+      *why =
+          "fix_fusion=intersection and fix_fusion=joint are for stop-and-go tracking "
+          "(landmarks-stopgo); continuous tracking takes fix_fusion=independent";
+    }
     return false;
   }
   if (tracking != Tracking::kUkf && filter != TrackingFilter::kPaper) {
@@ -54,7 +58,7 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     return false;
   }
   return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why) &&
-         stop_dead_reckoning.IsValid(why);
+         bank.IsValid(why) && stop_dead_reckoning.IsValid(why);
 }
 
 namespace {
@@ -133,6 +137,28 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
         OptionBounds::NonNegative(),
         "error-state: the steps' own heading offset, a consider parameter (reported covariance "
         "only; 0: none)");
+    t.Integer(
+        "motion_models", [](O& o) -> int& { return o.bank.models; }, OptionBounds::Between(1, 2),
+        "error-state: 2: a typical device's motion model and a poor one's (shared PDR "
+        "errors x motion_overbound, the steps' offset estimated), weighed by how well each "
+        "predicts the radio; 1: the typical one alone");
+    t.Flag(
+        "motion_poor_offset_state", [](O& o) -> bool& { return o.bank.poor_offset_state; },
+        "error-state: the poor device's heading offset is estimated (false: a consider "
+        "parameter, as the typical device's)");
+    t.Flag(
+        "motion_prefer_typical", [](O& o) -> bool& { return o.bank.prefer_typical; },
+        "error-state: the typical device's estimate until the poor one's weight passes 0.5 "
+        "(then moving to the poor one's), the mixture's mean squared error about it (false: "
+        "the mixture's mean)");
+    t.Real(
+        "motion_poor_prior", [](O& o) -> double& { return o.bank.poor_prior; }, "",
+        OptionBounds::Between(0.001, 0.999),
+        "error-state: the poor device's weight before any packet");
+    t.Real(
+        "motion_overbound", [](O& o) -> double& { return o.bank.overbound; }, "",
+        OptionBounds::AtLeast(1),
+        "error-state: the poor device's shared PDR error sigmas, x the typical ones");
     t.Flag("adapt_noise", [](O& o) -> bool& { return o.tracker.adapt_noise; },
            "error-state: the RSSI variances scaled up while the packets' mean NIS is above 1");
     t.Flag("slam", &O::slam,
@@ -231,8 +257,10 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
         }
         LandmarkTrackerOptions to = options_.tracker;
         to.default_sigma_db = std::max(to.default_sigma_db, options_.rssi_sigma_db);
+        TrackerBankOptions bank = options_.bank;
+        bank.evidence_delay_s = options_.integrity.window_s;  // the monitor's window
         a.tracker.emplace(Vec3(a.position.x(), a.position.y(), a.z_m), s, n.start_heading_sigma_rad,
-                          given, to);
+                          given, to, bank);
       } else {
         a.ukf.emplace(a.position, model_, uo);
       }
@@ -689,7 +717,10 @@ EstimatorSummary LandmarkEstimator::Summary() const {
   std::size_t gated = 0, calibration_only = 0;
   for (const auto& [id, a] : agents_) {
     if (!a.tracker) continue;
-    const LandmarkTracker& k = *a.tracker;
+    const LandmarkTracker& k = a.tracker->best();
+    if (a.tracker->size() > 1) {
+      summary.numbers[id + ".poor_device_weight"] = a.tracker->weight(1);
+    }
     gated += k.gated();
     calibration_only += k.calibration_only();
     summary.numbers[id + ".heading_correction_deg"] = k.heading_correction_rad() * 180 / M_PI;

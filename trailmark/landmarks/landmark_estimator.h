@@ -30,6 +30,7 @@
 #include "trailmark/landmarks/landmark_tracker.h"
 #include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/landmarks/stop_and_go.h"
+#include "trailmark/landmarks/tracker_bank.h"
 #include "trailmark/radio/path_loss.h"
 
 namespace trailmark::landmarks {
@@ -82,6 +83,9 @@ struct LandmarkEstimatorOptions {
   Tracking tracking = Tracking::kStopAndGo;
   TrackingFilter filter = TrackingFilter::kErrorState;
   LandmarkTrackerOptions tracker;  ///< TrackingFilter::kErrorState
+  /// Error-state: the typical device's tracker and a poor device's, weighed by the radio
+  /// (tracker_bank.h; models = 1: the typical one alone).
+  TrackerBankOptions bank;
   /// Error-state: also fuse landmarks placed by the stop-and-go solver. Off: they were placed
   /// from this dead reckoning's standing positions, so they share its heading and scale errors,
   /// which their covariance does not say; fused as independent, they turn the heading onto the
@@ -186,7 +190,7 @@ class LandmarkEstimator : public OnlineEstimator {
     std::vector<double> sum;
     std::vector<int> count;
     std::optional<LandmarkUkf> ukf;
-    std::optional<LandmarkTracker> tracker;
+    std::optional<LandmarkTrackerBank> tracker;
     double z_m = 0;  ///< the start's z plus every step's dz (when no height channel)
     bool stepped = false;  ///< a step was seen (the error-state tracker writes its start first)
     /// FixFusion::kJoint: the dead reckoning with its error at each of the latest stops, and

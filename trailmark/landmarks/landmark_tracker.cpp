@@ -108,7 +108,17 @@ bool LandmarkTracker::RadioMovesPosition() const {
          exponent_sigma() <= options_.calibrated_exponent_sigma;
 }
 
-void LandmarkTracker::Symmetrize() { P_ = 0.5 * (P_ + P_.transpose()).eval(); }
+void LandmarkTracker::Symmetrize() {
+  // In place (no temporary): each pair once, 0.5 (P_ij + P_ji) as the full form gives.
+  const Eigen::Index n = P_.rows();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    for (Eigen::Index i = 0; i < j; ++i) {
+      const double v = 0.5 * (P_(i, j) + P_(j, i));
+      P_(i, j) = v;
+      P_(j, i) = v;
+    }
+  }
+}
 
 void LandmarkTracker::DecayShadowing(double distance_m, double dt_s) {
   if (extra_kind_.empty()) return;
@@ -261,14 +271,42 @@ bool LandmarkTracker::UpdateRssi(TimeS t, int landmark, const Vec2& landmark_n,
                                  std::optional<double> landmark_z_m, const Mat2& landmark_cov,
                                  double agent_z_m, double rssi_dbm,
                                  const std::function<bool(double nis)>& admit) {
+  last_log_likelihood_ = std::numeric_limits<double>::quiet_NaN();
   if (!std::isfinite(rssi_dbm) || !landmark_n.allFinite()) return false;
   Propagate(t);
   const double dz = landmark_z_m ? *landmark_z_m - (agent_z_m + options_.handheld_height_m) : 0.0;
+  // A survey's error is one draw shared by every packet of the landmark, not noise per packet:
+  // its position is a state from its first packet on, at the survey with the survey's covariance.
+  if (options_.survey_error_states && landmark_cov.allFinite() && landmark_cov.trace() > 0) {
+    int i = LandmarkState(landmark);
+    if (i < 0) i = AddLandmarkStates(landmark, landmark_n, landmark_cov, Vec2::Zero());
+    return Update(landmark, x_.segment<2>(i), i, dz, Mat2::Zero(), rssi_dbm, admit);
+  }
   return Update(landmark, landmark_n, -1, dz, landmark_cov, rssi_dbm, admit);
+}
+
+int LandmarkTracker::AddLandmarkStates(int landmark, const Vec2& position_n, const Mat2& cov,
+                                       const Vec2& offset_sensitivity) {
+  const int i = static_cast<int>(x_.size());
+  x_.conservativeResize(i + 2);
+  x_.segment<2>(i) = position_n;
+  sens_.conservativeResize(i + 2);
+  sens_.segment<2>(i) = offset_sensitivity;
+  P_.conservativeResize(i + 2, i + 2);
+  P_.bottomRows(2).setZero();
+  P_.rightCols(2).setZero();
+  P_.block<2, 2>(i, i) = 0.5 * (cov + cov.transpose());
+  for (const char k : {'x', 'y'}) {
+    extra_kind_.push_back(k);
+    extra_landmark_.push_back(landmark);
+    extra_walked_m_.push_back(walked_m_);
+  }
+  return i;
 }
 
 bool LandmarkTracker::UpdateRssiUnknown(TimeS t, int landmark, double dz_m, double rssi_dbm,
                                         const std::function<bool(double nis)>& admit) {
+  last_log_likelihood_ = std::numeric_limits<double>::quiet_NaN();
   if (!std::isfinite(rssi_dbm) || !std::isfinite(dz_m)) return false;
   Propagate(t);
   const int i = LandmarkState(landmark);
@@ -339,43 +377,77 @@ void LandmarkTracker::PlaceLandmark(int landmark) {
       std::max<std::size_t>(1, (heard.size() + options_.slam_grid_packets - 1) / options_.slam_grid_packets);
   for (std::size_t k = 0; k < heard.size(); k += every) sample.push_back(&heard[k]);
   const double sample_share = std::min(looks, static_cast<double>(sample.size())) / sample.size();
-  std::vector<double> r0(sample.size());
+  // The sample as arrays: the grid's cost is evaluated a packet vector at a time (Eigen's
+  // vectorized log: the grid is most of the tracker's time).
+  const Eigen::Index m = static_cast<Eigen::Index>(sample.size());
+  Eigen::ArrayXd px(m), py(m), dz2(m), rssi(m);
+  for (Eigen::Index k = 0; k < m; ++k) {
+    px(k) = sample[k]->position.x();
+    py(k) = sample[k]->position.y();
+    dz2(k) = sample[k]->dz_m * sample[k]->dz_m;
+    rssi(k) = sample[k]->rssi_dbm;
+  }
+  const double min_d2 = options_.min_distance_m * options_.min_distance_m;
+  const double per_log_d2 = 10 * n / (2 * kLn10);  // 10 n log10(d) = per_log_d2 ln(d^2)
+  Eigen::ArrayXd r0(m);
   auto cost = [&](const Vec2& l) {  // with the offset at its best given l (shrunk to its prior)
-    double sum = 0;
-    for (std::size_t k = 0; k < sample.size(); ++k) sum += (r0[k] = residual(*sample[k], l, 0.0));
-    const double o = sum / (static_cast<double>(sample.size()) + var_fast / var_shadow);
-    double c = o * o / var_shadow;
+    // eq. (5), radio-landmarks paper: the residual of each packet with no offset.
+    r0 = rssi - alpha +
+         per_log_d2 * ((px - l.x()).square() + (py - l.y()).square() + dz2).max(min_d2).log();
+    const double o = r0.sum() / (static_cast<double>(m) + var_fast / var_shadow);
     const double k_huber = options_.huber_k;
-    for (const double r_k : r0) {
-      const double r = std::abs(r_k - o) / std::sqrt(var_fast);
-      c += r <= k_huber ? r * r : 2 * k_huber * r - k_huber * k_huber;
-    }
-    return c;
+    const Eigen::ArrayXd r = (r0 - o).abs() / std::sqrt(var_fast);
+    return o * o / var_shadow +
+           (r <= k_huber).select(r.square(), 2 * k_huber * r - k_huber * k_huber).sum();
   };
   // Grid search over the positions' box plus a margin, then Gauss-Newton (IRLS) from the best.
   // The grid: centred on the positions' box in their frame, symmetric (an axis's sign does not
-  // change it), the box plus a margin.
+  // change it), the box plus a margin. Coarse to fine: the box at twice slam_grid_m, then
+  // slam_grid_m around the coarse grid's best (the grid was 80 % of the tracker's time).
   const Vec2 centre = 0.5 * (lo_f + hi_f);
-  const double step = options_.slam_grid_m;
-  const int ku = static_cast<int>(std::ceil((0.5 * (hi_f.x() - lo_f.x()) + options_.slam_search_margin_m) / step));
-  const int kv = static_cast<int>(std::ceil((0.5 * (hi_f.y() - lo_f.y()) + options_.slam_search_margin_m) / step));
-  Vec2 best = mean;
+  const double fine = options_.slam_grid_m, coarse = 2 * fine;
+  const int ku = static_cast<int>(
+      std::ceil((0.5 * (hi_f.x() - lo_f.x()) + options_.slam_search_margin_m) / coarse));
+  const int kv = static_cast<int>(
+      std::ceil((0.5 * (hi_f.y() - lo_f.y()) + options_.slam_search_margin_m) / coarse));
+  Vec2 best_f = centre;  // in the positions' frame
   double best_cost = std::numeric_limits<double>::infinity();
   std::vector<std::pair<Vec2, double>> grid;
   for (int i = -ku; i <= ku; ++i) {
     for (int j = -kv; j <= kv; ++j) {
-      const Vec2 at = mean + frame * (centre + step * Vec2(i, j));
-      const double c = cost(at);
-      grid.emplace_back(at, c);
-      if (c < best_cost) best_cost = c, best = at;
+      const Vec2 f = centre + coarse * Vec2(i, j);
+      const double c = cost(mean + frame * f);
+      grid.emplace_back(f, c);  // in the positions' frame
+      if (c < best_cost) best_cost = c, best_f = f;
     }
   }
+  const Vec2 coarse_best = best_f;
+  for (int i = -2; i <= 2; ++i) {
+    for (int j = -2; j <= 2; ++j) {
+      if (i % 2 == 0 && j % 2 == 0) continue;  // on the coarse grid
+      const Vec2 f = coarse_best + fine * Vec2(i, j);
+      const double c = cost(mean + frame * f);
+      if (c < best_cost) best_cost = c, best_f = f;
+    }
+  }
+  const Vec2 best = mean + frame * best_f;
   // Decisive: every place farther than slam_ambiguity_m fits worse by slam_decisive_chi2 (in
-  // independent looks); else wait for more packets (a second basin, or a flat one).
-  for (const auto& [where, c] : grid) {
-    if ((where - best).norm() > options_.slam_ambiguity_m &&
-        (c - best_cost) * sample_share < options_.slam_decisive_chi2) {
-      return;
+  // independent looks); else wait for more packets (a second basin, or a flat one). A coarse
+  // cell within twice that of the best may hide a competitor between the coarse points: its
+  // fine neighbours are tested too (the test is then the fine grid's wherever it can matter).
+  auto competes = [&](const Vec2& f, double c) {
+    return ((mean + frame * f) - best).norm() > options_.slam_ambiguity_m &&
+           (c - best_cost) * sample_share < options_.slam_decisive_chi2;
+  };
+  for (const auto& [f, c] : grid) {
+    if (competes(f, c)) return;
+    if ((c - best_cost) * sample_share >= 2 * options_.slam_decisive_chi2) continue;
+    for (int i = -1; i <= 1; ++i) {
+      for (int j = -1; j <= 1; ++j) {
+        if (i == 0 && j == 0) continue;
+        const Vec2 g = f + fine * Vec2(i, j);
+        if (competes(g, cost(mean + frame * g))) return;
+      }
     }
   }
   using Vec3d = Eigen::Vector3d;
@@ -417,22 +489,10 @@ void LandmarkTracker::PlaceLandmark(int landmark) {
   Mat3d cov = eig.eigenvectors() * eig.eigenvalues().cwiseInverse().asDiagonal() *
               eig.eigenvectors().transpose();
   cov.topLeftCorner<2, 2>() += Mat2::Identity() * (0.5 * position_cov().trace());  // the track's own error
-  // The landmark's two states, then its link's bias state at the fitted offset.
-  const int i = static_cast<int>(x_.size());
-  x_.conservativeResize(i + 2);
-  x_.segment<2>(i) = theta.head<2>();
-  // Placed from the track's positions, in the track's frame: it moves with the track's offset
-  // error as the position does now (first order).
-  sens_.conservativeResize(i + 2);
-  sens_.segment<2>(i) = sens_.head<2>();
-  P_.conservativeResize(i + 2, i + 2);
-  P_.bottomRows(2).setZero();
-  P_.rightCols(2).setZero();
-  for (const char k : {'x', 'y'}) {
-    extra_kind_.push_back(k);
-    extra_landmark_.push_back(landmark);
-    extra_walked_m_.push_back(walked_m_);
-  }
+  // The landmark's two states (their covariance set below with the bias's), then its link's
+  // bias state at the fitted offset. Placed from the track's positions, in the track's frame:
+  // it moves with the track's offset error as the position does now (first order).
+  const int i = AddLandmarkStates(landmark, theta.head<2>(), Mat2::Zero(), sens_.head<2>());
   const int b = BiasState(landmark);
   x_(b) = theta(2);
   sens_(b) = 0;
@@ -496,6 +556,14 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
   const double e = std::abs(nu0) / std::sqrt(s0);
   nis_sum_ += e * e;
   ++nis_count_;
+  // The packet's predictive log-density at the prior, robust: Huber's density beyond huber_k
+  // sigmas, and no packet counts more than one at the gate (a model bank weighs models by it).
+  {
+    const double k = options_.huber_k;
+    const double ec = std::min(e, options_.gate_sigma);
+    const double rho = ec <= k ? 0.5 * ec * ec : k * ec - 0.5 * k * k;
+    last_log_likelihood_ = -rho - 0.5 * std::log(2 * M_PI * s0);
+  }
   if (e > options_.gate_sigma) {
     ++gated_;
     return false;
@@ -551,8 +619,14 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
   // Jacobian (the packet does not see the offset, so it corrects only what it sees of it).
   sens_ -= k * dot_h(l, sens_);
   // Joseph form for any gain: P - k u^T - u k^T + S k k^T, u = P H^T (the consider gain too).
-  P_ -= k * ph.transpose() + ph * k.transpose();
-  P_ += s * k * k.transpose();
+  // One pass without temporaries, each entry in the order of the matrix form (P - (k u^T +
+  // u k^T)) + (S k) k^T.
+  const Eigen::VectorXd sk = s * k;
+  for (Eigen::Index j = 0; j < n; ++j) {
+    for (Eigen::Index i = 0; i < n; ++i) {
+      P_(i, j) = (P_(i, j) - (k(i) * ph(j) + ph(i) * k(j))) + sk(i) * k(j);
+    }
+  }
   Symmetrize();
   return true;
 }

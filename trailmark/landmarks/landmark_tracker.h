@@ -32,6 +32,7 @@
 
 #include <Eigen/Core>
 #include <functional>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -75,6 +76,10 @@ struct LandmarkTrackerOptions {
   /// the RSSI variances are scaled up (at most noise_scale_max), back toward 1 when below.
   bool adapt_noise = true;
   double noise_scale_max = 4.0;
+  /// A surveyed landmark whose position has a covariance: its position is a state (from its
+  /// first packet, at the survey): the survey's error is one draw that every packet of it shares,
+  /// not noise of each packet. false: the survey's covariance is added to each packet's variance.
+  bool survey_error_states = true;
   int iterations = 4;                ///< Gauss-Newton iterations of one packet's update
   double huber_k = 2.0;              ///< normalized innovation beyond which weights fall
   double gate_sigma = 4.0;           ///< a packet beyond this many sigmas is not used (the paper UKF's)
@@ -116,7 +121,10 @@ class LandmarkTracker {
   /// a landmark whose height is unknown: the handheld's height is taken), whose horizontal
   /// position has covariance `landmark_cov`; `agent_z_m`: the agent's height now (feet).
   /// `admit` sees the packet's normalized innovation squared at the prior (1 dof) and may
-  /// refuse it (the integrity monitor). Returns whether the packet was used.
+  /// refuse it (the integrity monitor). With `survey_error_states` and a non-zero
+  /// `landmark_cov`, the landmark's position becomes two states at its first packet (later
+  /// packets' `landmark_n` and `landmark_cov` are not read again). Returns whether the packet
+  /// was used.
   bool UpdateRssi(TimeS t, int landmark, const Vec2& landmark_n,
                   std::optional<double> landmark_z_m, const Mat2& landmark_cov,
                   double agent_z_m, double rssi_dbm,
@@ -165,10 +173,19 @@ class LandmarkTracker {
   double noise_scale() const { return noise_scale_; }
   /// Mean normalized innovation squared of the packets so far (1 when the stated noise holds).
   double mean_nis() const { return nis_count_ ? nis_sum_ / nis_count_ : 0.0; }
+  /// The last packet that reached the filter (gated or not): its log predictive density at the
+  /// prior, log N(z; h(x), H P H^T + R) with Huber's tails beyond huber_k and the innovation
+  /// capped at the gate (a robust evidence for comparing models, LandmarkTrackerBank). NaN
+  /// before any packet, and for a packet the filter did not reach (an unplaced landmark).
+  double last_log_likelihood() const { return last_log_likelihood_; }
 
  private:
   int BiasState(int landmark);
-  int LandmarkState(int landmark) const;  ///< x state of an unknown landmark, -1 if none
+  int LandmarkState(int landmark) const;  ///< x state of a landmark's position, -1 if none
+  /// Appends a landmark's two position states (at `position_n`, covariance `cov`, uncorrelated
+  /// with the rest; the offset's sensitivity given); returns the first's index.
+  int AddLandmarkStates(int landmark, const Vec2& position_n, const Mat2& cov,
+                        const Vec2& offset_sensitivity);
   void PlaceLandmark(int landmark);
   /// One packet's iterated update; the landmark at `landmark_n` (cov `landmark_cov`) or, when
   /// `state` >= 0, the two states from there.
@@ -214,6 +231,7 @@ class LandmarkTracker {
   double nis_ema_ = 1.0;
   double nis_sum_ = 0;
   std::size_t nis_count_ = 0;
+  double last_log_likelihood_ = std::numeric_limits<double>::quiet_NaN();
 };
 
 }  // namespace trailmark::landmarks
