@@ -18,10 +18,10 @@
 /// not favoured for it (its predictive densities are wider: the marginal likelihood's Occam
 /// factor). A packet weighs once its landmark has passed the integrity monitor's window after
 /// it (`evidence_delay_s`): a landmark that lies is explained best by the freer model. Weights are
-/// floored at `min_weight` so a model can come back. The estimate is the mixture's mean, its
-/// covariance the mixture's (each model's plus the spread of the means). No I/O.
+/// floored at `min_weight` so a model can come back. The estimate is the typical model's until
+/// the radio decides for the poor one (`prefer_typical`), its covariance the mixture's mean
+/// squared error about it (each model's plus its mean's offset from the estimate). No I/O.
 
-#include <array>
 #include <deque>
 #include <functional>
 #include <map>
