@@ -720,6 +720,7 @@ EstimatorSummary LandmarkEstimator::Summary() const {
     const LandmarkTracker& k = a.tracker->best();
     if (a.tracker->size() > 1) {
       summary.numbers[id + ".poor_device_weight"] = a.tracker->weight(1);
+      summary.numbers[id + ".poor_device_ellipse_weight"] = a.tracker->cover_weight(1);
     }
     gated += k.gated();
     calibration_only += k.calibration_only();

@@ -174,10 +174,15 @@ class LandmarkTracker {
   /// Mean normalized innovation squared of the packets so far (1 when the stated noise holds).
   double mean_nis() const { return nis_count_ ? nis_sum_ / nis_count_ : 0.0; }
   /// The last packet that reached the filter (gated or not): its log predictive density at the
-  /// prior, log N(z; h(x), H P H^T + R) with Huber's tails beyond huber_k and the innovation
-  /// capped at the gate (a robust evidence for comparing models, LandmarkTrackerBank). NaN
-  /// before any packet, and for a packet the filter did not reach (an unplaced landmark).
+  /// prior, log N(z; h(x), H P H^T + R), with the normalized innovation capped at huber_k: a
+  /// packet beyond it is an outlier, whose density is the outlier process's, the same whatever
+  /// the motion (the evidence that decides a bank's estimate, LandmarkTrackerBank: one fading dip
+  /// cannot). NaN before any packet, and for a packet the filter did not reach (an unplaced
+  /// landmark).
   double last_log_likelihood() const { return last_log_likelihood_; }
+  /// The same density with Huber's tails beyond huber_k and the innovation capped at the gate
+  /// (the evidence that sizes a bank's ellipse: it also counts moderate outliers).
+  double last_huber_log_likelihood() const { return last_huber_log_likelihood_; }
 
  private:
   int BiasState(int landmark);
@@ -232,6 +237,7 @@ class LandmarkTracker {
   double nis_sum_ = 0;
   std::size_t nis_count_ = 0;
   double last_log_likelihood_ = std::numeric_limits<double>::quiet_NaN();
+  double last_huber_log_likelihood_ = std::numeric_limits<double>::quiet_NaN();
 };
 
 }  // namespace trailmark::landmarks

@@ -60,6 +60,8 @@ LandmarkTrackerBank::LandmarkTrackerBank(const Vec3& start_n, double start_sigma
   if (models_.size() == 2) weights_ = {1 - bank_.poor_prior, bank_.poor_prior};
   log_weights_.resize(weights_.size());
   for (std::size_t k = 0; k < weights_.size(); ++k) log_weights_[k] = std::log(weights_[k]);
+  cover_weights_ = weights_;
+  cover_log_weights_ = log_weights_;
 }
 
 std::size_t LandmarkTrackerBank::Best() const {
@@ -71,31 +73,35 @@ void LandmarkTrackerBank::AddStep(const Step& step) {
   for (auto& m : models_) m.AddStep(step);
 }
 
-void LandmarkTrackerBank::Weigh(const std::vector<double>& log_likelihoods) {
-  for (std::size_t k = 0; k < models_.size(); ++k) log_weights_[k] += log_likelihoods[k];
+void LandmarkTrackerBank::Weigh(const std::vector<double>& log_likelihoods,
+                                std::vector<double>* weights,
+                                std::vector<double>* log_weights) const {
+  std::vector<double>& w = *weights;
+  std::vector<double>& lw = *log_weights;
+  for (std::size_t k = 0; k < w.size(); ++k) lw[k] += log_likelihoods[k];
   // Normalize in the log domain, floor, and keep the logs those of the floored weights.
-  const double top = *std::max_element(log_weights_.begin(), log_weights_.end());
+  const double top = *std::max_element(lw.begin(), lw.end());
   double sum = 0;
-  for (std::size_t k = 0; k < models_.size(); ++k) sum += std::exp(log_weights_[k] - top);
+  for (std::size_t k = 0; k < w.size(); ++k) sum += std::exp(lw[k] - top);
   double floored_sum = 0;
-  for (std::size_t k = 0; k < models_.size(); ++k) {
-    weights_[k] = std::max(std::exp(log_weights_[k] - top) / sum, bank_.min_weight);
-    floored_sum += weights_[k];
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    w[k] = std::max(std::exp(lw[k] - top) / sum, bank_.min_weight);
+    floored_sum += w[k];
   }
-  for (std::size_t k = 0; k < models_.size(); ++k) {
-    weights_[k] /= floored_sum;
-    log_weights_[k] = std::log(weights_[k]);
+  for (std::size_t k = 0; k < w.size(); ++k) {
+    w[k] /= floored_sum;
+    lw[k] = std::log(w[k]);
   }
-  ++weighed_;
 }
 
 void LandmarkTrackerBank::Hold(TimeS t, int landmark, std::optional<bool> verdict) {
   // The packet's densities, when every model has one (the same evidence for all).
-  std::vector<double> ll(models_.size());
+  std::vector<double> ll(models_.size()), huber(models_.size());
   bool all = true;
   for (std::size_t k = 0; k < models_.size(); ++k) {
     ll[k] = models_[k].last_log_likelihood();
-    all = all && std::isfinite(ll[k]);
+    huber[k] = models_[k].last_huber_log_likelihood();
+    all = all && std::isfinite(ll[k]) && std::isfinite(huber[k]);
   }
   if (verdict.has_value()) {
     excluded_[landmark] = !*verdict;
@@ -103,10 +109,15 @@ void LandmarkTrackerBank::Hold(TimeS t, int landmark, std::optional<bool> verdic
       std::erase_if(pending_, [&](const Pending& p) { return p.landmark == landmark; });
     }
   }
-  if (all && !excluded_[landmark]) pending_.push_back({t, landmark, std::move(ll)});
+  if (all && !excluded_[landmark])
+    pending_.push_back({t, landmark, std::move(ll), std::move(huber)});
   // Evidence held for evidence_delay_s without its landmark being excluded weighs the models.
   while (!pending_.empty() && pending_.front().t <= t - bank_.evidence_delay_s) {
-    if (!excluded_[pending_.front().landmark]) Weigh(pending_.front().log_likelihoods);
+    if (!excluded_[pending_.front().landmark]) {
+      Weigh(pending_.front().log_likelihoods, &weights_, &log_weights_);
+      Weigh(pending_.front().huber_log_likelihoods, &cover_weights_, &cover_log_weights_);
+      ++weighed_;
+    }
     pending_.pop_front();
   }
 }
@@ -163,7 +174,7 @@ std::optional<std::pair<Vec2, Mat2>> LandmarkTrackerBank::LandmarkEstimate(int l
   std::vector<Member> placed;
   for (std::size_t k = 0; k < models_.size(); ++k) {
     if (auto e = models_[k].LandmarkEstimate(landmark)) {
-      placed.push_back({k, weights_[k], e->first, e->second});
+      placed.push_back({k, weights_[k], cover_weights_[k], e->first, e->second});
     }
   }
   if (placed.empty()) return std::nullopt;
@@ -184,12 +195,15 @@ std::pair<Vec2, Mat2> LandmarkTrackerBank::Report(const std::vector<Member>& mem
     estimate =
         members[0].mean + std::max(0.0, 2 * w_poor - 1) * (members[1].mean - members[0].mean);
   }
-  // The mixture's mean squared error about the estimate: each model's covariance plus its
-  // mean's offset from the estimate (the mixture's covariance when the estimate is its mean).
+  // The mixture's mean squared error about the estimate, with the ellipse's weights: each
+  // model's covariance plus its mean's offset from the estimate (the mixture's covariance when
+  // the estimate is its mean and the weights are the same).
+  double cover_total = 0;
+  for (const Member& m : members) cover_total += m.cover;
   Mat2 cov = Mat2::Zero();
   for (const Member& m : members) {
     const Vec2 d = m.mean - estimate;
-    cov += (m.weight / total) * (m.cov + d * d.transpose());
+    cov += (m.cover / cover_total) * (m.cov + d * d.transpose());
   }
   return {estimate, 0.5 * (cov + cov.transpose())};
 }
@@ -198,7 +212,8 @@ std::pair<Vec2, Mat2> LandmarkTrackerBank::PositionReport() const {
   if (models_.size() == 1) return {models_[0].position(), models_[0].reported_position_cov()};
   std::vector<Member> members;
   for (std::size_t k = 0; k < models_.size(); ++k) {
-    members.push_back({k, weights_[k], models_[k].position(), models_[k].reported_position_cov()});
+    members.push_back({k, weights_[k], cover_weights_[k], models_[k].position(),
+                       models_[k].reported_position_cov()});
   }
   return Report(members);
 }

@@ -13,14 +13,21 @@
 ///   model 1: the shared PDR error sigmas x `overbound` (the integrity guard's poor device) and
 ///            the steps' heading offset a state of that width instead of a consider parameter.
 /// Every packet of a surveyed landmark updates both; each model's weight is multiplied by the
-/// packet's predictive density under it (LandmarkTracker::last_log_likelihood: at the prior,
-/// robust), so the model that explains the radio better gains, and a model with more freedom is
-/// not favoured for it (its predictive densities are wider: the marginal likelihood's Occam
-/// factor). A packet weighs once its landmark has passed the integrity monitor's window after
-/// it (`evidence_delay_s`): a landmark that lies is explained best by the freer model. Weights are
+/// packet's predictive density under it (at the prior), so the model that explains the radio
+/// better gains, and a model with more freedom is not favoured for it (its predictive densities
+/// are wider: the marginal likelihood's Occam factor). Two sets of weights, from two evidences:
+///   the estimate's (`weight`): the density flat beyond huber_k (an outlier is the outlier
+///     process's, whatever the motion: LandmarkTracker::last_log_likelihood), so one fading dip
+///     cannot hand the estimate to the freer model;
+///   the ellipse's (`cover_weight`): Huber's tails up to the gate
+///     (LandmarkTracker::last_huber_log_likelihood), which also count the moderate outliers a
+///     poor device makes: a wider ellipse on a doubt is safe, a moved estimate is not.
+/// A packet weighs once its landmark has passed the integrity monitor's window after it
+/// (`evidence_delay_s`): a landmark that lies is explained best by the freer model. Weights are
 /// floored at `min_weight` so a model can come back. The estimate is the typical model's until
-/// the radio decides for the poor one (`prefer_typical`), its covariance the mixture's mean
-/// squared error about it (each model's plus its mean's offset from the estimate). No I/O.
+/// the radio decides for the poor one (`prefer_typical`, the estimate's weights), its covariance
+/// the mixture's mean squared error about it (each model's plus its mean's offset from the
+/// estimate, the ellipse's weights). No I/O.
 
 #include <deque>
 #include <functional>
@@ -84,14 +91,18 @@ class LandmarkTrackerBank {
   /// An unknown landmark: the mixture over the models that placed it (weights renormalized).
   std::optional<std::pair<Vec2, Mat2>> LandmarkEstimate(int landmark) const;
 
-  /// The estimate (prefer_typical) and the mixture's mean squared error about it (each model's
-  /// reported covariance plus its mean's offset from the estimate).
+  /// The estimate (prefer_typical; the estimate's weights) and the mixture's mean squared error
+  /// about it (each model's reported covariance plus its mean's offset from the estimate; the
+  /// ellipse's weights).
   Vec2 position() const;
   Mat2 reported_position_cov() const;
 
   std::size_t size() const { return models_.size(); }
   const LandmarkTracker& model(std::size_t k) const { return models_.at(k); }
+  /// The estimate's weight of model k (outliers flat).
   double weight(std::size_t k) const { return weights_.at(k); }
+  /// The ellipse's weight of model k (outliers with Huber's tails).
+  double cover_weight(std::size_t k) const { return cover_weights_.at(k); }
   /// The most probable model now.
   const LandmarkTracker& best() const { return models_[Best()]; }
   std::size_t best_index() const { return Best(); }
@@ -101,7 +112,8 @@ class LandmarkTrackerBank {
  private:
   std::size_t Best() const;
   /// Bayes' rule with one packet's log-densities (one per model), then the floor.
-  void Weigh(const std::vector<double>& log_likelihoods);
+  void Weigh(const std::vector<double>& log_likelihoods, std::vector<double>* weights,
+             std::vector<double>* log_weights) const;
   /// The last packet's densities held until evidence_delay_s passed without its landmark being
   /// excluded (`verdict`: the integrity monitor's, if it was asked); those due weigh.
   void Hold(TimeS t, int landmark, std::optional<bool> verdict);
@@ -113,24 +125,26 @@ class LandmarkTrackerBank {
       std::optional<bool>* asked);
   struct Member {
     std::size_t model;  ///< 0: the typical device
-    double weight;      ///< need not sum to 1 over the members
+    double weight;      ///< the estimate's; need not sum to 1 over the members
+    double cover;       ///< the ellipse's; need not sum to 1 over the members
     Vec2 mean;
     Mat2 cov;
   };
-  /// The estimate reported from the members (prefer_typical, else the mixture's mean) and the
-  /// mixture's mean squared error about it.
+  /// The estimate reported from the members (prefer_typical, else the mixture's mean; their
+  /// `weight`) and the mixture's mean squared error about it (their `cover`).
   std::pair<Vec2, Mat2> Report(const std::vector<Member>& members) const;
   std::pair<Vec2, Mat2> PositionReport() const;
 
   std::vector<LandmarkTracker> models_;
-  std::vector<double> weights_;
-  std::vector<double> log_weights_;
+  std::vector<double> weights_, log_weights_;              ///< the estimate's
+  std::vector<double> cover_weights_, cover_log_weights_;  ///< the ellipse's
   TrackerBankOptions bank_;
   std::size_t weighed_ = 0;
   struct Pending {
     TimeS t;
     int landmark;
-    std::vector<double> log_likelihoods;
+    std::vector<double> log_likelihoods;        ///< the estimate's evidence, one per model
+    std::vector<double> huber_log_likelihoods;  ///< the ellipse's
   };
   std::deque<Pending> pending_;
   std::map<int, bool> excluded_;  ///< the monitor's last verdict per landmark (true: excluded)
