@@ -12,6 +12,7 @@
 //   trailmark validate MISSION | pipelines | scenarios | demo | bench
 
 #include <fmt/format.h>
+#include <glog/logging.h>
 
 #include <CLI/CLI.hpp>
 #include <cmath>
@@ -20,20 +21,20 @@
 #include <map>
 
 #include "commands.h"
-#include "trailmark_generated/version.h"
+#include "experiments/experiments.h"
 #include "trailmark/core/error.h"
 #include "trailmark/io/convert_foot_imu.h"
-#include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/convert_imdf.h"
 #include "trailmark/io/convert_ipin.h"
+#include "trailmark/io/convert_pyshoe.h"
 #include "trailmark/io/convert_wrld.h"
-#include "trailmark/io/trajectory_formats.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/io/trajectory_formats.h"
 #include "trailmark/landmarks/energy.h"
-#include "experiments/experiments.h"
 #include "trailmark/pipelines/batch_run.h"
 #include "trailmark/pipelines/registry.h"
 #include "trailmark/sim/scenarios.h"
+#include "trailmark_generated/version.h"
 
 namespace fs = std::filesystem;
 using namespace trailmark;
@@ -51,6 +52,12 @@ std::map<std::string, std::string> ParseKeyValues(const std::vector<std::string>
 }
 
 int main(int argc, char** argv) {
+  // Ceres (the beacon map's least squares) reports a linear solve that Levenberg-Marquardt then
+  // damps and retries as a glog warning on stderr, before glog is even initialized: not a
+  // user's business. glog writes to stderr only (no log files), errors only.
+  FLAGS_logtostderr = true;
+  FLAGS_minloglevel = google::GLOG_ERROR;
+  google::InitGoogleLogging(argv[0]);
   CLI::App app{"trailmark: where every firefighter is, without GPS or infrastructure"};
   // An unsigned option would take "-3" as 2^64 - 3: say so instead.
   const CLI::Validator kWholeNonNegative(

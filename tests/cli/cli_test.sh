@@ -65,6 +65,13 @@ mkdir -p "$dir/nosteps" && cp "$dir/m/mission.json" "$dir/nosteps/"
 head -1 "$dir/m/steps.csv" > "$dir/nosteps/steps.csv"
 "$TM" run --pipeline pdr "$dir/nosteps" --out "$dir/nostepsrun" 2> "$dir/nosteps.err" > /dev/null
 grep -q "wrote no estimates" "$dir/nosteps.err" || fail "no warning for a run without estimates"
+# The beacon map's least squares on a variant where Levenberg-Marquardt meets a failed linear
+# solve (and damps and retries): Ceres' glog warnings stay off the user's stderr, and no log file
+# is written (they printed 12 "Linear solver failure" lines before 2026-12-06).
+"$TM" simulate beacon-trail --seed 119 --vary 19 --family all --out "$dir/bt19" > /dev/null
+TMPDIR="$dir/glogtmp" GLOG_log_dir="$dir/glogtmp" "$TM" run --pipeline beacons-ekf "$dir/bt19" --out "$dir/bt19run" > /dev/null 2> "$dir/bt19.err" || fail "beacons-ekf on a variant"
+[ ! -s "$dir/bt19.err" ] || { cat "$dir/bt19.err" | head -3; fail "glog warnings on stderr"; }
+[ -z "$(ls -A "$dir/glogtmp" 2>/dev/null)" ] || fail "glog wrote log files"
 # A variant: written with what was drawn, valid; bad --vary / --family named.
 "$TM" simulate office-loop-1lap --seed 2 --vary 4 --out "$dir/var" | matches "rotation_deg" || fail "simulate --vary"
 grep -q '"family": "all"' "$dir/var/variation.json" || fail "variation.json"
