@@ -6,6 +6,7 @@
 // returned is exactly what the CLI writes (numbers in shortest round-trip form, parsed back).
 // The pure-Python package (python/trailmark/__init__.py) wraps this module.
 
+#include <glog/logging.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -16,12 +17,11 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "trailmark/core/error.h"
 #include "trailmark/eval/metrics.h"
@@ -286,6 +286,13 @@ PYBIND11_MODULE(_trailmark, m) {
   using namespace trailmark::python;
   m.doc() = "trailmark's C++ library (use the `trailmark` package, which wraps this module)";
   m.attr("__version__") = TRAILMARK_VERSION;
+  // As the CLI: Ceres' glog warnings (a damped Levenberg-Marquardt step) stay off stderr, errors
+  // still print, no log files; unless the host process set glog up itself.
+  if (!google::IsGoogleLoggingInitialized()) {
+    FLAGS_logtostderr = true;
+    FLAGS_minloglevel = google::GLOG_ERROR;
+    google::InitGoogleLogging("trailmark");
+  }
 
   // InputError (bad input: file, line, problem) as trailmark.InputError, a ValueError.
   static py::exception<InputError> input_error(m, "InputError", PyExc_ValueError);

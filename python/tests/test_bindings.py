@@ -229,3 +229,14 @@ def test_docs_example_runs(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "p75" in result.stdout and "breadcrumb" in result.stdout
+
+
+def test_no_library_logging_on_stderr(tmp_path, capfd):
+    # A beacon-trail variant whose map solve meets a failed linear solve inside Levenberg-Marquardt:
+    # Ceres' glog warnings (12 lines before 2026-12-06) stay off the process's stderr.
+    run_cli("simulate", "beacon-trail", "--seed", 119, "--vary", 19, "--family", "all",
+            "--out", tmp_path / "bt19")
+    capfd.readouterr()
+    estimates = trailmark.run_pipeline("beacons-ekf", tmp_path / "bt19")
+    assert len(estimates["t"]) > 0
+    assert capfd.readouterr().err == ""
