@@ -58,10 +58,7 @@ LandmarkTrackerBank::LandmarkTrackerBank(const Vec3& start_n, double start_sigma
   }
   weights_.assign(1, 1.0);
   if (models_.size() == 2) weights_ = {1 - bank_.poor_prior, bank_.poor_prior};
-  log_weights_.resize(weights_.size());
-  for (std::size_t k = 0; k < weights_.size(); ++k) log_weights_[k] = std::log(weights_[k]);
   cover_weights_ = weights_;
-  cover_log_weights_ = log_weights_;
 }
 
 std::size_t LandmarkTrackerBank::Best() const {
@@ -74,12 +71,11 @@ void LandmarkTrackerBank::AddStep(const Step& step) {
 }
 
 void LandmarkTrackerBank::Weigh(const std::vector<double>& log_likelihoods,
-                                std::vector<double>* weights,
-                                std::vector<double>* log_weights) const {
+                                std::vector<double>* weights) const {
   std::vector<double>& w = *weights;
-  std::vector<double>& lw = *log_weights;
-  for (std::size_t k = 0; k < w.size(); ++k) lw[k] += log_likelihoods[k];
-  // Normalize in the log domain, floor, and keep the logs those of the floored weights.
+  std::vector<double> lw(w.size());
+  for (std::size_t k = 0; k < w.size(); ++k) lw[k] = std::log(w[k]) + log_likelihoods[k];
+  // Normalize in the log domain, then floor.
   const double top = *std::max_element(lw.begin(), lw.end());
   double sum = 0;
   for (std::size_t k = 0; k < w.size(); ++k) sum += std::exp(lw[k] - top);
@@ -88,10 +84,7 @@ void LandmarkTrackerBank::Weigh(const std::vector<double>& log_likelihoods,
     w[k] = std::max(std::exp(lw[k] - top) / sum, bank_.min_weight);
     floored_sum += w[k];
   }
-  for (std::size_t k = 0; k < w.size(); ++k) {
-    w[k] /= floored_sum;
-    lw[k] = std::log(w[k]);
-  }
+  for (std::size_t k = 0; k < w.size(); ++k) w[k] /= floored_sum;
 }
 
 void LandmarkTrackerBank::Hold(TimeS t, int landmark, std::optional<bool> verdict) {
@@ -114,8 +107,8 @@ void LandmarkTrackerBank::Hold(TimeS t, int landmark, std::optional<bool> verdic
   // Evidence held for evidence_delay_s without its landmark being excluded weighs the models.
   while (!pending_.empty() && pending_.front().t <= t - bank_.evidence_delay_s) {
     if (!excluded_[pending_.front().landmark]) {
-      Weigh(pending_.front().log_likelihoods, &weights_, &log_weights_);
-      Weigh(pending_.front().huber_log_likelihoods, &cover_weights_, &cover_log_weights_);
+      Weigh(pending_.front().log_likelihoods, &weights_);
+      Weigh(pending_.front().huber_log_likelihoods, &cover_weights_);
       ++weighed_;
     }
     pending_.pop_front();

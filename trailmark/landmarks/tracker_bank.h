@@ -112,8 +112,7 @@ class LandmarkTrackerBank {
  private:
   std::size_t Best() const;
   /// Bayes' rule with one packet's log-densities (one per model), then the floor.
-  void Weigh(const std::vector<double>& log_likelihoods, std::vector<double>* weights,
-             std::vector<double>* log_weights) const;
+  void Weigh(const std::vector<double>& log_likelihoods, std::vector<double>* weights) const;
   /// The last packet's densities held until evidence_delay_s passed without its landmark being
   /// excluded (`verdict`: the integrity monitor's, if it was asked); those due weigh.
   void Hold(TimeS t, int landmark, std::optional<bool> verdict);
@@ -136,8 +135,8 @@ class LandmarkTrackerBank {
   std::pair<Vec2, Mat2> PositionReport() const;
 
   std::vector<LandmarkTracker> models_;
-  std::vector<double> weights_, log_weights_;              ///< the estimate's
-  std::vector<double> cover_weights_, cover_log_weights_;  ///< the ellipse's
+  std::vector<double> weights_;        ///< the estimate's
+  std::vector<double> cover_weights_;  ///< the ellipse's
   TrackerBankOptions bank_;
   std::size_t weighed_ = 0;
   struct Pending {
