@@ -7,6 +7,10 @@ TM="$1"
 dir=$(mktemp -d)
 trap 'status=$?; pids=$(jobs -p); [ -z "$pids" ] || kill $pids 2>/dev/null; rm -rf "$dir"; exit $status' EXIT  # no server left behind
 fail() { echo "FAIL: $*"; exit 1; }
+# A command that stops the script through `set -e` names itself (CI once saw this test fail
+# with no FAIL line); commands run by run_failing (errexit off) are meant to fail and do not.
+set -E
+trap 'err=$?; [[ $- == *e* ]] && echo "FAIL: line $LINENO: exit $err from: $BASH_COMMAND" >&2' ERR
 # Runs a command that must fail; leaves its exit code in $rc and its stderr in $dir/err.
 # `cmd | matches PATTERN`: like grep -q, but reads to the end — grep -q stops at the first
 # match and the writer then dies of SIGPIPE, which pipefail turns into a failure.
