@@ -24,6 +24,10 @@ bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "track_heading_offset_sigma_rad must be finite and >= 0";
     return false;
   }
+  if (!(l.fixed_lag_s >= 0) || !std::isfinite(l.fixed_lag_s)) {
+    if (why) *why = "fixed_lag_s must be finite and >= 0";
+    return false;
+  }
   if (!(l.motion_noise_scale_max >= 1) || !std::isfinite(l.motion_noise_scale_max)) {
     if (why) *why = "motion_noise_scale_max must be finite and >= 1";
     return false;
@@ -128,6 +132,11 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Flag("second_order", &L::second_order,
            "an agent's range edges carry their model's second-order terms at the nodes' "
            "uncertainty (mean shift and variance) when linearized and committed (issue 25)");
+    t.Real("fixed_lag_s", &L::fixed_lag_s, "s", nonneg,
+           "an agent's states of this last span stay in the network and its range edges are "
+           "re-linearized at every solve until their state leaves (issue 25); 0: off");
+    t.Flag("fixed_lag_rssi", &L::fixed_lag_rssi,
+           "with fixed_lag_s, the agents' RSSI edges are re-linearized in the window too");
     t.Flag("detect_moved", &L::detect_moved, "detect kicked crumbs (sec. V-C)");
     t.Real("moved_sigma_m", &L::moved_sigma_m, "m", pos, "size of a kick (\"1 to 2 metres\")");
     t.Real("max_speed_mps", &L::max_speed_mps, "m/s", pos,

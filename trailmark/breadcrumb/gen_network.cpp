@@ -236,6 +236,34 @@ int GenNetwork::AddPersistent(NodeIndex i, NodeIndex j, const ScalarModel& model
   nodes_[i].persistent.push_back(id);
   nodes_[j].persistent.push_back(id);
   OffBlock(i, j);  // reserve the pattern
+  ++active_persistent_;
+  return id;
+}
+
+int GenNetwork::AddScalarPersistent(NodeIndex i, NodeIndex j, double z, double variance,
+                                    const ScalarModel& model, const Vec2& offset, NodeIndex bias,
+                                    const std::vector<ConsiderRate>& rates) {
+  if (!IsActive(i) || !IsActive(j) || i == j || !(variance > 0) || !std::isfinite(z) ||
+      (bias >= 0 && (!IsActive(bias) || bias == i || bias == j))) {
+    throw std::invalid_argument("AddScalarPersistent: bad nodes or variance");
+  }
+  for (const ConsiderRate& cr : rates) {
+    if (cr.parameter < 0 || cr.parameter >= considers_)
+      throw std::invalid_argument("GenNetwork: unknown consider parameter");
+  }
+  const int id = AddPersistent(i, j, model);
+  Persistent& e = persistent_[id];
+  e.offset = offset;
+  e.rates = rates;
+  e.information = 1.0 / variance;
+  e.weighted_z = z / variance;
+  if (bias >= 0) {
+    e.bias = bias;
+    nodes_[bias].persistent.push_back(id);
+    OffBlock(i, bias);
+    OffBlock(j, bias);
+  }
+  dirty_ = true;
   return id;
 }
 
@@ -265,31 +293,65 @@ void GenNetwork::SetPersistentWeight(int edge, double w) {
 double GenNetwork::PersistentResidual(int edge) const {
   const Persistent& e = persistent_.at(edge);
   if (!e.active || e.information <= 0) return 0;
-  const double d = (nodes_[e.i].x_hat - nodes_[e.j].x_hat).norm();
-  return (e.Mean() - e.model.Predict(d)) / std::sqrt(e.Variance());
+  const double d = (nodes_[e.i].x_hat + e.offset - nodes_[e.j].x_hat).norm();
+  const Vec2 bias_hat = e.bias >= 0 ? nodes_[e.bias].x_hat : Vec2::Zero();
+  const double predicted = (1.0 + bias_hat.y()) * e.model.Predict(d) + bias_hat.x();
+  return (e.Mean() - predicted) / std::sqrt(e.Variance());
+}
+
+void GenNetwork::AddSecondOrderTerms(int edge, const Mat2& cov_m2) {
+  Persistent& e = persistent_.at(edge);
+  if (!e.active || e.information <= 0) return;
+  const Vec2 diff = nodes_[e.i].x_hat + e.offset - nodes_[e.j].x_hat;
+  const ScalarModel::SecondOrder so = e.model.SecondOrderTerms(diff, cov_m2);
+  const double f = 1.0 + (e.bias >= 0 ? nodes_[e.bias].x_hat.y() : 0.0);
+  e.weighted_z -= f * so.mean_shift * e.information;
+  e.floor_variance += f * f * so.variance;
+  dirty_ = true;
 }
 
 void GenNetwork::FoldPersistent(int edge) {
   Persistent& e = persistent_[edge];
   if (!e.active) return;
   e.active = false;
+  --active_persistent_;
   if (e.information > 0) {
-    AddLinearizedScalar(e.i, e.j, Vec2::Zero(), e.Mean(), e.Variance(), e.model, Vec2::Zero());
+    AddLinearizedScalar(e.i, e.j, Vec2::Zero(), e.Mean(), e.Variance(), e.model, e.offset, e.bias,
+                        e.rates);
   }
-  for (NodeIndex n : {e.i, e.j}) {
+  for (NodeIndex n : {e.i, e.j, e.bias}) {
+    if (n < 0) continue;
     auto& list = nodes_[n].persistent;
     list.erase(std::remove(list.begin(), list.end(), edge), list.end());
   }
+  e.rates.clear();
+  e.rates.shrink_to_fit();
 }
 
 GenNetwork::Linearized GenNetwork::LinearizePersistent(const Persistent& e) const {
   const Vec2 xi = nodes_[e.i].x_hat, xj = nodes_[e.j].x_hat;
-  const Vec2 diff = xi - xj;
+  const Vec2 diff = xi + e.offset - xj;
   const double d = diff.norm();
   const Vec2 u = d > 1e-9 ? Vec2(diff / d) : Vec2(1.0, 0.0);
   const ScalarModel::Linear lin = e.model.Linearize(d);
-  const Vec2 h = lin.slope * u;
-  return {h, 1.0 / e.Variance(), e.Mean() - lin.predicted + h.dot(diff)};  // eq. (19)
+  Linearized out;
+  out.nodes = {e.i, e.j, e.bias};
+  out.w = 1.0 / e.Variance();
+  if (e.bias < 0) {
+    const Vec2 h = lin.slope * u;
+    out.rows = {h, Vec2(-h), Vec2::Zero()};
+    out.r = e.Mean() - lin.predicted + h.dot(diff) - h.dot(e.offset);  // eq. (19)
+    return out;
+  }
+  // z = (1 + scale) h(d) + offset: as AddLinearizedScalar
+  const Vec2 bias_hat = nodes_[e.bias].x_hat;
+  const double gain = 1.0 + bias_hat.y();
+  const Vec2 h = gain * lin.slope * u;
+  out.rows = {h, Vec2(-h), Vec2(1.0, lin.predicted)};
+  out.n = 3;
+  out.r = e.Mean() - (gain * lin.predicted + bias_hat.x()) + h.dot(diff) - h.dot(e.offset) +
+          out.rows[2].dot(bias_hat);
+  return out;
 }
 
 void GenNetwork::DeleteNode(NodeIndex k) { Marginalize<1>({k}); }
@@ -430,6 +492,7 @@ NodeIndex GenNetwork::MoveNode(NodeIndex from, NodeIndex to) {
   for (int e : nodes_[to].persistent) {
     if (persistent_[e].i == from) persistent_[e].i = to;
     if (persistent_[e].j == from) persistent_[e].j = to;
+    if (persistent_[e].bias == from) persistent_[e].bias = to;
   }
   nodes_[from] = Node{};
   free_.push_back(from);
@@ -640,9 +703,9 @@ bool GenNetwork::Solve() {
     if (have_persistent) {
       for (const auto& e : persistent_) {
         if (!e.active || e.information <= 0) continue;
-        const auto [h, w, r] = LinearizePersistent(e);
-        const Mat2 W = w * h * h.transpose();  // eq. (18)
-        const int ci = nodes_[e.i].compact * 2, cj = nodes_[e.j].compact * 2;
+        const Linearized lin = LinearizePersistent(e);
+        int c[3];
+        for (int a = 0; a < lin.n; ++a) c[a] = nodes_[lin.nodes[a]].compact * 2;
         auto add = [&](int r0, int c0, const Mat2& m) {
           for (int a = 0; a < 2; ++a) {
             for (int bb = 0; bb < 2; ++bb) {
@@ -650,11 +713,18 @@ bool GenNetwork::Solve() {
             }
           }
         };
-        add(ci, ci, W);
-        add(cj, cj, W);
-        if (ci > cj) add(ci, cj, -W); else add(cj, ci, -W);
-        rhs.segment<2>(ci) += w * h * r;
-        rhs.segment<2>(cj) -= w * h * r;
+        // eq. (18): w row_a row_c^T, the lower triangle only (diagonal blocks first)
+        for (int a = 0; a < lin.n; ++a)
+          add(c[a], c[a], lin.w * lin.rows[a] * lin.rows[a].transpose());
+        for (int a = 0; a < lin.n; ++a) {
+          for (int k = a + 1; k < lin.n; ++k) {
+            if (c[a] > c[k])
+              add(c[a], c[k], lin.w * lin.rows[a] * lin.rows[k].transpose());
+            else
+              add(c[k], c[a], lin.w * lin.rows[k] * lin.rows[a].transpose());
+          }
+        }
+        for (int a = 0; a < lin.n; ++a) rhs.segment<2>(c[a]) += lin.w * lin.rows[a] * lin.r;
       }
     }
     if (!Factorize(extra)) return false;
@@ -679,6 +749,11 @@ bool GenNetwork::Solve() {
 void GenNetwork::SolveSensitivities() {
   std::size_t rated = 0;
   for (NodeIndex slot : order_) rated = std::max(rated, nodes_[slot].db.size());
+  for (const auto& e : persistent_) {
+    if (!e.active) continue;
+    for (const ConsiderRate& cr : e.rates)
+      rated = std::max(rated, static_cast<std::size_t>(cr.parameter) + 1);
+  }
   if (rated == 0) {
     for (NodeIndex slot : order_) nodes_[slot].sens.clear();
     return;
@@ -688,6 +763,17 @@ void GenNetwork::SolveSensitivities() {
   for (NodeIndex slot : order_) {
     const auto& db = nodes_[slot].db;
     for (std::size_t c = 0; c < db.size(); ++c) B.block<2, 1>(nodes_[slot].compact * 2, c) = db[c];
+  }
+  for (const auto& e : persistent_) {
+    // A persistent edge's offset moves with its rates: as AddLinearizedScalar's, at the
+    // current linearization (r moves by -row_i^T d offset).
+    if (!e.active || e.rates.empty() || e.information <= 0) continue;
+    const Linearized lin = LinearizePersistent(e);
+    for (const ConsiderRate& cr : e.rates) {
+      const double dr = -lin.w * lin.rows[0].dot(cr.rate);
+      for (int a = 0; a < lin.n; ++a)
+        B.block<2, 1>(nodes_[lin.nodes[a]].compact * 2, cr.parameter) += dr * lin.rows[a];
+    }
   }
   const Eigen::MatrixXd X = dense_ ? Eigen::MatrixXd(dense_llt_.solve(B)) : solver_.solve(B);
   ++sensitivity_solves_;
@@ -815,15 +901,14 @@ void GenNetwork::DenseSystem(Eigen::MatrixXd* L, Eigen::VectorXd* b,
   }
   for (const auto& e : persistent_) {
     if (!e.active || e.information <= 0) continue;
-    const auto [h, w, r] = LinearizePersistent(e);
-    const Mat2 W = w * h * h.transpose();  // eq. (18)
-    const int ci = pos[e.i] * 2, cj = pos[e.j] * 2;
-    L->block<2, 2>(ci, ci) += W;
-    L->block<2, 2>(cj, cj) += W;
-    L->block<2, 2>(ci, cj) -= W;
-    L->block<2, 2>(cj, ci) -= W;
-    b->segment<2>(ci) += w * h * r;
-    b->segment<2>(cj) -= w * h * r;
+    const Linearized lin = LinearizePersistent(e);
+    for (int a = 0; a < lin.n; ++a) {  // eq. (18)-(19)
+      const int ca = pos[lin.nodes[a]] * 2;
+      for (int k = 0; k < lin.n; ++k) {
+        L->block<2, 2>(ca, pos[lin.nodes[k]] * 2) += lin.w * lin.rows[a] * lin.rows[k].transpose();
+      }
+      b->segment<2>(ca) += lin.w * lin.rows[a] * lin.r;
+    }
   }
   if (order) *order = ord;
 }

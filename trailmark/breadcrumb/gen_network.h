@@ -156,6 +156,31 @@ class GenNetwork {
   /// A persistent scalar edge between two nodes (re-linearized at each Solve). Repeated
   /// measurements of the same edge should be accumulated with AccumulatePersistent.
   int AddPersistent(NodeIndex i, NodeIndex j, const ScalarModel& model);
+  /// One scalar measurement kept as a persistent edge (AddScalar's model, offset, bias node and
+  /// rates): re-linearized at every Solve (Gauss-Newton) until one of its nodes is deleted,
+  /// then folded at the estimates of that moment. A fixed-lag smoother's window
+  /// (LocalizerOptions::fixed_lag_s): an edge added while its nodes were far from the truth is
+  /// re-linearized until the agent state it belongs to leaves (issue 25, item 2). The consider
+  /// rates enter the sensitivities at the current linearization. Returns the edge's id.
+  int AddScalarPersistent(NodeIndex i, NodeIndex j, double z, double variance,
+                          const ScalarModel& model, const Vec2& offset = Vec2::Zero(),
+                          NodeIndex bias = -1, const std::vector<ConsiderRate>& rates = {});
+  /// Persistent edges not yet folded.
+  std::size_t active_persistent() const { return active_persistent_; }
+  bool IsPersistentActive(int edge) const {
+    return edge >= 0 && edge < static_cast<int>(persistent_.size()) && persistent_[edge].active;
+  }
+  /// The persistent edge's nodes (i, j).
+  std::pair<NodeIndex, NodeIndex> PersistentNodes(int edge) const {
+    return {persistent_.at(edge).i, persistent_.at(edge).j};
+  }
+  /// Before a persistent edge is folded: its model's second-order terms at the current
+  /// estimates and the covariance cov_m2 of the difference of its two positions
+  /// (ScalarModel::SecondOrderTerms; scaled by the bias node's scale) — the observation shifted
+  /// by the mean shift, the variance term added. Within the window the edge is re-linearized and
+  /// needs none; committed, it stays linearized where it was, and the remaining uncertainty of
+  /// its nodes biases it (LocalizerOptions::second_order).
+  void AddSecondOrderTerms(int edge, const Mat2& cov_m2);
   /// Adds one measurement z with variance to persistent edge `edge` (information-weighted mean).
   /// The edge's variance is floor_variance + 1 / sum(1 / variance): a static link's slow
   /// shadowing does not average out over packets, only the fast fading does.
@@ -232,6 +257,9 @@ class GenNetwork {
   std::size_t sensitivity_solves_ = 0;
   struct Persistent {
     NodeIndex i = -1, j = -1;
+    NodeIndex bias = -1;              ///< (offset, scale) node of the measurement, -1: none
+    Vec2 offset = Vec2::Zero();       ///< known displacement added to x_i
+    std::vector<ConsiderRate> rates;  ///< how `offset` moves with consider parameters
     ScalarModel model;
     double information = 0;  ///< sum 1/var
     double weighted_z = 0;   ///< sum z/var
@@ -247,15 +275,19 @@ class GenNetwork {
                            const ScalarModel& model, const Vec2& offset, NodeIndex bias = -1,
                            const std::vector<ConsiderRate>& rates = {});
   void FoldPersistent(int edge);
-  /// One persistent range edge linearized at the current estimates (eqs. (18)-(19)):
-  /// Jacobian row h (w.r.t. x_i; -h for x_j), weight w = 1/variance and the linearized
-  /// observation r, so the edge adds w h h^T to the Kirchhoff blocks and +-w h r to b.
+  /// One persistent scalar edge linearized at the current estimates (eqs. (18)-(19)): its
+  /// nodes (i, j and the bias node when it has one) with their Jacobian rows (h w.r.t. x_i, -h
+  /// for x_j), weight w = 1/variance and the linearized observation r, so the edge adds
+  /// w row_a row_c^T to the Kirchhoff blocks and w row_a r to b.
   struct Linearized {
-    Vec2 h;
+    std::array<NodeIndex, 3> nodes;
+    std::array<Vec2, 3> rows;
+    int n = 2;
     double w;
     double r;
   };
   Linearized LinearizePersistent(const Persistent& e) const;
+  std::size_t active_persistent_ = 0;
   bool Factorize(const std::vector<Eigen::Triplet<double>>& extra_L);
   void CompactIndices();
   std::vector<std::pair<int, int>> BlockPattern() const;

@@ -528,8 +528,14 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   if (a.theta < 0) {
     gen_.AddRelative(next, a.state, delta, Diag(q), Turned(a, delta));
     const NodeIndex old_state = a.state;
-    gen_.DeleteNode(old_state);
-    a.state = gen_.MoveNode(next, old_state);
+    if (options_.fixed_lag_s > 0) {
+      a.window.push_back({old_state, -1, a.state_t, std::move(a.state_edges)});
+      a.state_edges.clear();
+      a.state = next;
+    } else {
+      gen_.DeleteNode(old_state);
+      a.state = gen_.MoveNode(next, old_state);
+    }
   } else {
     // x_new - x_old - J_theta theta_old = (1 + s) R(psi) delta - J_theta theta_hat (linearized)
     const Vec2 th = gen_.Estimate(a.theta);
@@ -579,10 +585,18 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
                    predicted - J_theta * th, cov, rates);
     // DeleteNode+ of the old position and heading states together (one 4x4 Schur pivot).
     const NodeIndex old_theta = a.theta, old_state = a.state;
-    gen_.DeleteNodes(old_state, old_theta);
-    a.theta = gen_.MoveNode(next_theta, old_theta);
-    a.state = gen_.MoveNode(next, old_state);
+    if (options_.fixed_lag_s > 0) {
+      a.window.push_back({old_state, old_theta, a.state_t, std::move(a.state_edges)});
+      a.state_edges.clear();
+      a.theta = next_theta;
+      a.state = next;
+    } else {
+      gen_.DeleteNodes(old_state, old_theta);
+      a.theta = gen_.MoveNode(next_theta, old_theta);
+      a.state = gen_.MoveNode(next, old_state);
+    }
   }
+  RetireLagged(a, t);
   a.state_t = t;
   a.state_cum = cum_t;
   a.state_cum_var = var_t;
@@ -592,6 +606,36 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   ++summary_.agent_states;
   // Keep ~30 s of PDR history behind the state for late (encounter) measurements.
   while (a.knots.size() > 2 && a.knots[1].t < t - 30.0) a.knots.pop_front();
+}
+
+void BreadcrumbLocalizer::RetireLagged(Agent& a, TimeS t) {
+  while (!a.window.empty() && a.window.front().t < t - options_.fixed_lag_s) {
+    const Agent::Lagged old = std::move(a.window.front());
+    a.window.pop_front();
+    if (options_.second_order) {
+      // The state's range edges are committed now, linearized at the current estimates: their
+      // second-order terms at the uncertainty the nodes have now (the sum of the marginals,
+      // as for an edge committed at once).
+      // The covariances first, from one solve (adding the terms makes the network dirty).
+      std::vector<std::pair<int, Mat2>> terms;
+      for (const int edge : old.edges) {
+        if (!gen_.IsPersistentActive(edge)) continue;
+        if (terms.empty() && !gen_.Solve()) break;  // not positive definite: none added
+        const auto [i, j] = gen_.PersistentNodes(edge);
+        const NodeIndex other = i == old.state ? j : i;
+        terms.emplace_back(edge, gen_.Covariance(other));
+      }
+      if (!terms.empty()) {
+        const Mat2 cov_state = gen_.Covariance(old.state);
+        for (const auto& [edge, cov_other] : terms)
+          gen_.AddSecondOrderTerms(edge, cov_state + cov_other);
+      }
+    }
+    if (old.theta >= 0)
+      gen_.DeleteNodes(old.state, old.theta);
+    else
+      gen_.DeleteNode(old.state);
+  }
 }
 
 std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScalarRobust(
@@ -606,6 +650,14 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
   const double slope = lin.slope;
   const Vec2 bias_hat = bias >= 0 ? gen_.Estimate(bias) : Vec2::Zero();
   const Mat2 cov_sum = cov_i + cov_j;
+  // An agent's edge in the fixed-lag window (not a static link: those stay as they were).
+  Agent* owner = nullptr;
+  if (options_.fixed_lag_s > 0 &&
+      (model.kind == ScalarModel::Kind::kRange || options_.fixed_lag_rssi)) {
+    for (auto& [id, ag] : agents_) owner = ag.state == i ? &ag : owner;
+  }
+  const bool persistent = owner != nullptr;
+  const double z_raw = z, variance_raw = variance;
   if (options_.second_order && model.kind == ScalarModel::Kind::kRange) {
     // z = (1 + scale) h(d) + offset: the expected h at the nodes' uncertainty, not at their
     // estimates. Their difference's covariance is taken as the marginals' sum (the cross-
@@ -638,11 +690,21 @@ std::optional<BreadcrumbLocalizer::EdgeInnovation> BreadcrumbLocalizer::AddScala
     return edge;
   }
   const double k = nu < 0 ? k_negative : options_.huber_k;
+  double huber = 1.0;
   if (normalized > k) {
-    variance *= normalized / k;  // IV-F: lessen a noisy measurement's effect (Huber weight)
+    huber = normalized / k;  // IV-F: lessen a noisy measurement's effect (Huber weight)
+    variance *= huber;
     ++summary_.downweighted;
   }
-  gen_.AddScalar(i, j, z, variance, model, offset, bias, rates);
+  if (persistent) {
+    // Re-linearized in the window: the model as it is; its second-order terms when committed
+    // (RetireLagged), at the uncertainty its nodes have then.
+    const int e =
+        gen_.AddScalarPersistent(i, j, z_raw, variance_raw * huber, model, offset, bias, rates);
+    if (model.kind == ScalarModel::Kind::kRange) owner->state_edges.push_back(e);
+  } else {
+    gen_.AddScalar(i, j, z, variance, model, offset, bias, rates);
+  }
   return edge;
 }
 

@@ -179,6 +179,16 @@ struct LocalizerOptions {
   /// sigma_t^2 / 2d, and less certain), so that edges to a beacon still poorly placed do not
   /// all pull one way (issue 25, item 2; ours). RSSI edges stay first-order (localizer.cpp).
   bool second_order = true;
+  /// A fixed-lag window (issue 25, item 2; ours): an agent's states of the last fixed_lag_s
+  /// stay in the network, and its range edges (and RSSI edges with fixed_lag_rssi) are
+  /// persistent (GenNetwork::AddScalarPersistent): re-linearized at every solve until their
+  /// state leaves the window, then folded at the estimates of that moment. An edge added while
+  /// the agent or the node was far from the truth (a loop closure, a beacon just placed) is
+  /// thus taken again at the better estimates the next measurements give, before it is
+  /// committed. 0: off (the paper's mobile node, IV-E: a state is marginalized as soon as the
+  /// next one exists).
+  double fixed_lag_s = 0.0;
+  bool fixed_lag_rssi = false;
   /// The PDR checked against its stated noise (issue 21; ours). Each agent's radio and range
   /// edges' innovations, normalized by one measurement's noise plus the position uncertainty
   /// the network states (not the edges' correlation-inflated variance; refused and gated
@@ -326,6 +336,15 @@ class BreadcrumbLocalizer {
   };
   struct Agent {
     std::string id;
+    /// fixed_lag_s: the earlier states still in the network (position, heading/scale node or
+    /// -1, and their time), oldest first.
+    struct Lagged {
+      NodeIndex state = -1, theta = -1;
+      TimeS t = 0;
+      std::vector<int> edges;  ///< its persistent range edges (second-order terms at the fold)
+    };
+    std::deque<Lagged> window;
+    std::vector<int> state_edges;  ///< the current state's persistent range edges
     NodeIndex state = -1;
     NodeIndex theta = -1;  ///< heading/scale node (-1 when not estimated)
     NodeIndex gyro = -1;   ///< gyro node (scale factor k, heading rate b); -1 when neither
@@ -406,6 +425,9 @@ class BreadcrumbLocalizer {
   double AgentHeading(const Agent& a) const;
   void ProcessAgent(Agent& a, TimeS covered);
   void AttachState(Agent& a, TimeS t);
+  /// fixed_lag_s: marginalizes the agent's states older than the window (their persistent
+  /// edges folded at the current estimates).
+  void RetireLagged(Agent& a, TimeS t);
   void ApplyPending(Agent& a, const Pending& p);
   /// `source` (a static node's id, may be null) and `t`: the integrity check of that node.
   /// An edge's innovation and its variance's position part (slope^2 u^T (cov_i + cov_j) u),
