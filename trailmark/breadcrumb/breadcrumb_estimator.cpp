@@ -76,6 +76,19 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "only; 0: none)");
     t.Real("start_heading_sigma_floor", &L::start_heading_sigma_floor_rad, "rad", nonneg,
            "a stated start_heading_sigma below this is raised to it (0: as stated)");
+    t.Flag("entry_heading", &L::entry_heading,
+           "the steps' rotation into the frame measured once: the stated start_heading minus "
+           "the direction of the first entry_track_m of steps (issue 25)");
+    t.Real("entry_track_m", &L::entry_track_m, "m", pos, "the entry track's length");
+    t.Real("entry_unstated_sigma", &L::entry_unstated_sigma_rad, "rad", pos,
+           "the sigma of a start_heading given without start_heading_sigma, as a measurement");
+    t.Real("entry_track_heading_sigma", &L::entry_track_heading_sigma_rad, "rad", nonneg,
+           "the entry track's own direction noise");
+    t.Real("entry_gate_sigma", &L::entry_gate_sigma, "", pos,
+           "the entry heading's gates: the stated start heading sigma refuted, the entry not "
+           "walked along the start heading");
+    t.Real("entry_prior_sigma", &L::entry_prior_sigma_rad, "rad", pos,
+           "the heading node's weak prior until the entry heading");
     t.Real("min_rssi_dbm", &L::min_rssi_dbm, "dBm", OptionBounds::Any(),
            "weaker packets are not range edges (mostly NLOS); the paper's channel's, see "
            "relative_rssi");
@@ -175,7 +188,7 @@ BreadcrumbEstimator::BreadcrumbEstimator(const MissionInfo& info,
         const auto start = info.AgentStart(n);
         loc_->AddAgent(n.id, start ? std::optional<Vec2>(start->head<2>()) : std::nullopt,
                        n.start_sigma_m.value_or(options_.localizer.known_start_sigma_m),
-                       n.start_heading_sigma_rad);
+                       n.start_heading_sigma_rad, n.start_heading_rad);
         agents_.push_back(n.id);
         agent_z_[n.id] = start ? start->z() : 0.0;
         if (start) known_starts_.push_back(n.id);
@@ -332,6 +345,9 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["drops"] = static_cast<double>(s.drops);
   num["moved_detected"] = static_cast<double>(s.moved_detected);
   num["agent_states"] = static_cast<double>(s.agent_states);
+  num["entry_headings"] = static_cast<double>(s.entry_headings);
+  num["entry_headings_refuted"] = static_cast<double>(s.entry_headings_refuted);
+  num["entry_headings_refused"] = static_cast<double>(s.entry_headings_refused);
   num["delayed_initializations"] = static_cast<double>(s.delayed_initializations);
   num["static_nodes_never_localized"] = static_cast<double>(s.pending_uninitialized);
   num["unusable"] = static_cast<double>(s.unusable);

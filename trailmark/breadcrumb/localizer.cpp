@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 
 namespace trailmark::breadcrumb {
@@ -183,18 +184,28 @@ void BreadcrumbLocalizer::AddUnknownNode(const std::string& id) {
 
 void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Vec2>& start,
                                    double start_sigma_m,
-                                   std::optional<double> start_heading_sigma_rad) {
+                                   std::optional<double> start_heading_sigma_rad,
+                                   std::optional<double> start_heading_rad) {
   Agent a;
   a.id = id;
   const Vec2 x0 = start.value_or(Vec2::Zero());
   const double s = start ? std::max(start_sigma_m, 1e-3) : options_.unknown_start_sigma_m;
   a.state = gen_.AddNode(x0);
   gen_.AddPrior(a.state, x0, Mat2::Identity() * s * s);
+  const bool entry = options_.entry_heading && options_.estimate_heading_scale &&
+                     start_heading_rad.has_value() && std::isfinite(*start_heading_rad);
   if (options_.track_heading_offset_sigma_rad > 0) a.consider = gen_.AddConsider();
   a.cached_cov = Mat2::Identity() * s * s;
   if (options_.estimate_heading_scale) {
-    const double sh = std::max({start_heading_sigma_rad.value_or(options_.heading_sigma0_rad),
-                                options_.start_heading_sigma_floor_rad, 1e-4});
+    double sh = std::max({start_heading_sigma_rad.value_or(options_.heading_sigma0_rad),
+                          options_.start_heading_sigma_floor_rad, 1e-4});
+    if (entry) {
+      a.entry_heading_rad = *start_heading_rad;
+      a.entry_heading_sigma_rad = sh;
+      a.entry_value_sigma_rad =
+          start_heading_sigma_rad ? sh : std::max(sh, options_.entry_unstated_sigma_rad);
+      sh = std::max(options_.entry_prior_sigma_rad, sh);  // weak until the entry (EntryHeading)
+    }
     a.theta = gen_.AddNode(Vec2::Zero());
     gen_.AddPrior(a.theta, Vec2::Zero(),
                   Vec2(sh * sh, options_.scale_sigma0 * options_.scale_sigma0).asDiagonal());
@@ -393,7 +404,61 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
     a.knots.back().cum_turn += turn;
     a.knots.back().cum_turn_signed += turn_signed;
   }
+  if (a.entry_heading_rad) {
+    a.entry_walked_m += d.norm();
+    if (a.knots.back().cum.norm() >= options_.entry_track_m ||
+        a.entry_walked_m >= 3.0 * options_.entry_track_m) {
+      EntryHeading(a);
+    }
+  }
   AdvanceTo(step.t1);
+}
+
+void BreadcrumbLocalizer::EntryHeading(Agent& a) {
+  const double stated = a.entry_heading_sigma_rad;
+  const double weak = std::max(options_.entry_prior_sigma_rad, stated);
+  const double wide = std::hypot(stated, options_.track_heading_offset_sigma_rad);
+  const double start_heading = *a.entry_heading_rad;
+  a.entry_heading_rad.reset();
+  // psi ~ N(mean, sigma^2) on the current heading node, its scale left free.
+  auto psi_prior = [&](double mean, double sigma) {
+    gen_.AddPrior(a.theta, Vec2(mean, 0.0), Vec2(sigma * sigma, 1e12).asDiagonal());
+  };
+  // The prior that makes the weak one `sigma` (information adds).
+  auto prior_to = [&](double sigma) {
+    if (sigma < weak) psi_prior(0.0, 1.0 / std::sqrt(1.0 / (sigma * sigma) - 1.0 / (weak * weak)));
+  };
+  const Vec2 track = a.knots.back().cum;
+  if (track.norm() < options_.entry_track_m) {  // walked without leaving the start
+    prior_to(wide);
+    return;
+  }
+  // The PDR's direction over its first entry_track_m against the stated start heading: the
+  // rotation of the steps into the navigation frame (their heading correction psi).
+  const double m = WrapAngle(start_heading - std::atan2(track.y(), track.x()));
+  const double sigma_m =
+      std::hypot(a.entry_value_sigma_rad, options_.entry_track_heading_sigma_rad);
+  const double deg = 180.0 / std::numbers::pi;
+  if (std::abs(m) <= options_.entry_gate_sigma * std::hypot(stated, sigma_m)) {
+    prior_to(stated);  // the claim holds
+    psi_prior(m, sigma_m);
+    ++summary_.entry_headings;
+  } else if (std::abs(m) <= options_.entry_gate_sigma * std::hypot(wide, sigma_m)) {
+    psi_prior(m, sigma_m);  // the claim is refuted: the measurement alone
+    ++summary_.entry_headings_refuted;
+    summary_.notes.push_back(fmt::format(
+        "{}: its first {:.1f} m of steps are turned {:.1f} deg from the stated start heading, "
+        "beyond its stated sigma ({:.1f} deg): the steps' rotation is taken from them",
+        a.id, options_.entry_track_m, m * deg, stated * deg));
+  } else {
+    prior_to(wide);
+    ++summary_.entry_headings_refused;
+    summary_.notes.push_back(fmt::format(
+        "{}: its first {:.1f} m of steps go {:.1f} deg from the stated start heading: not walked "
+        "along it, the entry heading is not used (the stated sigma widened by the steps' own "
+        "offset, {:.1f} deg)",
+        a.id, options_.entry_track_m, m * deg, wide * deg));
+  }
 }
 
 void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {

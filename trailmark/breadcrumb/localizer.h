@@ -70,6 +70,31 @@ struct LocalizerOptions {
   double track_heading_offset_sigma_rad = 0.087;
   /// A stated start_heading_sigma below this is raised to it (0: taken as stated).
   double start_heading_sigma_floor_rad = 0.0;
+  /// The entry heading (issue 25, item 1; as the beacon filter's, docs/beacons.md): for an
+  /// agent with a start_heading, the steps' rotation into the navigation frame is measured once,
+  /// m = the stated start heading minus the direction of its first entry_track_m of PDR (a
+  /// responder walks in facing forward), sigma_m = hypot(start sigma, entry_track_heading_sigma)
+  /// (the first metre's own direction noise). The stated start_heading_sigma is a claim about
+  /// the steps' alignment; m checks it (issue 21: a source checked against its stated noise):
+  ///  - m within entry_gate_sigma of hypot(start sigma, sigma_m): the claim holds; the heading
+  ///    node gets the stated prior and m;
+  ///  - beyond that, but within entry_gate_sigma of hypot(start sigma, the steps' own offset
+  ///    track_heading_offset_sigma_rad, sigma_m): the claim is refuted (the steps are turned by
+  ///    more than stated, e.g. a magnetometer's alignment); m alone, and a note;
+  ///  - further still: the walk did not start along the stated heading; the stated prior
+  ///    widened by the steps' offset, and a note.
+  /// Until then the heading node's prior is weak (entry_prior_sigma_rad); the steps' offset is
+  /// estimated, not a consider parameter. An agent that walks 3 entry_track_m without getting
+  /// that far from its start gets the widened prior.
+  bool entry_heading = true;
+  /// A start_heading given without its sigma: its value's accuracy is unknown, so the
+  /// measurement takes this sigma (a magnetometer's indoor heading, ~10 deg), while the steps'
+  /// alignment prior stays heading_sigma0_rad.
+  double entry_unstated_sigma_rad = 0.17;
+  double entry_track_m = 1.0;
+  double entry_track_heading_sigma_rad = 0.05;
+  double entry_gate_sigma = 3.0;
+  double entry_prior_sigma_rad = 1.0;
   double scale_sigma0 = 0.05;
   double heading_rw_rad_per_sqrt_s = 0.003;
   double heading_per_turn_sigma = 0.01;      ///< random part per turn, fraction of its angle
@@ -240,6 +265,9 @@ struct LocalizerSummary {
   std::size_t refusals_blamed_on_motion = 0;  ///< flagged nodes used anyway (BlameMotion)
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
+  /// entry_heading: claims held, refuted (the measurement alone), entries not along the
+  /// stated heading (the widened prior).
+  std::size_t entry_headings = 0, entry_headings_refuted = 0, entry_headings_refused = 0;
   std::size_t unusable = 0;  ///< measurements that could not be attached (with reasons in notes)
   std::size_t solves = 0, factorizations = 0, symbolic_analyses = 0, dense_factorizations = 0;
   std::size_t sensitivity_solves =
@@ -275,7 +303,8 @@ class BreadcrumbLocalizer {
   /// An agent; `start` empty when unknown; heading sigma for the heading/scale node (empty:
   /// options.heading_sigma0_rad).
   void AddAgent(const std::string& id, const std::optional<Vec2>& start, double start_sigma_m,
-                std::optional<double> start_heading_sigma_rad = std::nullopt);
+                std::optional<double> start_heading_sigma_rad = std::nullopt,
+                std::optional<double> start_heading_rad = std::nullopt);
   /// Estimated PDR heading correction (rad) and scale error of an agent.
   std::optional<Vec2> HeadingScale(const std::string& id) const;
   /// Estimated gyro scale-factor error and PDR heading drift rate (rad/s) of an agent.
@@ -356,6 +385,12 @@ class BreadcrumbLocalizer {
     Vec2 state_cum_var = Vec2::Zero();
     bool started = false;
     std::deque<Knot> knots;
+    /// entry_heading: the stated start heading and its sigma, until the entry track is walked
+    /// (then empty).
+    std::optional<double> entry_heading_rad;
+    double entry_heading_sigma_rad = 0;  ///< the stated start heading sigma (the claim)
+    double entry_value_sigma_rad = 0;    ///< the start heading value's sigma (the measurement)
+    double entry_walked_m = 0;           ///< path length walked while waiting
     std::deque<Pending> pending;  ///< sorted by t
     /// Calibration: recent packets per static node, and the last drop/encounter time.
     std::map<std::string, std::deque<std::pair<TimeS, double>>> link_history;
@@ -425,6 +460,9 @@ class BreadcrumbLocalizer {
   double AgentHeading(const Agent& a) const;
   void ProcessAgent(Agent& a, TimeS covered);
   void AttachState(Agent& a, TimeS t);
+  /// entry_heading: once the agent's PDR has walked entry_track_m, the measurement of its
+  /// heading node.
+  void EntryHeading(Agent& a);
   /// fixed_lag_s: marginalizes the agent's states older than the window (their persistent
   /// edges folded at the current estimates).
   void RetireLagged(Agent& a, TimeS t);
