@@ -479,6 +479,44 @@ TEST(FusionEstimator, TwoMembersReadingTheSameEvidenceAreOneOpinion) {
   EXPECT_EQ(s2.members[0].shared_evidence, 0);
 }
 
+// fusion.shared_evidence_members: with a third member (a map matcher) the two-member rule does
+// not apply; `all` and `witness` still make the network reading only the beacon filter's
+// ranges give way, so the fused position is that of the other two alone.
+TEST(FusionEstimator, AMemberReadingAnothersEvidenceGivesWayAtAnyCountWhenAsked) {
+  using SE = FusionOptions::SharedEvidence;
+  auto run = [](std::optional<SE> mode, bool with_radio) {
+    std::vector<FusionMember> m;
+    if (with_radio) {
+      m.push_back({"radio", Offset(Vec2(0.6, 0), 0.01, 0, 0.01),
+                   StreamSet{Stream::kRssi, Stream::kRanges}});
+      m.back().static_rank = 2;
+    }
+    m.push_back({"ranges", Offset(Vec2(0, 0), 0.04, 0, 0.04), StreamSet{Stream::kRanges}});
+    m.back().static_rank = 0;
+    m.push_back({"map", Offset(Vec2(0, 0.3), 0.09, 0, 0.09)});
+    m.back().static_rank = 3;
+    FusionOptions o = NoHat();
+    o.disagreement_probability = 1.0 - 1e-12;  // no member left out as disagreeing
+    if (mode) o.shared_evidence_members = *mode;
+    FusionEstimator f(OneAgent(), o, std::move(m));
+    VectorSink sink;
+    f.Add(RangeMeasurement{0.1, "ff1", "b1", 3.0, 0.05}, sink);
+    for (int k = 0; k < 10; ++k)
+      f.Add(Step{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.7, 0, 0), std::nullopt}, sink);
+    return std::make_pair(sink.rows.back(), f.TypedSummary());
+  };
+  const auto [two_only, s0] = run(std::nullopt, false);
+  const auto [two, s1] = run(SE::kTwo, true);
+  EXPECT_GT((two.position_n - two_only.position_n).norm(), 0.2);  // the radio member counts
+  EXPECT_EQ(s1.members[0].shared_evidence, 0);
+  for (const SE mode : {SE::kAll, SE::kWitness}) {
+    const auto [fused, s] = run(mode, true);
+    EXPECT_LT((fused.position_n - two_only.position_n).norm(), 1e-9);
+    EXPECT_EQ(s.members[0].shared_evidence, 10);
+    EXPECT_EQ(s.members[0].rows_used, 0);
+  }
+}
+
 TEST(FusionEstimator, BetweenFusedRowsTheEstimateIsPredictedAtItsVelocityForHalfTheInterval) {
   // One member at the truth, a step (0.7 m east) every 0.5 s, other rows (a barometer) every
   // 0.05 s in between: a predicted row at most every 0.1 s, on the line at 1.4 m/s, for at most

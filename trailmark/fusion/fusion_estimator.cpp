@@ -61,6 +61,13 @@ const OptionTable<FusionOptions>& FusionOptionTable() {
     t.Flag("fusion.shared_evidence_to_owner", &FusionOptions::shared_evidence_to_owner,
            "where only two members count and one's evidence is all the other's (of lower "
            "static rank), the other alone");
+    t.Choice("fusion.shared_evidence_members", &FusionOptions::shared_evidence_members,
+             std::vector<std::pair<std::string, FusionOptions::SharedEvidence>>{
+                 {"two", FusionOptions::SharedEvidence::kTwo},
+                 {"all", FusionOptions::SharedEvidence::kAll},
+                 {"witness", FusionOptions::SharedEvidence::kWitness}},
+             "where shared_evidence_to_owner applies: two (only two members count), all (any "
+             "count), witness (any count, the member left in the hat's differences)");
     t.Real("fusion.predict_fraction", &FusionOptions::predict_fraction, "",
            OptionBounds::NonNegative(),
            "between fused rows, predict an agent's estimate for at most this part of the "
@@ -450,15 +457,18 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
       }
     }
   }
+  auto covered = [&](std::size_t a, std::size_t b) {  // a's evidence seen is b's, b ranks first
+    const StreamSet seen = seen_evidence_[a];
+    if (seen.empty() || members_[b].static_rank >= members_[a].static_rank) return false;
+    for (Stream st : seen.List())
+      if (!members_[b].evidence.Has(st)) return false;
+    return true;
+  };
+  using SE = FusionOptions::SharedEvidence;
+  // Members that give way to another built for their evidence but stay in the hat (kWitness).
+  std::vector<bool> witness;
   if (options_.shared_evidence_to_owner && inputs.size() == 2 && !FallbackFor(used[0], p.agent)) {
     // Two members reading the same evidence: the one built for it (lower static rank) alone.
-    auto covered = [&](std::size_t a, std::size_t b) {  // a's evidence seen is b's, b ranks first
-      const StreamSet seen = seen_evidence_[a];
-      if (seen.empty() || members_[b].static_rank >= members_[a].static_rank) return false;
-      for (Stream st : seen.List())
-        if (!members_[b].evidence.Has(st)) return false;
-      return true;
-    };
     for (std::size_t k = 0; k < 2; ++k) {
       if (covered(used[k], used[1 - k])) {
         ++summary_.members[used[k]].shared_evidence;
@@ -466,6 +476,28 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
         inputs = {inputs[1 - k]};
         break;
       }
+    }
+  } else if (options_.shared_evidence_to_owner && options_.shared_evidence_members != SE::kTwo &&
+             inputs.size() > 2 && !FallbackFor(used[0], p.agent)) {
+    std::vector<bool> gives_way(inputs.size(), false);
+    for (std::size_t a = 0; a < inputs.size(); ++a)
+      for (std::size_t b = 0; b < inputs.size() && !gives_way[a]; ++b)
+        gives_way[a] = b != a && covered(used[a], used[b]);
+    if (options_.shared_evidence_members == SE::kWitness) {
+      witness = gives_way;
+    } else {
+      std::vector<std::size_t> keep_used;
+      std::vector<Estimate> keep_inputs;
+      for (std::size_t i = 0; i < inputs.size(); ++i) {
+        if (gives_way[i]) {
+          ++summary_.members[used[i]].shared_evidence;
+          continue;
+        }
+        keep_used.push_back(used[i]);
+        keep_inputs.push_back(inputs[i]);
+      }
+      used = std::move(keep_used);
+      inputs = std::move(keep_inputs);
     }
   }
   // Leave out a member while three remain and some pair of members disagrees: of the members of
@@ -482,6 +514,12 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
   std::vector<bool> out(n, false);
   std::vector<double> out_d2(n, 0.0);
   std::size_t remaining = n;
+  if (!witness.empty()) {
+    for (std::size_t i = 0; i < n; ++i) {
+      out[i] = witness[i];
+      remaining -= witness[i];
+    }
+  }
   while (remaining >= 3) {
     double worst_sum = -1.0;
     std::size_t worst_i = n;
@@ -520,6 +558,10 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
   for (std::size_t i = 0; i < inputs.size(); ++i) {
     const auto key = std::make_pair(p.agent, used[i]);
     const bool was_out = excluded_[key];
+    if (!witness.empty() && witness[i]) {
+      ++summary_.members[used[i]].shared_evidence;
+      continue;
+    }
     if (out[i]) {
       ++summary_.members[used[i]].exclusions;
       if (!was_out) Note(p.t, p.agent, used[i], true, out_d2[i]);

@@ -72,6 +72,13 @@ struct FusionOptions {
   /// the beacon filter both reading the ultrasound ranges), they are not two opinions: the one
   /// built for that evidence is used alone.
   bool shared_evidence_to_owner = true;
+  /// Which counts the rule above applies at. kTwo: only where two members count (the hat
+  /// cannot arbitrate). kAll: a member whose evidence seen is all another's (of lower static
+  /// rank) gives way to it whenever both count. kWitness: as kAll for the fused position, but
+  /// the member still takes part in the hat's pairwise differences (a third opinion of the
+  /// others' errors, not of its own).
+  enum class SharedEvidence { kTwo, kAll, kWitness };
+  SharedEvidence shared_evidence_members = SharedEvidence::kTwo;
   /// The hat's weights are (1/s_i^2)^hat_power: 1 is the minimum-variance combination of
   /// independent errors; the members' errors share dead reckoning's, and a larger power leans
   /// toward the best member alone.
