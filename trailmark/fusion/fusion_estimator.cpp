@@ -412,6 +412,21 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
     if (!inputs.empty()) break;  // the fallback only where no other member estimates
   }
   if (inputs.empty()) return;
+  // Leaves out the members marked in `drop`, counting each in the summary's `count` field.
+  auto leave_out = [&](const std::vector<bool>& drop, long long FusionMemberSummary::*count) {
+    std::vector<std::size_t> keep_used;
+    std::vector<Estimate> keep_inputs;
+    for (std::size_t i = 0; i < inputs.size(); ++i) {
+      if (drop[i]) {
+        ++(summary_.members[used[i]].*count);
+        continue;
+      }
+      keep_used.push_back(used[i]);
+      keep_inputs.push_back(inputs[i]);
+    }
+    used = std::move(keep_used);
+    inputs = std::move(keep_inputs);
+  };
   if (options_.follows_dr_m > 0 && !FallbackFor(used.front(), p.agent)) {
     // Dead reckoning at t (a fallback member), and each member's time-averaged distance from
     // it: a member that stays with it uses no evidence of its own for this agent.
@@ -441,20 +456,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
       // Left out only where two or more others use evidence of their own (they can then be
       // compared with each other); beside a single one, the member that stays with dead
       // reckoning is dead reckoning's voice, which may be the right one.
-      if (own >= 2) {
-        std::vector<std::size_t> keep_used;
-        std::vector<Estimate> keep_inputs;
-        for (std::size_t i = 0; i < inputs.size(); ++i) {
-          if (follows[i]) {
-            ++summary_.members[used[i]].follows_dr;
-            continue;
-          }
-          keep_used.push_back(used[i]);
-          keep_inputs.push_back(inputs[i]);
-        }
-        used = std::move(keep_used);
-        inputs = std::move(keep_inputs);
-      }
+      if (own >= 2) leave_out(follows, &FusionMemberSummary::follows_dr);
     }
   }
   auto covered = [&](std::size_t a, std::size_t b) {  // a's evidence seen is b's, b ranks first
@@ -486,18 +488,7 @@ void FusionEstimator::EmitAgent(const Pending& p, EstimateSink& sink) {
     if (options_.shared_evidence_members == SE::kWitness) {
       witness = gives_way;
     } else {
-      std::vector<std::size_t> keep_used;
-      std::vector<Estimate> keep_inputs;
-      for (std::size_t i = 0; i < inputs.size(); ++i) {
-        if (gives_way[i]) {
-          ++summary_.members[used[i]].shared_evidence;
-          continue;
-        }
-        keep_used.push_back(used[i]);
-        keep_inputs.push_back(inputs[i]);
-      }
-      used = std::move(keep_used);
-      inputs = std::move(keep_inputs);
+      leave_out(gives_way, &FusionMemberSummary::shared_evidence);
     }
   }
   // Leave out a member while three remain and some pair of members disagrees: of the members of
