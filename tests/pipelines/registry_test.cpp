@@ -11,6 +11,7 @@
 #include <sstream>
 
 #include "test_util.h"
+#include "trailmark/io/mission_io.h"
 #include "trailmark/pipelines/batch_run.h"
 #include "trailmark/sim/scenarios.h"
 
@@ -84,6 +85,29 @@ TEST(Registry, OutOfRangeAndUnknownOptionsAreErrorsNamingTheKey) {
   EXPECT_THAT(unknown, HasSubstr("zupt_sigma"));
   EXPECT_THROW(RequirePipeline("pdr").make(in, {{"ins.window", "0"}}, Feed::kTimeOrdered),
                std::invalid_argument);
+}
+
+// A run refused (here: a bad option) leaves the output folder's earlier estimates.csv as it was
+// (not truncated beside the diagnostics.json of the run that wrote it), and no partial file.
+TEST(Registry, ARefusedRunLeavesTheEarlierEstimatesAsTheyWere) {
+  testing::TempDir dir;
+  const SimulatedMission sim = SimulateScenario("office-loop-1lap", 1);
+  WriteMissionDirectory(dir.path(), sim.data);
+  const MissionDirectory mission(dir.path());
+  const auto out = dir.path() / "run";
+  const RunResult first = RunPipeline(RequirePipeline("pdr"), {mission, {}}, out);
+  ASSERT_GT(first.estimates, 0u);
+  auto read = [&] {
+    std::ifstream in(out / "estimates.csv");
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return ss.str();
+  };
+  const std::string before = read();
+  EXPECT_THROW(RunPipeline(RequirePipeline("breadcrumb"), {mission, {{"fixed_lag_s", "-1"}}}, out),
+               std::invalid_argument);
+  EXPECT_EQ(read(), before);
+  EXPECT_FALSE(std::filesystem::exists(out / "estimates.csv.partial"));
 }
 
 // landmarks-stopgo has no continuous tracker: its options do not list the tracker's, and a

@@ -231,21 +231,33 @@ class CsvRowSink : public EstimateSink {
 RunResult RunPipeline(const PipelineSpec& pipeline, const PipelineContext& context,
                       const std::filesystem::path& out_dir) {
   std::filesystem::create_directories(out_dir);
-  CsvRowSink csv((out_dir / "estimates.csv").string(), EstimatesHaveFloorColumns(context.mission));
-  RestampingSink sink(csv);
+  // Written beside and renamed when the run succeeds: a run refused (a bad option, a bad row)
+  // leaves an earlier run's estimates.csv as it was, not truncated beside its diagnostics.json.
+  const std::filesystem::path partial = out_dir / "estimates.csv.partial";
   const auto t0 = std::chrono::steady_clock::now();
   RunResult result;
   result.pipeline = pipeline.name;
-  result.summary = RunBatch(pipeline, context, sink);
-  csv.Close();
+  std::size_t restamped = 0;
+  try {
+    CsvRowSink csv(partial.string(), EstimatesHaveFloorColumns(context.mission));
+    RestampingSink sink(csv);
+    result.summary = RunBatch(pipeline, context, sink);
+    csv.Close();
+    result.estimates = sink.count();
+    restamped = sink.restamped();
+  } catch (...) {
+    std::error_code ignored;
+    std::filesystem::remove(partial, ignored);
+    throw;
+  }
+  std::filesystem::rename(partial, out_dir / "estimates.csv");
   result.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  result.estimates = sink.count();
   nlohmann::json diag;
   diag["pipeline"] = pipeline.name;
   diag["mission"] = context.mission.dir().string();
   diag["estimates"] = result.estimates;
   diag["wall_time_s"] = result.wall_time_s;
-  diag["rows_restamped"] = sink.restamped();
+  diag["rows_restamped"] = restamped;
   diag["numbers"] = result.summary.numbers;
   diag["notes"] = result.summary.notes;
   // Integrity notes (issue 21): sources excluded and readmitted, fallbacks to dead reckoning.
