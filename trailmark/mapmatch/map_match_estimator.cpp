@@ -103,6 +103,12 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
          [](O& o) -> double& { return o.filter.wall_follow_converged_power; }, "", any,
          "wall-following weight once converged (0: only while uncertain)");
     real(
+        "free_walk_share", [](O& o) -> double& { return o.filter.free_walk_share; }, "", any,
+        "wall-following model: share of the particles that walk freely (0: searchers only)");
+    real(
+        "free_walk_switch", [](O& o) -> double& { return o.filter.free_walk_switch; }, "", any,
+        "wall-following model: probability per step of drawing a particle's model again");
+    real(
         "confirm_distinct_m", [](O& o) -> double& { return o.filter.confirm_distinct_m; }, "m", any,
         "a comparison confirms only if its best matches lie within this of each other (0: all)");
     real(

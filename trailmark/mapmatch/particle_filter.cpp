@@ -78,6 +78,9 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
     return fail(
         "wall_follow_leave must be within (0, 1), wall_follow_return and "
         "wall_follow_off_likelihood within (0, 1], wall_follow_converged_power within [0, 1]");
+  if (!(free_walk_share >= 0 && free_walk_share < 1) ||
+      !(free_walk_switch >= 0 && free_walk_switch <= 1))
+    return fail("free_walk_share must be within [0, 1), free_walk_switch within [0, 1]");
   if (!(kld_epsilon >= 0 && kld_epsilon < 1))
     return fail("kld_epsilon must be within [0, 1) (0: off)");
   if (!(kld_quantile > 0.5 && kld_quantile < 1))
@@ -233,7 +236,11 @@ void MapParticleFilter::ContinueFrom(const MapParticleFilter& from,
 std::uint8_t MapParticleFilter::RandomHand() {
   // Only the wall-following model reads the hand: without it, no draw (the random stream, and
   // so the results, stay those of the paper's filter).
-  return options_.wall_follow && Uniform() >= 0.5 ? 1 : 0;
+  if (!options_.wall_follow) return 0;
+  const double u = Uniform();
+  const double f = options_.free_walk_share;
+  if (u < f) return 2;
+  return (u - f) / (1 - f) >= 0.5 ? 1 : 0;
 }
 
 void MapParticleFilter::Normalize() {
@@ -282,6 +289,46 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
         static_cast<std::size_t>(std::lower_bound(cdf.begin(), cdf.end(), u) - cdf.begin()),
         alive.size() - 1);
     particles_[i] = particles_[alive[k]];
+  }
+  Normalize();
+}
+
+void MapParticleFilter::ReplaceWithinModels(const std::vector<char>& dead) {
+  // Per model (0: searching, 1: free walking): its survivors' running weight and indices.
+  std::vector<double> cdf[2];
+  std::vector<int> alive[2];
+  double acc[2] = {0, 0}, mass[2] = {0, 0};
+  for (int i = 0; i < static_cast<int>(particles_.size()); ++i) {
+    const int c = particles_[i].hand == 2 ? 1 : 0;
+    mass[c] += particles_[i].weight;
+    if (dead[i]) continue;
+    acc[c] += particles_[i].weight;
+    cdf[c].push_back(acc[c]);
+    alive[c].push_back(i);
+  }
+  const bool has[2] = {acc[0] > 0, acc[1] > 0};
+  if (!has[0] && !has[1]) {
+    ReplaceFromSurvivors(dead);  // every particle hit a wall: the restart
+    return;
+  }
+  for (int i = 0; i < static_cast<int>(particles_.size()); ++i) {
+    if (!dead[i]) continue;
+    int c = particles_[i].hand == 2 ? 1 : 0;
+    if (!has[c]) c = 1 - c;  // a model with no survivor continues from the other's
+    const double u = Uniform() * acc[c];
+    const auto k = std::min(static_cast<std::size_t>(
+                                std::lower_bound(cdf[c].begin(), cdf[c].end(), u) - cdf[c].begin()),
+                            alive[c].size() - 1);
+    particles_[i] = particles_[alive[c][k]];
+  }
+  // Each model with survivors keeps the belief it had before the step: the walls weigh the
+  // particles within a model, not the models against each other (a free walker's particles
+  // diffuse into walls that the searcher's prior keeps its particles away from).
+  double now[2] = {0, 0};
+  for (const auto& q : particles_) now[q.hand == 2 ? 1 : 0] += q.weight;
+  for (auto& q : particles_) {
+    const int c = q.hand == 2 ? 1 : 0;
+    if (has[0] && has[1] && now[c] > 0) q.weight *= mass[c] / now[c];
   }
   Normalize();
 }
@@ -357,7 +404,7 @@ int MapParticleFilter::OccupiedBins(const std::vector<Particle>& particles) cons
     const auto iy =
         static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(g.y())) & 0xFFFFF);
     const auto ih = static_cast<std::uint64_t>(std::floor(h / options_.kld_bin_rad)) & 0x3FFF;
-    keys.push_back((ix << 44) | (iy << 24) | (ih << 1) | (q.hand & 1u));
+    keys.push_back((ix << 44) | (iy << 24) | (ih << 2) | (q.hand & 3u));
   }
   std::sort(keys.begin(), keys.end());
   return static_cast<int>(std::unique(keys.begin(), keys.end()) - keys.begin());
@@ -431,11 +478,16 @@ void MapParticleFilter::Predict(const Vec2& d) {
       }
     }
     if (n_dead < particles_.size() || attempt == 3) {
-      if (n_dead > 0) ReplaceFromSurvivors(dead);
+      if (n_dead > 0) {
+        if (options_.wall_follow && options_.free_walk_share > 0)
+          ReplaceWithinModels(dead);
+        else
+          ReplaceFromSurvivors(dead);
+      }
       if (options_.wall_follow && len > 0.1) {
         // Full weight while uncertain; once converged, tempered (see the option).
         const bool uncertain =
-            forced_pattern_updates_ > 0 || Covariance().trace() > PatternThreshold();
+            forced_pattern_updates_ > 0 || TriggerVariance() > PatternThreshold();
         const double power = uncertain ? 1.0 : options_.wall_follow_converged_power;
         if (power > 0) WeighWallFollowing(std::atan2(d.y(), d.x()), power);
       }
@@ -481,7 +533,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
   for (const auto& sc : pc.sequences) {
     for (const auto& r : sc.rmse_m) best_anywhere = std::min({best_anywhere, r[0], r[1]});
   }
-  const bool converged_now = Covariance().trace() <= PatternThreshold();
+  const bool converged_now = TriggerVariance() <= PatternThreshold();
   if (forced_pattern_updates_ > 0) {
     --forced_pattern_updates_;
   } else if (converged_now && !AwaitingConfirmation()) {
@@ -577,7 +629,10 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
         q.heading_offset_rad = WrapAngle(o.heading - odometry_heading_rad +
                                          rng_.Normal(0, options_.resample_heading_sigma_rad));
         q.weight = new_weight;
-        q.hand = static_cast<std::uint8_t>(o.end);
+        q.hand = options_.wall_follow && options_.free_walk_share > 0 &&
+                         Uniform() < options_.free_walk_share
+                     ? 2
+                     : static_cast<std::uint8_t>(o.end);
         q.p_off_wall = 0;
         ++summary_.pattern_resamples;
       }
@@ -589,7 +644,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
 
 bool MapParticleFilter::WantsPatterns() const {
   return options_.pseudo_observations && (forced_pattern_updates_ > 0 || AwaitingConfirmation() ||
-                                          Covariance().trace() > PatternThreshold());
+                                          TriggerVariance() > PatternThreshold());
 }
 
 bool MapParticleFilter::Distinctive(const PatternComparison& pc, double best_rmse_m) const {
@@ -647,11 +702,37 @@ std::shared_ptr<const DistanceField> MakeWallDistanceField(const FloorPlan& plan
 }
 
 void MapParticleFilter::WeighWallFollowing(double step_heading_odometry_rad, double power) {
+  const double f = options_.free_walk_share;
+  if (f > 0) {
+    // The walker's model as a slowly switching hidden state (its stationary share is f).
+    const double to_free = options_.free_walk_switch * f;
+    const double to_search = options_.free_walk_switch * (1 - f);
+    for (auto& q : particles_) {
+      const double u = Uniform();
+      if (q.hand == 2 && u < to_search) {
+        q.hand = u < 0.5 * to_search ? 0 : 1;
+        q.p_off_wall = 0;
+      } else if (q.hand != 2 && u < to_free) {
+        q.hand = 2;
+      }
+    }
+  }
+  double searching_before = 0, searching_after = 0;
   for (auto& q : particles_) {
+    if (q.hand == 2) continue;  // a free walker: no wall to follow
+    searching_before += q.weight;
     const double l = WallFollowingLikelihood(*wall_distance_, q.position_n,
                                              q.heading_offset_rad + step_heading_odometry_rad,
                                              q.hand == 0, options_, q.p_off_wall);
     q.weight *= power == 1.0 ? l : std::pow(l, power);
+    searching_after += q.weight;
+  }
+  // With free walkers, a prior within the searching model: it moves no belief between models.
+  if (f > 0 && searching_after > 0) {
+    const double scale = searching_before / searching_after;
+    for (auto& q : particles_) {
+      if (q.hand != 2) q.weight *= scale;
+    }
   }
   Normalize();
   ResampleIfDegenerate();
@@ -682,7 +763,7 @@ double MapParticleFilter::PatternThreshold() const {
 
 void MapParticleFilter::NoteConvergence() {
   if (!converged_ && options_.use_patterns_above_variance_m2 > 0 && !AwaitingConfirmation() &&
-      Covariance().trace() <= options_.use_patterns_above_variance_m2) {
+      TriggerVariance() <= options_.use_patterns_above_variance_m2) {
     converged_ = true;
     tracking_ = true;
   }
@@ -706,6 +787,20 @@ Vec2 MapParticleFilter::Mean() const {
   double sum = 0;
   for (const auto& q : particles_) m += q.weight * q.position_n, sum += q.weight;
   return sum > 0 ? Vec2(m / sum) : m;
+}
+
+double MapParticleFilter::TriggerVariance() const {
+  if (!(options_.wall_follow && options_.free_walk_share > 0)) return Covariance().trace();
+  Vec2 m = Vec2::Zero();
+  double sum = 0;
+  for (const auto& q : particles_)
+    if (q.hand != 2) m += q.weight * q.position_n, sum += q.weight;
+  if (!(sum > 0)) return Covariance().trace();
+  m /= sum;
+  double v = 0;
+  for (const auto& q : particles_)
+    if (q.hand != 2) v += q.weight * (q.position_n - m).squaredNorm();
+  return v / sum + 2e-6;
 }
 
 Mat2 MapParticleFilter::Covariance() const {

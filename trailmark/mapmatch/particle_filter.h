@@ -130,6 +130,26 @@ struct MapParticleFilterOptions {
   double wall_follow_return = 0.15;
   double wall_follow_off_likelihood = 0.6;
   double wall_follow_converged_power = 1.0;
+  /// Ours: a walker who does not search (walks a corridor's middle along a beacon trail,
+  /// crosses a room) as a second motion model beside the wall-following one. A share
+  /// `free_walk_share` of the belief is free walkers (hand 2): the wall-following likelihood is
+  /// not applied to them; applied to the searchers, it is renormalized within them (a prior on
+  /// where a searcher stands). Walls eliminate particles within each model and the model keeps
+  /// its share: a searcher's prior keeps its particles away from walls that a free walker's
+  /// particles diffuse into, so weighing the models by eliminations made the searchers win on
+  /// a trail walked down the middle (the free share fell 0.5 -> 0.15), where they are wrong. In
+  /// a plain corridor the data cannot tell the two apart; the share is a stated prior, and
+  /// only the pattern comparisons move belief between the models. Per step a particle becomes
+  /// a free walker with probability free_walk_switch x share and a searcher with
+  /// free_walk_switch x (1 - share). The filter's "uncertain" (pattern comparisons, the
+  /// wall-following weight's power, convergence) reads the searchers' variance: the free
+  /// walkers' wider spread is the reported uncertainty, not a reason to compare patterns (a
+  /// known start on the multi-floor building compared, and was lost, where the searchers were
+  /// sure). 0: the wall-following model alone (before 2026-12-06). 0.5 and 0.1 chosen on the
+  /// neighbour trail 401-410 and house searches 1-10, checked on 511-530 / 611-630
+  /// (docs/mapmatch.md).
+  double free_walk_share = 0.5;
+  double free_walk_switch = 0.1;
   /// Weight (x 1/N) of a particle drawn from the pseudo observations; 1 = as much as an
   /// average particle (ours: the paper does not say).
   double new_particle_weight = 1.0;
@@ -204,7 +224,7 @@ class MapParticleFilter {
     double heading_offset_rad = 0;  ///< odometry frame -> map frame
     double weight = 0;
     Vec2 step_from_n = Vec2::Zero();  ///< where its last time update started (for checks)
-    std::uint8_t hand = 0;            ///< search hand hypothesis: 0 left, 1 right
+    std::uint8_t hand = 0;            ///< 0 left-hand search, 1 right-hand, 2 free walker
     float p_off_wall = 0;             ///< probability it follows no wall of the map
   };
 
@@ -267,6 +287,9 @@ class MapParticleFilter {
  private:
   void Normalize();
   void ReplaceFromSurvivors(const std::vector<char>& dead);
+  /// With free walkers (free_walk_share > 0): the dead replaced by survivors of their own
+  /// model, each model keeping its share of the belief.
+  void ReplaceWithinModels(const std::vector<char>& dead);
   /// Systematic resampling to the same number of particles, or with KLD-sampling on to the
   /// number the resampled particles' histogram asks for.
   void SystematicResample();
@@ -284,6 +307,9 @@ class MapParticleFilter {
   Vec2 GridNoise(double sigma_m);
   bool InsideBuilding(const Vec2& p) const;
   double PatternThreshold() const;
+  /// The variance the filter's own rules read (see free_walk_share): the searchers' when the
+  /// belief holds free walkers too, else the belief's.
+  double TriggerVariance() const;
   void NoteConvergence();
   double Uniform() { return rng_.Uniform(); }
   std::uint8_t RandomHand();
