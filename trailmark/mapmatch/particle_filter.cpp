@@ -253,6 +253,14 @@ void MapParticleFilter::Normalize() {
   for (auto& q : particles_) q.weight /= sum;
 }
 
+int MapParticleFilter::DrawSurvivor(const std::vector<double>& cdf, const std::vector<int>& alive) {
+  const double u = Uniform() * cdf.back();
+  const auto k =
+      std::min(static_cast<std::size_t>(std::lower_bound(cdf.begin(), cdf.end(), u) - cdf.begin()),
+               alive.size() - 1);
+  return alive[k];
+}
+
 void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
   std::vector<double> cdf;
   std::vector<int> alive;
@@ -284,11 +292,7 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
   }
   for (int i = 0; i < static_cast<int>(particles_.size()); ++i) {
     if (!dead[i]) continue;
-    const double u = Uniform() * acc;
-    const auto k = std::min(
-        static_cast<std::size_t>(std::lower_bound(cdf.begin(), cdf.end(), u) - cdf.begin()),
-        alive.size() - 1);
-    particles_[i] = particles_[alive[k]];
+    particles_[i] = particles_[DrawSurvivor(cdf, alive)];
   }
   Normalize();
 }
@@ -315,11 +319,7 @@ void MapParticleFilter::ReplaceWithinModels(const std::vector<char>& dead) {
     if (!dead[i]) continue;
     int c = particles_[i].hand == 2 ? 1 : 0;
     if (!has[c]) c = 1 - c;  // a model with no survivor continues from the other's
-    const double u = Uniform() * acc[c];
-    const auto k = std::min(static_cast<std::size_t>(
-                                std::lower_bound(cdf[c].begin(), cdf[c].end(), u) - cdf[c].begin()),
-                            alive[c].size() - 1);
-    particles_[i] = particles_[alive[c][k]];
+    particles_[i] = particles_[DrawSurvivor(cdf[c], alive[c])];
   }
   // Each model with survivors keeps the belief it had before the step: the walls weigh the
   // particles within a model, not the models against each other (a free walker's particles

@@ -287,6 +287,9 @@ class MapParticleFilter {
  private:
   void Normalize();
   void ReplaceFromSurvivors(const std::vector<char>& dead);
+  /// A survivor drawn by weight: `cdf` its survivors' running weight (last > 0), `alive` their
+  /// indices.
+  int DrawSurvivor(const std::vector<double>& cdf, const std::vector<int>& alive);
   /// With free walkers (free_walk_share > 0): the dead replaced by survivors of their own
   /// model, each model keeping its share of the belief.
   void ReplaceWithinModels(const std::vector<char>& dead);
