@@ -4,7 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
-
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -84,6 +84,32 @@ TEST(MapLeastSquares, MarginalCovariancesAreHonestOverMonteCarlo) {
   EXPECT_NEAR(nees / n, 2.0, 0.3);
 }
 
+// The drop priors (all but the two surveyed) on one track with shared errors.
+void OnOneTrack(const std::vector<Vec2>& truth, MapProblem* p) {
+  p->tracks.push_back({TrackVec(0.05 * 0.05, 1e-6, 0.03 * 0.03, 0.03 * 0.03).asDiagonal()});
+  for (auto& q : p->priors) {
+    if (q.i == 4 || q.i == 12) continue;
+    q.track = 0;
+    q.along << -truth[q.i].y(), 0.5 * q.i, truth[q.i].x(), 0.2 * q.i, truth[q.i].x(), 0.1 * q.i,
+        truth[q.i].y(), -0.3 * q.i;
+  }
+}
+
+// Our sparse-Cholesky marginals against ceres::Covariance (SPARSE_QR); ours returned.
+MapSolution ExpectMarginalsEqualCeres(const MapProblem& p, const std::vector<Vec2>& truth) {
+  MapLeastSquaresOptions ours, reference;
+  reference.reference_covariance = true;
+  const MapSolution a = SolveMapLeastSquares(p, {truth}, ours);
+  const MapSolution b = SolveMapLeastSquares(p, {truth}, reference);
+  EXPECT_TRUE(a.ok) << a.why;
+  EXPECT_TRUE(b.ok) << b.why;
+  EXPECT_EQ(a.cov.size(), truth.size());
+  EXPECT_EQ(b.cov.size(), truth.size());
+  for (std::size_t i = 0; i < std::min(a.cov.size(), b.cov.size()); ++i)
+    EXPECT_LT((a.cov[i] - b.cov[i]).norm(), 1e-9 * (1 + b.cov[i].norm())) << i;
+  return a;
+}
+
 TEST(MapLeastSquares, MarginalsEqualCeresCovarianceWithTracksAndTheRobustLossActive) {
   // Our sparse-Cholesky marginals against ceres::Covariance (SPARSE_QR) on a problem with a
   // track's shared errors, drop priors on it and one NLOS link far into the Huber loss.
@@ -91,21 +117,139 @@ TEST(MapLeastSquares, MarginalsEqualCeresCovarianceWithTracksAndTheRobustLossAct
   const auto truth = UTrail();
   MapProblem p = Problem(truth, 0.1, 0.0, rng);
   p.links[5].range_m += 1.5;  // NLOS
-  p.tracks.push_back({Vec3(0.05 * 0.05, 1e-6, 0.03 * 0.03).asDiagonal()});
-  for (auto& q : p.priors) {
-    if (q.i == 4 || q.i == 12) continue;
+  OnOneTrack(truth, &p);
+  ExpectMarginalsEqualCeres(p, truth);
+}
+
+// The U trail's drop priors on a track with shared errors, and an agent walking back along the
+// top arm ranging the beacons of the bottom arm (sightings across the trail, issue 22 item 1):
+// two chains of sightings, one range an outlier far into Tukey's bound.
+MapProblem WithSightings(const std::vector<Vec2>& truth, Random& rng) {
+  MapProblem p = Problem(truth, 0.05, 0.3, rng);
+  OnOneTrack(truth, &p);
+  for (auto& q : p.priors)
+    if (q.track == 0) q.cov = Mat2::Identity() * 0.09;
+  for (int k = 0; k < 12; ++k) {
+    MapSighting q;
+    const Vec2 at(14.0 - 1.2 * k, 7.0);  // walking back along the top arm, 1 m inside it
+    q.i = std::min(k, 8);                // a beacon of the bottom arm
+    q.range_m = (at - truth[q.i]).norm() + 0.1 * rng.Normal();
+    if (k == 5) q.range_m += 3.0;  // an outlier
     q.track = 0;
-    q.along << -truth[q.i].y(), 0.5 * q.i, truth[q.i].x(), truth[q.i].x(), 0.1 * q.i, truth[q.i].y();
+    q.position_n = at + 0.2 * Vec2(rng.Normal(), rng.Normal());
+    q.along << -at.y(), 30.0 + k, at.x(), 1.5, at.x(), 30.0 + k, at.y(), -1.5;
+    if (k == 0 || k == 6) {  // two chains
+      q.cov = Vec3(0.25, 0.25, 0.01).asDiagonal();
+    } else {
+      q.from_sighting = k - 1;
+      q.cov = Vec3(0.02, 0.02, 1e-4).asDiagonal();
+    }
+    p.sightings.push_back(q);
   }
-  MapLeastSquaresOptions ours, reference;
-  reference.reference_covariance = true;
-  const MapSolution a = SolveMapLeastSquares(p, {truth}, ours);
-  const MapSolution b = SolveMapLeastSquares(p, {truth}, reference);
-  ASSERT_TRUE(a.ok) << a.why;
-  ASSERT_TRUE(b.ok) << b.why;
-  ASSERT_EQ(a.cov.size(), truth.size());
+  return p;
+}
+
+// The problem's cost written out: Huber links, Gaussian priors and tracks, the sightings' start
+// and chain priors and their ranges under Tukey's biweight (Ceres' rho / 2).
+double WrittenOutCost(const MapProblem& p, const std::vector<double>& x) {
+  const int n = p.beacons;
+  const auto beacon = [&](int i) { return Vec2(x[2 * i], x[2 * i + 1]); };
+  const auto track = [&](int k) {
+    return Eigen::Map<const TrackVec>(&x[2 * n + kTrackErrors * k]);
+  };
+  const int t0 = 2 * n + kTrackErrors * static_cast<int>(p.tracks.size());
+  const auto state = [&](int k) {
+    return Vec3(x[t0 + 3 * k], x[t0 + 3 * k + 1], x[t0 + 3 * k + 2]);
+  };
+  double cost = 0;
+  for (const MapLink& l : p.links) {
+    const double r = ((beacon(l.i) - beacon(l.j)).norm() - l.range_m) / l.sigma_m;
+    cost += std::abs(r) <= 2 ? 0.5 * r * r : 2 * std::abs(r) - 2;
+  }
+  for (const MapPrior& q : p.priors) {
+    const Vec2 d =
+        beacon(q.i) - q.position_n - (q.track >= 0 ? Vec2(q.along * track(q.track)) : Vec2::Zero());
+    cost += 0.5 * d.dot(q.cov.ldlt().solve(d));
+  }
+  for (std::size_t k = 0; k < p.tracks.size(); ++k)
+    cost += 0.5 * track(k).dot(p.tracks[k].cov.ldlt().solve(TrackVec(track(k))));
+  for (std::size_t k = 0; k < p.sightings.size(); ++k) {
+    const MapSighting& q = p.sightings[k];
+    const Vec3 s = state(k);
+    Vec3 u;
+    if (q.from_sighting >= 0) {
+      const MapSighting& a = p.sightings[q.from_sighting];
+      const Vec3 sa = state(q.from_sighting);
+      const Vec2 d = q.position_n - a.position_n;
+      u << s.head<2>() - sa.head<2>() - d - sa.z() * Vec2(-d.y(), d.x()) -
+               (q.along - a.along) * track(q.track),
+          s.z() - sa.z();
+    } else {
+      u << s.head<2>() - q.position_n - q.along * track(q.track), s.z();
+    }
+    cost += 0.5 * u.dot(q.cov.ldlt().solve(u));
+    const double r = ((s.head<2>() - beacon(q.i)).norm() - q.range_m) / q.sigma_m;
+    const double c2 = 4.685 * 4.685, v = 1 - r * r / c2;
+    cost += r * r > c2 ? c2 / 6 : c2 / 6 * (1 - v * v * v);
+  }
+  return cost;
+}
+
+TEST(MapLeastSquares, SightingsSolutionIsTheMinimumOfTheWrittenOutCost) {
+  // The sightings' costs and their analytic Jacobians (chain, start, range) against the cost
+  // written out here: its numerical gradient vanishes at the solution, and the solution's
+  // chi2 is twice it.
+  Random rng(31);
+  const auto truth = UTrail();
+  const MapProblem p = WithSightings(truth, rng);
+  const MapSolution s = SolveMapLeastSquares(p, {truth});
+  ASSERT_TRUE(s.ok) << s.why;
+  ASSERT_EQ(s.sighting_state.size(), p.sightings.size());
+  EXPECT_EQ(s.sighting_outliers, 1);
+  std::vector<double> x;
+  for (const Vec2& b : s.position_n) x.push_back(b.x()), x.push_back(b.y());
+  for (const TrackVec& e : s.track_errors) x.insert(x.end(), e.data(), e.data() + kTrackErrors);
+  for (const Vec3& v : s.sighting_state) x.insert(x.end(), v.data(), v.data() + 3);
+  EXPECT_NEAR(2 * WrittenOutCost(p, x), s.chi2, 1e-6 * s.chi2);
+  EXPECT_NEAR(s.chi2_sightings + s.chi2_links + s.chi2_priors, s.chi2, 1e-9 * s.chi2);
+  for (std::size_t k = 0; k < x.size(); ++k) {
+    const double h = 1e-6;
+    std::vector<double> up = x, down = x;
+    up[k] += h;
+    down[k] -= h;
+    EXPECT_NEAR((WrittenOutCost(p, up) - WrittenOutCost(p, down)) / (2 * h), 0.0, 1e-4) << k;
+  }
+  // A wrong chain (its heading lever left out) is not the minimum.
+  MapProblem wrong = p;
+  for (auto& q : wrong.sightings) q.position_n.x() += 0.5;
+  EXPECT_GT(std::abs(WrittenOutCost(wrong, x) - WrittenOutCost(p, x)), 1e-3);
+}
+
+TEST(MapLeastSquares, MarginalsEqualCeresCovarianceWithSightings) {
+  Random rng(37);
+  const auto truth = UTrail();
+  const MapProblem p = WithSightings(truth, rng);
+  const MapSolution a = ExpectMarginalsEqualCeres(p, truth);
+  ASSERT_TRUE(a.ok);
+  // The sightings inform the map: its marginals are smaller than without them.
+  MapProblem without = p;
+  without.sightings.clear();
+  const MapSolution c = SolveMapLeastSquares(without, {truth});
+  ASSERT_TRUE(c.ok);
+  double with_trace = 0, without_trace = 0;
   for (std::size_t i = 0; i < truth.size(); ++i)
-    EXPECT_LT((a.cov[i] - b.cov[i]).norm(), 1e-9 * (1 + b.cov[i].norm())) << i;
+    with_trace += a.cov[i].trace(), without_trace += c.cov[i].trace();
+  EXPECT_LT(with_trace, without_trace);
+  // Bad sightings are refused.
+  MapProblem bad = p;
+  bad.sightings[3].from_sighting = 5;  // not an earlier one
+  EXPECT_THROW(SolveMapLeastSquares(bad, {truth}), std::invalid_argument);
+  bad = p;
+  bad.sightings[2].cov(0, 0) = -1;
+  EXPECT_THROW(SolveMapLeastSquares(bad, {truth}), std::invalid_argument);
+  bad = p;
+  bad.sightings[2].range_m = std::nan("");
+  EXPECT_THROW(SolveMapLeastSquares(bad, {truth}), std::invalid_argument);
 }
 
 TEST(MapLeastSquares, AMovedSurveyIsInconsistent) {

@@ -101,5 +101,78 @@ TEST(BeaconTrailEstimator, ADropOfAnAgentIsNotABeacon) {
   EXPECT_FALSE(MapPosition(estimator, "ff1").has_value());
 }
 
+// Out along +x, back along -x (a reversal whose step points at pi - eps or -pi + eps: the steps
+// cannot tell a half turn left from one right), 3 m back, then a left turn and 3 m along -y; b1
+// dropped at the end of the way out, b2 before the left turn, b3 at the end. The prior of each
+// drop (no links: never solved) as its map position.
+std::vector<BeaconPosition> ReversalPriors(double eps, const BeaconTrailOptions& options) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(0, 0, 0), 0.05, 0.0, 0.01));
+  for (const char* id : {"b1", "b2", "b3"}) {
+    NodeInfo b;
+    b.id = id;
+    b.kind = NodeKind::kCrumb;
+    info.nodes.push_back(b);
+  }
+  BeaconTrailEstimator estimator(info, options);
+  VectorSink sink;
+  TimeS t = 0;
+  const auto step = [&](const Vec2& d) {
+    Step s;
+    s.t0 = t;
+    s.t1 = t + 0.5;
+    s.agent = "ff1";
+    s.delta_n = Vec3(d.x(), d.y(), 0);
+    s.variance_m2 = Vec3(1e-4, 1e-4, 1e-4);
+    estimator.Add(s, sink);
+    t += 0.5;
+  };
+  for (int k = 0; k < 10; ++k) step(Vec2(0.5, 0));
+  estimator.Add(MissionEvent{t, "ff1", "drop", "b1"}, sink);
+  step(Vec2(-0.5, eps));  // the reversal: pi - eps (eps > 0) or -pi + |eps|
+  for (int k = 0; k < 5; ++k) step(Vec2(-0.5, 0));
+  estimator.Add(MissionEvent{t, "ff1", "drop", "b2"}, sink);
+  for (int k = 0; k < 6; ++k) step(Vec2(0, -0.5));  // a left turn (from -x to -y)
+  estimator.Add(MissionEvent{t, "ff1", "drop", "b3"}, sink);
+  estimator.Finish(sink);
+  std::vector<BeaconPosition> out;
+  for (const char* id : {"b1", "b2", "b3"}) {
+    const auto p = MapPosition(estimator, id);
+    EXPECT_TRUE(p.has_value()) << id;
+    out.push_back(p.value_or(BeaconPosition{}));
+  }
+  return out;
+}
+
+TEST(BeaconTrailEstimator, AReversalsGuessedSignDoesNotTurnTheMapsTurnScaleLever) {
+  // The gyro's turn-scale error is a track error of the map: every turn's share of it moves the
+  // drops after it (its lever). A reversal's sign is a guess; drawn as +pi or as -pi the same
+  // walk must give the same priors. Counted, the two guesses differ by 2 pi in the turn after
+  // the reversal, and the last drop's prior by metres of lever x 3 %.
+  const double eps = 1e-4;
+  for (const double ambiguous : {2.5, 7.0}) {
+    BeaconTrailOptions options;
+    options.map_turn_ambiguous_rad = ambiguous;
+    const auto plus = ReversalPriors(eps, options);
+    const auto minus = ReversalPriors(-eps, options);
+    for (int i = 0; i < 3; ++i) {
+      const double d = (plus[i].position_n - minus[i].position_n).norm();
+      EXPECT_LT(d, 1e-3) << i;  // the steps are the same to eps
+      const double c = (plus[i].cov - minus[i].cov).norm() / plus[i].cov.norm();
+      if (ambiguous < 3 || i < 2)
+        EXPECT_LT(c, 1e-3) << "b" << i + 1 << " with the reversal left out: " << ambiguous;
+      else
+        EXPECT_GT(c, 0.05) << "b3 with the reversal counted";
+    }
+  }
+  // Left out, the reversal's share is a heading error of its own: the drops after it are
+  // wider than with no turn-scale error at all.
+  BeaconTrailOptions without;
+  without.map_turn_scale = false;
+  const auto plain = ReversalPriors(eps, without);
+  const auto with = ReversalPriors(eps, BeaconTrailOptions{});
+  EXPECT_GT(with[2].cov.trace(), plain[2].cov.trace());
+}
+
 }  // namespace
 }  // namespace trailmark::beacons

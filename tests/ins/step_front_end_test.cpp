@@ -133,6 +133,26 @@ TEST(DeadReckoning, SetPositionKeepsTheSharedErrorsForTheWalkAfter) {
   EXPECT_EQ(dr.position_n(), before);
 }
 
+TEST(DeadReckoning, AnAddedHeadingVarianceTurnsTheWalkAfterIt) {
+  // An extra heading error of variance v (a reversal whose turn's sign is unknown): the walk
+  // after it gains v perp(d) perp(d)^T on its position; the position before it is unchanged.
+  PdrOptions o = WhiteOnly();
+  DeadReckoning dr(Vec3::Zero(), 0.1, o, 0.0);
+  TimeS t = 0;
+  for (int k = 0; k < 10; ++k, t += 0.5)
+    dr.AddStep({t, t + 0.5, "a", Vec3(0.7, 0, 0), Vec3(1e-6, 1e-6, 0)});
+  const Mat2 before = dr.covariance();
+  dr.AddHeadingVariance(0.01);
+  EXPECT_EQ(dr.covariance(), before);
+  for (int k = 0; k < 10; ++k, t += 0.5)
+    dr.AddStep({t, t + 0.5, "a", Vec3(0, 0.7, 0), Vec3(1e-6, 1e-6, 0)});
+  Mat2 expected = before + Mat2::Identity() * 10 * 1e-6;
+  expected(0, 0) += 0.01 * 7 * 7;  // perp((0, 7)) = (-7, 0)
+  EXPECT_LT((dr.covariance() - expected).norm(), 1e-9);
+  EXPECT_THROW(dr.AddHeadingVariance(-1e-3), std::invalid_argument);
+  EXPECT_THROW(dr.AddHeadingVariance(NAN), std::invalid_argument);
+}
+
 TEST(DeadReckoning, CorrelatedHeadingAndScaleErrorsMatchMonteCarlo) {
   // Exact reference: the covariance of the position over many walks whose steps are turned by
   // a heading offset + drift x time + a turn-scale error x the angle turned + a random walk and

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numeric>
 #include <stdexcept>
 
 #include "trailmark/beacons/mds.h"
@@ -15,6 +16,13 @@
 
 namespace trailmark::beacons {
 namespace {
+
+// A problem solved again (its priors scaled) starts where its solution is.
+void WarmStart(const MapSolution& solution, MapProblem* problem) {
+  problem->track_start = solution.track_errors;
+  for (std::size_t k = 0; k < problem->sightings.size(); ++k)
+    problem->sightings[k].start = solution.sighting_state[k];
+}
 
 // The sigma of the median of `count` ranges (1.2533 sigma / sqrt(n) for large n, the mean's for
 // n <= 2).
@@ -35,6 +43,10 @@ bool BeaconMapOptions::IsValid(std::string* why) const {
     if (why) *why = "resolve_count_growth must be >= 1 and resolve_median_shift_sigma >= 0";
     return false;
   }
+  if (max_sightings < 0) {
+    if (why) *why = "max_sightings must be >= 0";
+    return false;
+  }
   return least_squares.IsValid(why);
 }
 
@@ -46,6 +58,16 @@ std::string BeaconMapSummary::BriefReport() const {
       reflected ? " (layout flipped)" : "");
   if (least_squares_parts > 0)
     text += fmt::format("; least squares chi2/dof {:.2f}", chi2_per_dof);
+  if (sightings > 0)
+    text += fmt::format(
+        "; {} sighting(s) from the agents' tracks ({} in the last solve, {} of "
+        "them beyond the robust bound)",
+        sightings, sightings_used, sighting_outliers);
+  if (tracks_without_sightings > 0)
+    text += fmt::format(
+        "; the sightings of {} track(s) left out: their dead reckoning drifted "
+        "beyond its stated sigma (the sightings' chain is first order in it)",
+        tracks_without_sightings);
   if (track_inflated_solves > 0)
     text += fmt::format("; dead-reckoning drift beyond its stated sigma in {} solve(s) (last: "
                         "x{:.1f} in variance)",
@@ -76,6 +98,8 @@ int BeaconMap::Add(const std::string& id) {
   neighbours_.emplace_back();
   samples_.emplace_back();
   changed_.push_back(false);
+  sightings_new_.push_back(0);
+  sightings_used_.push_back(0);
   Touch(static_cast<int>(ids_.size()) - 1);
   return static_cast<int>(ids_.size()) - 1;
 }
@@ -112,24 +136,47 @@ void BeaconMap::SetAnchorHint(int i, const Vec2& p, const Mat2& cov) {
   Touch(i);
 }
 
-int BeaconMap::AddTrack(const Mat3& cov) {
-  tracks_.push_back(0.5 * (cov + cov.transpose()));
+int BeaconMap::AddTrack(const MapTrack& track) {
+  tracks_.push_back({0.5 * (track.cov + track.cov.transpose()), track.dof});
   return static_cast<int>(tracks_.size()) - 1;
 }
 
 void BeaconMap::SetTrackHint(int i, int track, const Vec2& p, const Mat2& white_cov,
-                             const Eigen::Matrix<double, 2, 3>& along, int from,
-                             const Mat2& increment_cov) {
+                             const TrackLever& along, int from, const Mat2& increment_cov) {
   if (track < 0 || track >= static_cast<int>(tracks_.size()))
     throw std::invalid_argument(fmt::format("beacon map: no track {}", track));
   if (from >= static_cast<int>(ids_.size()) || from == i)
     throw std::invalid_argument(fmt::format("beacon map: hint of {} from {}", i, from));
   const Mat2 white = 0.5 * (white_cov + white_cov.transpose());
-  const Mat2 marginal = white + along * tracks_[track] * along.transpose();
+  const Mat2 marginal = white + along * tracks_[track].cov * along.transpose();
   hint_[i] = BeaconPosition{p, 0.5 * (marginal + marginal.transpose())};
   hint_track_[i] = TrackHint{track, white, along, from,
                              0.5 * (increment_cov + increment_cov.transpose())};
   Touch(i);
+}
+
+void BeaconMap::AddSighting(int i, int track, const Vec2& position_n, const TrackLever& along,
+                            const Mat3& white_cov, const Mat3& segment_cov, double range_m,
+                            double sigma_m) {
+  if (!options_.sightings || options_.solver != MapSolver::kLeastSquares) return;
+  if (i < 0 || i >= static_cast<int>(ids_.size()) || track < 0 ||
+      track >= static_cast<int>(tracks_.size()))
+    throw std::invalid_argument(
+        fmt::format("beacon map: sighting of beacon {} on track {}", i, track));
+  if (!position_n.allFinite() || !white_cov.allFinite() || !segment_cov.allFinite() ||
+      !along.allFinite() || !std::isfinite(range_m) || range_m < 0 || !(sigma_m > 0) ||
+      !std::isfinite(sigma_m))
+    throw std::invalid_argument(
+        fmt::format("beacon map: a sighting of {} is not finite or has sigma <= 0", ids_[i]));
+  track_sightings_.resize(tracks_.size(), 0);
+  sighting_state_.emplace_back();
+  sightings_.push_back({i, track, track_sightings_[track]++, position_n, along,
+                        0.5 * (white_cov + white_cov.transpose()),
+                        0.5 * (segment_cov + segment_cov.transpose()), range_m, sigma_m});
+  ++summary_.sightings;
+  // New sightings matter once they have grown by resolve_count_growth (as a pair's ranges do).
+  const double used = static_cast<double>(sightings_used_[i]);
+  if (++sightings_new_[i] >= std::max(1.0, (options_.resolve_count_growth - 1) * used)) Touch(i);
 }
 
 bool BeaconMap::AddRange(int i, int j, double range_m) {
@@ -164,6 +211,44 @@ std::optional<BeaconPosition> BeaconMap::Position(int i) const {
 void BeaconMap::Solve() {
   BeginSolve(false);
   EndSolve();
+}
+
+std::vector<MapSighting> BeaconMap::PartSightings(const std::vector<int>& local,
+                                                  std::vector<std::size_t>* ids) const {
+  // The part's latest sightings, in the order they came (time order per track).
+  std::vector<std::size_t> chosen;
+  for (std::size_t k = sightings_.size(); k-- > 0;) {
+    if (static_cast<int>(chosen.size()) >= options_.max_sightings) break;
+    if (local[sightings_[k].beacon] >= 0 &&
+        std::find(tracks_without_sightings_.begin(), tracks_without_sightings_.end(),
+                  sightings_[k].track) == tracks_without_sightings_.end())
+      chosen.push_back(k);
+  }
+  std::reverse(chosen.begin(), chosen.end());
+  *ids = chosen;
+  // Each follows its track's previous sighting when that one is chosen too; else it starts a
+  // chain at the dead reckoning's white covariance there.
+  std::map<int, std::pair<std::size_t, int>> last;  // track -> (sequence, index in out)
+  std::vector<MapSighting> out;
+  for (const std::size_t id : chosen) {
+    const Sighting* s = &sightings_[id];
+    MapSighting q;
+    q.start = sighting_state_[id];
+    q.i = local[s->beacon];
+    q.range_m = s->range_m;
+    q.sigma_m = s->sigma_m;
+    q.track = s->track;
+    q.position_n = s->position_n;
+    q.along = s->along;
+    q.cov = s->white;
+    if (const auto l = last.find(s->track); l != last.end() && l->second.first + 1 == s->sequence) {
+      q.from_sighting = l->second.second;
+      q.cov = s->segment;
+    }
+    last[s->track] = {s->sequence, static_cast<int>(out.size())};
+    out.push_back(q);
+  }
+  return out;
 }
 
 void BeaconMap::BeginSolve(bool on_worker) {
@@ -216,6 +301,12 @@ void BeaconMap::BeginSolve(bool on_worker) {
       h.from = h.from >= 0 ? local[h.from] : -1;
       in.hint_track.push_back(h);
     }
+    if (options_.sightings && options_.solver == MapSolver::kLeastSquares)
+      in.sightings = PartSightings(local, &in.sighting_ids);
+    for (const MapSighting& q : in.sightings)
+      if (const auto t = track_state_.find(q.track); t != track_state_.end())
+        in.track_start.emplace(q.track, t->second);
+    for (int i : members) sightings_used_[i] += sightings_new_[i], sightings_new_[i] = 0;
     in.members = std::move(members);
     pending->inputs.push_back(std::move(in));
   }
@@ -247,6 +338,13 @@ void BeaconMap::EndSolve() {
     const PartInput& in = pending->inputs[k];
     PartOutput& out = outputs[k];
     for (std::size_t a = 0; a < in.members.size(); ++a) solved_[in.members[a]] = out.solved[a];
+    for (std::size_t k = 0; k < out.sighting_state.size(); ++k)
+      if (out.sighting_state[k]) sighting_state_[in.sighting_ids[k]] = out.sighting_state[k];
+    for (const auto& [track, e] : out.track_errors) track_state_[track] = e;
+    for (int track : out.sighting_fallback_tracks)
+      if (std::find(tracks_without_sightings_.begin(), tracks_without_sightings_.end(), track) ==
+          tracks_without_sightings_.end())
+        tracks_without_sightings_.push_back(track);
     parts_.emplace(in.members.front(), out.part);
     ++summary_.part_solves;
     summary_.track_inflated_solves += out.track_inflated_solves;
@@ -262,7 +360,11 @@ void BeaconMap::EndSolve() {
   summary_.chi2_per_dof = 0;
   summary_.prior_inflation = 1;
   summary_.track_inflation = 1;
+  summary_.sightings_used = summary_.sighting_outliers = 0;
+  summary_.tracks_without_sightings = tracks_without_sightings_.size();
   for (const auto& [first, part] : parts_) {
+    summary_.sightings_used += part.sightings;
+    summary_.sighting_outliers += part.sighting_outliers;
     summary_.components += part.placed;
     summary_.least_squares_parts += part.least_squares;
     summary_.rejected_parts += part.rejected;
@@ -288,7 +390,7 @@ void BeaconMap::EndSolve() {
   }
 }
 
-BeaconMap::PartOutput BeaconMap::SolvePart(const PartInput& in, const std::vector<Mat3>& tracks,
+BeaconMap::PartOutput BeaconMap::SolvePart(const PartInput& in, const std::vector<MapTrack>& tracks,
                                            const Options& options) {
   PartOutput out;
   const int m = static_cast<int>(in.members.size());
@@ -350,7 +452,7 @@ BeaconMap::PartOutput BeaconMap::SolvePart(const PartInput& in, const std::vecto
   return out;
 }
 
-bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& tracks,
+bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrack>& tracks,
                                   const Options& options,
                                   const std::optional<std::vector<Vec2>>& mds_start,
                                   PartOutput* out) {
@@ -371,7 +473,7 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& 
       continue;
     }
     const auto [it, added] = track_index.emplace(h.track, static_cast<int>(problem.tracks.size()));
-    if (added) problem.tracks.push_back({tracks[h.track]});
+    if (added) problem.tracks.push_back(tracks[h.track]);
     MapPrior q{a, prior[a]->position_n, h.white_cov, it->second, h.along};
     // The displacement from the track's previous drop when that one is in this part too.
     if (options.relative_drop_priors && h.from >= 0 && !in.surveyed[h.from] && in.hint[h.from] &&
@@ -385,6 +487,19 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& 
   }
   if (problem.priors.size() < 2) return false;
   prior_mean /= static_cast<double>(problem.priors.size());
+  for (MapSighting q : in.sightings) {
+    const auto [it, added] = track_index.emplace(q.track, static_cast<int>(problem.tracks.size()));
+    if (added) problem.tracks.push_back(tracks[q.track]);
+    q.track = it->second;
+    problem.sightings.push_back(q);
+  }
+  // Warm: each track's e where the last solve left it (its sightings' states likewise).
+  if (!in.track_start.empty()) {
+    problem.track_start.assign(problem.tracks.size(), TrackVec::Zero());
+    for (const auto& [track, k] : track_index)
+      if (const auto e = in.track_start.find(track); e != in.track_start.end())
+        problem.track_start[k] = e->second;
+  }
   for (int a = 0; a < m; ++a) {
     for (int b = a + 1; b < m; ++b) {
       if (!in.measured[a][b]) continue;
@@ -403,25 +518,81 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& 
   }
   if (mds_start) starts.push_back(*mds_start);
   MapSolution solution = SolveMapLeastSquares(problem, starts, options.least_squares);
-  // A track whose shared errors came out beyond their stated sigma (eq. of a chi-square test
-  // with 3 dof): its dead reckoning drifts more than assumed a priori (another PDR, a
-  // magnetically disturbed heading). Its covariance is scaled to what was found, the map solved
-  // again from there (so the map follows the links, not the tighter prior).
+  // Sightings hold while their track's dead reckoning is what its model says: their chain's
+  // lever arms are first order in the shared errors. A track whose errors come out beyond
+  // their sigma (a drift 10x the prior's turns the heading 140 deg in 4 min: beacon-trail
+  // seed 8) would bend the map with them; its sightings are left out and the part solved
+  // again from the same starts, and from now on (the caller stops giving them).
+  // The input sighting each of the problem's is (the identity until some are left out).
+  std::vector<std::size_t> sighting_of(problem.sightings.size());
+  std::iota(sighting_of.begin(), sighting_of.end(), std::size_t{0});
+  if (solution.ok && !problem.sightings.empty()) {
+    const double limit = integrity::ChiSquareQuantile(1, 1 - options.least_squares.false_alarm);
+    std::vector<bool> beyond(problem.tracks.size(), false);
+    for (std::size_t k = 0; k < problem.tracks.size(); ++k)
+      for (int j = 0; j < kTrackErrors; ++j)
+        beyond[k] = beyond[k] || solution.track_errors[k][j] * solution.track_errors[k][j] >
+                                     limit * problem.tracks[k].cov(j, j);
+    std::vector<MapSighting> kept;
+    std::vector<int> index(problem.sightings.size(), -1);
+    std::vector<std::size_t> original;
+    for (std::size_t k = 0; k < problem.sightings.size(); ++k) {
+      MapSighting q = problem.sightings[k];
+      if (beyond[q.track]) continue;
+      q.from_sighting = q.from_sighting >= 0 ? index[q.from_sighting] : -1;
+      index[k] = static_cast<int>(kept.size());
+      kept.push_back(q);
+      original.push_back(k);
+    }
+    if (kept.size() < problem.sightings.size()) {
+      for (const auto& [track, k] : track_index)
+        if (beyond[k]) out->sighting_fallback_tracks.push_back(track);
+      problem.sightings = std::move(kept);
+      sighting_of = std::move(original);
+      problem.track_start.clear();
+      solution = SolveMapLeastSquares(problem, starts, options.least_squares);
+    }
+  }
+  // A track whose shared errors came out beyond their stated sigma: its dead reckoning drifts
+  // more than assumed a priori (another PDR, a magnetically disturbed heading). Its covariance
+  // is scaled to what was found, the map solved again from there (so the map follows the links,
+  // not the tighter prior). Each error apart (`inflate_track_errors_apart`, since 2026-12-06):
+  // a drift rate beyond its sigma says nothing about the start heading, and scaling all four
+  // by the rate's excess let the start heading, the map's only hold on its rotation where no
+  // beacon is surveyed, turn the map 40 deg (beacon-trail seed 8); else the track's chi-square
+  // with its dof and one scale for all.
   if (solution.ok) {
-    const double limit = integrity::ChiSquareQuantile(3, 1 - options.least_squares.false_alarm);
     bool again = false;
+    const double alarm = 1 - options.least_squares.false_alarm;
     for (std::size_t k = 0; k < problem.tracks.size(); ++k) {
-      const Vec3& e = solution.track_errors[k];
-      const double q = e.dot(problem.tracks[k].cov.ldlt().solve(e));
+      MapTrack& track = problem.tracks[k];
+      const TrackVec& e = solution.track_errors[k];
+      if (options.inflate_track_errors_apart) {
+        const double limit = integrity::ChiSquareQuantile(1, alarm);
+        for (int j = 0; j < kTrackErrors; ++j) {
+          const double q = e[j] * e[j] / track.cov(j, j);
+          if (!(q > limit)) continue;
+          const double f = std::min(q, 100.0);
+          track.cov.row(j) *= std::sqrt(f);
+          track.cov.col(j) *= std::sqrt(f);
+          part->track_inflation = std::max(part->track_inflation, f);
+          again = true;
+        }
+        continue;
+      }
+      const int dof = std::max(track.dof, 1);
+      const double limit = integrity::ChiSquareQuantile(dof, alarm);
+      const double q = e.dot(track.cov.ldlt().solve(e));
       if (q > limit) {
-        const double f = std::min(q / 3.0, 100.0);
-        problem.tracks[k].cov *= f;
+        const double f = std::min(q / dof, 100.0);
+        track.cov *= f;
         part->track_inflation = std::max(part->track_inflation, f);
         again = true;
       }
     }
     if (again) {
       starts = {solution.position_n};
+      WarmStart(solution, &problem);
       MapSolution next = SolveMapLeastSquares(problem, starts, options.least_squares);
       if (next.ok) {
         next.start = solution.start;
@@ -444,7 +615,9 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& 
     if (links_ok && f > 1) {
       for (MapPrior& q : problem.priors) q.cov *= f;
       for (MapTrack& t : problem.tracks) t.cov *= f;
+      for (MapSighting& q : problem.sightings) q.cov *= f;
       starts = {solution.position_n};
+      WarmStart(solution, &problem);
       MapSolution again = SolveMapLeastSquares(problem, starts, options.least_squares);
       if (again.ok) {
         again.start = solution.start;
@@ -459,6 +632,8 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& 
     return false;
   }
   part->least_squares = true;
+  part->sightings = problem.sightings.size();
+  part->sighting_outliers = static_cast<std::size_t>(solution.sighting_outliers);
   out->fold_starts_won += solution.start == 1;
   double sq = 0;
   for (const MapPrior& q : problem.priors) sq += (solution.position_n[q.i] - q.position_n).squaredNorm();
@@ -472,6 +647,10 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<Mat3>& 
     return true;  // the part keeps its priors (Position() falls back to them)
   }
   for (int a = 0; a < m; ++a) out->solved[a] = BeaconPosition{solution.position_n[a], solution.cov[a]};
+  out->sighting_state.assign(in.sightings.size(), std::nullopt);
+  for (std::size_t k = 0; k < solution.sighting_state.size(); ++k)
+    out->sighting_state[sighting_of[k]] = solution.sighting_state[k];
+  for (const auto& [track, k] : track_index) out->track_errors[track] = solution.track_errors[k];
   return true;
 }
 

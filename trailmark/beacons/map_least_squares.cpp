@@ -18,8 +18,12 @@
 namespace trailmark::beacons {
 
 bool MapLeastSquaresOptions::IsValid(std::string* why) const {
-  if (!(link_huber_sigma > 0) || max_iterations < 1 || !(false_alarm > 0 && false_alarm < 1)) {
-    if (why) *why = "link_huber_sigma > 0, max_iterations >= 1, 0 < false_alarm < 1";
+  if (!(link_huber_sigma > 0) || !(sighting_tukey_sigma > 0) || max_iterations < 1 ||
+      !(false_alarm > 0 && false_alarm < 1)) {
+    if (why)
+      *why =
+          "link_huber_sigma > 0, sighting_tukey_sigma > 0, max_iterations >= 1, 0 < false_alarm < "
+          "1";
     return false;
   }
   return true;
@@ -76,21 +80,20 @@ class PriorCost final : public ceres::SizedCostFunction<2, 2> {
 };
 
 // W (p - mu - A e): a drop prior correlated with the others of its track through e.
-class TrackPriorCost final : public ceres::SizedCostFunction<2, 2, 3> {
+class TrackPriorCost final : public ceres::SizedCostFunction<2, 2, kTrackErrors> {
  public:
-  TrackPriorCost(const Vec2& mu, const Mat2& cov, const Eigen::Matrix<double, 2, 3>& along)
-      : mu_(mu) {
+  TrackPriorCost(const Vec2& mu, const Mat2& cov, const TrackLever& along) : mu_(mu) {
     const Eigen::LLT<Mat2> llt(cov);
     w_ = llt.matrixL().solve(Mat2::Identity());
     wa_ = w_ * along;
   }
   bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
-    const Eigen::Map<const Vec3> e(x[1]);
+    const Eigen::Map<const TrackVec> e(x[1]);
     const Vec2 r = w_ * (Vec2(x[0][0], x[0][1]) - mu_) - wa_ * e;
     residual[0] = r.x(), residual[1] = r.y();
     if (jacobians) {
       if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
-      if (jacobians[1]) WriteRowMajor(Eigen::Matrix<double, 2, 3>(-wa_), jacobians[1]);
+      if (jacobians[1]) WriteRowMajor(TrackLever(-wa_), jacobians[1]);
     }
     return true;
   }
@@ -98,28 +101,27 @@ class TrackPriorCost final : public ceres::SizedCostFunction<2, 2, 3> {
  private:
   Vec2 mu_;
   Mat2 w_;
-  Eigen::Matrix<double, 2, 3> wa_;
+  TrackLever wa_;
 };
 
 // W ((p_i - p_j) - (mu_i - mu_j) - (A_i - A_j) e): a displacement between two drops of a track.
-class RelativeTrackPriorCost final : public ceres::SizedCostFunction<2, 2, 2, 3> {
+class RelativeTrackPriorCost final : public ceres::SizedCostFunction<2, 2, 2, kTrackErrors> {
  public:
-  RelativeTrackPriorCost(const Vec2& delta, const Mat2& cov,
-                         const Eigen::Matrix<double, 2, 3>& along)
+  RelativeTrackPriorCost(const Vec2& delta, const Mat2& cov, const TrackLever& along)
       : delta_(delta) {
     const Eigen::LLT<Mat2> llt(cov);
     w_ = llt.matrixL().solve(Mat2::Identity());
     wa_ = w_ * along;
   }
   bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
-    const Eigen::Map<const Vec3> e(x[2]);
+    const Eigen::Map<const TrackVec> e(x[2]);
     const Vec2 d(x[0][0] - x[1][0], x[0][1] - x[1][1]);
     const Vec2 r = w_ * (d - delta_) - wa_ * e;
     residual[0] = r.x(), residual[1] = r.y();
     if (jacobians) {
       if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
       if (jacobians[1]) WriteRowMajor(Mat2(-w_), jacobians[1]);
-      if (jacobians[2]) WriteRowMajor(Eigen::Matrix<double, 2, 3>(-wa_), jacobians[2]);
+      if (jacobians[2]) WriteRowMajor(TrackLever(-wa_), jacobians[2]);
     }
     return true;
   }
@@ -127,25 +129,103 @@ class RelativeTrackPriorCost final : public ceres::SizedCostFunction<2, 2, 2, 3>
  private:
   Vec2 delta_;
   Mat2 w_;
-  Eigen::Matrix<double, 2, 3> wa_;
+  TrackLever wa_;
 };
 
 // W e: the prior of a track's shared errors (zero mean).
-class TrackCost final : public ceres::SizedCostFunction<3, 3> {
+class TrackCost final : public ceres::SizedCostFunction<kTrackErrors, kTrackErrors> {
  public:
-  explicit TrackCost(const Mat3& cov) {
-    const Eigen::LLT<Mat3> llt(cov);
-    w_ = llt.matrixL().solve(Mat3::Identity());
+  explicit TrackCost(const TrackCov& cov) {
+    const Eigen::LLT<TrackCov> llt(cov);
+    w_ = llt.matrixL().solve(TrackCov::Identity());
   }
   bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
-    const Vec3 r = w_ * Eigen::Map<const Vec3>(x[0]);
-    for (int k = 0; k < 3; ++k) residual[k] = r[k];
+    const TrackVec r = w_ * Eigen::Map<const TrackVec>(x[0]);
+    for (int k = 0; k < kTrackErrors; ++k) residual[k] = r[k];
     if (jacobians && jacobians[0]) WriteRowMajor(w_, jacobians[0]);
     return true;
   }
 
  private:
+  TrackCov w_;
+};
+
+// W [p - mu - A e; h]: a chain of sightings' first state, [x, y, h].
+class SightingStartCost final : public ceres::SizedCostFunction<3, 3, kTrackErrors> {
+ public:
+  SightingStartCost(const Vec2& mu, const Mat3& cov, const TrackLever& along) : mu_(mu) {
+    const Eigen::LLT<Mat3> llt(cov);
+    w_ = llt.matrixL().solve(Mat3::Identity());
+    wa_ = -w_.leftCols<2>() * along;
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const Eigen::Map<const Vec3> s(x[0]);
+    const Eigen::Map<const TrackVec> e(x[1]);
+    const Vec3 r = w_ * Vec3(s.x() - mu_.x(), s.y() - mu_.y(), s.z()) + wa_ * e;
+    for (int k = 0; k < 3; ++k) residual[k] = r[k];
+    if (jacobians) {
+      if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
+      if (jacobians[1]) WriteRowMajor(wa_, jacobians[1]);
+    }
+    return true;
+  }
+
+ private:
+  Vec2 mu_;
   Mat3 w_;
+  Eigen::Matrix<double, 3, kTrackErrors> wa_;
+};
+
+// W [p - p_A - D - h_A perp(D) - dA e; h - h_A]: a sighting after the previous one of its track.
+class SightingChainCost final : public ceres::SizedCostFunction<3, 3, 3, kTrackErrors> {
+ public:
+  SightingChainCost(const Vec2& d, const Mat3& cov, const TrackLever& d_along) : d_(d) {
+    const Eigen::LLT<Mat3> llt(cov);
+    w_ = llt.matrixL().solve(Mat3::Identity());
+    wa_ = -w_.leftCols<2>() * d_along;
+    Mat3 ja = -Mat3::Identity();
+    ja(0, 2) = d.y();  // -perp(D) = (D_y, -D_x)
+    ja(1, 2) = -d.x();
+    wja_ = w_ * ja;
+  }
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const Eigen::Map<const Vec3> b(x[0]), a(x[1]);
+    const Eigen::Map<const TrackVec> e(x[2]);
+    const Vec3 u(b.x() - a.x() - d_.x() + a.z() * d_.y(), b.y() - a.y() - d_.y() - a.z() * d_.x(),
+                 b.z() - a.z());
+    const Vec3 r = w_ * u + wa_ * e;
+    for (int k = 0; k < 3; ++k) residual[k] = r[k];
+    if (jacobians) {
+      if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
+      if (jacobians[1]) WriteRowMajor(wja_, jacobians[1]);
+      if (jacobians[2]) WriteRowMajor(wa_, jacobians[2]);
+    }
+    return true;
+  }
+
+ private:
+  Vec2 d_;
+  Mat3 w_, wja_;
+  Eigen::Matrix<double, 3, kTrackErrors> wa_;
+};
+
+// (|p - b| - range) / sigma for a sighting's state [x, y, h] and its beacon.
+class SightingRangeCost final : public ceres::SizedCostFunction<1, 3, 2> {
+ public:
+  SightingRangeCost(double range_m, double sigma_m) : link_(range_m, sigma_m) {}
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    double j0[2], j1[2];
+    double* jac[2] = {j0, j1};
+    link_.Evaluate(x, residual, jacobians ? jac : nullptr);
+    if (jacobians) {
+      if (jacobians[0]) jacobians[0][0] = j0[0], jacobians[0][1] = j0[1], jacobians[0][2] = 0;
+      if (jacobians[1]) jacobians[1][0] = j1[0], jacobians[1][1] = j1[1];
+    }
+    return true;
+  }
+
+ private:
+  LinkCost link_;
 };
 
 void Check(const MapProblem& p) {
@@ -181,24 +261,44 @@ void Check(const MapProblem& p) {
       throw std::invalid_argument(fmt::format("beacon map: prior {} on track {} (of {})", k,
                                               q.track, p.tracks.size()));
   }
+  for (std::size_t k = 0; k < p.sightings.size(); ++k) {
+    const MapSighting& q = p.sightings[k];
+    const Eigen::LLT<Mat3> llt(0.5 * (q.cov + q.cov.transpose()));
+    if (!index_ok(q.i) || q.track < 0 || q.track >= static_cast<int>(p.tracks.size()) ||
+        q.from_sighting < -1 || q.from_sighting >= static_cast<int>(k) ||
+        (q.from_sighting >= 0 && p.sightings[q.from_sighting].track != q.track))
+      throw std::invalid_argument(fmt::format(
+          "beacon map: sighting {} of beacon {} on track {} after sighting {} (of {} beacons, {} "
+          "tracks; it follows an earlier sighting of its own track)",
+          k, q.i, q.track, q.from_sighting, p.beacons, p.tracks.size()));
+    if (!std::isfinite(q.range_m) || q.range_m < 0 || !(q.sigma_m > 0) ||
+        !std::isfinite(q.sigma_m) || !q.position_n.allFinite() || !q.along.allFinite() ||
+        !q.cov.allFinite() || llt.info() != Eigen::Success ||
+        !q.cov.isApprox(q.cov.transpose(), 1e-9))
+      throw std::invalid_argument(fmt::format(
+          "beacon map: sighting {} of beacon {} is not finite, has a sigma <= 0 or a covariance "
+          "that is not symmetric positive definite",
+          k, q.i));
+  }
   for (std::size_t k = 0; k < p.tracks.size(); ++k) {
-    const Mat3& c = p.tracks[k].cov;
+    const TrackCov& c = p.tracks[k].cov;
     if (!c.allFinite() || !c.isApprox(c.transpose(), 1e-9) ||
-        Eigen::LLT<Mat3>(c).info() != Eigen::Success)
+        Eigen::LLT<TrackCov>(c).info() != Eigen::Success || p.tracks[k].dof < 0 ||
+        p.tracks[k].dof > kTrackErrors)
       throw std::invalid_argument(
           fmt::format("beacon map: track {} covariance is not symmetric positive definite", k));
   }
 }
 
-// The problem's residual blocks on x (2 per beacon, then 3 per track).
+// The problem's residual blocks on x (2 per beacon, then 3 per track, then 2 per sighting).
 void Build(const MapProblem& problem, const MapLeastSquaresOptions& options,
            std::vector<double>& x, ceres::Problem& p) {
   const int n = problem.beacons;
   for (int i = 0; i < n; ++i) p.AddParameterBlock(&x[2 * i], 2);
   double* tracks = x.data() + 2 * n;
   for (std::size_t k = 0; k < problem.tracks.size(); ++k) {
-    p.AddParameterBlock(tracks + 3 * k, 3);
-    p.AddResidualBlock(new TrackCost(problem.tracks[k].cov), nullptr, tracks + 3 * k);
+    p.AddParameterBlock(tracks + kTrackErrors * k, kTrackErrors);
+    p.AddResidualBlock(new TrackCost(problem.tracks[k].cov), nullptr, tracks + kTrackErrors * k);
   }
   for (const MapLink& l : problem.links) {
     p.AddResidualBlock(new LinkCost(l.range_m, l.sigma_m),
@@ -207,15 +307,41 @@ void Build(const MapProblem& problem, const MapLeastSquaresOptions& options,
   for (const MapPrior& q : problem.priors) {
     const Mat2 cov = 0.5 * (q.cov + q.cov.transpose());
     if (q.track >= 0 && q.from >= 0)
-      p.AddResidualBlock(new RelativeTrackPriorCost(q.position_n - q.from_position_n, cov,
-                                                    q.along - q.from_along),
-                         nullptr, &x[2 * q.i], &x[2 * q.from], tracks + 3 * q.track);
+      p.AddResidualBlock(
+          new RelativeTrackPriorCost(q.position_n - q.from_position_n, cov, q.along - q.from_along),
+          nullptr, &x[2 * q.i], &x[2 * q.from], tracks + kTrackErrors * q.track);
     else if (q.track >= 0)
       p.AddResidualBlock(new TrackPriorCost(q.position_n, cov, q.along), nullptr, &x[2 * q.i],
-                         tracks + 3 * q.track);
+                         tracks + kTrackErrors * q.track);
     else
       p.AddResidualBlock(new PriorCost(q.position_n, cov), nullptr, &x[2 * q.i]);
   }
+  double* sightings = tracks + kTrackErrors * problem.tracks.size();
+  for (std::size_t k = 0; k < problem.sightings.size(); ++k) {
+    const MapSighting& q = problem.sightings[k];
+    double* state = sightings + 3 * k;
+    double* e = tracks + kTrackErrors * q.track;
+    p.AddParameterBlock(state, 3);
+    const Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
+    if (q.from_sighting >= 0) {
+      const MapSighting& a = problem.sightings[q.from_sighting];
+      p.AddResidualBlock(new SightingChainCost(q.position_n - a.position_n, cov, q.along - a.along),
+                         nullptr, state, sightings + 3 * q.from_sighting, e);
+    } else {
+      p.AddResidualBlock(new SightingStartCost(q.position_n, cov, q.along), nullptr, state, e);
+    }
+    p.AddResidualBlock(new SightingRangeCost(q.range_m, q.sigma_m),
+                       new ceres::TukeyLoss(options.sighting_tukey_sigma), state, &x[2 * q.i]);
+  }
+}
+
+// Tukey's biweight as Ceres writes it (rho(s) for s the squared residual, bound c): the
+// sightings' range cost at a solution.
+double TukeyRho(double s, double c) {
+  const double c2 = c * c;
+  if (s > c2) return c2 / 3.0;
+  const double v = 1.0 - s / c2;
+  return c2 / 3.0 * (1.0 - v * v * v);
 }
 
 // The same by ceres::Covariance (SPARSE_QR): the reference of the tests.
@@ -344,6 +470,13 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   if (!options.IsValid(&why)) throw std::invalid_argument("beacon map: " + why);
   Check(problem);
   if (starts.empty()) throw std::invalid_argument("beacon map: no start");
+  if (!problem.track_start.empty() && problem.track_start.size() != problem.tracks.size())
+    throw std::invalid_argument("beacon map: track starts for not every track");
+  for (const TrackVec& e : problem.track_start)
+    if (!e.allFinite()) throw std::invalid_argument("beacon map: a track start is not finite");
+  for (const MapSighting& q : problem.sightings)
+    if (q.start && !q.start->allFinite())
+      throw std::invalid_argument("beacon map: a sighting's start is not finite");
   for (const auto& s : starts) {
     if (static_cast<int>(s.size()) != problem.beacons)
       throw std::invalid_argument(fmt::format("beacon map: a start of {} positions for {} beacons",
@@ -355,13 +488,31 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   if (!Anchored(problem, &best.why)) return best;
   const int n = problem.beacons;
   const int residuals = static_cast<int>(problem.links.size() + 2 * problem.priors.size());
-  best.dof = residuals - 2 * n;
+  best.dof = residuals - 2 * n;  // the tracks' 3 residuals and 3 unknowns cancel
 
   double best_cost = std::numeric_limits<double>::infinity();
   std::vector<double> x;
   for (std::size_t s = 0; s < starts.size(); ++s) {
-    std::vector<double> xs(2 * n + 3 * problem.tracks.size(), 0.0);
+    std::vector<double> xs(
+        2 * n + kTrackErrors * problem.tracks.size() + 3 * problem.sightings.size(), 0.0);
     for (int i = 0; i < n; ++i) xs[2 * i] = starts[s][i].x(), xs[2 * i + 1] = starts[s][i].y();
+    // Each sighting starts where its chain's previous one is plus the dead reckoning's step
+    // between them, a chain's first at its dead reckoning; no white heading error.
+    for (std::size_t k = 0; k < problem.track_start.size(); ++k)
+      Eigen::Map<TrackVec>(xs.data() + 2 * n + kTrackErrors * k) = problem.track_start[k];
+    double* states = xs.data() + 2 * n + kTrackErrors * problem.tracks.size();
+    for (std::size_t k = 0; k < problem.sightings.size(); ++k) {
+      const MapSighting& q = problem.sightings[k];
+      Vec3 at(q.position_n.x(), q.position_n.y(), 0);
+      if (q.start) {
+        at = *q.start;
+      } else if (q.from_sighting >= 0) {
+        at.head<2>() = Vec2(states[3 * q.from_sighting], states[3 * q.from_sighting + 1]) +
+                       (q.position_n - problem.sightings[q.from_sighting].position_n);
+        at.z() = states[3 * q.from_sighting + 2];
+      }
+      Eigen::Map<Vec3>(states + 3 * k) = at;
+    }
     ceres::Problem p;
     Build(problem, options, xs, p);
     ceres::Solver::Options so;
@@ -394,7 +545,7 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   best.position_n.resize(n);
   for (int i = 0; i < n; ++i) best.position_n[i] = Vec2(x[2 * i], x[2 * i + 1]);
   for (std::size_t k = 0; k < problem.tracks.size(); ++k)
-    best.track_errors.push_back(Vec3(x[2 * n + 3 * k], x[2 * n + 3 * k + 1], x[2 * n + 3 * k + 2]));
+    best.track_errors.push_back(Eigen::Map<const TrackVec>(x.data() + 2 * n + kTrackErrors * k));
   // The two parts of chi2: links (Huber rho of the squared whitened residual) and priors.
   const double d2 = options.link_huber_sigma * options.link_huber_sigma;
   for (const MapLink& l : problem.links) {
@@ -402,11 +553,37 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     const double r2 = r * r;
     best.chi2_links += r2 <= d2 ? r2 : 2 * options.link_huber_sigma * std::abs(r) - d2;
   }
-  best.chi2_priors = best.chi2 - best.chi2_links;
-  best.prior_residuals = static_cast<int>(2 * problem.priors.size() + 3 * problem.tracks.size());
+  // The sightings' part: each one's robust range cost and its prior (start or chain).
+  const double* states = x.data() + 2 * n + kTrackErrors * problem.tracks.size();
+  const double c2 = options.sighting_tukey_sigma * options.sighting_tukey_sigma;
+  for (std::size_t k = 0; k < problem.sightings.size(); ++k) {
+    const MapSighting& q = problem.sightings[k];
+    const Vec3 state(states[3 * k], states[3 * k + 1], states[3 * k + 2]);
+    best.sighting_state.push_back(state);
+    const Eigen::Map<const TrackVec> e(x.data() + 2 * n + kTrackErrors * q.track);
+    const double r = ((state.head<2>() - best.position_n[q.i]).norm() - q.range_m) / q.sigma_m;
+    best.chi2_sightings += 2 * TukeyRho(r * r, options.sighting_tukey_sigma);
+    best.sighting_outliers += r * r > c2;
+    Vec3 u;
+    if (q.from_sighting >= 0) {
+      const MapSighting& a = problem.sightings[q.from_sighting];
+      const Vec3& sa = best.sighting_state[q.from_sighting];
+      const Vec2 d = q.position_n - a.position_n;
+      u.head<2>() = state.head<2>() - sa.head<2>() - d - sa.z() * Vec2(-d.y(), d.x()) -
+                    (q.along - a.along) * e;
+      u.z() = state.z() - sa.z();
+    } else {
+      u.head<2>() = state.head<2>() - q.position_n - q.along * e;
+      u.z() = state.z();
+    }
+    best.chi2_sightings += u.dot(Mat3(0.5 * (q.cov + q.cov.transpose())).ldlt().solve(u));
+  }
+  best.chi2_priors = best.chi2 - best.chi2_links - best.chi2_sightings;
+  best.prior_residuals = static_cast<int>(2 * problem.priors.size());
+  for (const MapTrack& t : problem.tracks) best.prior_residuals += t.dof;
   if (best.dof > 0) {
     best.chi2_threshold = integrity::ChiSquareQuantile(best.dof, 1 - options.false_alarm);
-    best.consistent = best.chi2 <= best.chi2_threshold;
+    best.consistent = best.chi2 - best.chi2_sightings <= best.chi2_threshold;
   }
   if (options.covariances) {
     // Marginals at the solution: the problem rebuilt around x (the solver's copy is gone).
@@ -414,7 +591,10 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     Build(problem, options, x, p);
     std::vector<double*> blocks;
     for (int i = 0; i < n; ++i) blocks.push_back(&x[2 * i]);
-    for (std::size_t k = 0; k < problem.tracks.size(); ++k) blocks.push_back(&x[2 * n + 3 * k]);
+    for (std::size_t k = 0; k < problem.tracks.size(); ++k)
+      blocks.push_back(&x[2 * n + kTrackErrors * k]);
+    for (std::size_t k = 0; k < problem.sightings.size(); ++k)
+      blocks.push_back(&x[2 * n + kTrackErrors * problem.tracks.size() + 3 * k]);
     const bool ok = options.reference_covariance
                         ? ReferenceMarginalCovariances(p, x, n, &best.cov)
                         : MarginalCovariances(p, blocks, n, &best.cov);

@@ -9,6 +9,7 @@
 /// residuals against their stated noise (a map that disagrees with its noise is not to be
 /// used). No I/O.
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,10 +24,19 @@ struct MapLink {
 };
 
 /// The errors a dead reckoning shares between all the positions it gives (ins/dead_reckoning.h):
-/// e = [heading offset rad, heading rate rad/s, step scale], zero mean, covariance `cov`. Drop
-/// priors of one track are correlated through e: its states are estimated with the map.
+/// e = [heading offset rad, heading rate rad/s, step scale, turn scale], zero mean, covariance
+/// `cov`. Drop priors of one track are correlated through e: its states are estimated with the
+/// map.
+inline constexpr int kTrackErrors = 4;
+using TrackVec = Eigen::Matrix<double, kTrackErrors, 1>;
+using TrackCov = Eigen::Matrix<double, kTrackErrors, kTrackErrors>;
+/// d position / d e at a point of a track.
+using TrackLever = Eigen::Matrix<double, 2, kTrackErrors>;
 struct MapTrack {
-  Mat3 cov = Mat3::Identity();  ///< symmetric positive definite
+  TrackCov cov = TrackCov::Identity();  ///< symmetric positive definite
+  /// Of its errors, how many the positions depend on (the chi-square tests' degrees of
+  /// freedom): 3 when the turn scale is held at a negligible prior with no lever.
+  int dof = kTrackErrors;
 };
 
 /// A Gaussian prior on a beacon: position_n + along e (its track's shared errors, when `track`
@@ -36,16 +46,42 @@ struct MapPrior {
   Vec2 position_n = Vec2::Zero();
   Mat2 cov = Mat2::Identity();  ///< symmetric positive definite
   int track = -1;
-  /// d position / d e at this prior: [perp(sum d), sum (t - t0) perp(d), sum d] over the
-  /// track's steps up to the drop (perp(x, y) = (-y, x)).
-  Eigen::Matrix<double, 2, 3> along = Eigen::Matrix<double, 2, 3>::Zero();
+  /// d position / d e at this prior: [perp(sum d), sum (t - t0) perp(d), sum d, sum turned
+  /// perp(d)] over the track's steps up to the drop (perp(x, y) = (-y, x); turned: the walking
+  /// direction's turn since the first step, up to that step).
+  TrackLever along = TrackLever::Zero();
   /// >= 0: the prior is on the displacement from beacon `from` (the same track's previous
   /// drop, whose position_n and along are `from_position_n`, `from_along`): the dead
   /// reckoning's white errors are independent between drops, not at each drop. `cov` is then
   /// the covariance of that displacement.
   int from = -1;
   Vec2 from_position_n = Vec2::Zero();
-  Eigen::Matrix<double, 2, 3> from_along = Eigen::Matrix<double, 2, 3>::Zero();
+  TrackLever from_along = TrackLever::Zero();
+};
+
+/// An agent's range to a beacon from a point of its dead-reckoning track (issue 22, item 1: an
+/// agent walking back hears beacons dropped long before, across the trail — the loop closure
+/// that neighbour-only beacon links lack). The agent's state there is a nuisance of the problem,
+/// [x, y, h]: its position and its dead reckoning's white heading error h (the heading random
+/// walk's accumulated part; the shared errors are its track's e). A chain of sightings is the
+/// dead reckoning's own Markov chain: from the track's previous sighting A,
+///     p = p_A + D + h_A perp(D) + (along - along_A) e + w,   h = h_A + v,
+/// D = position_n - position_n_A, [w; v] of covariance `cov` (the walk between the two alone:
+/// step noise and heading walk, from no error at A). A chain's first sighting has the absolute
+/// prior p = position_n + along e + w, h = v, `cov` the white covariance there. The range ties p
+/// to beacon `i` under a redescending loss (a moving foot's ranges have ~10 % outliers: sec. 3.B).
+struct MapSighting {
+  int i = 0;  ///< the beacon heard
+  double range_m = 0;
+  double sigma_m = 0.3;  ///< of one range from a moving foot (the tracker's)
+  int track = 0;         ///< >= 0
+  Vec2 position_n = Vec2::Zero();
+  TrackLever along = TrackLever::Zero();
+  Mat3 cov = Mat3::Identity();  ///< symmetric positive definite
+  int from_sighting = -1;       ///< the same track's previous sighting, an earlier index; -1: none
+  /// Where the solver starts it (e.g. the last solve's): empty, its dead reckoning moved as
+  /// its chain's previous sighting was (a redescending loss needs a start near the answer).
+  std::optional<Vec3> start;
 };
 
 struct MapProblem {
@@ -53,12 +89,19 @@ struct MapProblem {
   std::vector<MapLink> links;
   std::vector<MapPrior> priors;
   std::vector<MapTrack> tracks;
+  std::vector<MapSighting> sightings;
+  /// Where the solver starts each track's e (e.g. the last solve's); empty: zero.
+  std::vector<TrackVec> track_start;
 };
 
 struct MapLeastSquaresOptions {
   /// Huber loss on each link's whitened residual beyond this many sigmas (a pair whose every
   /// sample was long, NLOS, pulls linearly, not quadratically).
   double link_huber_sigma = 2.0;
+  /// Tukey's biweight on each sighting's whitened range residual: beyond this many sigmas a
+  /// range has no weight (4.685: 95 % efficiency at the Gaussian; Huber's linear pull of a 3 m
+  /// outlier from a 0.3 m sigma would bend the track).
+  double sighting_tukey_sigma = 4.685;
   int max_iterations = 100;
   /// The solution's robust chi-square is tested against its degrees of freedom at this false
   /// alarm rate (a map that disagrees with its noise: wrong fold, a moved anchor).
@@ -78,14 +121,22 @@ struct MapSolution {
   double chi2 = 0;                   ///< 2 x the final robust cost (whitened residuals)
   double chi2_links = 0;             ///< the links' part of chi2 (robust)
   double chi2_priors = 0;            ///< the priors' part (surveys, drops, tracks' errors)
-  int prior_residuals = 0;           ///< scalar residuals of the priors (2 each, 3 per track)
-  int dof = 0;                       ///< scalar residuals - 2 x beacons
+  /// The sightings' part (their ranges, robust, and their displacement priors). Not in the
+  /// consistency test: a moving foot's heavy-tailed ranges under a redescending loss have no
+  /// chi-square distribution; reported.
+  double chi2_sightings = 0;
+  int prior_residuals = 0;  ///< scalar residuals of the priors (2 each, a track's dof)
+  /// Of the test: links + priors' scalar residuals - 2 x beacons (the sightings add one range
+  /// and two prior residuals for two unknowns each, and are left out with their chi2).
+  int dof = 0;
   double chi2_threshold = 0;         ///< the chi-square quantile at 1 - false_alarm (dof > 0)
   bool consistent = true;            ///< chi2 <= chi2_threshold (or dof <= 0)
   int start = 0;                     ///< index of the start that won
   int iterations = 0;
   std::vector<double> start_chi2;    ///< per start
-  std::vector<Vec3> track_errors;    ///< the estimated e of each track
+  std::vector<TrackVec> track_errors;  ///< the estimated e of each track
+  std::vector<Vec3> sighting_state;    ///< [x, y, h] of the agent at each sighting
+  int sighting_outliers = 0;           ///< sightings whose range is beyond the Tukey bound
 };
 
 /// Solves `problem` from each of `starts` (each a position per beacon) and keeps the lowest

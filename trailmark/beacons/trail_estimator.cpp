@@ -26,11 +26,12 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
     return false;
   }
   if (!(drop_sigma_m > 0) || !(close_pass_m >= 0) || !(pdr_drift_per_m >= 0) ||
-      !(way_out_window_s >= 0) || !(measurement_hold_s >= 0) ||
-      !(entry_heading_fallback_m >= 0)) {
+      !(way_out_window_s >= 0) || !(measurement_hold_s >= 0) || !(entry_heading_fallback_m >= 0) ||
+      !(sighting_loop_m >= 0) || !(sighting_spacing_m >= 0)) {
     if (why)
-      *why = "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s, "
-             "measurement_hold_s, entry_heading_fallback_m >= 0";
+      *why =
+          "drop_sigma_m > 0; close_pass_m, pdr_drift_per_m, way_out_window_s, "
+          "measurement_hold_s, entry_heading_fallback_m, sighting_loop_m, sighting_spacing_m >= 0";
     return false;
   }
   return ekf.IsValid(why) && map.IsValid(why) && integrity.IsValid(why);
@@ -66,6 +67,28 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Flag("relative_drop_priors", [](O& o) -> bool& { return o.map.relative_drop_priors; },
          "least squares: drop priors on the displacement between consecutive drops");
   t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
+  t.Flag("map_turn_scale", &O::map_turn_scale,
+         "least squares: the gyro's turn-scale error a shared error of each track in the map "
+         "(with heading offset, rate and scale)");
+  t.Flag(
+      "map_inflate_apart", [](O& o) -> bool& { return o.map.inflate_track_errors_apart; },
+      "least squares: a track's shared errors found beyond their sigma inflated each apart "
+      "(false: all by the track's chi-square)");
+  t.Real("map_turn_ambiguous_rad", &O::map_turn_ambiguous_rad, "rad", OptionBounds::Positive(),
+         "a turn between two steps larger than this (a reversal, its sign unknown) is left out "
+         "of the turn-scale lever, its share of the turn-scale error a heading error of its own");
+  t.Flag(
+      "sightings", [](O& o) -> bool& { return o.map.sightings; },
+      "least squares: the agents' ranges to beacons from their dead-reckoning tracks in the "
+      "map (the loop closure across a trail)");
+  t.Real("sighting_loop_m", &O::sighting_loop_m, "m", OptionBounds::NonNegative(),
+         "a range to a beacon the agent dropped or passed is a sighting once it has walked this "
+         "far since");
+  t.Real("sighting_spacing_m", &O::sighting_spacing_m, "m", OptionBounds::NonNegative(),
+         "at most one sighting of a beacon per agent per this distance walked");
+  t.Integer(
+      "max_sightings", [](O& o) -> int& { return o.map.max_sightings; },
+      OptionBounds::NonNegative(), "the latest sightings a part of the map keeps");
   t.Flag("close_pass_on_track", &O::close_pass_on_track,
          "a beacon without drop event is anchored at a close pass as a drop would be: on the "
          "passer's dead-reckoning track and as a consider state of its tracker (false: at the "
@@ -215,51 +238,93 @@ int BeaconTrailEstimator::Beacon(const std::string& id) {
   return i;
 }
 
+PdrOptions BeaconTrailEstimator::WhiteDeadReckoning() const {
+  PdrOptions white = options_.drop_dead_reckoning;
+  white.heading_drift_sigma_rad_per_s = white.step_scale_sigma = white.turn_scale_sigma = 0;
+  return white;
+}
+
 void BeaconTrailEstimator::StartDropDeadReckoning(Agent& a, double heading_sigma_rad) {
   // The drop priors' dead reckoning: white errors in drop_dr, the shared ones (heading offset,
-  // drift rate, scale) a track of the map. The gyro's turn-scale error is shared too, and not
-  // yet a track error of the map: it is left out of both (docs/beacons.md).
+  // drift rate, step scale, turn scale) a track of the map (the turn scale since 2026-12-06;
+  // map_turn_scale=false leaves it out of both, as before).
   const PdrOptions& pdr = options_.drop_dead_reckoning;
-  PdrOptions white = pdr;
-  white.heading_drift_sigma_rad_per_s = white.step_scale_sigma = white.turn_scale_sigma = 0;
+  const PdrOptions white = WhiteDeadReckoning();
   a.drop_dr.emplace(Vec3(a.start_n.x(), a.start_n.y(), 0), a.start_sigma_m, white, 0.0);
-  a.map_track = map_.AddTrack(Vec3(heading_sigma_rad * heading_sigma_rad,
-                                   pdr.heading_drift_sigma_rad_per_s *
-                                       pdr.heading_drift_sigma_rad_per_s,
-                                   pdr.step_scale_sigma * pdr.step_scale_sigma)
-                                  .asDiagonal());
+  a.segment_dr.emplace(Vec3::Zero(), 0.0, white, 0.0);
+  const double turn_sigma = options_.map_turn_scale ? pdr.turn_scale_sigma : 1e-9;
+  MapTrack track;
+  track.cov = TrackVec(heading_sigma_rad * heading_sigma_rad,
+                       pdr.heading_drift_sigma_rad_per_s * pdr.heading_drift_sigma_rad_per_s,
+                       pdr.step_scale_sigma * pdr.step_scale_sigma, turn_sigma * turn_sigma)
+                  .asDiagonal();
+  track.dof = options_.map_turn_scale ? kTrackErrors : kTrackErrors - 1;
+  a.map_track = map_.AddTrack(track);
+}
+
+TrackLever BeaconTrailEstimator::DropDeadReckoningState::Lever() const {
+  TrackLever along;
+  along << Vec2(-sum_d_n.y(), sum_d_n.x()), sum_t_perp_n, sum_d_n, sum_turn_perp_n;
+  return along;
 }
 
 void BeaconTrailEstimator::AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d) {
   Step rotated = step;
   const Vec2 d_n = Eigen::Rotation2Dd(a.drop_dr_rotation_rad) * d;
   rotated.delta_n.head<2>() = d_n;
+  // The turn-scale error's lever (DeadReckoning::AddStep): a step of at least turn_min_step_m
+  // says where the body faces; the heading error is the scale error x the angle turned. A
+  // reversal's sign is a guess (a half turn left and a half turn right look alike in the
+  // steps; the gyro knew): it is left out of the lever, so that a wrong guess does not turn
+  // it by 2 pi x the scale error, and its share of that error is a heading error of its own.
+  if (options_.map_turn_scale &&
+      d_n.norm() >= std::max(options_.drop_dead_reckoning.turn_min_step_m, 1e-9)) {
+    const double direction = std::atan2(d_n.y(), d_n.x());
+    if (a.last_direction_rad) {
+      const double turn = WrapAngle(direction - *a.last_direction_rad);
+      if (std::abs(turn) < options_.map_turn_ambiguous_rad) {
+        a.turned_rad += turn;
+      } else {
+        const double v = std::pow(options_.drop_dead_reckoning.turn_scale_sigma * turn, 2);
+        a.drop_dr->AddHeadingVariance(v);
+        a.segment_dr->AddHeadingVariance(v);
+      }
+    }
+    a.last_direction_rad = direction;
+  }
   a.drop_dr->AddStep(rotated);
+  a.segment_dr->AddStep(rotated);
   // Lever arms of the shared errors (DeadReckoning's model): heading offset, rate x time.
   if (!a.first_step_t) a.first_step_t = step.t0;
   a.sum_d_n += d_n;
   a.sum_t_perp_n += (step.t1 - *a.first_step_t) * Vec2(-d_n.y(), d_n.x());
+  a.sum_turn_perp_n += a.turned_rad * Vec2(-d_n.y(), d_n.x());
 }
 
 BeaconTrailEstimator::DropDeadReckoningState BeaconTrailEstimator::DropState(const Agent& a) const {
-  return {a.drop_dr->position_n().head<2>(), a.drop_dr->covariance(), a.sum_d_n, a.sum_t_perp_n};
+  return {a.drop_dr->position_n().head<2>(),
+          a.drop_dr->covariance(),
+          a.sum_d_n,
+          a.sum_t_perp_n,
+          a.sum_turn_perp_n,
+          a.drop_dr->error_covariance().topLeftCorner<3, 3>(),
+          a.segment_dr->error_covariance().topLeftCorner<3, 3>()};
 }
 
 void BeaconTrailEstimator::HintTrackPoint(Agent& a, int i, const DropDeadReckoningState& at) {
-  Eigen::Matrix<double, 2, 3> along;
-  along << Vec2(-at.sum_d_n.y(), at.sum_d_n.x()), at.sum_t_perp_n, at.sum_d_n;
-  map_.SetTrackHint(i, a.map_track, at.position_n, at.white, along, -1, at.white);
+  map_.SetTrackHint(i, a.map_track, at.position_n, at.white, at.Lever(), -1, at.white);
+  a.walked_at_drop[i] = a.walked_m;
 }
 
 void BeaconTrailEstimator::HintDrop(Agent& a, int i, const DropDeadReckoningState& at) {
   const Mat2 drop = Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m;
-  Eigen::Matrix<double, 2, 3> along;
-  along << Vec2(-at.sum_d_n.y(), at.sum_d_n.x()), at.sum_t_perp_n, at.sum_d_n;
+  const TrackLever along = at.Lever();
   // Between two drops: the white errors accrued since the last (and both drops' scatter).
   Mat2 increment = at.white - a.last_drop_white_cov + 2 * drop;
   increment = 0.5 * (increment + increment.transpose());
   map_.SetTrackHint(i, a.map_track, at.position_n, at.white + drop, along,
                     a.last_drop != i ? a.last_drop : -1, increment);
+  a.walked_at_drop[i] = a.walked_m;
   a.last_drop = i;
   a.last_drop_white_cov = at.white;
 }
@@ -280,9 +345,57 @@ void BeaconTrailEstimator::HintPendingDrops(Agent& a, TimeS until, TimeS t0, Tim
     const auto lerp = [f](const auto& x0, const auto& x1) { return (x0 + f * (x1 - x0)).eval(); };
     HintDrop(a, Beacon(id),
              {lerp(before.position_n, after.position_n), lerp(before.white, after.white),
-              lerp(before.sum_d_n, after.sum_d_n), lerp(before.sum_t_perp_n, after.sum_t_perp_n)});
+              lerp(before.sum_d_n, after.sum_d_n), lerp(before.sum_t_perp_n, after.sum_t_perp_n),
+              lerp(before.sum_turn_perp_n, after.sum_turn_perp_n)});
   }
   a.pending_drops = std::move(later);
+}
+
+bool BeaconTrailEstimator::WantsSighting(const Agent& a, int beacon) const {
+  if (!options_.map.sightings || options_.map.solver != MapSolver::kLeastSquares || !a.drop_dr ||
+      a.AwaitingHeading() || a.map_track < 0)
+    return false;
+  if (const auto d = a.walked_at_drop.find(beacon);
+      d != a.walked_at_drop.end() && a.walked_m - d->second < options_.sighting_loop_m)
+    return false;
+  const auto s = a.walked_at_sighting.find(beacon);
+  return s == a.walked_at_sighting.end() || a.walked_m - s->second >= options_.sighting_spacing_m;
+}
+
+void BeaconTrailEstimator::HintPendingSightings(Agent& a, TimeS until, TimeS t0, TimeS t1,
+                                                const DropDeadReckoningState& before) {
+  if (a.pending_sightings.empty()) return;
+  const DropDeadReckoningState after = DropState(a);
+  std::vector<PendingRange> later;
+  bool placed = false;
+  for (const PendingRange& r : a.pending_sightings) {
+    if (r.t > until) {
+      later.push_back(r);
+      continue;
+    }
+    // Asked again once its step has come: a drop within the same step is placed by now.
+    if (!WantsSighting(a, r.beacon)) continue;
+    a.walked_at_sighting[r.beacon] = a.walked_m;
+    const double f = t1 > t0 ? std::clamp((r.t - t0) / (t1 - t0), 0.0, 1.0) : 1.0;
+    const auto lerp = [f](const auto& x0, const auto& x1) { return (x0 + f * (x1 - x0)).eval(); };
+    const DropDeadReckoningState at{lerp(before.position_n, after.position_n),
+                                    lerp(before.white, after.white),
+                                    lerp(before.sum_d_n, after.sum_d_n),
+                                    lerp(before.sum_t_perp_n, after.sum_t_perp_n),
+                                    lerp(before.sum_turn_perp_n, after.sum_turn_perp_n),
+                                    lerp(before.white3, after.white3),
+                                    lerp(before.segment3, after.segment3)};
+    // Kept positive definite where no step lies between (1 cm, 0.06 deg).
+    const Mat3 floor = Vec3(1e-4, 1e-4, 1e-6).asDiagonal();
+    map_.AddSighting(r.beacon, a.map_track, at.position_n, at.Lever(), at.white3 + floor,
+                     at.segment3 + floor, r.range_m,
+                     r.sigma_m > 0 ? r.sigma_m : options_.ekf.range_sigma_m);
+    placed = true;
+  }
+  a.pending_sightings = std::move(later);
+  // The next sighting's walk is counted from here (the step's end: within a step, the rest of
+  // it is counted twice, a few centimetres).
+  if (placed) a.segment_dr.emplace(Vec3::Zero(), 0.0, WhiteDeadReckoning(), 0.0);
 }
 
 void BeaconTrailEstimator::TryEstimateHeading(Agent& a, TimeS t, const BeaconPosition& beacon,
@@ -343,7 +456,7 @@ void BeaconTrailEstimator::FixHeading(Agent& a, TimeS t, double psi_rad, double 
     for (const auto& [t_drop, beacon_index] : a.drops_before_fix) {
       for (; k < a.steps_before_fix.size() && a.steps_before_fix[k].t1 <= t_drop; ++k)
         AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
-      HintDrop(a, beacon_index);
+      HintDrop(a, beacon_index, DropState(a));
     }
     for (; k < a.steps_before_fix.size(); ++k)
       AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
@@ -461,7 +574,7 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
             else
               a.drops_before_fix.emplace_back(e->t, i);
           } else if (a.drop_dr) {
-            HintDrop(a, i);
+            HintDrop(a, i, DropState(a));
           } else {
             const auto [p, cov] = AgentEstimate(it->second);
             if (p) map_.SetAnchorHint(i, *p, *cov + drop);
@@ -473,10 +586,11 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
     if (a.AwaitingHeading()) a.steps_before_fix.push_back(*step);
-    if (a.drop_dr && !a.pending_drops.empty()) {
+    if (a.drop_dr && (!a.pending_drops.empty() || !a.pending_sightings.empty())) {
       const DropDeadReckoningState before = DropState(a);
       AdvanceDropDeadReckoning(a, *step, d);
       HintPendingDrops(a, step->t1, step->t0, step->t1, before);
+      HintPendingSightings(a, step->t1, step->t0, step->t1, before);
     } else if (a.drop_dr) {
       AdvanceDropDeadReckoning(a, *step, d);
     }
@@ -547,6 +661,8 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     pending_.push_back({t, agent, beacon, r->range_m, r->sigma_m.value_or(0.0)});
     pending_t_ = t;
+    if (r->range_m > 0 && r->range_m <= options_.map.max_link_m && WantsSighting(passer, beacon))
+      passer.pending_sightings.push_back(pending_.back());
   } else if (const auto* b = std::get_if<BearingMeasurement>(&row)) {
     // Bearing from a beacon (a) to the agent (b).
     auto it = agents_.find(b->b);
@@ -597,6 +713,8 @@ void BeaconTrailEstimator::ApplyStanding(TimeS before, TimeS now, EstimateSink& 
     // Drops made while standing: where the dropper stands (no step spans them).
     if (a.drop_dr && !a.pending_drops.empty())
       HintPendingDrops(a, std::nextafter(before, -1e300), 0, 0, DropState(a));
+    if (a.drop_dr && !a.pending_sightings.empty())
+      HintPendingSightings(a, std::nextafter(before, -1e300), 0, 0, DropState(a));
     if (a.deferred.empty() || !a.ekf) continue;
     bool accepted = false;
     std::vector<Deferred> keep;
@@ -877,6 +995,10 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["anchor_rms_m"] = ms.anchor_rms_m;
   num["entry_heading_fixes"] = static_cast<double>(entry_fixes_);
   num["beacons_anchored_by_close_pass"] = static_cast<double>(close_pass_anchors_);
+  num["map_sightings"] = static_cast<double>(ms.sightings);
+  num["map_sightings_used"] = static_cast<double>(ms.sightings_used);
+  num["map_sighting_outliers"] = static_cast<double>(ms.sighting_outliers);
+  num["map_tracks_without_sightings"] = static_cast<double>(ms.tracks_without_sightings);
   num["implausible_beacon_links"] = static_cast<double>(implausible_links_);
   num["rows_ignored"] = static_cast<double>(rows_ignored_);
   summary.integrity.insert(summary.integrity.end(), map_notes_.begin(), map_notes_.end());

@@ -76,6 +76,26 @@ struct BeaconTrailOptions {
   /// (before; the tracker follows the map, so each pass anchored the map where the map had put
   /// it, and the ellipses held the truth 62-65 % of the time on variants without drop events).
   bool close_pass_on_track = true;
+  /// An agent's ranges to beacons from its dead-reckoning track go into the map (issue 22,
+  /// item 1; BeaconMap::AddSighting, `map.sightings`): an agent walking back past beacons it
+  /// dropped long before, or hearing them across a U-shaped trail, closes the loop that
+  /// neighbour-only beacon links leave open. A range counts when the agent has walked
+  /// `sighting_loop_m` since it dropped or passed that beacon (a range to a beacon just dropped
+  /// says what the drop prior and the links say) or the beacon is another's or surveyed, at
+  /// most one per beacon per `sighting_spacing_m` walked. Set a priori: a few beacon spacings,
+  /// and the length over which the dead reckoning's white errors decorrelate.
+  double sighting_loop_m = 10.0;
+  double sighting_spacing_m = 2.0;
+  /// The gyro's turn-scale error (drop_dead_reckoning.turn_scale_sigma) is a shared error of
+  /// each track in the map, with the other three (2026-12-06): every turn adds its share to the
+  /// heading of the walk after it (a search that has turned 5 rad at 3 % is 9 deg off), which
+  /// no heading offset, rate or scale explains. false: left out (before; held at a negligible
+  /// prior). docs/beacons.md.
+  bool map_turn_scale = true;
+  /// rad; a turn between two steps larger than this is a reversal whose sign the steps do not
+  /// tell (the gyro knew): left out of the turn-scale lever, its share of the turn-scale error
+  /// a heading error of its own (a wrong guess would turn the lever by 2 pi).
+  double map_turn_ambiguous_rad = 2.5;
   /// Dead-reckoning drift of the drop hints without a tracker: 1 sigma per metre (ours: 5 %).
   double pdr_drift_per_m = 0.05;
   /// PDR direction noise over the entry track, added to the start heading's own sigma.
@@ -163,7 +183,12 @@ class BeaconTrailEstimator : public OnlineEstimator {
   struct DropDeadReckoningState {
     Vec2 position_n = Vec2::Zero();
     Mat2 white = Mat2::Zero();
-    Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
+    Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero(), sum_turn_perp_n = Vec2::Zero();
+    /// The white covariance of [x, y, heading] (the sightings' chains), and that of the walk
+    /// since the last sighting alone.
+    Mat3 white3 = Mat3::Zero(), segment3 = Mat3::Zero();
+    /// d position / d e (MapPrior::along).
+    TrackLever Lever() const;
   };
   struct Agent {
     std::string id;
@@ -192,6 +217,9 @@ class BeaconTrailEstimator : public OnlineEstimator {
     /// white errors (step noise, heading walk) here, its shared ones as the map's track
     /// `map_track` with the lever arms below (MapPrior::along).
     std::optional<DeadReckoning> drop_dr;
+    /// The same white dead reckoning from the last sighting on, from no error there: the
+    /// covariance of the walk between two sightings (MapSighting).
+    std::optional<DeadReckoning> segment_dr;
     double drop_dr_rotation_rad = 0;
     int map_track = -1;
     std::optional<TimeS> first_step_t;
@@ -208,24 +236,38 @@ class BeaconTrailEstimator : public OnlineEstimator {
     bool heading_assumed = false;  ///< fixed by the fallback, not estimated
     /// No start heading and none estimated or assumed yet.
     bool AwaitingHeading() const { return heading_unknown && !heading_fixed; }
-    Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero();
+    Vec2 sum_d_n = Vec2::Zero(), sum_t_perp_n = Vec2::Zero(), sum_turn_perp_n = Vec2::Zero();
+    /// The walking direction's turn since the first step (DeadReckoning's turn-scale model).
+    double turned_rad = 0;
+    std::optional<double> last_direction_rad;
     int last_drop = -1;                      ///< beacon of the previous drop
     /// Drops waiting for the step that spans them (drop_within_step): time, beacon.
     std::vector<std::pair<TimeS, std::string>> pending_drops;
+    /// Ranges waiting for the step that spans them to become the map's sightings.
+    std::vector<PendingRange> pending_sightings;
+    /// Walked (walked_m) when each beacon was dropped or passed by this agent, and when it was
+    /// last a sighting of it.
+    std::map<int, double> walked_at_drop, walked_at_sighting;
     Mat2 last_drop_white_cov = Mat2::Zero();  ///< drop_dr's covariance there
   };
 
   int Beacon(const std::string& id);
+  /// The drop priors' dead reckoning without its shared errors (the map's track errors).
+  PdrOptions WhiteDeadReckoning() const;
   void StartDropDeadReckoning(Agent& a, double heading_sigma_rad);
   void AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d);
   DropDeadReckoningState DropState(const Agent& a) const;
   /// The map's prior of `beacon` dropped by `a` at `at`.
   void HintDrop(Agent& a, int beacon, const DropDeadReckoningState& at);
-  void HintDrop(Agent& a, int beacon) { HintDrop(a, beacon, DropState(a)); }
   /// A point of a's dead-reckoning track as the map's prior of `beacon` (a close pass of a
   /// beacon that has no drop event), its white covariance as given; not a link of the chain of
   /// drops.
   void HintTrackPoint(Agent& a, int beacon, const DropDeadReckoningState& at);
+  /// The pending sightings up to `until`, placed as the drops are.
+  void HintPendingSightings(Agent& a, TimeS until, TimeS t0, TimeS t1,
+                            const DropDeadReckoningState& before);
+  /// Whether a's range to `beacon` becomes a sighting of the map (options.sighting_loop_m).
+  bool WantsSighting(const Agent& a, int beacon) const;
   /// The pending drops up to `until`, placed at the share of the step from `before` to now.
   void HintPendingDrops(Agent& a, TimeS until, TimeS t0, TimeS t1,
                         const DropDeadReckoningState& before);

@@ -106,6 +106,12 @@ void DeadReckoning::AddStep(const Step& step) {
   position_n_ += step.delta_n;
 }
 
+void DeadReckoning::AddHeadingVariance(double variance_rad2) {
+  if (!(variance_rad2 >= 0) || !std::isfinite(variance_rad2))
+    throw std::invalid_argument("DeadReckoning: a heading variance must be finite and >= 0");
+  error_cov_(kHeading, kHeading) += variance_rad2;
+}
+
 Mat2 DeadReckoning::covariance() const {
   const Vec2 s = offset_sens_.head<2>();
   return own_covariance() + considered_sigma_rad_ * considered_sigma_rad_ * s * s.transpose();

@@ -93,6 +93,10 @@ class DeadReckoning {
   /// error keeps of the old one's sensitivity to it (zero: the fix is independent of the walk;
   /// I - K for an update with gain K). Throws std::invalid_argument as FusePosition does.
   void SetPosition(const Vec2& position_n, const Mat2& cov, const Mat2& offset_kept = Mat2::Zero());
+  /// An extra heading error of this variance (rad^2) from now on, independent of every other
+  /// error: e.g. a reversal whose turn's sign the steps do not tell, so that its share of the
+  /// turn-scale error is not known either. Not a step: DeadReckoningClones do not see it.
+  void AddHeadingVariance(double variance_rad2);
   /// The error covariance [dx, dy, d_heading, d_heading_rate, d_scale, d_turn_scale].
   static constexpr int kErrors = 6;
   using ErrorCovariance = Eigen::Matrix<double, kErrors, kErrors>;
