@@ -553,30 +553,32 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     const double r2 = r * r;
     best.chi2_links += r2 <= d2 ? r2 : 2 * options.link_huber_sigma * std::abs(r) - d2;
   }
-  // The sightings' part: each one's robust range cost and its prior (start or chain).
-  const double* states = x.data() + 2 * n + kTrackErrors * problem.tracks.size();
+  // The sightings' part: each one's robust range cost and its prior (start or chain), by the
+  // same cost functions the solver saw.
+  double* states = x.data() + 2 * n + kTrackErrors * problem.tracks.size();
   const double c2 = options.sighting_tukey_sigma * options.sighting_tukey_sigma;
   for (std::size_t k = 0; k < problem.sightings.size(); ++k) {
     const MapSighting& q = problem.sightings[k];
-    const Vec3 state(states[3 * k], states[3 * k + 1], states[3 * k + 2]);
-    best.sighting_state.push_back(state);
-    const Eigen::Map<const TrackVec> e(x.data() + 2 * n + kTrackErrors * q.track);
-    const double r = ((state.head<2>() - best.position_n[q.i]).norm() - q.range_m) / q.sigma_m;
+    double* state = states + 3 * k;
+    double* e = x.data() + 2 * n + kTrackErrors * q.track;
+    best.sighting_state.push_back(Eigen::Map<const Vec3>(state));
+    double r = 0;
+    const double* range_blocks[2] = {state, &x[2 * q.i]};
+    SightingRangeCost(q.range_m, q.sigma_m).Evaluate(range_blocks, &r, nullptr);
     best.chi2_sightings += 2 * TukeyRho(r * r, options.sighting_tukey_sigma);
     best.sighting_outliers += r * r > c2;
+    const Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
     Vec3 u;
     if (q.from_sighting >= 0) {
       const MapSighting& a = problem.sightings[q.from_sighting];
-      const Vec3& sa = best.sighting_state[q.from_sighting];
-      const Vec2 d = q.position_n - a.position_n;
-      u.head<2>() = state.head<2>() - sa.head<2>() - d - sa.z() * Vec2(-d.y(), d.x()) -
-                    (q.along - a.along) * e;
-      u.z() = state.z() - sa.z();
+      const double* blocks[3] = {state, states + 3 * q.from_sighting, e};
+      SightingChainCost(q.position_n - a.position_n, cov, q.along - a.along)
+          .Evaluate(blocks, u.data(), nullptr);
     } else {
-      u.head<2>() = state.head<2>() - q.position_n - q.along * e;
-      u.z() = state.z();
+      const double* blocks[2] = {state, e};
+      SightingStartCost(q.position_n, cov, q.along).Evaluate(blocks, u.data(), nullptr);
     }
-    best.chi2_sightings += u.dot(Mat3(0.5 * (q.cov + q.cov.transpose())).ldlt().solve(u));
+    best.chi2_sightings += u.squaredNorm();
   }
   best.chi2_priors = best.chi2 - best.chi2_links - best.chi2_sightings;
   best.prior_residuals = static_cast<int>(2 * problem.priors.size());
