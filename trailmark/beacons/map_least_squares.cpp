@@ -565,7 +565,7 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     double r = 0;
     const double* range_blocks[2] = {state, &x[2 * q.i]};
     SightingRangeCost(q.range_m, q.sigma_m).Evaluate(range_blocks, &r, nullptr);
-    best.chi2_sightings += 2 * TukeyRho(r * r, options.sighting_tukey_sigma);
+    best.chi2_sightings += TukeyRho(r * r, options.sighting_tukey_sigma);
     best.sighting_outliers += r * r > c2;
     const Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
     Vec3 u;
