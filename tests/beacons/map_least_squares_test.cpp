@@ -6,6 +6,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <numbers>
 #include <stdexcept>
 
 #include "trailmark/core/random.h"
@@ -138,6 +139,7 @@ MapProblem WithSightings(const std::vector<Vec2>& truth, Random& rng) {
     q.track = 0;
     q.position_n = at + 0.2 * Vec2(rng.Normal(), rng.Normal());
     q.along << -at.y(), 30.0 + k, at.x(), 1.5, at.x(), 30.0 + k, at.y(), -1.5;
+    q.heading_along << 1.0, 30.0 + k, 0.0, 3.0;
     if (k == 0 || k == 6) {  // two chains
       q.cov = Vec3(0.25, 0.25, 0.01).asDiagonal();
     } else {
@@ -150,13 +152,17 @@ MapProblem WithSightings(const std::vector<Vec2>& truth, Random& rng) {
 }
 
 // The problem's cost written out: Huber links, Gaussian priors and tracks, the sightings' start
-// and chain priors and their ranges under Tukey's biweight (Ceres' rho / 2), by part.
+// and chain priors and their ranges under Tukey's biweight (Ceres' rho / 2), by part. A chain's
+// displacement D is turned by the heading error there, h_A and the part g e of the shared
+// errors' lever that turns D (options.sighting_chain_rotation; else to first order); a chain's
+// start has the dead reckoning's marginal as its prior (options.sighting_start_marginal).
 struct CostParts {
   double links = 0, priors = 0, sightings = 0;
   double total() const { return links + priors + sightings; }
 };
 
-CostParts WrittenOutCostParts(const MapProblem& p, const std::vector<double>& x) {
+CostParts WrittenOutCostParts(const MapProblem& p, const std::vector<double>& x,
+                              const MapLeastSquaresOptions& o = {}) {
   const int n = p.beacons;
   const auto beacon = [&](int i) { return Vec2(x[2 * i], x[2 * i + 1]); };
   const auto track = [&](int k) {
@@ -185,14 +191,31 @@ CostParts WrittenOutCostParts(const MapProblem& p, const std::vector<double>& x)
     if (q.from_sighting >= 0) {
       const MapSighting& a = p.sightings[q.from_sighting];
       const Vec3 sa = state(q.from_sighting);
-      const Vec2 d = q.position_n - a.position_n;
-      u << s.head<2>() - sa.head<2>() - d - sa.z() * Vec2(-d.y(), d.x()) -
-               (q.along - a.along) * track(q.track),
-          s.z() - sa.z();
+      const Vec2 d = q.position_n - a.position_n, perp(-d.y(), d.x());
+      const TrackLever da = q.along - a.along;
+      Vec2 moved;
+      if (o.sighting_chain_rotation) {
+        const Eigen::Matrix<double, 1, kTrackErrors> g = perp.transpose() * da / d.squaredNorm();
+        const double phi = sa.z() + (g * track(q.track)).value();
+        moved = Vec2(std::cos(phi) * d.x() - std::sin(phi) * d.y(),
+                     std::sin(phi) * d.x() + std::cos(phi) * d.y()) +
+                (da - perp * g) * track(q.track);
+      } else {
+        moved = d + sa.z() * perp + da * track(q.track);
+      }
+      u << s.head<2>() - sa.head<2>() - moved, s.z() - sa.z();
+      cost.sightings += 0.5 * u.dot(q.cov.ldlt().solve(u));
+    } else if (o.sighting_start_marginal) {
+      Eigen::Matrix<double, 3, kTrackErrors> j;
+      j.topRows<2>() = q.along;
+      j.row(2) = q.heading_along.transpose();
+      const Mat3 cov = q.cov + j * p.tracks[q.track].cov * j.transpose();
+      u << s.head<2>() - q.position_n, s.z();
+      cost.sightings += 0.5 * u.dot(cov.ldlt().solve(u));
     } else {
       u << s.head<2>() - q.position_n - q.along * track(q.track), s.z();
+      cost.sightings += 0.5 * u.dot(q.cov.ldlt().solve(u));
     }
-    cost.sightings += 0.5 * u.dot(q.cov.ldlt().solve(u));
     const double r = ((s.head<2>() - beacon(q.i)).norm() - q.range_m) / q.sigma_m;
     const double c2 = 4.685 * 4.685, v = 1 - r * r / c2;
     cost.sightings += r * r > c2 ? c2 / 6 : c2 / 6 * (1 - v * v * v);
@@ -200,8 +223,9 @@ CostParts WrittenOutCostParts(const MapProblem& p, const std::vector<double>& x)
   return cost;
 }
 
-double WrittenOutCost(const MapProblem& p, const std::vector<double>& x) {
-  return WrittenOutCostParts(p, x).total();
+double WrittenOutCost(const MapProblem& p, const std::vector<double>& x,
+                      const MapLeastSquaresOptions& o = {}) {
+  return WrittenOutCostParts(p, x, o).total();
 }
 
 TEST(MapLeastSquares, SightingsSolutionIsTheMinimumOfTheWrittenOutCost) {
@@ -211,32 +235,90 @@ TEST(MapLeastSquares, SightingsSolutionIsTheMinimumOfTheWrittenOutCost) {
   Random rng(31);
   const auto truth = UTrail();
   const MapProblem p = WithSightings(truth, rng);
-  const MapSolution s = SolveMapLeastSquares(p, {truth});
-  ASSERT_TRUE(s.ok) << s.why;
-  ASSERT_EQ(s.sighting_state.size(), p.sightings.size());
-  EXPECT_EQ(s.sighting_outliers, 1);
-  std::vector<double> x;
-  for (const Vec2& b : s.position_n) x.push_back(b.x()), x.push_back(b.y());
-  for (const TrackVec& e : s.track_errors) x.insert(x.end(), e.data(), e.data() + kTrackErrors);
-  for (const Vec3& v : s.sighting_state) x.insert(x.end(), v.data(), v.data() + 3);
-  EXPECT_NEAR(2 * WrittenOutCost(p, x), s.chi2, 1e-6 * s.chi2);
-  // Each part of chi2 (the consistency test leaves the sightings' out) as written out: twice
-  // its cost, a range under Tukey's loss counted once (Ceres' rho), not twice.
-  const CostParts parts = WrittenOutCostParts(p, x);
-  EXPECT_NEAR(s.chi2_links, 2 * parts.links, 1e-6 * s.chi2);
-  EXPECT_NEAR(s.chi2_priors, 2 * parts.priors, 1e-6 * s.chi2);
-  EXPECT_NEAR(s.chi2_sightings, 2 * parts.sightings, 1e-6 * s.chi2);
-  for (std::size_t k = 0; k < x.size(); ++k) {
-    const double h = 1e-6;
-    std::vector<double> up = x, down = x;
-    up[k] += h;
-    down[k] -= h;
-    EXPECT_NEAR((WrittenOutCost(p, up) - WrittenOutCost(p, down)) / (2 * h), 0.0, 1e-4) << k;
+  // The defaults (turned chains, marginal starts) and the first-order forms.
+  MapLeastSquaresOptions first_order;
+  first_order.sighting_chain_rotation = first_order.sighting_start_marginal = false;
+  for (const MapLeastSquaresOptions& o : {MapLeastSquaresOptions{}, first_order}) {
+    const MapSolution s = SolveMapLeastSquares(p, {truth}, o);
+    ASSERT_TRUE(s.ok) << s.why;
+    ASSERT_EQ(s.sighting_state.size(), p.sightings.size());
+    EXPECT_EQ(s.sighting_outliers, 1);
+    std::vector<double> x;
+    for (const Vec2& b : s.position_n) x.push_back(b.x()), x.push_back(b.y());
+    for (const TrackVec& e : s.track_errors) x.insert(x.end(), e.data(), e.data() + kTrackErrors);
+    for (const Vec3& v : s.sighting_state) x.insert(x.end(), v.data(), v.data() + 3);
+    EXPECT_NEAR(2 * WrittenOutCost(p, x, o), s.chi2, 1e-6 * s.chi2);
+    // Each part of chi2 (the consistency test leaves the sightings' out) as written out: twice
+    // its cost, a range under Tukey's loss counted once (Ceres' rho), not twice.
+    const CostParts parts = WrittenOutCostParts(p, x, o);
+    EXPECT_NEAR(s.chi2_links, 2 * parts.links, 1e-6 * s.chi2);
+    EXPECT_NEAR(s.chi2_priors, 2 * parts.priors, 1e-6 * s.chi2);
+    EXPECT_NEAR(s.chi2_sightings, 2 * parts.sightings, 1e-6 * s.chi2);
+    for (std::size_t k = 0; k < x.size(); ++k) {
+      const double h = 1e-6;
+      std::vector<double> up = x, down = x;
+      up[k] += h;
+      down[k] -= h;
+      EXPECT_NEAR((WrittenOutCost(p, up, o) - WrittenOutCost(p, down, o)) / (2 * h), 0.0, 1e-4)
+          << k;
+    }
+    // A wrong chain (its heading lever left out) is not the minimum.
+    MapProblem wrong = p;
+    for (auto& q : wrong.sightings) q.position_n.x() += 0.5;
+    EXPECT_GT(std::abs(WrittenOutCost(wrong, x, o) - WrittenOutCost(p, x, o)), 1e-3);
   }
-  // A wrong chain (its heading lever left out) is not the minimum.
-  MapProblem wrong = p;
-  for (auto& q : wrong.sightings) q.position_n.x() += 0.5;
-  EXPECT_GT(std::abs(WrittenOutCost(wrong, x) - WrittenOutCost(p, x)), 1e-3);
+}
+
+TEST(MapLeastSquares, AChainTurnedByALargeHeadingErrorFitsExactly) {
+  // An agent's walk round a 10 m square of surveyed beacons, its dead reckoning turned by
+  // 0.4 rad from the start (a heading error a two-minute trace reaches), exact ranges. Turned
+  // exactly, the chain of sightings fits the walk (the states on the true positions, h = the
+  // heading error, chi2 ~ 0); to first order D + h perp(D) is 8 % too long and the tight
+  // chain cannot fit the ranges.
+  const std::vector<Vec2> beacons{{0, 0}, {10, 0}, {10, 10}, {0, 10}};
+  MapProblem p;
+  p.beacons = 4;
+  for (int i = 0; i < 4; ++i) p.priors.push_back({i, beacons[i], Mat2::Identity() * 1e-6});
+  MapTrack track;
+  track.cov = TrackVec(1e-8, 1e-12, 1e-8, 1e-8).asDiagonal();
+  p.tracks.push_back(track);
+  const double heading_error = 0.4;
+  std::vector<Vec2> walk;
+  for (int k = 0; k < 16; ++k) {
+    const double a = 2 * std::numbers::pi * k / 16;
+    walk.push_back(Vec2(5, 5) + 3.0 * Vec2(std::cos(a), std::sin(a)));
+  }
+  const Eigen::Rotation2Dd dead_reckoning(-heading_error);  // D = R(-error) x true step
+  Vec2 at = walk[0];
+  for (int k = 0; k < 16; ++k) {
+    if (k > 0) at += dead_reckoning * (walk[k] - walk[k - 1]);
+    for (int i = 0; i < 4; ++i) {
+      MapSighting q;
+      q.i = i;
+      q.range_m = (walk[k] - beacons[i]).norm();
+      q.position_n = at;
+      q.heading_along << 1, 0, 0, 0;
+      q.from_sighting = static_cast<int>(p.sightings.size()) - 1;
+      // The first: where the walk starts, heading unknown (1 rad); then 4 ranges from one
+      // point (no walk between), then a tight walk.
+      q.cov = q.from_sighting < 0 ? Mat3(Vec3(1e-6, 1e-6, 1.0).asDiagonal())
+              : i > 0             ? Mat3(Vec3(1e-8, 1e-8, 1e-10).asDiagonal())
+                                  : Mat3(Vec3(1e-4, 1e-4, 1e-6).asDiagonal());
+      p.sightings.push_back(q);
+    }
+  }
+  const MapSolution turned = SolveMapLeastSquares(p, {beacons});
+  ASSERT_TRUE(turned.ok) << turned.why;
+  EXPECT_LT(turned.chi2, 1.0);
+  for (int k = 0; k < 16; ++k) {
+    EXPECT_NEAR((turned.sighting_state[4 * k].head<2>() - walk[k]).norm(), 0.0, 1e-3) << k;
+    EXPECT_NEAR(turned.sighting_state[4 * k].z(), heading_error, 1e-3) << k;
+  }
+  MapLeastSquaresOptions first_order;
+  first_order.sighting_chain_rotation = false;
+  const MapSolution linear = SolveMapLeastSquares(p, {beacons}, first_order);
+  ASSERT_TRUE(linear.ok) << linear.why;
+  EXPECT_GT(linear.chi2, 10.0);
 }
 
 TEST(MapLeastSquares, MarginalsEqualCeresCovarianceWithSightings) {

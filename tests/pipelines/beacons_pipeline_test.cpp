@@ -265,6 +265,30 @@ TEST(BeaconsPipeline, HoldsOnANeighbourOnlyTrailWithImplausibleLinks) {
   }
 }
 
+TEST(BeaconsPipeline, SightingsAreUsedWhereSurveyedBeaconsHoldTheMapsRotation) {
+  // Sightings (`sightings=true`) go into a part of the map with at least
+  // `sightings_min_surveyed` surveyed beacons: the neighbour trail has three, the deployed
+  // trail none, where they are not even kept unless the gate is 0.
+  const SimulatedMission surveyed = SimulateShapedTrail({}, 2);
+  const OnDisk surveyed_disk(surveyed.data, surveyed.plan);
+  const Outcome on = RunOn(RequirePipeline("beacons-mds"), surveyed_disk.mission, surveyed.data,
+                           {{"sightings", "true"}});
+  EXPECT_GT(on.summary.numbers.at("map_sightings_used"), 0.0);
+  const SimulatedMission deployed = SimulateScenario("beacon-trail", 2);
+  const OnDisk deployed_disk(deployed.data, deployed.plan);
+  const Outcome gated = RunOn(RequirePipeline("beacons-mds"), deployed_disk.mission, deployed.data,
+                              {{"sightings", "true"}});
+  EXPECT_EQ(gated.summary.numbers.at("map_sightings"), 0.0);
+  const Outcome everywhere =
+      RunOn(RequirePipeline("beacons-mds"), deployed_disk.mission, deployed.data,
+            {{"sightings", "true"}, {"sightings_min_surveyed", "0"}});
+  EXPECT_GT(everywhere.summary.numbers.at("map_sightings_used"), 0.0);
+  // Gated, the map is the one without sightings.
+  const Outcome off = RunOn(RequirePipeline("beacons-mds"), deployed_disk.mission, deployed.data);
+  EXPECT_EQ(gated.metrics.static_nodes.stats.mean_m, off.metrics.static_nodes.stats.mean_m);
+  EXPECT_NE(everywhere.metrics.static_nodes.stats.mean_m, off.metrics.static_nodes.stats.mean_m);
+}
+
 TEST(BeaconsPipeline, AMapThatDisagreesWithItsNoiseIsNotUsedAndSaysSo) {
   // One of the trail's surveyed beacons written 4 m from where it is: the least-squares map
   // fails its chi-square test, the beacons fall back to their surveys and drop priors, and an

@@ -43,8 +43,8 @@ bool BeaconMapOptions::IsValid(std::string* why) const {
     if (why) *why = "resolve_count_growth must be >= 1 and resolve_median_shift_sigma >= 0";
     return false;
   }
-  if (max_sightings < 0) {
-    if (why) *why = "max_sightings must be >= 0";
+  if (max_sightings < 0 || sightings_min_surveyed < 0) {
+    if (why) *why = "max_sightings and sightings_min_surveyed must be >= 0";
     return false;
   }
   return least_squares.IsValid(why);
@@ -156,21 +156,21 @@ void BeaconMap::SetTrackHint(int i, int track, const Vec2& p, const Mat2& white_
 }
 
 void BeaconMap::AddSighting(int i, int track, const Vec2& position_n, const TrackLever& along,
-                            const Mat3& white_cov, const Mat3& segment_cov, double range_m,
-                            double sigma_m) {
+                            const TrackVec& heading_along, const Mat3& white_cov,
+                            const Mat3& segment_cov, double range_m, double sigma_m) {
   if (!options_.sightings || options_.solver != MapSolver::kLeastSquares) return;
   if (i < 0 || i >= static_cast<int>(ids_.size()) || track < 0 ||
       track >= static_cast<int>(tracks_.size()))
     throw std::invalid_argument(
         fmt::format("beacon map: sighting of beacon {} on track {}", i, track));
   if (!position_n.allFinite() || !white_cov.allFinite() || !segment_cov.allFinite() ||
-      !along.allFinite() || !std::isfinite(range_m) || range_m < 0 || !(sigma_m > 0) ||
-      !std::isfinite(sigma_m))
+      !along.allFinite() || !heading_along.allFinite() || !std::isfinite(range_m) || range_m < 0 ||
+      !(sigma_m > 0) || !std::isfinite(sigma_m))
     throw std::invalid_argument(
         fmt::format("beacon map: a sighting of {} is not finite or has sigma <= 0", ids_[i]));
   track_sightings_.resize(tracks_.size(), 0);
   sighting_state_.emplace_back();
-  sightings_.push_back({i, track, track_sightings_[track]++, position_n, along,
+  sightings_.push_back({i, track, track_sightings_[track]++, position_n, along, heading_along,
                         0.5 * (white_cov + white_cov.transpose()),
                         0.5 * (segment_cov + segment_cov.transpose()), range_m, sigma_m});
   ++summary_.sightings;
@@ -240,6 +240,7 @@ std::vector<MapSighting> BeaconMap::PartSightings(const std::vector<int>& local,
     q.track = s->track;
     q.position_n = s->position_n;
     q.along = s->along;
+    q.heading_along = s->heading_along;
     q.cov = s->white;
     if (const auto l = last.find(s->track); l != last.end() && l->second.first + 1 == s->sequence) {
       q.from_sighting = l->second.second;
@@ -301,7 +302,10 @@ void BeaconMap::BeginSolve(bool on_worker) {
       h.from = h.from >= 0 ? local[h.from] : -1;
       in.hint_track.push_back(h);
     }
-    if (options_.sightings && options_.solver == MapSolver::kLeastSquares)
+    const auto surveyed_members = std::count_if(in.surveyed.begin(), in.surveyed.end(),
+                                                [](const auto& s) { return s.has_value(); });
+    if (options_.sightings && options_.solver == MapSolver::kLeastSquares &&
+        surveyed_members >= options_.sightings_min_surveyed)
       in.sightings = PartSightings(local, &in.sighting_ids);
     for (const MapSighting& q : in.sightings)
       if (const auto t = track_state_.find(q.track); t != track_state_.end())

@@ -72,11 +72,16 @@ struct BeaconMapOptions {
   /// Least squares: the agents' ranges to beacons from their dead-reckoning tracks
   /// (AddSighting) in the map, the loop closure across a trail (issue 22, item 1). A part
   /// keeps its latest `max_sightings`, and is solved again for a beacon's new ones when they
-  /// have grown by `resolve_count_growth` since its last solve. Off by default (2026-12-06):
-  /// on the neighbour trail's design seeds the map 0.243 -> 0.232 m, on the paper's deployed
-  /// trail 0.444 -> 0.602 m (its heading offset, the only hold on the map's rotation there,
-  /// pulled by the trace's heading walk; docs/beacons.md).
+  /// have grown by `resolve_count_growth` since its last solve. Used by a part with at least
+  /// `sightings_min_surveyed` surveyed beacons (2: its rotation held by them): where the map's
+  /// rotation is held by the droppers' heading priors alone, a trace's dead-reckoning misfit of
+  /// a few centimetres per range turns it (the paper's deployed trail, design seeds: map 0.44
+  /// -> 0.58 m with sightings; the neighbour trail, three surveyed: 0.243 -> 0.203 m;
+  /// docs/beacons.md). 0: every part. Off by default: with sightings the solver needs 100-500
+  /// iterations where 100 are allowed (a run 0.2 -> 8 s on the neighbour trail, and the map
+  /// not converged to round-off: docs/beacons.md).
   bool sightings = false;
+  int sightings_min_surveyed = 2;
   int max_sightings = 200;
   /// Least squares: a track's shared errors found beyond their sigma are inflated each apart
   /// (a chi-square test of 1 dof each); false: the track's chi-square and one scale for all.
@@ -141,7 +146,8 @@ class BeaconMap {
   /// the track's previous one when that one is in the part too, else starts a chain with the
   /// white covariance.
   void AddSighting(int i, int track, const Vec2& position_n, const TrackLever& along,
-                   const Mat3& white_cov, const Mat3& segment_cov, double range_m, double sigma_m);
+                   const TrackVec& heading_along, const Mat3& white_cov, const Mat3& segment_cov,
+                   double range_m, double sigma_m);
   bool HasAnchor(int i) const { return surveyed_[i].has_value() || hint_[i].has_value(); }
   /// A beacon-to-beacon range; returns false (and ignores it) when implausible.
   bool AddRange(int i, int j, double range_m);
@@ -186,6 +192,7 @@ class BeaconMap {
     std::size_t sequence = 0;  ///< of its track's sightings
     Vec2 position_n = Vec2::Zero();
     TrackLever along = TrackLever::Zero();
+    TrackVec heading_along = TrackVec::Zero();
     Mat3 white = Mat3::Identity(), segment = Mat3::Identity();
     double range_m = 0, sigma_m = 0.3;
   };

@@ -176,38 +176,81 @@ class SightingStartCost final : public ceres::SizedCostFunction<3, 3, kTrackErro
   Eigen::Matrix<double, 3, kTrackErrors> wa_;
 };
 
-// W [p - p_A - D - h_A perp(D) - dA e; h - h_A]: a sighting after the previous one of its track.
+// W [p - p_A - R(phi) D - C e; h - h_A], phi = h_A + g e: a sighting after the previous one of
+// its track. The heading error there (the walk's h_A and the part g e of the shared errors'
+// lever dA that turns D: offset, rate x time, turn scale) rotates the dead reckoning's D; C e is
+// the rest of dA e (the step scale, turns within). `rotate` false: the first-order form
+// D + phi perp(D) with g = 0, C = dA (6 % too long at a heading error of 0.35 rad, which a
+// two-minute trace reaches).
 class SightingChainCost final : public ceres::SizedCostFunction<3, 3, 3, kTrackErrors> {
  public:
-  SightingChainCost(const Vec2& d, const Mat3& cov, const TrackLever& d_along) : d_(d) {
+  SightingChainCost(const Vec2& d, const Mat3& cov, const TrackLever& d_along, bool rotate)
+      : d_(d), rotate_(rotate) {
     const Eigen::LLT<Mat3> llt(cov);
     w_ = llt.matrixL().solve(Mat3::Identity());
-    wa_ = -w_.leftCols<2>() * d_along;
-    Mat3 ja = -Mat3::Identity();
-    ja(0, 2) = d.y();  // -perp(D) = (D_y, -D_x)
-    ja(1, 2) = -d.x();
-    wja_ = w_ * ja;
+    const Vec2 perp(-d.y(), d.x());
+    g_.setZero();
+    if (rotate && d.squaredNorm() > 1e-12) g_ = perp.transpose() * d_along / d.squaredNorm();
+    c_ = d_along - perp * g_;
   }
   bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
     const Eigen::Map<const Vec3> b(x[0]), a(x[1]);
     const Eigen::Map<const TrackVec> e(x[2]);
-    const Vec3 u(b.x() - a.x() - d_.x() + a.z() * d_.y(), b.y() - a.y() - d_.y() - a.z() * d_.x(),
-                 b.z() - a.z());
-    const Vec3 r = w_ * u + wa_ * e;
+    const double phi = a.z() + (g_ * e).value();
+    Vec2 rd, drd;  // R(phi) D and its derivative in phi
+    if (rotate_) {
+      rd = Eigen::Rotation2Dd(phi) * d_;
+      drd = Vec2(-rd.y(), rd.x());
+    } else {
+      drd = Vec2(-d_.y(), d_.x());
+      rd = d_ + a.z() * drd;
+    }
+    const Vec2 p = b.head<2>() - a.head<2>() - rd - c_ * e;
+    const Vec3 r = w_ * Vec3(p.x(), p.y(), b.z() - a.z());
     for (int k = 0; k < 3; ++k) residual[k] = r[k];
     if (jacobians) {
       if (jacobians[0]) WriteRowMajor(w_, jacobians[0]);
-      if (jacobians[1]) WriteRowMajor(wja_, jacobians[1]);
-      if (jacobians[2]) WriteRowMajor(wa_, jacobians[2]);
+      if (jacobians[1]) {
+        Mat3 ja = -Mat3::Identity();
+        ja.block<2, 1>(0, 2) = -drd;
+        WriteRowMajor(Mat3(w_ * ja), jacobians[1]);
+      }
+      if (jacobians[2]) {
+        Eigen::Matrix<double, 3, kTrackErrors> je = Eigen::Matrix<double, 3, kTrackErrors>::Zero();
+        je.topRows<2>() = -drd * g_ - c_;
+        WriteRowMajor(Eigen::Matrix<double, 3, kTrackErrors>(w_ * je), jacobians[2]);
+      }
     }
     return true;
   }
 
  private:
   Vec2 d_;
-  Mat3 w_, wja_;
-  Eigen::Matrix<double, 3, kTrackErrors> wa_;
+  bool rotate_;
+  Mat3 w_;
+  Eigen::Matrix<double, 1, kTrackErrors> g_;
+  TrackLever c_;
 };
+
+// The prior of sighting k: its chain's displacement from the previous one, or the chain's start
+// (its parameter blocks: the state, the previous state when chained, its track's e).
+std::unique_ptr<ceres::CostFunction> SightingPriorCost(const MapProblem& problem, std::size_t k,
+                                                       const MapLeastSquaresOptions& options) {
+  const MapSighting& q = problem.sightings[k];
+  Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
+  if (q.from_sighting >= 0) {
+    const MapSighting& a = problem.sightings[q.from_sighting];
+    return std::make_unique<SightingChainCost>(q.position_n - a.position_n, cov, q.along - a.along,
+                                               options.sighting_chain_rotation);
+  }
+  if (!options.sighting_start_marginal)
+    return std::make_unique<SightingStartCost>(q.position_n, cov, q.along);
+  Eigen::Matrix<double, 3, kTrackErrors> j;
+  j << q.along, q.heading_along.transpose();
+  const TrackCov& e_cov = problem.tracks[q.track].cov;
+  cov += j * (0.5 * (e_cov + e_cov.transpose())) * j.transpose();
+  return std::make_unique<SightingStartCost>(q.position_n, cov, TrackLever::Zero());
+}
 
 // (|p - b| - range) / sigma for a sighting's state [x, y, h] and its beacon.
 class SightingRangeCost final : public ceres::SizedCostFunction<1, 3, 2> {
@@ -273,7 +316,7 @@ void Check(const MapProblem& p) {
           k, q.i, q.track, q.from_sighting, p.beacons, p.tracks.size()));
     if (!std::isfinite(q.range_m) || q.range_m < 0 || !(q.sigma_m > 0) ||
         !std::isfinite(q.sigma_m) || !q.position_n.allFinite() || !q.along.allFinite() ||
-        !q.cov.allFinite() || llt.info() != Eigen::Success ||
+        !q.heading_along.allFinite() || !q.cov.allFinite() || llt.info() != Eigen::Success ||
         !q.cov.isApprox(q.cov.transpose(), 1e-9))
       throw std::invalid_argument(fmt::format(
           "beacon map: sighting {} of beacon {} is not finite, has a sigma <= 0 or a covariance "
@@ -322,14 +365,11 @@ void Build(const MapProblem& problem, const MapLeastSquaresOptions& options,
     double* state = sightings + 3 * k;
     double* e = tracks + kTrackErrors * q.track;
     p.AddParameterBlock(state, 3);
-    const Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
-    if (q.from_sighting >= 0) {
-      const MapSighting& a = problem.sightings[q.from_sighting];
-      p.AddResidualBlock(new SightingChainCost(q.position_n - a.position_n, cov, q.along - a.along),
-                         nullptr, state, sightings + 3 * q.from_sighting, e);
-    } else {
-      p.AddResidualBlock(new SightingStartCost(q.position_n, cov, q.along), nullptr, state, e);
-    }
+    if (q.from_sighting >= 0)
+      p.AddResidualBlock(SightingPriorCost(problem, k, options).release(), nullptr, state,
+                         sightings + 3 * q.from_sighting, e);
+    else
+      p.AddResidualBlock(SightingPriorCost(problem, k, options).release(), nullptr, state, e);
     p.AddResidualBlock(new SightingRangeCost(q.range_m, q.sigma_m),
                        new ceres::TukeyLoss(options.sighting_tukey_sigma), state, &x[2 * q.i]);
   }
@@ -517,8 +557,10 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     Build(problem, options, xs, p);
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+
     so.max_num_iterations = options.max_iterations;
     so.num_threads = 1;
+
     // Converged to round-off (not Ceres' 1e-6 defaults): the map must not depend on the frame.
     so.function_tolerance = 1e-14;
     so.gradient_tolerance = 1e-14;
@@ -567,17 +609,9 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     SightingRangeCost(q.range_m, q.sigma_m).Evaluate(range_blocks, &r, nullptr);
     best.chi2_sightings += TukeyRho(r * r, options.sighting_tukey_sigma);
     best.sighting_outliers += r * r > c2;
-    const Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
     Vec3 u;
-    if (q.from_sighting >= 0) {
-      const MapSighting& a = problem.sightings[q.from_sighting];
-      const double* blocks[3] = {state, states + 3 * q.from_sighting, e};
-      SightingChainCost(q.position_n - a.position_n, cov, q.along - a.along)
-          .Evaluate(blocks, u.data(), nullptr);
-    } else {
-      const double* blocks[2] = {state, e};
-      SightingStartCost(q.position_n, cov, q.along).Evaluate(blocks, u.data(), nullptr);
-    }
+    const double* blocks[3] = {state, q.from_sighting >= 0 ? states + 3 * q.from_sighting : e, e};
+    SightingPriorCost(problem, k, options)->Evaluate(blocks, u.data(), nullptr);
     best.chi2_sightings += u.squaredNorm();
   }
   best.chi2_priors = best.chi2 - best.chi2_links - best.chi2_sightings;

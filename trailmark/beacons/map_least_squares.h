@@ -77,6 +77,9 @@ struct MapSighting {
   int track = 0;         ///< >= 0
   Vec2 position_n = Vec2::Zero();
   TrackLever along = TrackLever::Zero();
+  /// d heading / d e there: [1, t - t0, 0, turned] (the offset, the rate's time, the turn
+  /// scale's angle turned since the track's first step).
+  TrackVec heading_along = TrackVec::Zero();
   Mat3 cov = Mat3::Identity();  ///< symmetric positive definite
   int from_sighting = -1;       ///< the same track's previous sighting, an earlier index; -1: none
   /// Where the solver starts it (e.g. the last solve's): empty, its dead reckoning moved as
@@ -102,6 +105,14 @@ struct MapLeastSquaresOptions {
   /// range has no weight (4.685: 95 % efficiency at the Gaussian; Huber's linear pull of a 3 m
   /// outlier from a 0.3 m sigma would bend the track).
   double sighting_tukey_sigma = 4.685;
+  /// A chain of sightings turns each displacement by its heading error exactly (a rotation),
+  /// not to first order (false: D + phi perp(D)).
+  bool sighting_chain_rotation = true;
+  /// A chain's first state has the dead reckoning's marginal there as its prior (the shared
+  /// errors' share J cov_e J^T added to the white covariance, J = [along; heading_along]), not
+  /// the first-order lever on e (14 m from the entry at a heading error of 0.3 rad that lever
+  /// is 0.6 m off; the chain's displacements keep their exact hold on e). False: the lever.
+  bool sighting_start_marginal = true;
   int max_iterations = 100;
   /// The solution's robust chi-square is tested against its degrees of freedom at this false
   /// alarm rate (a map that disagrees with its noise: wrong fold, a moved anchor).

@@ -81,6 +81,11 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
       "sightings", [](O& o) -> bool& { return o.map.sightings; },
       "least squares: the agents' ranges to beacons from their dead-reckoning tracks in the "
       "map (the loop closure across a trail)");
+  t.Integer(
+      "sightings_min_surveyed", [](O& o) -> int& { return o.map.sightings_min_surveyed; },
+      OptionBounds::NonNegative(),
+      "a part of the map uses sightings when at least this many of its beacons are surveyed (2: "
+      "its rotation held by them; 0: every part)");
   t.Real("sighting_loop_m", &O::sighting_loop_m, "m", OptionBounds::NonNegative(),
          "a range to a beacon the agent dropped or passed is a sighting once it has walked this "
          "far since");
@@ -352,7 +357,9 @@ void BeaconTrailEstimator::HintPendingDrops(Agent& a, TimeS until, TimeS t0, Tim
 }
 
 bool BeaconTrailEstimator::WantsSighting(const Agent& a, int beacon) const {
-  if (!options_.map.sightings || options_.map.solver != MapSolver::kLeastSquares || !a.drop_dr ||
+  // A mission with fewer surveyed beacons than a part needs to use them keeps none.
+  if (!options_.map.sightings || options_.map.solver != MapSolver::kLeastSquares ||
+      static_cast<int>(surveyed_.size()) < options_.map.sightings_min_surveyed || !a.drop_dr ||
       a.AwaitingHeading() || a.map_track < 0)
     return false;
   if (const auto d = a.walked_at_drop.find(beacon);
@@ -387,8 +394,12 @@ void BeaconTrailEstimator::HintPendingSightings(Agent& a, TimeS until, TimeS t0,
                                     lerp(before.segment3, after.segment3)};
     // Kept positive definite where no step lies between (1 cm, 0.06 deg).
     const Mat3 floor = Vec3(1e-4, 1e-4, 1e-6).asDiagonal();
-    map_.AddSighting(r.beacon, a.map_track, at.position_n, at.Lever(), at.white3 + floor,
-                     at.segment3 + floor, r.range_m,
+    // The heading's sensitivity to the track's errors there: offset, rate x time, turn scale x
+    // the angle turned (the step's end's, within a step).
+    const TrackVec heading_along(1.0, a.first_step_t ? r.t - *a.first_step_t : 0.0, 0.0,
+                                 options_.map_turn_scale ? a.turned_rad : 0.0);
+    map_.AddSighting(r.beacon, a.map_track, at.position_n, at.Lever(), heading_along,
+                     at.white3 + floor, at.segment3 + floor, r.range_m,
                      r.sigma_m > 0 ? r.sigma_m : options_.ekf.range_sigma_m);
     placed = true;
   }
