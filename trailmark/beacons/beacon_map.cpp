@@ -565,6 +565,8 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
   // by the rate's excess let the start heading, the map's only hold on its rotation where no
   // beacon is surveyed, turn the map 40 deg (beacon-trail seed 8); else the track's chi-square
   // with its dof and one scale for all.
+  const bool any_surveyed = std::any_of(in.surveyed.begin(), in.surveyed.end(),
+                                        [](const auto& s) { return s.has_value(); });
   if (solution.ok) {
     bool again = false;
     const double alarm = 1 - options.least_squares.false_alarm;
@@ -573,14 +575,24 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
       const TrackVec& e = solution.track_errors[k];
       if (options.inflate_track_errors_apart) {
         const double limit = integrity::ChiSquareQuantile(1, alarm);
+        double largest = 1;
         for (int j = 0; j < kTrackErrors; ++j) {
           const double q = e[j] * e[j] / track.cov(j, j);
           if (!(q > limit)) continue;
           const double f = std::min(q, 100.0);
+          largest = std::max(largest, f);
           track.cov.row(j) *= std::sqrt(f);
           track.cov.col(j) *= std::sqrt(f);
           part->track_inflation = std::max(part->track_inflation, f);
           again = true;
+        }
+        // Not where a beacon is surveyed: there a shared error beyond its sigma may be a
+        // survey's fault (one written 4 m off), and loosened drops would hand the map to it.
+        if (largest > 1 && options.inflate_track_white && !any_surveyed) {
+          for (MapPrior& q : problem.priors)
+            if (q.track == static_cast<int>(k)) q.cov *= largest;
+          for (MapSighting& q : problem.sightings)
+            if (q.track == static_cast<int>(k)) q.cov *= largest;
         }
         continue;
       }

@@ -86,6 +86,14 @@ struct BeaconMapOptions {
   /// Least squares: a track's shared errors found beyond their sigma are inflated each apart
   /// (a chi-square test of 1 dof each); false: the track's chi-square and one scale for all.
   bool inflate_track_errors_apart = true;
+  /// Least squares: a track whose shared errors are found beyond their sigma has its drops' (and
+  /// sightings') white covariances scaled by the largest of those factors too, in a part
+  /// without surveyed beacons (with one, the fault may be the survey's): a dead
+  /// reckoning that far outside its model (phone steps, a drift 10x its prior, steps 10 % short)
+  /// is off in its white errors as well, and drop priors held at their stated white sigma bend
+  /// the map with confidence (beacon-trail variants K 1-20, `phone`: beacons-ekf p75 3.21 ->
+  /// 2.64 m, in95 42 -> 51 %; docs/beacons.md). false: the shared errors alone (before).
+  bool inflate_track_white = true;
   bool IsValid(std::string* why) const;
 };
 

@@ -74,6 +74,10 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
       "map_inflate_apart", [](O& o) -> bool& { return o.map.inflate_track_errors_apart; },
       "least squares: a track's shared errors found beyond their sigma inflated each apart "
       "(false: all by the track's chi-square)");
+  t.Flag(
+      "map_inflate_white", [](O& o) -> bool& { return o.map.inflate_track_white; },
+      "least squares: a track whose shared errors are inflated has its drops' white "
+      "covariances scaled by the largest factor too (false: the shared errors alone)");
   t.Real("map_turn_ambiguous_rad", &O::map_turn_ambiguous_rad, "rad", OptionBounds::Positive(),
          "a turn between two steps larger than this (a reversal, its sign unknown) is left out "
          "of the turn-scale lever, its share of the turn-scale error a heading error of its own");
