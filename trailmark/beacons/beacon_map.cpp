@@ -302,10 +302,8 @@ void BeaconMap::BeginSolve(bool on_worker) {
       h.from = h.from >= 0 ? local[h.from] : -1;
       in.hint_track.push_back(h);
     }
-    const auto surveyed_members = std::count_if(in.surveyed.begin(), in.surveyed.end(),
-                                                [](const auto& s) { return s.has_value(); });
     if (options_.sightings && options_.solver == MapSolver::kLeastSquares &&
-        surveyed_members >= options_.sightings_min_surveyed)
+        in.SurveyedCount() >= options_.sightings_min_surveyed)
       in.sightings = PartSightings(local, &in.sighting_ids);
     for (const MapSighting& q : in.sightings)
       if (const auto t = track_state_.find(q.track); t != track_state_.end())
@@ -565,8 +563,7 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
   // by the rate's excess let the start heading, the map's only hold on its rotation where no
   // beacon is surveyed, turn the map 40 deg (beacon-trail seed 8); else the track's chi-square
   // with its dof and one scale for all.
-  const bool any_surveyed = std::any_of(in.surveyed.begin(), in.surveyed.end(),
-                                        [](const auto& s) { return s.has_value(); });
+  const bool any_surveyed = in.SurveyedCount() > 0;
   if (solution.ok) {
     bool again = false;
     const double alarm = 1 - options.least_squares.false_alarm;

@@ -14,6 +14,7 @@
 ///    the least squares, and the answer where fewer than two beacons of a part have priors.
 /// Also the way back out (sec. 4): move towards the smallest id you can hear. No I/O.
 
+#include <algorithm>
 #include <functional>
 #include <future>
 #include <limits>
@@ -244,6 +245,10 @@ class BeaconMap {
     std::vector<MapSighting> sightings;
     std::vector<std::size_t> sighting_ids;
     std::map<int, TrackVec> track_start;  ///< the map's track -> its e at the last solve
+    int SurveyedCount() const {
+      return static_cast<int>(std::count_if(surveyed.begin(), surveyed.end(),
+                                            [](const auto& s) { return s.has_value(); }));
+    }
   };
   /// A part's solution and its share of the summary.
   struct PartOutput {

@@ -557,10 +557,8 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     Build(problem, options, xs, p);
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-
     so.max_num_iterations = options.max_iterations;
     so.num_threads = 1;
-
     // Converged to round-off (not Ceres' 1e-6 defaults): the map must not depend on the frame.
     so.function_tolerance = 1e-14;
     so.gradient_tolerance = 1e-14;
