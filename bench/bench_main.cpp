@@ -344,6 +344,31 @@ void BM_LandmarkTrackerOffice(benchmark::State& state) {
 }
 BENCHMARK(BM_LandmarkTrackerOffice)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
+// landmarks-ukf's estimator on the synthetic landmark incident of `trailmark bench landmarks`
+// (issue 24): 20 firefighters under a ceiling grid of 208 landmarks, a quarter unknown, rows in
+// memory (arg: minutes of the incident; the CLI runs the 4 hours). x_real_time: incident seconds
+// per wall second, all 20 at once.
+void BM_LandmarkIncident(benchmark::State& state) {
+  LandmarkIncidentOptions o;
+  o.duration_s = 60.0 * static_cast<double>(state.range(0));
+  const LandmarkIncident inc = MakeLandmarkIncident(o, 1);
+  double seconds = 0;
+  for (auto _ : state) {
+    landmarks::LandmarkEstimatorOptions e;
+    e.tracking = landmarks::Tracking::kUkf;
+    e.fix_fusion = landmarks::FixFusion::kIndependent;  // the pipeline's defaults
+    landmarks::LandmarkEstimator estimator(inc.info, e);
+    NullSink sink;
+    for (const MissionRow& r : inc.rows) estimator.Add(r, sink);
+    estimator.Finish(sink);
+    benchmark::DoNotOptimize(estimator.Current("ff1"));
+    seconds += o.duration_s;
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(inc.rows.size()));
+  state.counters["x_real_time"] = benchmark::Counter(seconds, benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_LandmarkIncident)->Arg(10)->Unit(benchmark::kMillisecond)->Iterations(3);
+
 // The SCAAT EKF on the simulated lab trace e (8 min): every step and every ultrasound range and
 // bearing, as the beacons-ekf pipeline feeds it, without file reading. x_real_time = mission
 // seconds per wall second (issue 4: >= 10,000x).

@@ -84,6 +84,11 @@ int Bench(std::size_t rows, const std::filesystem::path& json_out);
 int BenchBreadcrumb(const IncidentOptions& options, double solve_period_s,
                     double covariance_period_s, const std::filesystem::path& json_out,
                     const std::map<std::string, std::string>& localizer_options = {});
+/// `trailmark bench landmarks`: landmarks-ukf on a synthetic landmark incident (issue 24), rows
+/// in memory: the pipeline as `run` builds it and the estimator alone; `options`: the pipeline's.
+int BenchLandmarks(const LandmarkIncidentOptions& options,
+                   const std::map<std::string, std::string>& pipeline_options,
+                   const std::filesystem::path& json_out);
 /// `trailmark bench ins --mission DIR`: the INS core on the samples in memory and the whole
 /// `run --pipeline ins`, samples/s, best of `runs`.
 int BenchIns(const std::filesystem::path& mission_dir, int runs,

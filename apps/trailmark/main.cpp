@@ -171,7 +171,8 @@ int main(int argc, char** argv) {
   bench->add_option("what", bench_what,
                     "empty: I/O and pdr; 'breadcrumb': the large-incident benchmark (issue 8); "
                     "'load': the live server under load on loopback (issue 7); 'ins': the foot "
-                    "INS on a mission's imu.csv, core and end to end (--mission)");
+                    "INS on a mission's imu.csv, core and end to end (--mission); 'landmarks': "
+                    "landmarks-ukf on a 4-hour 20-firefighter landmark incident (issue 24)");
   std::string bench_mission;
   int bench_runs = 7;
   bench
@@ -182,9 +183,10 @@ int main(int argc, char** argv) {
   bench->add_option("--runs", bench_runs, "ins: runs of each measurement (the best is reported)")
       ->check(CLI::Range(1, 1000000));
   std::vector<std::string> bench_options;
-  bench->add_option("--option", bench_options,
-                    "ins, load, breadcrumb: an option of the pipeline key=value (ins: for both "
-                    "measurements; breadcrumb: on top of the benchmark's; repeatable)");
+  bench->add_option(
+      "--option", bench_options,
+      "ins, load, breadcrumb, landmarks: an option of the pipeline key=value (ins: for both "
+      "measurements; breadcrumb: on top of the benchmark's; repeatable)");
   server::LoadTestOptions load;
   bench->add_option("--firefighters", load.firefighters, "load: firefighters sending at once");
   bench->add_option("--minutes", load.minutes, "load: incident minutes each one sends");
@@ -210,9 +212,9 @@ int main(int argc, char** argv) {
       "load: devices publish to this MQTT broker instead of POSTing (tcp://host:port)");
   IncidentOptions incident;
   double solve_period = 1.0, covariance_period = 5.0;
-  bench->add_option("--agents", incident.agents, "breadcrumb: firefighters");
+  bench->add_option("--agents", incident.agents, "breadcrumb, landmarks: firefighters");
   bench->add_option("--crumbs", incident.crumbs, "breadcrumb: breadcrumbs");
-  bench->add_option("--hours", incident.duration_s, "breadcrumb: incident length (s)")
+  bench->add_option("--hours", incident.duration_s, "breadcrumb, landmarks: incident length (h)")
       ->transform([](std::string v) { return std::to_string(std::stod(v) * 3600.0); });
   bench->add_option("--measurements", incident.measurements, "breadcrumb: total measurements");
   bench->add_option("--solve-period", solve_period, "breadcrumb: re-solve at most every S s");
@@ -446,6 +448,12 @@ int main(int argc, char** argv) {
       if (bench_what == "breadcrumb") {
         return cli::BenchBreadcrumb(incident, solve_period, covariance_period, bench_json,
                                     ParseKeyValues(bench_options));
+      }
+      if (bench_what == "landmarks") {
+        LandmarkIncidentOptions o;
+        o.agents = incident.agents;
+        o.duration_s = incident.duration_s;
+        return cli::BenchLandmarks(o, ParseKeyValues(bench_options), bench_json);
       }
       if (bench_what == "ins") {
         if (bench_mission.empty()) throw std::invalid_argument("bench ins needs --mission DIR");

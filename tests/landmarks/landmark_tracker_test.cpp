@@ -116,6 +116,8 @@ TEST(LandmarkTracker, OneIterationIsTheEkfUpdateAndIteratingReachesTheMap) {
       EXPECT_GT((single.position() - tracker.position()).norm(), 1e-3);
     }
     EXPECT_TRUE(SymmetricPositiveDefinite(tracker.covariance()));
+    // The update writes each pair of entries once: exactly symmetric, not to round-off.
+    EXPECT_EQ((tracker.covariance() - tracker.covariance().transpose()).cwiseAbs().maxCoeff(), 0.0);
   }
 }
 

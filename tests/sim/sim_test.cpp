@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
 #include <utility>
 #include <vector>
@@ -10,6 +12,7 @@
 #include "trailmark/sim/pdr_error_model.h"
 #include "trailmark/sim/rssi_channel.h"
 #include "trailmark/sim/scenarios.h"
+#include "trailmark/sim/synthetic_incident.h"
 #include "trailmark/sim/walker.h"
 
 namespace trailmark {
@@ -209,6 +212,55 @@ TEST(Scenario, OfficeLoopIsDeterministicAndLikeThePaper) {
   int strong = 0;
   for (const auto& p : a.data.rssi) strong += p.rssi_dbm > -40 && p.rx == "ff1";
   EXPECT_GT(strong, 0);
+}
+
+TEST(LandmarkIncident, RowsInTimeOrderEveryPacketFromALandmarkInRangeAndLoudEnough) {
+  // The benchmark's incident (`trailmark bench landmarks`): what it claims to contain.
+  LandmarkIncidentOptions o;
+  o.agents = 5;
+  o.duration_s = 300;
+  const LandmarkIncident inc = MakeLandmarkIncident(o, 3);
+  EXPECT_EQ(inc.steps, static_cast<std::size_t>(5 * 500));
+  EXPECT_EQ(inc.rows.size(), inc.steps + inc.packets);
+  EXPECT_EQ(inc.truth.size(), inc.steps);
+  EXPECT_GT(inc.packets, static_cast<std::size_t>(5 * 300 * 3));  // several landmarks a second
+  for (std::size_t k = 1; k < inc.rows.size(); ++k) {
+    ASSERT_LE(RowTime(inc.rows[k - 1]), RowTime(inc.rows[k])) << k;
+  }
+  std::map<std::string, const NodeInfo*> landmarks;
+  std::size_t unknown = 0;
+  for (const NodeInfo& n : inc.info.nodes) {
+    if (n.kind != NodeKind::kLandmark) continue;
+    landmarks[n.id] = &n;
+    unknown += !n.position.has_value();
+  }
+  EXPECT_EQ(landmarks.size(), inc.landmarks);
+  EXPECT_EQ(unknown, inc.unknown);
+  EXPECT_NEAR(static_cast<double>(unknown) / static_cast<double>(inc.landmarks), 0.25, 0.02);
+  // Each packet from a landmark within hearing range of the walker's truth (a step's end at
+  // most one step away), above the receiver's sensitivity.
+  std::map<std::string, std::vector<const TruthSample*>> truth;
+  for (const TruthSample& s : inc.truth) truth[s.id].push_back(&s);
+  std::size_t checked = 0;
+  for (const MissionRow& row : inc.rows) {
+    const auto* p = std::get_if<RssiPacket>(&row);
+    if (p == nullptr) continue;
+    ASSERT_TRUE(landmarks.count(p->tx)) << p->tx;
+    EXPECT_GE(p->rssi_dbm, o.sensitivity_dbm);
+    const NodeInfo* l = landmarks[p->tx];
+    if (!l->position) continue;
+    const auto& v = truth.at(p->rx);
+    const auto s = std::lower_bound(v.begin(), v.end(), p->t,
+                                    [](const TruthSample* a, double t) { return a->t < t; });
+    if (s == v.end()) continue;
+    EXPECT_LE(((*s)->position_n - *l->position).head<2>().norm(),
+              o.hearing_range_m + o.step_length_m + 1e-9);
+    ++checked;
+  }
+  EXPECT_GT(checked, inc.packets / 2);
+  // Deterministic for a seed, another for another.
+  EXPECT_EQ(MakeLandmarkIncident(o, 3).packets, inc.packets);
+  EXPECT_NE(MakeLandmarkIncident(o, 4).packets, inc.packets);
 }
 
 TEST(Scenario, UnknownNameListsKnownOnes) {

@@ -625,16 +625,21 @@ bool LandmarkTracker::Update(int landmark, const Vec2& landmark_n, int state, do
   // The consider sensitivity through the update: (I - k h^T) S, the final iterate's gain and
   // Jacobian (the packet does not see the offset, so it corrects only what it sees of it).
   sens_ -= k * dot_h(l, sens_);
-  // Joseph form for any gain: P - k u^T - u k^T + S k k^T, u = P H^T (the consider gain too).
-  // One pass without temporaries, each entry in the order of the matrix form (P - (k u^T +
-  // u k^T)) + (S k) k^T.
+  // Joseph form for any gain: P - k u^T - u k^T + S k k^T, u = P H^T (the consider gain too),
+  // then symmetrized, 0.5 (A + A^T). One pass over the pairs without temporaries: each entry in
+  // the order of the matrix form (P - (k u^T + u k^T)) + (S k) k^T, both of a pair before
+  // either is written (the same numbers as the full update followed by Symmetrize()).
   const Eigen::VectorXd sk = s * k;
   for (Eigen::Index j = 0; j < n; ++j) {
-    for (Eigen::Index i = 0; i < n; ++i) {
-      P_(i, j) = (P_(i, j) - (k(i) * ph(j) + ph(i) * k(j))) + sk(i) * k(j);
+    for (Eigen::Index i = 0; i < j; ++i) {
+      const double a_ij = (P_(i, j) - (k(i) * ph(j) + ph(i) * k(j))) + sk(i) * k(j);
+      const double a_ji = (P_(j, i) - (k(j) * ph(i) + ph(j) * k(i))) + sk(j) * k(i);
+      const double v = 0.5 * (a_ij + a_ji);
+      P_(i, j) = v;
+      P_(j, i) = v;
     }
+    P_(j, j) = (P_(j, j) - (k(j) * ph(j) + ph(j) * k(j))) + sk(j) * k(j);
   }
-  Symmetrize();
   return true;
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "trailmark/core/mission.h"
+#include "trailmark/core/online_estimator.h"
 
 namespace trailmark {
 
@@ -44,5 +45,40 @@ struct SyntheticIncident {
 };
 
 SyntheticIncident MakeSyntheticIncident(const IncidentOptions& options, std::uint64_t seed);
+
+/// A large landmark incident for benchmarks (issue 24: "a 4-hour, 20-firefighter landmark
+/// incident in the benchmark"): the same sectors and random-waypoint walks, under radio landmarks
+/// on the ceiling on a square grid over the whole site; every landmark within hearing range
+/// answers every firefighter's phone once per answer period (log-distance + shadowing, packets
+/// below the receiver's sensitivity lost). A share of the landmarks is declared without a
+/// position (placed by the estimator). Steps carry a white heading error per step and a heading
+/// error that walks (a gyro's drift: ~0.2 rad in 30 minutes). Truth per step.
+struct LandmarkIncidentOptions {
+  int agents = 20;
+  double duration_s = 4 * 3600.0;
+  double sector_m = 30.0;  ///< each firefighter searches a square sector of this size
+  double step_period_s = 0.6;
+  double step_length_m = 0.7;
+  double step_heading_sigma_rad = 0.02;  ///< white, per step
+  double heading_walk_rad = 0.004;       ///< the steps' heading error walks this much per step
+  double landmark_spacing_m = 12.0;      ///< the ceiling grid
+  double landmark_height_m = 2.5;
+  double unknown_share = 0.25;  ///< landmarks declared without a position, every k-th
+  double surveyed_sigma_m = 0.2;
+  double answer_period_s = 1.0;
+  double hearing_range_m = 20.0;
+  double alpha_dbm = -60.0, path_loss_exponent = 2.0, sigma_db = 4.0;  ///< BLE-like
+  double sensitivity_dbm = -92.0;
+};
+
+struct LandmarkIncident {
+  MissionInfo info;                ///< the agents (with starts) and the landmarks, radio given
+  std::vector<MissionRow> rows;    ///< steps and packets in time order
+  std::vector<TruthSample> truth;  ///< each firefighter at each step's end
+  std::vector<TruthSample> landmark_truth;  ///< every landmark where it is (t 0)
+  std::size_t steps = 0, packets = 0, landmarks = 0, unknown = 0;
+};
+
+LandmarkIncident MakeLandmarkIncident(const LandmarkIncidentOptions& options, std::uint64_t seed);
 
 }  // namespace trailmark
