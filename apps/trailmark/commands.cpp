@@ -338,16 +338,19 @@ Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
     fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>9} {:>6} {:>6}\n",
                "node", "kind", "samples", "mean m", "median", "p95 m", "max m", "final m",
                "dist m", "mean %dist", "in95 %", "own %");
-    auto row = [](const NodeMetrics& m) {
+    // A share as a whole percentage; "-" where it is not known (no covariance given).
+    auto Percent = [](double share) {
+      return std::isfinite(share) ? fmt::format("{:.0f}", 100.0 * share) : std::string("-");
+    };
+    auto row = [&Percent](const NodeMetrics& m) {
       fmt::print(
-          "{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9} {:>6.0f} "
+          "{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9} {:>6} "
           "{:>6}\n",
-          m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m,
-          m.stats.p95_m, m.stats.max_m, m.stats.final_m, m.distance_m,
+          m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m, m.stats.p95_m,
+          m.stats.max_m, m.stats.final_m, m.distance_m,
           m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-",
-          100.0 * m.stats.in95,
-          m.at_estimates.samples > 0 ? fmt::format("{:.0f}", 100.0 * m.at_estimates.in95)
-                                     : std::string("-"));
+          Percent(m.stats.in95),
+          m.at_estimates.samples > 0 ? Percent(m.at_estimates.in95) : std::string("-"));
     };
     for (const auto& m : metrics.nodes) row(m);
     row(metrics.agents);

@@ -51,6 +51,28 @@ TEST(Evaluate, AgentOnlineSemanticsHandComputed) {
   EXPECT_EQ(m.agents.stats.samples, 4u);
 }
 
+TEST(Evaluate, EstimatesWithoutACovarianceAreLeftOutOfTheEllipseCheckNotCountedOutside) {
+  // estimates.csv with empty sxx, sxy, syy (spec: empty = unknown): in95 is over the rows that
+  // have a covariance, and unknown (NaN, written as null) when none has; the errors count all.
+  std::vector<TruthSample> truth;
+  for (int t = 0; t <= 4; ++t) truth.push_back({double(t), "ff1", Vec3(t, 0, 0)});
+  Estimate unknown{0.0, "ff1", Vec3(0, 0.5, 0)};
+  unknown.covariance_known = false;
+  Estimate known{2.0, "ff1", Vec3(2, 0.5, 0), 0.25, 0, 0.25};
+  const Metrics both = Evaluate(Info(), truth, {unknown, known});
+  ASSERT_EQ(both.nodes[0].stats.samples, 5u);
+  // Errors at t = 0..4: 0.5, |(1, 0.5)|, then from t = 2 on the second estimate: 0.5,
+  // |(1, 0.5)|, |(2, 0.5)|.
+  EXPECT_NEAR(both.nodes[0].stats.mean_m,
+              (0.5 + std::sqrt(1.25) + 0.5 + std::sqrt(1.25) + std::sqrt(4.25)) / 5, 1e-12);
+  // With a covariance (sigma 0.5 m): t = 2, 3, 4, NEES 1, 5, 17: two of three inside.
+  EXPECT_NEAR(both.nodes[0].stats.in95, 2.0 / 3.0, 1e-12);
+  const Metrics none = Evaluate(Info(), truth, {unknown});
+  EXPECT_TRUE(std::isnan(none.nodes[0].stats.in95));
+  EXPECT_TRUE(std::isnan(none.nodes[0].at_estimates.in95));
+  EXPECT_EQ(none.nodes[0].stats.mean_nees, 0.0);
+}
+
 TEST(Evaluate, FloorFiguresHandComputed) {
   // Levels 0 at z = 0 and 1 at z = 3. Truth at t = 0..3 on level 0, then t = 4 on level 1
   // (z = 3); x = t. Estimates held from their time:

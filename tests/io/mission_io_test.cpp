@@ -382,5 +382,84 @@ TEST(Streams, FloorAndVerticalVarianceColumnsOfVersion1Point1) {
   }
 }
 
+TEST(InputAsTheSpecAllows, FeaturesOfOtherKindsKindsInAnyCaseAndWholeLevelsWrittenAsReals) {
+  // Found by an audit of the readers against the spec (2026-12-06): a label feature whose
+  // `level` is a name refused the whole plan; "Wall" was silently no wall; 1.0 was no level.
+  const char* text = R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"label","level":"G","text":"lobby"},
+     "geometry":{"type":"Point","coordinates":[1,1]}},
+    {"type":"Feature","properties":{"kind":"Wall","level":1.0},
+     "geometry":{"type":"LineString","coordinates":[[0,0],[10,0]]}},
+    {"type":"Feature","properties":{"kind":"DOOR","level":1},
+     "geometry":{"type":"LineString","coordinates":[[4,0],[5,0]]}}]})";
+  std::vector<int> levels;
+  const FloorPlan plan = ParseFloorPlanGeoJson(text, "plan.geojson", std::nullopt, &levels);
+  EXPECT_EQ(plan.walls().size(), 1u);
+  EXPECT_EQ(plan.doors().size(), 1u);
+  EXPECT_EQ(levels, std::vector<int>{1});
+  const std::string half = R"({"type":"FeatureCollection","features":[
+    {"type":"Feature","properties":{"kind":"wall","level":0.5},
+     "geometry":{"type":"LineString","coordinates":[[0,0],[10,0]]}}]})";
+  try {
+    ParseFloorPlanGeoJson(half, "plan.geojson");
+    FAIL() << "level 0.5 was accepted";
+  } catch (const InputError& e) {
+    EXPECT_THAT(e.what(), AllOf(HasSubstr("/features/0/properties/level"), HasSubstr("integer")));
+  }
+  const MissionInfo info = ParseMissionInfo(
+      R"({"floors": [{"level": 1.0, "elevation_m": 3}, {"level": 0, "elevation_m": 0}]})", "m");
+  ASSERT_EQ(info.floors.size(), 2u);
+  EXPECT_EQ(info.floors.back().level, 1);
+}
+
+TEST(InputAsTheSpecAllows, APartialRadioBlockIsNotACalibration) {
+  // "radio holds calibration if known": a sigma alone is not one; alpha and the exponent are not
+  // invented from defaults (they were, and the landmark filter then took itself as calibrated).
+  const MissionInfo sigma_only =
+      ParseMissionInfo(R"({"radio": {"shadowing_sigma_db": 6}})", "mission.json");
+  ASSERT_TRUE(sigma_only.radio.has_value());
+  EXPECT_FALSE(sigma_only.radio->Complete());
+  EXPECT_TRUE(sigma_only.radio->sigma_given);
+  EXPECT_EQ(sigma_only.radio->shadowing_sigma_db, 6.0);
+  // Written back as it was given.
+  EXPECT_THAT(MissionInfoToJson(sigma_only), ::testing::Not(HasSubstr("alpha_dbm")));
+  const MissionInfo again = ParseMissionInfo(MissionInfoToJson(sigma_only), "again");
+  EXPECT_FALSE(again.radio->Complete());
+  EXPECT_EQ(again.radio->shadowing_sigma_db, 6.0);
+  // The spec's example is a calibration; without a sigma it still is (the default sigma).
+  EXPECT_TRUE(ParseMissionInfo(kSpecExample, "m").radio->Complete());
+  const MissionInfo no_sigma =
+      ParseMissionInfo(R"({"radio": {"alpha_dbm": -60, "path_loss_exponent": 2}})", "m");
+  EXPECT_TRUE(no_sigma.radio->Complete());
+  EXPECT_FALSE(no_sigma.radio->sigma_given);
+}
+
+TEST(InputAsTheSpecAllows, EmptyCellsAreUnknownNotZeroAndExtraColumnsMayRepeatAName) {
+  TempDir dir;
+  // A step with sxx given and syy empty: the given variance for both horizontal axes (both
+  // were dropped for the pipeline's default).
+  const auto steps = ReadAll<Step>(
+      dir.File("steps.csv",
+               "t0,t1,agent,dx,dy,dz,sxx,syy,szz\n0,0.5,a,0.7,0,0,0.01,,\n0.5,1,a,0.7,0,0,,,\n"));
+  ASSERT_EQ(steps.size(), 2u);
+  ASSERT_TRUE(steps[0].variance_m2.has_value());
+  EXPECT_EQ(steps[0].variance_m2->x(), 0.01);
+  EXPECT_EQ(steps[0].variance_m2->y(), 0.01);
+  EXPECT_FALSE(steps[1].variance_m2.has_value());
+  // Estimates without a covariance (another method's): unknown, written back empty.
+  const auto est = ReadAll<Estimate>(
+      dir.File("estimates.csv", "t,id,x,y,z,sxx,sxy,syy\n0,a,1,2,0,,,\n1,a,1,2,0,0.5,0,0.5\n"));
+  ASSERT_EQ(est.size(), 2u);
+  EXPECT_FALSE(est[0].covariance_known);
+  EXPECT_TRUE(est[1].covariance_known);
+  EXPECT_EQ(FormatAll(est)[1], "0,a,1,2,0,,,");
+  // Two extra columns of one name are ignored like any extra column (a column that is read may
+  // still not appear twice: CsvReader.DuplicateHeaderColumn).
+  const auto truth =
+      ReadAll<TruthSample>(dir.File("truth.csv", "t,id,note,x,y,z,note\n0,a,p,1,2,0,q\n"));
+  ASSERT_EQ(truth.size(), 1u);
+  EXPECT_EQ(truth[0].position_n, Vec3(1, 2, 0));
+}
+
 }  // namespace
 }  // namespace trailmark

@@ -173,9 +173,17 @@ BreadcrumbEstimator::BreadcrumbEstimator(const MissionInfo& info,
     : options_(std::move(options)), info_(info) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("breadcrumb: " + why);
-  if (info.radio) {
+  if (info.radio && info.radio->Complete()) {
     options_.localizer.radio = radio::LogDistanceModel::From(*info.radio);
     options_.localizer.radio_given = true;
+  } else if (info.radio) {
+    // A partial block is not a calibration: the default model, with the given sigma.
+    if (info.radio->sigma_given) options_.localizer.radio.sigma_db = info.radio->shadowing_sigma_db;
+    setup_notes_.push_back(fmt::format(
+        "mission.json's radio is not a whole calibration (alpha_dbm and path_loss_exponent both "
+        "needed): default log-distance model (alpha {:g} dBm at 1 m, n {:g}), sigma {:g} dB{}",
+        options_.localizer.radio.alpha_dbm, options_.localizer.radio.path_loss_exponent,
+        options_.localizer.radio.sigma_db, info.radio->sigma_given ? " (given)" : ""));
   } else {
     setup_notes_.push_back(
         "mission.json has no radio calibration: default log-distance model (alpha -40 dBm at "

@@ -86,6 +86,10 @@ struct Estimate {
   double syy = 0;
   std::optional<double> szz{};  ///< vertical variance, m^2 (1.1); empty: no height estimate
   std::optional<int> floor{};  ///< the level the estimator believes (1.1); empty: from z
+  /// False when estimates.csv left sxx, sxy or syy empty ("unknown", e.g. a method that gives
+  /// no covariance): sxx, sxy, syy are then 0 and mean nothing (evaluation leaves such rows
+  /// out of in95 and NEES; written back as empty cells).
+  bool covariance_known = true;
 };
 
 }  // namespace trailmark

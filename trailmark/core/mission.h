@@ -46,11 +46,20 @@ struct NodeInfo {
 };
 
 /// Log-distance path-loss calibration: rssi = alpha - 10 n log10(d / 1 m) + N(0, sigma^2).
+/// mission.json may give only some of the values (spec: "`radio` holds calibration if known");
+/// the others keep these defaults and are flagged as not given.
 struct RadioCalibration {
   std::string model = "log-distance";
   double alpha_dbm = -40.0;
   double path_loss_exponent = 2.3;
   double shadowing_sigma_db = 4.0;
+  bool alpha_given = true;
+  bool exponent_given = true;
+  bool sigma_given = true;
+  /// A calibration the estimators can use as it is: alpha and the exponent both known (a
+  /// missing sigma takes the default). Otherwise the path loss is fitted, with the given sigma
+  /// where there is one.
+  bool Complete() const { return alpha_given && exponent_given; }
 };
 
 /// One level of the building (spec 1.1, "Floors"): the elevation of its floor surface in the

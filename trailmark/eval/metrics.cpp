@@ -14,7 +14,17 @@ double HorizontalError(const Vec3& a, const Vec3& b) { return (a - b).head<2>().
 
 ErrorSample Sample(TimeS t, const Estimate& e, const Vec3& truth_n) {
   const Vec2 d = (e.position_n - truth_n).head<2>();
-  return {t, d.norm(), HorizontalNees(d, e.sxx, e.sxy, e.syy)};
+  // No covariance given (an empty cell in estimates.csv): no NEES, not an ellipse of zero.
+  const double nees = e.covariance_known ? HorizontalNees(d, e.sxx, e.sxy, e.syy)
+                                         : std::numeric_limits<double>::quiet_NaN();
+  return {t, d.norm(), nees};
+}
+
+/// The share of the samples with a covariance whose truth is inside it; NaN (written as null,
+/// printed as "-") when no sample has one.
+double InsideShare(std::size_t inside, std::size_t with_covariance) {
+  return with_covariance > 0 ? static_cast<double>(inside) / static_cast<double>(with_covariance)
+                             : std::numeric_limits<double>::quiet_NaN();
 }
 
 void FinishPercentages(NodeMetrics& m) {
@@ -52,16 +62,17 @@ ErrorStatistics ComputeStatistics(const std::vector<ErrorSample>& series) {
   std::vector<double> e;
   e.reserve(series.size());
   double sum = 0, sum2 = 0, nees_sum = 0;
-  std::size_t inside = 0, finite = 0;
+  std::size_t inside = 0, finite = 0, with_covariance = 0;
   for (const auto& x : series) {
     e.push_back(x.error_m);
     sum += x.error_m;
     sum2 += x.error_m * x.error_m;
+    with_covariance += !std::isnan(x.nees);
     inside += x.nees <= kChi2Dof2P95;
     if (std::isfinite(x.nees)) nees_sum += x.nees, ++finite;
   }
   const double n = static_cast<double>(series.size());
-  s.in95 = static_cast<double>(inside) / n;
+  s.in95 = InsideShare(inside, with_covariance);
   s.mean_nees = finite > 0 ? nees_sum / static_cast<double>(finite) : 0.0;
   s.mean_m = sum / n;
   s.rmse_m = std::sqrt(sum2 / n);
@@ -77,13 +88,14 @@ EllipseCheck ComputeEllipseCheck(const std::vector<ErrorSample>& at_estimates) {
   EllipseCheck c;
   c.samples = at_estimates.size();
   if (at_estimates.empty()) return c;
-  std::size_t inside = 0, finite = 0;
+  std::size_t inside = 0, finite = 0, with_covariance = 0;
   double sum = 0;
   for (const auto& x : at_estimates) {
+    with_covariance += !std::isnan(x.nees);
     inside += x.nees <= kChi2Dof2P95;
     if (std::isfinite(x.nees)) sum += x.nees, ++finite;
   }
-  c.in95 = static_cast<double>(inside) / static_cast<double>(c.samples);
+  c.in95 = InsideShare(inside, with_covariance);
   c.mean_nees = finite > 0 ? sum / static_cast<double>(finite) : 0.0;
   return c;
 }

@@ -44,7 +44,8 @@ struct ErrorStatistics {
   double mean_m = 0, median_m = 0, p75_m = 0, p95_m = 0, max_m = 0, rmse_m = 0;
   double final_m = 0;  ///< error at the last scored instant
   /// Share of samples whose truth lies inside the estimate's own 95 % ellipse (NEES <= 5.991);
-  /// 0.95 for an honest covariance (issue 21: between 0.85 and 0.99).
+  /// 0.95 for an honest covariance (issue 21: between 0.85 and 0.99). Over the samples whose
+  /// estimate has a covariance; NaN when none has (estimates.csv with empty covariance cells).
   double in95 = 0;
   /// Mean NEES over the samples with a finite NEES (2 for an honest covariance).
   double mean_nees = 0;

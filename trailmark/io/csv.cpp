@@ -104,9 +104,8 @@ void CsvReader::ReadHeader() {
     if (name.empty() && !options_.allow_unnamed_columns) {
       Fail(fmt::format("header: column {} has an empty name", i + 1));
     }
-    for (const auto& prev : header_) {
-      if (prev == name) Fail(fmt::format("header: column '{}' appears twice", name));
-    }
+    // A name twice is an error only when that column is read (Column): extra columns, which
+    // readers ignore, may repeat a name.
     header_.push_back(name);
   }
 }
@@ -116,10 +115,15 @@ CsvReader::~CsvReader() {
 }
 
 int CsvReader::Column(std::string_view name) const {
+  int found = -1;
   for (std::size_t i = 0; i < header_.size(); ++i) {
-    if (header_[i] == name) return static_cast<int>(i);
+    if (header_[i] != name) continue;
+    if (found >= 0) {
+      throw InputError(path_, 1, fmt::format("header: column '{}' appears twice", name));
+    }
+    found = static_cast<int>(i);
   }
-  return -1;
+  return found;
 }
 
 int CsvReader::RequireColumn(std::string_view name) const {

@@ -2,11 +2,11 @@
 #include "trailmark/io/mission_io.h"
 
 #include <fmt/format.h>
-
-#include <cmath>
 #include <fmt/ranges.h>
 
 #include <algorithm>
+#include <cctype>
+#include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -65,6 +65,16 @@ std::string String(const json& obj, const char* key, const std::string& source,
 }
 
 json Pos(const Vec3& p) { return json::array({p.x(), p.y(), p.z()}); }
+
+/// A level: an integer, also when written as a number with nothing after the point (1.0, as
+/// Python's json and GeoJSON tools write them); 0.5 or "G" are refused.
+int IntegralLevel(const json& j, const std::string& source, const std::string& where) {
+  if (!j.is_number()) Bad(source, where, "expected an integer level");
+  const double v = j.get<double>();
+  if (!(std::abs(v) <= 1000)) Bad(source, where, fmt::format("{:g} is not a plausible level", v));
+  if (v != std::floor(v)) Bad(source, where, fmt::format("expected an integer level, not {:g}", v));
+  return static_cast<int>(v);
+}
 
 }  // namespace
 
@@ -147,11 +157,17 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
     if (radio.model != "log-distance") {
       Bad(source, "/radio/model", fmt::format("unknown model '{}' (log-distance)", radio.model));
     }
-    radio.alpha_dbm = OptNumber(r, "alpha_dbm", source, "/radio").value_or(radio.alpha_dbm);
-    radio.path_loss_exponent =
-        OptNumber(r, "path_loss_exponent", source, "/radio").value_or(radio.path_loss_exponent);
-    radio.shadowing_sigma_db =
-        OptNumber(r, "shadowing_sigma_db", source, "/radio").value_or(radio.shadowing_sigma_db);
+    // Each value is known only where it is given: a partial block (say the shadowing sigma
+    // alone) is not a calibration, and the estimators fit the rest (RadioCalibration::Complete).
+    const auto alpha = OptNumber(r, "alpha_dbm", source, "/radio");
+    const auto exponent = OptNumber(r, "path_loss_exponent", source, "/radio");
+    const auto sigma = OptNumber(r, "shadowing_sigma_db", source, "/radio");
+    radio.alpha_dbm = alpha.value_or(radio.alpha_dbm);
+    radio.path_loss_exponent = exponent.value_or(radio.path_loss_exponent);
+    radio.shadowing_sigma_db = sigma.value_or(radio.shadowing_sigma_db);
+    radio.alpha_given = alpha.has_value();
+    radio.exponent_given = exponent.has_value();
+    radio.sigma_given = sigma.has_value();
     if (radio.path_loss_exponent <= 0) Bad(source, "/radio/path_loss_exponent", "must be > 0");
     if (radio.shadowing_sigma_db < 0) Bad(source, "/radio/shadowing_sigma_db", "must be >= 0");
     info.radio = radio;
@@ -179,11 +195,8 @@ MissionInfo ParseMissionInfo(const std::string& text, const std::string& source)
       const std::string where = fmt::format("/floors/{}", i);
       const json& f = floors[i];
       if (!f.is_object()) Bad(source, where, "expected an object {level, elevation_m}");
-      if (!f.contains("level") || !f["level"].is_number_integer()) {
-        Bad(source, where + "/level", "expected an integer level");
-      }
-      const auto level = f["level"].get<std::int64_t>();
-      if (std::abs(level) > 1000) Bad(source, where + "/level", "not a plausible level");
+      if (!f.contains("level")) Bad(source, where + "/level", "expected an integer level");
+      const int level = IntegralLevel(f["level"], source, where + "/level");
       const auto elevation = OptNumber(f, "elevation_m", source, where);
       if (!elevation) Bad(source, where, "missing key 'elevation_m'");
       if (std::abs(*elevation) > 1e4) {
@@ -249,10 +262,13 @@ std::string MissionInfoToJson(const MissionInfo& info) {
   }
   root["nodes"] = nodes;
   if (info.radio) {
-    root["radio"] = {{"model", info.radio->model},
-                     {"alpha_dbm", info.radio->alpha_dbm},
-                     {"path_loss_exponent", info.radio->path_loss_exponent},
-                     {"shadowing_sigma_db", info.radio->shadowing_sigma_db}};
+    root["radio"] = {{"model", info.radio->model}};
+    if (info.radio->alpha_given) root["radio"]["alpha_dbm"] = info.radio->alpha_dbm;
+    if (info.radio->exponent_given) {
+      root["radio"]["path_loss_exponent"] = info.radio->path_loss_exponent;
+    }
+    if (info.radio->sigma_given)
+      root["radio"]["shadowing_sigma_db"] = info.radio->shadowing_sigma_db;
   }
   if (info.floorplan) root["floorplan"] = *info.floorplan;
   if (!info.floors.empty()) {
@@ -323,16 +339,18 @@ FloorPlan ParseFloorPlanGeoJson(const std::string& text, const std::string& sour
     if (!f.is_object()) Bad(source, where, "expected a Feature object");
     const json props =
         f.contains("properties") && f["properties"].is_object() ? f["properties"] : json::object();
-    const std::string kind = props.contains("kind") && props["kind"].is_string()
-                                 ? props["kind"].get<std::string>()
-                                 : std::string();
+    // The kind as drawn in any case ("Wall" is a wall); features of other kinds (labels,
+    // furniture, ...) are ignored before anything else of theirs is read.
+    std::string kind = props.contains("kind") && props["kind"].is_string()
+                           ? props["kind"].get<std::string>()
+                           : std::string();
+    std::transform(kind.begin(), kind.end(), kind.begin(),
+                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+    if (kind != "wall" && kind != "door" && kind != "room") continue;
     int feature_level = 0;
     if (props.contains("level") && !props["level"].is_null()) {
-      if (!props["level"].is_number_integer())
-        Bad(source, where + "/properties/level", "expected an integer");
-      feature_level = props["level"].get<int>();
+      feature_level = IntegralLevel(props["level"], source, where + "/properties/level");
     }
-    if (kind != "wall" && kind != "door" && kind != "room") continue;  // others are ignored
     levels.insert(feature_level);
     if (level && feature_level != *level) continue;
     if (!f.contains("geometry") || !f["geometry"].is_object()) {

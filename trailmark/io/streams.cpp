@@ -136,9 +136,13 @@ struct Layout<Step> {
       c.Fail(fmt::format("a step of {:g} m is not a plausible foot displacement (> {:g} m)",
                          r.delta_n.norm(), kMaxStepLengthM));
     }
-    const auto sxx = c.OptionalDouble(k[6]);
-    const auto syy = c.OptionalDouble(k[7]);
+    auto sxx = c.OptionalDouble(k[6]);
+    auto syy = c.OptionalDouble(k[7]);
     const auto szz = c.OptionalDouble(k[8]);
+    // One horizontal variance given and the other empty (unknown): the step's error taken as
+    // round, the given one for both, rather than both dropped for the pipeline's default.
+    if (sxx && !syy) syy = sxx;
+    if (syy && !sxx) sxx = syy;
     if (sxx && syy) {
       if (*sxx < 0 || *syy < 0 || (szz && *szz < 0)) c.Fail("negative variance");
       CheckAtMost(c, "sxx", *sxx, kMaxStepVarianceM2, "m^2");
@@ -315,9 +319,13 @@ struct Layout<Estimate> {
     r.t = c.Double(k[0]);
     r.id.assign(c.NodeId(k[1]));
     r.position_n = Vec3(c.Double(k[2]), c.Double(k[3]), c.OptionalDouble(k[4]).value_or(0.0));
-    r.sxx = c.OptionalDouble(k[5]).value_or(0.0);
-    r.sxy = c.OptionalDouble(k[6]).value_or(0.0);
-    r.syy = c.OptionalDouble(k[7]).value_or(0.0);
+    // Empty = unknown (spec): a covariance with any of its cells empty is not known.
+    const auto sxx = c.OptionalDouble(k[5]), sxy = c.OptionalDouble(k[6]),
+               syy = c.OptionalDouble(k[7]);
+    r.covariance_known = sxx && sxy && syy;
+    r.sxx = r.covariance_known ? *sxx : 0.0;
+    r.sxy = r.covariance_known ? *sxy : 0.0;
+    r.syy = r.covariance_known ? *syy : 0.0;
     r.szz = c.OptionalDouble(k[8]);
     r.floor = OptionalLevel(c, k[9]);
     if (r.sxx < 0 || r.syy < 0 || (r.szz && *r.szz < 0)) c.Fail("negative variance");
@@ -325,7 +333,12 @@ struct Layout<Estimate> {
   static RowIds Ids(const Estimate& r) { return {r.id}; }
   static void Format(CsvWriter& w, const Estimate& r) {
     w.Add(r.t).Add(r.id).Add(r.position_n.x()).Add(r.position_n.y()).Add(r.position_n.z());
-    w.Add(r.sxx).Add(r.sxy).Add(r.syy);
+    if (r.covariance_known) {
+      w.Add(r.sxx).Add(r.sxy).Add(r.syy);
+    } else {
+      const std::optional<double> unknown;
+      w.Add(unknown).Add(unknown).Add(unknown);
+    }
   }
   static void FormatFloor(CsvWriter& w, const Estimate& r) {
     w.Add(r.szz);

@@ -186,9 +186,25 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
       landmark_integrity_("landmark", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
-  calibrated_ = info.radio.has_value();
+  calibrated_ = info.radio && info.radio->Complete();
   if (calibrated_) {
     model_ = radio::LogDistanceModel::From(*info.radio);
+  } else if (info.radio) {
+    // A partial block: its sigma (where given) is the packets' stated noise; the path loss is
+    // fitted as without one.
+    if (info.radio->sigma_given) {
+      model_.sigma_db = info.radio->shadowing_sigma_db;
+      stated_sigma_db_ = info.radio->shadowing_sigma_db;
+    }
+    setup_notes_.push_back(fmt::format(
+        "mission.json's radio gives {}{}: not a calibration, the path loss is fitted online from "
+        "the stops' RSSI of surveyed landmarks (default log-distance model until then)",
+        info.radio->sigma_given
+            ? fmt::format("shadowing_sigma_db {:g} dB", info.radio->shadowing_sigma_db)
+            : std::string("no shadowing sigma"),
+        info.radio->alpha_given      ? " and alpha_dbm without path_loss_exponent"
+        : info.radio->exponent_given ? " and path_loss_exponent without alpha_dbm"
+                                     : " only"));
   } else {
     setup_notes_.push_back(
         "mission.json has no radio calibration: fitted online from the stops' RSSI of surveyed "
@@ -256,6 +272,7 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
           given->sigma_db = std::max(model_.sigma_db, options_.rssi_sigma_db);
         }
         LandmarkTrackerOptions to = options_.tracker;
+        if (stated_sigma_db_) to.default_sigma_db = *stated_sigma_db_;  // a partial radio block
         to.default_sigma_db = std::max(to.default_sigma_db, options_.rssi_sigma_db);
         TrackerBankOptions bank = options_.bank;
         bank.evidence_delay_s = options_.integrity.window_s;  // the monitor's window

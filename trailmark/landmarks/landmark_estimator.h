@@ -225,6 +225,8 @@ class LandmarkEstimator : public OnlineEstimator {
 
   LandmarkEstimatorOptions options_;
   radio::LogDistanceModel model_;
+  /// mission.json's shadowing sigma when its radio block is not a whole calibration.
+  std::optional<double> stated_sigma_db_;
   bool calibrated_ = false;
   std::vector<std::string> ids_;
   std::map<std::string, int> index_;
