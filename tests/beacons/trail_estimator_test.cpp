@@ -64,6 +64,112 @@ TEST(BeaconTrailEstimator, ADropIsPlacedWithinTheStepThatSpansIt) {
   EXPECT_NEAR(DroppedAt(1.8, false).x(), 10 + 2.1, 1e-6);
 }
 
+/// The steps of DroppedAt (along +x) by a dropper whose stated start heading is `heading_rad`:
+/// the entry fix turns the steps by it; b1 dropped at `drop_t`.
+Vec2 DroppedTurned(double heading_rad, double drop_t, bool within_step, Tracker tracker,
+                   double* entry_fixes = nullptr, double entry_track_m = 1.0) {
+  MissionInfo info = OneDropperOneBeacon();
+  info.nodes[0].start_heading_rad = heading_rad;
+  BeaconTrailOptions options;
+  options.drop_within_step = within_step;
+  options.tracker = tracker;
+  options.entry_track_m = entry_track_m;
+  BeaconTrailEstimator estimator(info, options);
+  VectorSink sink;
+  bool dropped = false;
+  for (int k = 0; k < 8; ++k) {
+    Step s;
+    s.t0 = 0.6 * k;
+    s.t1 = 0.6 * (k + 1);
+    s.agent = "ff1";
+    s.delta_n = Vec3(0.7, 0, 0);
+    s.variance_m2 = Vec3(1e-4, 1e-4, 1e-4);
+    if (!dropped && drop_t < s.t1) {
+      estimator.Add(MissionEvent{drop_t, "ff1", "drop", "b1"}, sink);
+      dropped = true;
+    }
+    estimator.Add(s, sink);
+  }
+  estimator.Finish(sink);
+  if (entry_fixes) *entry_fixes = estimator.Summary().numbers.at("entry_heading_fixes");
+  const auto p = MapPosition(estimator, "b1");
+  EXPECT_TRUE(p.has_value());
+  return p ? p->position_n : Vec2::Constant(std::nan(""));
+}
+
+TEST(BeaconTrailEstimator, TheEntryFixTurnsTheFirstTrackOfTheDropPriorsToo) {
+  // Found by a review (2026-12-06): the first metre's steps went into the drop priors' dead
+  // reckoning unturned and every later prior was off by (R(psi) - I) x that metre. The steps
+  // along +x by a dropper who faced +y at the start: the walk goes up +y.
+  for (const Tracker tracker : {Tracker::kScaat, Tracker::kNone}) {
+    // Dropped after the fix (at 1.4 m): a quarter into the third step, 1.575 m up.
+    Vec2 p = DroppedTurned(M_PI / 2, 1.35, true, tracker);
+    EXPECT_NEAR(p.x(), 10, 1e-6);
+    EXPECT_NEAR(p.y(), 20 + 1.575, 1e-6);
+    p = DroppedTurned(M_PI / 2, 1.35, false, tracker);
+    EXPECT_NEAR(p.x(), 10, 1e-6);
+    EXPECT_NEAR(p.y(), 21.4, 1e-6);
+    // Dropped on the first track itself (0.35 m), its prior placed again at the fix.
+    p = DroppedTurned(M_PI / 2, 0.3, true, tracker);
+    EXPECT_NEAR(p.x(), 10, 1e-6);
+    EXPECT_NEAR(p.y(), 20.35, 1e-6);
+    p = DroppedTurned(M_PI / 2, 0.9, false, tracker);
+    EXPECT_NEAR(p.x(), 10, 1e-6);
+    EXPECT_NEAR(p.y(), 20.7, 1e-6);
+  }
+  // Facing the way the steps go, nothing turns.
+  const Vec2 straight = DroppedTurned(0.0, 1.35, true, Tracker::kScaat);
+  EXPECT_NEAR(straight.x(), 10 + 1.575, 1e-6);
+  EXPECT_NEAR(straight.y(), 20, 1e-6);
+}
+
+TEST(BeaconTrailEstimator, AnEntryTrackOfZeroNeverFixesTheHeading) {
+  // entry_track_m = 0 is documented as "never": it fixed at the first step.
+  double fixes = -1;
+  DroppedTurned(0.1, 1.35, true, Tracker::kScaat, &fixes, 0.0);
+  EXPECT_EQ(fixes, 0.0);
+  DroppedTurned(0.1, 1.35, true, Tracker::kScaat, &fixes, 1.0);
+  EXPECT_EQ(fixes, 1.0);
+}
+
+TEST(BeaconTrailEstimator, TheAssumedHeadingAfterThirtyMetresKeepsItsLeverOnThePosition) {
+  // No start heading and no ultrasound: after entry_heading_fallback_m the heading is assumed
+  // (0, sigma 0.1 rad) and the filter starts at the end of the 30 m track with the heading's
+  // lever perp(track) in its position. The position's correlation with that heading was left
+  // out (found by a review, 2026-12-06): walking 12 m further the same way, the cross-track
+  // variance grew as (30^2 + 12^2) sigma^2 instead of (30 + 12)^2 sigma^2.
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(0, 0, 0), 0.05));
+  NodeInfo lm;  // surveyed, away from the start, never heard: the heading is to be estimated
+  lm.id = "lm1";
+  lm.kind = NodeKind::kLandmark;
+  lm.position = Vec3(50, 50, 0);
+  info.nodes.push_back(lm);
+  BeaconTrailOptions options;
+  options.drop_dead_reckoning.start_heading_sigma_rad = 0.1;
+  options.ekf.initial_heading_sigma_rad = 0.1;
+  BeaconTrailEstimator estimator(info, options);
+  VectorSink sink;
+  for (int k = 0; k < 60; ++k) {  // 42 m along +x
+    Step s;
+    s.t0 = 0.6 * k;
+    s.t1 = 0.6 * (k + 1);
+    s.agent = "ff1";
+    s.delta_n = Vec3(0.7, 0, 0);
+    s.variance_m2 = Vec3(1e-6, 1e-6, 1e-6);
+    estimator.Add(s, sink);
+  }
+  estimator.Finish(sink);
+  const Estimate* last = nullptr;
+  for (const Estimate& e : sink.rows)
+    if (e.id == "ff1") last = &e;
+  ASSERT_NE(last, nullptr);
+  EXPECT_NEAR(last->position_n.x(), 42, 1e-6);
+  // (30 + 12)^2 x 0.01 = 17.6 m^2 (plus the white walk's share); the old form 10.4 m^2.
+  EXPECT_GT(last->syy, 17.0);
+  EXPECT_LT(last->syy, 20.0);
+}
+
 TEST(BeaconTrailEstimator, ADropAfterTheLastStepIsPlacedWhereTheDropperStands) {
   BeaconTrailOptions options;
   BeaconTrailEstimator estimator(OneDropperOneBeacon(), options);

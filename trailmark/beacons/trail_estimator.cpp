@@ -484,12 +484,22 @@ void BeaconTrailEstimator::FixHeading(Agent& a, TimeS t, double psi_rad, double 
     if (init) {
       a.ekf.emplace(StartFromInit(*init, track_n, options_.ekf));
     } else {
-      const Mat2 lever = Vec2(-track_n.y(), track_n.x()) * Vec2(-track_n.y(), track_n.x()).transpose();
       // Assumed: as an agent with a start heading starts (the filter's heading prior), the
-      // dead reckoning's own uncertainty and the heading's lever arm in the position.
+      // dead reckoning's own uncertainty and the heading's lever arm in the position, with the
+      // position's correlation with that heading: p = start + R(psi) track, dp/dpsi = perp.
+      const Vec2 lever(-track_n.y(), track_n.x());
       const double psi_sigma = std::max(sigma_rad, options_.ekf.initial_heading_sigma_rad);
-      a.ekf.emplace(position_n, a.drop_dr->covariance() + lever * psi_sigma * psi_sigma, 0.0,
-                    psi_sigma, 1.0, options_.ekf.initial_scale_sigma, options_.ekf);
+      const double psi_var = psi_sigma * psi_sigma;
+      ScaatEkf::State x;
+      x << position_n, 0.0, 1.0;
+      ScaatEkf::Cov P = ScaatEkf::Cov::Zero();
+      P.topLeftCorner<2, 2>() = a.drop_dr->covariance() + lever * lever.transpose() * psi_var;
+      P.block<2, 1>(0, ScaatEkf::kPsi) = lever * psi_var;
+      P.block<1, 2>(ScaatEkf::kPsi, 0) = lever.transpose() * psi_var;
+      P(ScaatEkf::kPsi, ScaatEkf::kPsi) = psi_var;
+      P(ScaatEkf::kScale, ScaatEkf::kScale) =
+          options_.ekf.initial_scale_sigma * options_.ekf.initial_scale_sigma;
+      a.ekf.emplace(x, P, options_.ekf);
     }
     Emit(t, a, sink);
   } else if (options_.tracker == Tracker::kNone) {
@@ -567,6 +577,8 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     } else if (e->event == "drop" && !e->node.empty()) {
       drop_rank_.emplace(e->node, static_cast<int>(drop_rank_.size()));
       auto it = agents_.find(e->agent);
+      if (it != agents_.end() && OnFirstTrack(it->second))
+        it->second.first_track_drops.emplace_back(e->t, e->node);
       if (it != agents_.end() && options_.drop_within_step && it->second.drop_dr &&
           !it->second.AwaitingHeading()) {
         // Where the dropper was at the drop: within the step that spans it, when that step
@@ -601,6 +613,7 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     Agent& a = agents_.at(step->agent);
     const Vec2 d = Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(step->delta_n.head<2>());
     if (a.AwaitingHeading()) a.steps_before_fix.push_back(*step);
+    if (OnFirstTrack(a)) a.first_track_steps.push_back(*step);
     if (a.drop_dr && (!a.pending_drops.empty() || !a.pending_sightings.empty())) {
       const DropDeadReckoningState before = DropState(a);
       AdvanceDropDeadReckoning(a, *step, d);
@@ -753,8 +766,12 @@ void BeaconTrailEstimator::Finish(EstimateSink& sink) {
   SolveAndEmit(last_t_, sink, /*begin=*/false);
 }
 
+bool BeaconTrailEstimator::OnFirstTrack(const Agent& a) const {
+  return a.entry_heading_rad && !a.heading_fixed && options_.entry_track_m > 0;
+}
+
 void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
-  if (a.heading_fixed || !a.entry_heading_rad) return;
+  if (!OnFirstTrack(a)) return;  // entry_track_m = 0: never
   a.first_track_n += d;
   if (a.first_track_n.norm() < options_.entry_track_m) return;
   a.heading_fixed = true;
@@ -769,6 +786,50 @@ void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
     a.pdr_n = a.start_n + Eigen::Rotation2Dd(psi) * Vec2(a.pdr_n - a.start_n);
     ++entry_fixes_;
   }
+  if (a.drop_dr) ReplayFirstTrack(a);
+}
+
+void BeaconTrailEstimator::ReplayFirstTrack(Agent& a) {
+  // The first track's steps went into the drop priors' dead reckoning before the fix turned
+  // them: every later drop prior was off by (R(psi) - I) x the first track (0.1-0.5 m at the
+  // offsets of 5-20 degrees a boot or a phone has), a shift about the start that no shared
+  // error's lever can take. Run again from the start with the steps turned.
+  const PdrOptions white = WhiteDeadReckoning();
+  a.drop_dr.emplace(Vec3(a.start_n.x(), a.start_n.y(), 0), a.start_sigma_m, white, 0.0);
+  a.segment_dr.emplace(Vec3::Zero(), 0.0, white, 0.0);
+  a.sum_d_n = a.sum_t_perp_n = a.sum_turn_perp_n = Vec2::Zero();
+  a.turned_rad = 0;
+  a.last_direction_rad.reset();
+  a.first_step_t.reset();
+  a.last_drop = -1;
+  a.last_drop_white_cov = Mat2::Zero();
+  std::vector<Step> steps = std::move(a.first_track_steps);
+  std::vector<std::pair<TimeS, std::string>> drops = std::move(a.first_track_drops);
+  a.first_track_steps.clear();
+  a.first_track_drops.clear();
+  auto turned = [&](const Step& st) {
+    return Vec2(Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(st.delta_n.head<2>()));
+  };
+  const std::map<int, double> walked_at_drop = a.walked_at_drop;  // as walked then, not now
+  if (options_.drop_within_step) {
+    // The first track's drops, each within the step that spans it (those after its last step
+    // stay pending for the next, as they were).
+    a.pending_drops = std::move(drops);
+    for (const Step& st : steps) {
+      const DropDeadReckoningState before = DropState(a);
+      AdvanceDropDeadReckoning(a, st, turned(st));
+      HintPendingDrops(a, st.t1, st.t0, st.t1, before);
+    }
+  } else {
+    std::size_t k = 0;
+    for (const auto& [t_drop, id] : drops) {
+      for (; k < steps.size() && steps[k].t1 <= t_drop; ++k)
+        AdvanceDropDeadReckoning(a, steps[k], turned(steps[k]));
+      HintDrop(a, Beacon(id), DropState(a));
+    }
+    for (; k < steps.size(); ++k) AdvanceDropDeadReckoning(a, steps[k], turned(steps[k]));
+  }
+  for (const auto& [i, walked] : walked_at_drop) a.walked_at_drop[i] = walked;
 }
 
 void BeaconTrailEstimator::FlushPending(EstimateSink& sink) {

@@ -210,6 +210,10 @@ class BeaconTrailEstimator : public OnlineEstimator {
     std::optional<double> entry_heading_rad;
     double entry_heading_sigma_rad = 0.05;
     Vec2 first_track_n = Vec2::Zero();
+    /// The steps and the drops (time, beacon id) of that first track: at the fix the drop
+    /// priors' dead reckoning is run again over them turned by it (ReplayFirstTrack).
+    std::vector<Step> first_track_steps;
+    std::vector<std::pair<TimeS, std::string>> first_track_drops;
     bool heading_fixed = false;
     Vec2 start_n = Vec2::Zero();
     double pdr_rotation_rad = 0;  ///< applied to the dead reckoning of the map-only mode
@@ -256,6 +260,11 @@ class BeaconTrailEstimator : public OnlineEstimator {
   PdrOptions WhiteDeadReckoning() const;
   void StartDropDeadReckoning(Agent& a, double heading_sigma_rad);
   void AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d);
+  /// Whether the agent is on its first track, before the entry heading fixes its steps' turn.
+  bool OnFirstTrack(const Agent& a) const;
+  /// The drop priors' dead reckoning from the start again, the first track's steps turned by the
+  /// entry fix as every later step is, its drops hinted again (FixEntryHeading).
+  void ReplayFirstTrack(Agent& a);
   DropDeadReckoningState DropState(const Agent& a) const;
   /// The map's prior of `beacon` dropped by `a` at `at`.
   void HintDrop(Agent& a, int beacon, const DropDeadReckoningState& at);
