@@ -79,6 +79,39 @@ TEST(BeaconMap, DropEstimatesAnchorAndUnflipTheLayout) {
             0);
 }
 
+TEST(BeaconMap, ARelativeDropPriorWhoseIncrementIsNoCovarianceFallsBackToTheDrop) {
+  // relative_drop_priors (an ablation, off by default): the prior between two drops is the
+  // difference of the dead reckoning's covariances there, which is no covariance where the walk
+  // comes back towards its start (found by a review, 2026-12-06: the solve threw, and from the
+  // map's worker thread that ends the process). Such a drop keeps its absolute prior.
+  BeaconMapOptions o;
+  o.relative_drop_priors = true;
+  BeaconMap map(o);
+  Random rng(3);
+  const auto truth = Trail(6);
+  for (std::size_t i = 0; i < truth.size(); ++i) map.Add("b" + std::to_string(i));
+  for (std::size_t i = 0; i + 1 < truth.size(); ++i)
+    EXPECT_TRUE(map.AddRange(static_cast<int>(i), static_cast<int>(i + 1),
+                             (truth[i] - truth[i + 1]).norm()));
+  MapTrack track;
+  track.cov = TrackVec(0.01, 1e-6, 1e-4, 1e-4).asDiagonal();
+  const int t = map.AddTrack(track);
+  for (int i = 0; i < 6; ++i) {
+    TrackLever along = TrackLever::Zero();
+    along.col(0) = Vec2(-truth[i].y(), truth[i].x());
+    Mat2 increment = Mat2::Identity() * 0.02;
+    if (i == 3) increment = Vec2(-0.3, 0.05).asDiagonal();  // the walk came back
+    map.SetTrackHint(i, t, truth[i] + Vec2(rng.Normal(0, 0.1), rng.Normal(0, 0.1)),
+                     Mat2::Identity() * 0.04, along, i > 0 ? i - 1 : -1, increment);
+  }
+  EXPECT_NO_THROW(map.Solve());
+  for (int i = 0; i < 6; ++i) {
+    const auto p = map.Position(i);
+    ASSERT_TRUE(p.has_value());
+    EXPECT_LT((p->position_n - truth[i]).norm(), 0.5) << i;
+  }
+}
+
 TEST(BeaconMap, BeaconsWithoutLinksFallBackToTheirHintAndImplausibleRangesAreRefused) {
   BeaconMap map;
   const int a = map.Add("a"), b = map.Add("b");

@@ -477,9 +477,14 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
     const auto [it, added] = track_index.emplace(h.track, static_cast<int>(problem.tracks.size()));
     if (added) problem.tracks.push_back(tracks[h.track]);
     MapPrior q{a, prior[a]->position_n, h.white_cov, it->second, h.along};
-    // The displacement from the track's previous drop when that one is in this part too.
+    // The displacement from the track's previous drop when that one is in this part too, and
+    // when its increment is a covariance: the difference of the dead reckoning's covariances at
+    // two drops is not one where the walk comes back towards its start (then the drop keeps
+    // its absolute prior).
+    const Mat2& inc = h.increment_cov;
+    const bool increment_pd = inc(0, 0) > 0 && inc(0, 0) * inc(1, 1) - inc(0, 1) * inc(1, 0) > 0;
     if (options.relative_drop_priors && h.from >= 0 && !in.surveyed[h.from] && in.hint[h.from] &&
-        in.hint_track[h.from].track == h.track) {
+        in.hint_track[h.from].track == h.track && increment_pd) {
       q.cov = h.increment_cov;
       q.from = h.from;
       q.from_position_n = in.hint[h.from]->position_n;
