@@ -965,5 +965,67 @@ TEST(BreadcrumbLocalizer, TheEntryHeadingMeasuresTheStepsRotation) {
   EXPECT_TRUE(noted);
 }
 
+/// A dead-reckoning-only walk along +x whose every step makes a network state (an
+/// uninformative range, sigma 1e6 m, to a far anchor at each step): the covariance reported at
+/// the end, and the heading node's estimate.
+struct StatesWalk {
+  Mat2 covariance;
+  Vec2 walk_n;  ///< the raw steps' sum
+};
+StatesWalk WalkWithStates(LocalizerOptions o, double start_sigma_m, std::optional<double> heading,
+                          int steps = 200, double heading_sigma_rad = 0.01) {
+  o.estimate_range_bias = false;
+  BreadcrumbLocalizer loc(o);
+  loc.AddKnownNode("far", Vec2(10, 5000), 1e-3);
+  loc.AddAgent("ff1", Vec2::Zero(), start_sigma_m,
+               heading ? std::optional<double>(heading_sigma_rad) : std::nullopt, heading);
+  StatesWalk w{Mat2::Zero(), Vec2::Zero()};
+  for (int k = 0; k < steps; ++k) {
+    const TimeS t1 = 0.5 * k + 0.5;
+    const Vec3 d(0.5, 0.02 * std::sin(0.3 * k), 0);
+    loc.AddStep({t1 - 0.5, t1, "ff1", d, Vec3(1e-3, 1e-3, 1e-4)});
+    w.walk_n += d.head<2>();
+    RangeMeasurement r;
+    r.t = t1;
+    r.a = "ff1";
+    r.b = "far";
+    r.range_m = 5000;
+    r.sigma_m = 1e6;
+    loc.AddRange(r);
+    if (k == 0) loc.Estimate("ff1");  // the cached covariance refreshed here
+  }
+  w.covariance = loc.Estimate("ff1")->covariance;
+  return w;
+}
+
+TEST(BreadcrumbLocalizer, AWalkOfManyStatesKeepsTheUncertaintyOfAnUnknownStart) {
+  // Each new state of a walk took the network's 1e-8 regularization prior again, and the
+  // marginalization carried it on: after N states, N times the "negligible" information (found
+  // by a review, 2026-12-06). An agent started at 1,000 m: 400 states later its variance is
+  // still about the start's (the first state's one prior takes 1 %; it was a fifth of it).
+  LocalizerOptions o;
+  o.estimate_heading_scale = false;
+  o.track_heading_offset_sigma_rad = 0;
+  const StatesWalk w = WalkWithStates(o, 1000.0, std::nullopt, 400);
+  EXPECT_GT(w.covariance(0, 0), 0.98e6);
+  EXPECT_GT(w.covariance(1, 1), 0.98e6);
+}
+
+TEST(BreadcrumbLocalizer, ACovarianceRefreshedLessOftenCountsEachStepOnce) {
+  // Between two refreshes of an agent's cached covariance, each new state added its edge's
+  // variance and the estimate added the same walk's variance again (found by a review,
+  // 2026-12-06). The walk's covariance must not depend on how often it is refreshed.
+  LocalizerOptions every, seldom;
+  every.estimate_heading_scale = seldom.estimate_heading_scale = false;
+  every.track_heading_offset_sigma_rad = seldom.track_heading_offset_sigma_rad = 0;
+  every.covariance_period_s = every.solve_period_s = 0;
+  seldom.covariance_period_s = 1000;
+  const StatesWalk a = WalkWithStates(every, 0.1, std::nullopt),
+                   b = WalkWithStates(seldom, 0.1, std::nullopt);
+  EXPECT_LT((a.covariance - b.covariance).norm(), 0.02 * a.covariance.norm())
+      << a.covariance << "\n vs\n"
+      << b.covariance;
+}
+
 }  // namespace
 }  // namespace trailmark::breadcrumb

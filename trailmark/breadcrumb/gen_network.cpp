@@ -54,7 +54,7 @@ ScalarModel::SecondOrder ScalarModel::SecondOrderTerms(const Vec2& delta_n,
 
 GenNetwork::GenNetwork(GenOptions options) : options_(options) {}
 
-NodeIndex GenNetwork::AddNode(const Vec2& initial_estimate) {
+NodeIndex GenNetwork::AddNode(const Vec2& initial_estimate, bool regularize) {
   NodeIndex i;
   if (!free_.empty()) {
     i = free_.back();
@@ -71,7 +71,8 @@ NodeIndex GenNetwork::AddNode(const Vec2& initial_estimate) {
   ++active_count_;
   // Factorize() compares the block pattern with the analysed one before re-analysing.
   pattern_dirty_ = true;
-  const double w = 1.0 / (options_.regularization_sigma_m * options_.regularization_sigma_m);
+  const double w =
+      regularize ? 1.0 / (options_.regularization_sigma_m * options_.regularization_sigma_m) : 0.0;
   n.L_ii = Mat2::Identity() * w;  // eq. (13) plus a negligible prior
   n.b = w * initial_estimate;
   dirty_ = true;

@@ -126,8 +126,11 @@ class GenNetwork {
   /// How often the sensitivities were solved for (each: C right-hand sides with the factor).
   std::size_t sensitivity_solves() const { return sensitivity_solves_; }
 
-  /// AddNode, eq. (13): new zero rows/columns, plus the weak regularization prior.
-  NodeIndex AddNode(const Vec2& initial_estimate);
+  /// AddNode, eq. (13): new zero rows/columns, plus the weak regularization prior unless
+  /// `regularize` is false — a node that an edge to an existing node will hold at once (a
+  /// mobile node's next state): marginalization would carry each such prior on, and N states
+  /// would hold the walk with N times the "negligible" information.
+  NodeIndex AddNode(const Vec2& initial_estimate, bool regularize = true);
   /// A Gaussian prior x_i ~ N(mean, cov): an edge to the ground (an anchor at `mean`), eq. (12).
   void AddPrior(NodeIndex i, const Vec2& mean, const Mat2& cov);
   /// AddMeasurement, eq. (11): zeta = x_i - x_j + e, e ~ N(0, cov).

@@ -589,7 +589,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   const Vec2 q =
       (var_t - a.state_cum_var).cwiseMax(options_.min_step_variance_m2) * a.motion_noise_scale;
   const Vec2 predicted = Corrected(a, delta);
-  const NodeIndex next = gen_.AddNode(gen_.Estimate(a.state) + predicted);
+  // Held by the PDR edge from the state before: no regularization prior of its own.
+  const NodeIndex next = gen_.AddNode(gen_.Estimate(a.state) + predicted, /*regularize=*/false);
   if (a.theta < 0) {
     gen_.AddRelative(next, a.state, delta, Diag(q), Turned(a, delta));
     const NodeIndex old_state = a.state;
@@ -623,7 +624,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
     const Vec2 kb_hat = a.gyro >= 0 ? gen_.Estimate(a.gyro) : Vec2::Zero();
     const double rate_dt = options_.estimate_heading_rate ? dt : 0.0;
     const NodeIndex next_theta =
-        gen_.AddNode(th + Vec2(kb_hat.x() * turned + kb_hat.y() * rate_dt, 0.0));
+        gen_.AddNode(th + Vec2(kb_hat.x() * turned + kb_hat.y() * rate_dt, 0.0),
+                     /*regularize=*/false);
     const Mat2 Q_theta = Vec2(std::max(q_psi, 1e-12), std::max(q_s, 1e-14)).asDiagonal();
     if (a.gyro >= 0) {
       // theta_new - theta_old - (k Delta + b dt, 0) = 0: the gyro scale factor turns psi at each
@@ -667,7 +669,11 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   a.state_cum_var = var_t;
   a.state_cum_turn = turn_t;
   a.state_cum_turn_signed = turn_signed_t;
+  // The cached covariance follows the new state by its edge's variance and is then as of
+  // state_cum_var: an estimate before the next refresh must not add that walk's variance again
+  // (it did, found by a review 2026-12-06).
   a.cached_cov += Diag(q);
+  a.cov_cum_var = var_t;
   ++summary_.agent_states;
   // Keep ~30 s of PDR history behind the state for late (encounter) measurements.
   while (a.knots.size() > 2 && a.knots[1].t < t - 30.0) a.knots.pop_front();
