@@ -24,48 +24,8 @@ std::optional<BeaconPosition> MapPosition(const BeaconTrailEstimator& e, const s
   return std::nullopt;
 }
 
-// Steps of 0.7 m along +x every 0.6 s (their rows at their end), b1 dropped at `drop_t`.
-Vec2 DroppedAt(double drop_t, bool within_step) {
-  BeaconTrailOptions options;
-  options.drop_within_step = within_step;
-  BeaconTrailEstimator estimator(OneDropperOneBeacon(), options);
-  VectorSink sink;
-  bool dropped = false;
-  for (int k = 0; k < 8; ++k) {
-    Step s;
-    s.t0 = 0.6 * k;
-    s.t1 = 0.6 * (k + 1);
-    s.agent = "ff1";
-    s.delta_n = Vec3(0.7, 0, 0);
-    s.variance_m2 = Vec3(1e-4, 1e-4, 1e-4);
-    if (!dropped && drop_t < s.t1) {
-      estimator.Add(MissionEvent{drop_t, "ff1", "drop", "b1"}, sink);
-      dropped = true;
-    }
-    estimator.Add(s, sink);
-  }
-  estimator.Finish(sink);
-  const auto p = MapPosition(estimator, "b1");
-  EXPECT_TRUE(p.has_value());
-  return p ? p->position_n : Vec2::Constant(std::nan(""));
-}
-
-TEST(BeaconTrailEstimator, ADropIsPlacedWithinTheStepThatSpansIt) {
-  // Dropped a quarter into the third step (1.2-1.8 s): 2.175 m from the start. Its row comes
-  // before the step's (rows in time order, a step at its end).
-  const Vec2 within = DroppedAt(1.35, true);
-  EXPECT_NEAR(within.x(), 10 + 1.4 + 0.25 * 0.7, 1e-6);
-  EXPECT_NEAR(within.y(), 20, 1e-6);
-  // The old placement: where the last step before the drop ended, a quarter step behind.
-  const Vec2 at_end = DroppedAt(1.35, false);
-  EXPECT_NEAR(at_end.x(), 10 + 1.4, 1e-6);
-  // A drop at a step's end (its row after that step's) is the same either way.
-  EXPECT_NEAR(DroppedAt(1.8, true).x(), 10 + 2.1, 1e-6);
-  EXPECT_NEAR(DroppedAt(1.8, false).x(), 10 + 2.1, 1e-6);
-}
-
-/// The steps of DroppedAt (along +x) by a dropper whose stated start heading is `heading_rad`:
-/// the entry fix turns the steps by it; b1 dropped at `drop_t`.
+// Steps of 0.7 m along +x every 0.6 s (their rows at their end) by a dropper whose stated start
+// heading is `heading_rad` (the entry fix turns the steps by it), b1 dropped at `drop_t`.
 Vec2 DroppedTurned(double heading_rad, double drop_t, bool within_step, Tracker tracker,
                    double* entry_fixes = nullptr, double entry_track_m = 1.0) {
   MissionInfo info = OneDropperOneBeacon();
@@ -95,6 +55,24 @@ Vec2 DroppedTurned(double heading_rad, double drop_t, bool within_step, Tracker 
   const auto p = MapPosition(estimator, "b1");
   EXPECT_TRUE(p.has_value());
   return p ? p->position_n : Vec2::Constant(std::nan(""));
+}
+
+Vec2 DroppedAt(double drop_t, bool within_step) {
+  return DroppedTurned(0.0, drop_t, within_step, BeaconTrailOptions{}.tracker);
+}
+
+TEST(BeaconTrailEstimator, ADropIsPlacedWithinTheStepThatSpansIt) {
+  // Dropped a quarter into the third step (1.2-1.8 s): 1.575 m from the start. Its row comes
+  // before the step's (rows in time order, a step at its end).
+  const Vec2 within = DroppedAt(1.35, true);
+  EXPECT_NEAR(within.x(), 10 + 1.4 + 0.25 * 0.7, 1e-6);
+  EXPECT_NEAR(within.y(), 20, 1e-6);
+  // The old placement: where the last step before the drop ended, a quarter step behind.
+  const Vec2 at_end = DroppedAt(1.35, false);
+  EXPECT_NEAR(at_end.x(), 10 + 1.4, 1e-6);
+  // A drop at a step's end (its row after that step's) is the same either way.
+  EXPECT_NEAR(DroppedAt(1.8, true).x(), 10 + 2.1, 1e-6);
+  EXPECT_NEAR(DroppedAt(1.8, false).x(), 10 + 2.1, 1e-6);
 }
 
 TEST(BeaconTrailEstimator, TheEntryFixTurnsTheFirstTrackOfTheDropPriorsToo) {
