@@ -180,6 +180,36 @@ TEST(MissionDirectory, AnAgentOrABaseIsNotDropped) {
   }
 }
 
+TEST(MissionDirectory, TheAgentColumnNamesAnAgent) {
+  // A landmark's barometer, a base that stops, a crumb's steps: the agent column of steps, IMU,
+  // barometer and events names a moving person (found by the readers' audit, 2026-12-06: they
+  // were read without a word). Refused with the file and line; an agent's rows are read.
+  TempDir dir;
+  dir.File("mission.json", R"({"nodes":[{"id":"base","kind":"base","position":[0,0,0]},
+                                         {"id":"ff1","kind":"agent"},
+                                         {"id":"lm1","kind":"landmark","position":[3,0,0]}]})");
+  dir.File("events.csv", "t,agent,event,node\n0,ff1,enter,\n5,ff1,drop,c1\n9,base,stop,\n");
+  dir.File("baro.csv", "t,agent,pressure_hpa\n0,ff1,1013.2\n0.5,lm1,1013.1\n");
+  dir.File("steps.csv",
+           "t0,t1,agent,dx,dy,dz,sxx,syy,szz\n0,0.5,ff1,0.7,0,0,,,\n0.5,1,c1,0.7,0,0,,,\n");
+  const MissionDirectory mission(dir.path());
+  auto error_of = [&](auto reader, auto row) {
+    try {
+      while (reader.Next(row)) {
+      }
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_THAT(error_of(mission.OpenStream<MissionEvent>(), MissionEvent{}),
+              AllOf(HasSubstr("events.csv:4:"), HasSubstr("'base' is a base")));
+  EXPECT_THAT(error_of(mission.OpenStream<BaroSample>(), BaroSample{}),
+              AllOf(HasSubstr("baro.csv:3:"), HasSubstr("'lm1' is a landmark")));
+  EXPECT_THAT(error_of(mission.OpenStream<Step>(), Step{}),
+              AllOf(HasSubstr("steps.csv:3:"), HasSubstr("'c1' is a crumb")));
+}
+
 TEST(MissionDirectory, MissingDirectoryOrMissionJson) {
   TempDir dir;
   EXPECT_THROW(MissionDirectory(dir.path() / "nope"), InputError);

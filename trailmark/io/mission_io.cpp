@@ -612,7 +612,7 @@ MissionDirectory::MissionDirectory(std::filesystem::path dir) : dir_(std::move(d
     throw InputError(dir_.string(), 0, "not a mission directory (does not exist or not a folder)");
   }
   info_ = ReadMissionInfo(dir_ / "mission.json");
-  for (const auto& n : info_.nodes) registry_.Add(n.id);
+  for (const auto& n : info_.nodes) registry_.Add(n.id, n.kind);
   if (Has("events.csv")) {
     // Pass 1 over events: crumbs that drops introduce. Ids are checked for syntax here and
     // against the registry (declared ids + all drops) when the stream is read for real.
@@ -633,7 +633,7 @@ MissionDirectory::MissionDirectory(std::filesystem::path dir) : dir_(std::move(d
         dropped_.push_back(e.node);
       }
     }
-    for (const auto& id : dropped_) registry_.Add(id);
+    for (const auto& id : dropped_) registry_.Add(id, NodeKind::kCrumb);
   }
 }
 

@@ -7,6 +7,7 @@
 #include <array>
 #include <cctype>
 #include <cmath>
+#include <type_traits>
 
 #include "trailmark/core/error.h"
 
@@ -346,6 +347,13 @@ struct Layout<Estimate> {
   }
 };
 
+/// Rows whose first id is the agent column (spec: steps, IMU, events, barometer).
+template <class Row>
+constexpr bool HasAgentColumn() {
+  return std::is_same_v<Row, Step> || std::is_same_v<Row, ImuSample> ||
+         std::is_same_v<Row, MissionEvent> || std::is_same_v<Row, BaroSample>;
+}
+
 template <class Row>
 constexpr std::size_t FloorColumns() {
   if constexpr (requires { Layout<Row>::kFloorColumns; }) {
@@ -422,6 +430,14 @@ bool RowReader<Row>::Next(Row& row) {
         csv_.Fail(fmt::format("unknown node id '{}': not declared in mission.json nor dropped "
                               "in events.csv",
                               id));
+      }
+    }
+    // The agent column (steps, IMU, barometer, events) names a moving person.
+    if constexpr (HasAgentColumn<Row>()) {
+      const std::string_view agent = Layout<Row>::Ids(row).front();
+      if (const auto kind = registry_->Kind(agent); kind && *kind != NodeKind::kAgent) {
+        csv_.Fail(fmt::format("'{}' is a {} in mission.json: the agent column names an agent",
+                              agent, ToString(*kind)));
       }
     }
   }

@@ -46,11 +46,22 @@ struct StringHash {
 class NodeRegistry {
  public:
   void Add(std::string id) { ids_.insert(std::move(id)); }
+  /// With its kind: a row's agent column (steps, IMU, barometer, events) must then name an agent.
+  void Add(std::string id, NodeKind kind) {
+    kinds_[id] = kind;
+    ids_.insert(std::move(id));
+  }
   bool Contains(std::string_view id) const { return ids_.find(id) != ids_.end(); }
+  /// The kind it was added with; nullopt when added without one.
+  std::optional<NodeKind> Kind(std::string_view id) const {
+    const auto it = kinds_.find(id);
+    return it == kinds_.end() ? std::nullopt : std::optional<NodeKind>(it->second);
+  }
   std::size_t size() const { return ids_.size(); }
 
  private:
   std::unordered_set<std::string, StringHash, std::equal_to<>> ids_;
+  std::unordered_map<std::string, NodeKind, StringHash, std::equal_to<>> kinds_;
 };
 
 /// Column layout and parsing of one row kind (specialised in streams.cpp).
