@@ -18,6 +18,7 @@
 #include <unordered_map>
 
 #include "commands.h"
+#include "trailmark/eval/metrics.h"  // Percentile
 #include "trailmark/landmarks/landmark_estimator.h"
 #include "trailmark/pipelines/registry.h"
 
@@ -29,13 +30,6 @@ using Clock = std::chrono::steady_clock;
 
 double Seconds(Clock::time_point a) {
   return std::chrono::duration<double>(Clock::now() - a).count();
-}
-
-double Percentile(std::vector<double> v, double q) {
-  if (v.empty()) return 0;
-  const auto k = static_cast<std::size_t>(q / 100.0 * static_cast<double>(v.size() - 1));
-  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
-  return v[k];
 }
 
 /// The agents' estimates at their step ends, against the truth there.

@@ -215,7 +215,19 @@ int main(int argc, char** argv) {
   bench->add_option("--agents", incident.agents, "breadcrumb, landmarks: firefighters");
   bench->add_option("--crumbs", incident.crumbs, "breadcrumb: breadcrumbs");
   bench->add_option("--hours", incident.duration_s, "breadcrumb, landmarks: incident length (h)")
-      ->transform([](std::string v) { return std::to_string(std::stod(v) * 3600.0); });
+      ->transform([](std::string v) {
+        // Hours to seconds; anything that is no positive number is refused with the option's name.
+        double h = 0;
+        try {
+          h = std::stod(v);
+        } catch (const std::exception&) {
+          throw CLI::ValidationError("'" + v + "' is not a number of hours");
+        }
+        if (!(h > 0) || !std::isfinite(h)) {
+          throw CLI::ValidationError("'" + v + "' must be a positive number of hours");
+        }
+        return std::to_string(h * 3600.0);
+      });
   bench->add_option("--measurements", incident.measurements, "breadcrumb: total measurements");
   bench->add_option("--solve-period", solve_period, "breadcrumb: re-solve at most every S s");
   bench->add_option("--covariance-period", covariance_period,

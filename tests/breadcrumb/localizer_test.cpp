@@ -972,13 +972,11 @@ struct StatesWalk {
   Mat2 covariance;
   Vec2 walk_n;  ///< the raw steps' sum
 };
-StatesWalk WalkWithStates(LocalizerOptions o, double start_sigma_m, std::optional<double> heading,
-                          int steps = 200, double heading_sigma_rad = 0.01) {
+StatesWalk WalkWithStates(LocalizerOptions o, double start_sigma_m, int steps = 200) {
   o.estimate_range_bias = false;
   BreadcrumbLocalizer loc(o);
   loc.AddKnownNode("far", Vec2(10, 5000), 1e-3);
-  loc.AddAgent("ff1", Vec2::Zero(), start_sigma_m,
-               heading ? std::optional<double>(heading_sigma_rad) : std::nullopt, heading);
+  loc.AddAgent("ff1", Vec2::Zero(), start_sigma_m);
   StatesWalk w{Mat2::Zero(), Vec2::Zero()};
   for (int k = 0; k < steps; ++k) {
     const TimeS t1 = 0.5 * k + 0.5;
@@ -1006,7 +1004,7 @@ TEST(BreadcrumbLocalizer, AWalkOfManyStatesKeepsTheUncertaintyOfAnUnknownStart) 
   LocalizerOptions o;
   o.estimate_heading_scale = false;
   o.track_heading_offset_sigma_rad = 0;
-  const StatesWalk w = WalkWithStates(o, 1000.0, std::nullopt, 400);
+  const StatesWalk w = WalkWithStates(o, 1000.0, 400);
   EXPECT_GT(w.covariance(0, 0), 0.98e6);
   EXPECT_GT(w.covariance(1, 1), 0.98e6);
 }
@@ -1020,8 +1018,7 @@ TEST(BreadcrumbLocalizer, ACovarianceRefreshedLessOftenCountsEachStepOnce) {
   every.track_heading_offset_sigma_rad = seldom.track_heading_offset_sigma_rad = 0;
   every.covariance_period_s = every.solve_period_s = 0;
   seldom.covariance_period_s = 1000;
-  const StatesWalk a = WalkWithStates(every, 0.1, std::nullopt),
-                   b = WalkWithStates(seldom, 0.1, std::nullopt);
+  const StatesWalk a = WalkWithStates(every, 0.1), b = WalkWithStates(seldom, 0.1);
   EXPECT_LT((a.covariance - b.covariance).norm(), 0.02 * a.covariance.norm())
       << a.covariance << "\n vs\n"
       << b.covariance;

@@ -428,6 +428,13 @@ done
 curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/state" | matches '"id":"ff1"' || fail "live mapmatch state"
 curl -s -H "Authorization: Bearer H" "http://127.0.0.1:$hport/api/floorplan" | matches '"walls":\[\[' || fail "live floor plan"
 kill $hpid; wait $hpid || true
+# The landmark incident benchmark, short (2 firefighters, 3 minutes), and bad lengths named.
+"$TM" bench landmarks --agents 2 --hours 0.05 > "$dir/bl.log" 2>&1 \
+  && grep -q "dead reckoning (pdr) at the same step ends" "$dir/bl.log" || { cat "$dir/bl.log"; fail "bench landmarks"; }
+for h in abc 0 nan -1; do
+  run_failing "$TM" bench landmarks --hours "$h"
+  [ $rc -ne 0 ] && matches "hours" "$dir/err" || { cat "$dir/err"; fail "bench landmarks --hours $h"; }
+done
 run_failing "$TM" bench load --firefighters 1 --minutes 0.1 --pipeline nope --dir "$dir/load"
 [ $rc -ne 0 ] && matches "unknown pipeline 'nope'" "$dir/err" || { cat "$dir/err"; fail "bench load with an unknown pipeline"; }
 # A bounded load test (3 firefighters, 30 s each, as fast as possible): fails unless every row

@@ -457,25 +457,10 @@ void BeaconTrailEstimator::FixHeading(Agent& a, TimeS t, double psi_rad, double 
   // The drop priors from here on, and those of the drops made so far (their steps replayed).
   a.drop_dr_rotation_rad = psi_rad;
   StartDropDeadReckoning(a, sigma_rad);
-  if (options_.drop_within_step) {
-    // Each drop within the step that spans it; those after the last step wait for the next.
-    for (const auto& [t_drop, beacon_index] : a.drops_before_fix)
-      a.pending_drops.emplace_back(t_drop, map_.id(beacon_index));
-    for (const Step& s : a.steps_before_fix) {
-      const DropDeadReckoningState before = DropState(a);
-      AdvanceDropDeadReckoning(a, s, s.delta_n.head<2>());
-      HintPendingDrops(a, s.t1, s.t0, s.t1, before);
-    }
-  } else {
-    std::size_t k = 0;
-    for (const auto& [t_drop, beacon_index] : a.drops_before_fix) {
-      for (; k < a.steps_before_fix.size() && a.steps_before_fix[k].t1 <= t_drop; ++k)
-        AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
-      HintDrop(a, beacon_index, DropState(a));
-    }
-    for (; k < a.steps_before_fix.size(); ++k)
-      AdvanceDropDeadReckoning(a, a.steps_before_fix[k], a.steps_before_fix[k].delta_n.head<2>());
-  }
+  std::vector<std::pair<TimeS, std::string>> drops;
+  for (const auto& [t_drop, beacon_index] : a.drops_before_fix)
+    drops.emplace_back(t_drop, map_.id(beacon_index));
+  ReplayDrops(a, a.steps_before_fix, std::move(drops), 0.0);
   a.steps_before_fix.clear();
   a.drops_before_fix.clear();
   const Vec2 track_n = a.pdr_n - a.start_n;  // in the PDR's frame
@@ -803,18 +788,27 @@ void BeaconTrailEstimator::ReplayFirstTrack(Agent& a) {
   a.first_step_t.reset();
   a.last_drop = -1;
   a.last_drop_white_cov = Mat2::Zero();
-  std::vector<Step> steps = std::move(a.first_track_steps);
+  const std::vector<Step> steps = std::move(a.first_track_steps);
   std::vector<std::pair<TimeS, std::string>> drops = std::move(a.first_track_drops);
   a.first_track_steps.clear();
   a.first_track_drops.clear();
-  auto turned = [&](const Step& st) {
-    return Vec2(Eigen::Rotation2Dd(a.pdr_rotation_rad) * Vec2(st.delta_n.head<2>()));
-  };
+  // The first track's drops were pending or hinted: hinted again here, those after its last
+  // step pending for the next, as they were.
+  a.pending_drops.clear();
   const std::map<int, double> walked_at_drop = a.walked_at_drop;  // as walked then, not now
+  ReplayDrops(a, steps, std::move(drops), a.pdr_rotation_rad);
+  for (const auto& [i, walked] : walked_at_drop) a.walked_at_drop[i] = walked;
+}
+
+void BeaconTrailEstimator::ReplayDrops(Agent& a, const std::vector<Step>& steps,
+                                       std::vector<std::pair<TimeS, std::string>> drops,
+                                       double step_rotation_rad) {
+  auto turned = [&](const Step& st) {
+    return Vec2(Eigen::Rotation2Dd(step_rotation_rad) * Vec2(st.delta_n.head<2>()));
+  };
   if (options_.drop_within_step) {
-    // The first track's drops, each within the step that spans it (those after its last step
-    // stay pending for the next, as they were).
-    a.pending_drops = std::move(drops);
+    // Each drop within the step that spans it; those after the last step wait for the next.
+    for (auto& drop : drops) a.pending_drops.push_back(std::move(drop));
     for (const Step& st : steps) {
       const DropDeadReckoningState before = DropState(a);
       AdvanceDropDeadReckoning(a, st, turned(st));
@@ -829,7 +823,6 @@ void BeaconTrailEstimator::ReplayFirstTrack(Agent& a) {
     }
     for (; k < steps.size(); ++k) AdvanceDropDeadReckoning(a, steps[k], turned(steps[k]));
   }
-  for (const auto& [i, walked] : walked_at_drop) a.walked_at_drop[i] = walked;
 }
 
 void BeaconTrailEstimator::FlushPending(EstimateSink& sink) {

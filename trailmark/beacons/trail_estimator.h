@@ -265,6 +265,11 @@ class BeaconTrailEstimator : public OnlineEstimator {
   /// The drop priors' dead reckoning from the start again, the first track's steps turned by the
   /// entry fix as every later step is, its drops hinted again (FixEntryHeading).
   void ReplayFirstTrack(Agent& a);
+  /// The drop priors' dead reckoning over `steps` (each turned by `step_rotation_rad` before the
+  /// dead reckoning's own rotation), the `drops` (time, beacon id) on them hinted where they
+  /// were made (FixHeading, ReplayFirstTrack).
+  void ReplayDrops(Agent& a, const std::vector<Step>& steps,
+                   std::vector<std::pair<TimeS, std::string>> drops, double step_rotation_rad);
   DropDeadReckoningState DropState(const Agent& a) const;
   /// The map's prior of `beacon` dropped by `a` at `at`.
   void HintDrop(Agent& a, int beacon, const DropDeadReckoningState& at);

@@ -91,7 +91,9 @@ LandmarkIncident MakeLandmarkIncident(const LandmarkIncidentOptions& o, std::uin
   if (o.agents < 1 || !(o.duration_s > 0) || !(o.sector_m > 0) || !(o.step_period_s > 0) ||
       !(o.step_length_m > 0) || !(o.landmark_spacing_m > 0) || !(o.answer_period_s > 0) ||
       !(o.hearing_range_m > 0) || !(o.unknown_share >= 0 && o.unknown_share <= 1)) {
-    throw std::invalid_argument("landmark incident: invalid options");
+    throw std::invalid_argument(
+        "landmark incident: agents >= 1; duration, sector, step period and length, landmark "
+        "spacing, answer period and hearing range > 0; unknown_share within 0 .. 1");
   }
   Random rng(seed);
   LandmarkIncident inc;
