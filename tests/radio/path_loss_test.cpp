@@ -196,6 +196,83 @@ TEST(Encounter, OnePeakPerPassAboveTheThresholdOnly) {
   for (const auto& [t, r] : pass(4.0, 100.0)) EXPECT_FALSE(far.Add(t, r));
 }
 
+// A pass at 1.2 m/s by a node 0.3 m off the path (closest at t0 + 10 s), sampled every `dt_s`,
+// with a bump of `bump_db` on the packets around `bump_x_m` along the path (a shadowing peak).
+std::vector<std::pair<double, double>> Pass(double dt_s, double t0, double bump_x_m = 0,
+                                            double bump_db = 0) {
+  std::vector<std::pair<double, double>> packets;
+  for (double t = 0; t <= 20.0 + 1e-9; t += dt_s) {
+    const double x = -12.0 + 1.2 * t;
+    double r = -40.0 - 23.0 * std::log10(std::hypot(x, 0.3));
+    if (bump_db != 0 && std::abs(x - bump_x_m) < 0.5) r += bump_db;
+    packets.emplace_back(t0 + t, r);
+  }
+  return packets;
+}
+
+std::vector<double> Encounters(const std::vector<std::pair<double, double>>& packets,
+                               EncounterOptions o = {}) {
+  EncounterDetector det(o);
+  std::vector<double> found;
+  for (const auto& [t, r] : packets) {
+    if (auto e = det.Add(t, r)) found.push_back(*e);
+  }
+  return found;
+}
+
+// The window is a time: the same pass at 1 Hz, 2 Hz and 10 Hz gives one encounter at the same
+// place (as a count of packets the window was 0.3 s at 10 Hz).
+TEST(Encounter, TheWindowIsATimeNotAPacketCount) {
+  for (const double dt : {1.0, 0.5, 0.1}) {
+    // the pass with a 12 dB shadowing bump every 2.5 m on the way in and out (a correlated
+    // channel): local maxima above the threshold within a few metres of the node
+    std::vector<std::pair<double, double>> packets = Pass(dt, 0.0);
+    for (auto& [t, r] : packets) {
+      const double x = -12.0 + 1.2 * t;
+      if (std::abs(std::remainder(x, 2.5)) < 0.3 && std::abs(x) > 1.0) r += 12.0;
+    }
+    const std::vector<double> found = Encounters(packets);
+    ASSERT_EQ(found.size(), 1u) << "packets every " << dt << " s";
+    EXPECT_NEAR(found[0], 10.0, 0.5) << dt;
+  }
+}
+
+// Under a shadowing peak 3 m before the node (12 dB: BLE at 7 dB sigma), the first local
+// maximum above the threshold is not the pass: the strongest packet within +-3 s is.
+TEST(Encounter, TheStrongestPeakOfAPassWinsNotTheFirst) {
+  const auto packets = Pass(0.5, 0.0, -3.0, 12.0);
+  EncounterOptions short_window;
+  short_window.half_window_s = 1.5;  // +-3 packets at 2 Hz: the detector before 2026-12-06
+  const std::vector<double> first = Encounters(packets, short_window);
+  ASSERT_FALSE(first.empty());
+  EXPECT_NEAR(first[0], 7.5, 0.3);  // 3 m before the node: taken as the pass
+  const std::vector<double> found = Encounters(packets);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_NEAR(found[0], 10.0, 0.5);
+}
+
+// Packets below the receiver's sensitivity never arrive: a link that falls silent after its peak
+// still confirms it (the silence is weaker), and a peak judged only after a long silence is
+// stale and not returned.
+TEST(Encounter, SilenceEndsTheWindowAndAStalePeakIsNotReturned) {
+  std::vector<std::pair<double, double>> packets;
+  for (const auto& [t, r] : Pass(0.5, 0.0)) {
+    if (r > -47.0) packets.emplace_back(t, r);  // heard within ~2 m only
+  }
+  packets.emplace_back(packets.back().first + 4.0, -46.0);  // the next packet after a silence
+  const std::vector<double> found = Encounters(packets);
+  ASSERT_EQ(found.size(), 1u);
+  EXPECT_NEAR(found[0], 10.0, 0.5);
+  // Heard only within ~1.5 m, then silent for 60 s: the peak would come a minute late.
+  std::vector<std::pair<double, double>> brief;
+  for (const auto& [t, r] : Pass(0.5, 0.0)) {
+    if (r > -44.0) brief.emplace_back(t, r);
+  }
+  ASSERT_GE(brief.size(), 2u);
+  brief.emplace_back(brief.back().first + 60.0, -50.0);
+  EXPECT_TRUE(Encounters(brief).empty());
+}
+
 TEST(LinkChange, DetectsALastingStepNotNoise) {
   Random rng(9);
   LinkChangeDetector steady;

@@ -13,6 +13,7 @@ namespace trailmark::breadcrumb {
 bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
   const LocalizerOptions& l = localizer;
   if (!(l.state_period_s >= 0) || !(l.max_latency_s >= 0) || !(l.encounter_sigma_m > 0) ||
+      !(l.own_drop_encounter_after_s >= 0) || !(l.encounter.half_window_s >= 0) ||
       !(l.drop_sigma_m > 0) || !(l.default_range_sigma_m > 0) || !(l.gate_sigma > 0) ||
       !(l.huber_k > 0) || !(l.moved_sigma_m > 0) || !(l.max_speed_mps > 0) ||
       !(static_period_s >= 0) || !(l.solve_period_s >= 0) || !(l.covariance_period_s >= 0)) {
@@ -101,6 +102,13 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real("encounter_dbm", [](L& o) -> double& { return o.encounter.threshold_dbm; }, "dBm",
            OptionBounds::Any(), "an RSSI peak above this is an encounter (paper: -40 dBm)");
     t.Real("encounter_sigma_m", &L::encounter_sigma_m, "m", pos, "sigma of an encounter edge");
+    t.Real(
+        "encounter_window_s", [](L& o) -> double& { return o.encounter.half_window_s; }, "s",
+        nonneg, "an encounter's peak is its link's strongest packet within +- this");
+    t.Flag("encounter_places_crumbs", &L::encounter_places_crumbs,
+           "a crumb no drop named enters the network at its first encounter");
+    t.Real("own_drop_encounter_after_s", &L::own_drop_encounter_after_s, "s", nonneg,
+           "a dropper's peak from its own crumb this soon after the drop is not an encounter");
     t.Real("drop_sigma_m", &L::drop_sigma_m, "m", pos,
            "where a dropped crumb lies around the foot");
     t.Real("range_sigma_m", &L::default_range_sigma_m, "m", pos,
@@ -350,6 +358,8 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   loc_->node_integrity().Report(summary);
   num["downweighted"] = static_cast<double>(s.downweighted);
   num["encounters"] = static_cast<double>(s.encounters);
+  num["encounters_after_own_drop"] = static_cast<double>(s.encounters_after_own_drop);
+  num["crumbs_placed_by_encounters"] = static_cast<double>(s.crumbs_placed_by_encounters);
   num["drops"] = static_cast<double>(s.drops);
   num["moved_detected"] = static_cast<double>(s.moved_detected);
   num["agent_states"] = static_cast<double>(s.agent_states);

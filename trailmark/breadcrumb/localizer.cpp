@@ -472,8 +472,10 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
   const std::string& agent = rx_agent ? p.rx : p.tx;
   const std::string& other = rx_agent ? p.tx : p.rx;
   if (p.rssi_dbm < MinRssiDbm()) {
-    // Too weak for an edge; from a crumb its dropper has just dropped, a near-field sample.
+    // Too weak for an edge, but the encounter detector sees that the link is weaker; from a
+    // crumb its dropper has just dropped, a near-field sample.
     const auto ait = agents_.find(agent);
+    if (ait != agents_.end() && ait->second.started) DetectEncounter(ait->second, other, p);
     if (options_.relative_rssi_thresholds && ait != agents_.end() && ait->second.started) {
       Agent& a = ait->second;
       const auto d = a.dropped.find(other);
@@ -494,14 +496,31 @@ void BreadcrumbLocalizer::AddRssi(const RssiPacket& p) {
     Pending q{p.t, Kind::kRssi, other, p.rssi_dbm, 0, {}};
     Enqueue(a, q);
   }
-  if (options_.use_encounters && !agents_.count(other)) {
-    auto& det = encounter_.try_emplace({agent, other}, options_.encounter).first->second;
-    if (auto peak = det.Add(p.t, p.rssi_dbm - rssi_shift_db_)) {
-      Pending q{*peak, Kind::kEncounter, other, 0, 0, {}};
-      Enqueue(a, q);
-    }
-  }
+  DetectEncounter(a, other, p);
   AdvanceTo(p.t);
+}
+
+void BreadcrumbLocalizer::DetectEncounter(Agent& a, const std::string& other, const RssiPacket& p) {
+  if (!options_.use_encounters || agents_.count(other)) return;
+  auto& det = encounter_.try_emplace({a.id, other}, options_.encounter).first->second;
+  // The threshold is the near field's level: a node whose packets run hot by an offset (its
+  // transmitter, antenna, mounting) passes it metres out unless the offset is taken off.
+  double offset_db = 0;
+  if (options_.rssi_offsets == LocalizerOptions::RssiOffsets::kInnovations) {
+    if (const StaticNode* node = FindStatic(other)) offset_db = InnovationOffsetDb(*node);
+  }
+  const auto peak = det.Add(p.t, p.rssi_dbm - rssi_shift_db_ - offset_db);
+  if (!peak) return;
+  const auto d = a.dropped.find(other);
+  if (d != a.dropped.end() && *peak >= d->second &&
+      *peak - d->second < options_.own_drop_encounter_after_s) {
+    // The drop's edge and the steps since (precise over seconds) already say where the crumb
+    // is: such a peak adds only its own error (the walker leaving it: 2-4 m behind).
+    ++summary_.encounters_after_own_drop;
+    return;
+  }
+  Pending q{*peak, Kind::kEncounter, other, 0, 0, {}};
+  Enqueue(a, q);
 }
 
 void BreadcrumbLocalizer::AddRange(const RangeMeasurement& r) {
@@ -886,25 +905,29 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
   const Vec2 here = gen_.Estimate(a.state) + offset;
   const Mat2 cov_here = a.cached_cov + Diag(offset_var);
 
+  // x_crumb - x_state = offset + e, e ~ N(0, sigma^2 + PDR variance since the state): a drop,
+  // or the first encounter of a crumb no drop named and its packets have not placed yet
+  auto place_here = [&](StaticNode& node, double sigma_m) {
+    if (node.index >= 0)
+      gen_.DeleteNode(node.index);  // picked up and dropped again
+    else
+      static_order_.push_back(node.id);
+    node.index = gen_.AddNode(here);
+    gen_.AddRelative(node.index, a.state, offset,
+                     Mat2::Identity() * sigma_m * sigma_m + Diag(offset_var), Turned(a, offset));
+    node.cached_cov = cov_here;
+    node.init.clear();
+    SetCalibrationAnchor(a, node.id, p.t);
+    for (auto it = links_.begin(); it != links_.end();) {
+      it = (it->first.first == node.id || it->first.second == node.id) ? links_.erase(it) : ++it;
+    }
+  };
   if (p.kind == Kind::kDrop) {
     if (declared_known_.count(p.other)) AddUnknownNode(p.other);  // into the network first
     StaticNode& node = static_[p.other];
     node.id = p.other;
-    if (node.index >= 0) gen_.DeleteNode(node.index);  // picked up and dropped again
-    else static_order_.push_back(p.other);
-    node.index = gen_.AddNode(here);
-    // x_crumb - x_state = offset + e, e ~ N(0, drop^2 + PDR variance since the state)
-    gen_.AddRelative(
-        node.index, a.state, offset,
-        Mat2::Identity() * options_.drop_sigma_m * options_.drop_sigma_m + Diag(offset_var),
-        Turned(a, offset));
-    node.cached_cov = cov_here;
-    node.init.clear();
+    place_here(node, options_.drop_sigma_m);
     ++summary_.drops;
-    SetCalibrationAnchor(a, p.other, p.t);
-    for (auto it = links_.begin(); it != links_.end();) {
-      it = (it->first.first == p.other || it->first.second == p.other) ? links_.erase(it) : ++it;
-    }
     return;
   }
 
@@ -947,6 +970,11 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       const Vec2 bias = RangeBias(p.range_kind).value_or(Vec2::Zero());
       ObserveUninitialized(*node, here, (p.value - bias.x()) / (1.0 + bias.y()), p.sigma,
                            options_.estimate_range_bias);
+    } else if (p.kind == Kind::kEncounter && options_.encounter_places_crumbs && !node->known) {
+      // Passed within ~1 m of a crumb nothing has placed: where it lies, as a drop would say.
+      place_here(*node, options_.encounter_sigma_m);
+      ++summary_.encounters;
+      ++summary_.crumbs_placed_by_encounters;
     }
     return;
   }

@@ -154,6 +154,16 @@ struct LocalizerOptions {
   bool use_encounters = true;
   radio::EncounterOptions encounter;
   double encounter_sigma_m = 1.0;
+  /// A dropper's peak from its own crumb within this long after the drop is not an encounter:
+  /// the drop's edge and the steps since (precise over seconds) already say where the crumb is,
+  /// and walking away its near field peaks 2-4 m behind (measured on BLE channels of 6-8 dB;
+  /// taking those within 2.45 sigma by the steps instead measured worse on the office loop's
+  /// families, docs/breadcrumb.md). 0: every peak counts. A return later counts.
+  double own_drop_encounter_after_s = 10.0;
+  /// A crumb that no drop named and its packets have not yet placed enters the network at its
+  /// first encounter, tied to the agent's state by encounter_sigma_m (as a drop by drop_sigma_m).
+  /// Off: measured mixed (docs/breadcrumb.md, "Encounters under a poor channel").
+  bool encounter_places_crumbs = false;
   /// min_rssi_dbm and encounter.threshold_dbm are the paper's, for its channel (868 MHz: about
   /// -40 dBm at 1 m, sec. V-A). With relative_rssi_thresholds they move with this channel's
   /// level at 1 m (a BLE channel reads ~20 dB lower: every packet fell below -65 dBm, no
@@ -264,6 +274,8 @@ struct LocalizerSummary {
   std::size_t refused = 0;  ///< by the integrity check (a static node inconsistent with its noise)
   std::size_t refusals_blamed_on_motion = 0;  ///< flagged nodes used anyway (BlameMotion)
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
+  std::size_t encounters_after_own_drop = 0;  ///< peaks of a crumb its dropper was leaving, refused
+  std::size_t crumbs_placed_by_encounters = 0;
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   /// entry_heading: claims held, refuted (the measurement alone), entries not along the
   /// stated heading (the widened prior).
@@ -488,6 +500,9 @@ class BreadcrumbLocalizer {
   bool BlameMotion(const Agent& a, const std::string& node) const;
   /// adapt_motion_noise: one edge of agent `a` to `node` at t, with the variance of one
   /// measurement.
+  /// Feeds an agent-to-static packet (weak ones too) to the link's encounter detector and
+  /// enqueues a confirmed encounter (not one of a crumb its dropper is leaving).
+  void DetectEncounter(Agent& a, const std::string& other, const RssiPacket& p);
   void ObserveMotion(Agent& a, const std::string& node, TimeS t,
                      const std::optional<EdgeInnovation>& edge, double measurement_variance);
   NodeIndex RangeBiasNode(const std::string& kind);

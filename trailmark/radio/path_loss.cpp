@@ -7,6 +7,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <stdexcept>
 
@@ -345,25 +346,44 @@ PathLossCalibration CalibratePathLoss(const std::vector<CalibrationPair>& pairs,
   return Plausible(out, options);
 }
 
-std::optional<TimeS> EncounterDetector::Add(TimeS t, double rssi_dbm) {
-  if (!window_.empty() && t - window_.back().first > options_.max_gap_s) window_.clear();
-  window_.emplace_back(t, rssi_dbm);
-  const std::size_t size = 2 * static_cast<std::size_t>(options_.half_window) + 1;
-  if (window_.size() > size) window_.pop_front();
-  if (window_.size() < size) return std::nullopt;
-  const auto& mid = window_[options_.half_window];
-  if (mid.second < options_.threshold_dbm) return std::nullopt;
-  for (std::size_t k = 0; k < window_.size(); ++k) {
-    if (k == static_cast<std::size_t>(options_.half_window)) continue;
+bool EncounterDetector::Judge() {
+  const double w = options_.half_window_s;
+  const auto& mid = window_[next_];
+  bool peak = mid.second >= options_.threshold_dbm;
+  for (std::size_t k = 0; peak && k < window_.size(); ++k) {
+    if (k == next_ || std::abs(window_[k].first - mid.first) > w) continue;
     // strict on the earlier side, non-strict on the later side: one peak per plateau
-    if (k < static_cast<std::size_t>(options_.half_window) ? window_[k].second >= mid.second
-                                                            : window_[k].second > mid.second) {
-      return std::nullopt;
-    }
+    peak = k < next_ ? window_[k].second < mid.second : window_[k].second <= mid.second;
   }
-  if (mid.first - last_encounter_ < options_.refractory_s) return std::nullopt;
+  if (!peak || mid.first - last_encounter_ < options_.refractory_s) return false;
   last_encounter_ = mid.first;
-  return mid.first;
+  return true;
+}
+
+std::optional<TimeS> EncounterDetector::Add(TimeS t, double rssi_dbm) {
+  const double w = options_.half_window_s;
+  std::optional<TimeS> found;
+  auto judge_until = [&](TimeS until) {
+    while (next_ < window_.size() && window_[next_].first < until) {
+      if (Judge() && !found && t - window_[next_].first <= w + options_.max_gap_s) {
+        found = window_[next_].first;
+      }
+      ++next_;
+    }
+  };
+  if (!window_.empty() && t - window_.back().first > options_.max_gap_s) {
+    judge_until(std::numeric_limits<double>::infinity());  // the silence is weaker
+    window_.clear();
+    next_ = 0;
+  }
+  window_.emplace_back(t, rssi_dbm);
+  judge_until(t - w);  // every packet whose later half window is complete
+  // Keep what the packets still to judge need: w before the oldest of them.
+  while (next_ > 0 && window_.front().first < window_[next_].first - w) {
+    window_.pop_front();
+    --next_;
+  }
+  return found;
 }
 
 std::optional<double> LinkChangeDetector::Add(double rssi_dbm) {

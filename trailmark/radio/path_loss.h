@@ -138,23 +138,38 @@ PathLossCalibration CalibratePathLoss(const std::vector<CalibrationPair>& pairs,
 
 /// Encounter detection (breadcrumb paper sec. V-A, Fig. 7; their ref. [31]): a local maximum of
 /// a link's RSSI above a threshold means the agent passed within about a metre of the node.
+///
+/// The peak must be the strongest of the link's packets within +-half_window_s (a time, not a
+/// packet count: the same passes at 1 Hz or 10 Hz). Under a channel with heavy or spatially
+/// correlated shadowing a walker's approach and departure have local maxima above the threshold
+/// metres away from the node (BLE at 7 dB: peaks 5-12 m out, seconds before and after the true
+/// pass); within the window the strongest peak of a pass wins instead of the first.
 struct EncounterOptions {
   double threshold_dbm = -40.0;  ///< paper: > -40 dB implies <= ~1 m
-  int half_window = 3;           ///< the peak must be the maximum of 2 h + 1 packets
-  double max_gap_s = 3.0;        ///< packets further apart than this break the window
+  /// The peak is the link's strongest packet within +- this: about 4 m of walking, where the
+  /// near field's mean has fallen by 12 dB or more (n >= 2), twice the shadowing sigma of a poor
+  /// indoor channel. The encounter waits this long (a latency).
+  double half_window_s = 3.0;
+  /// A link silent this long (its packets below the receiver's sensitivity: weaker than any
+  /// peak) ends the later half window of the packets before; a peak judged only later than
+  /// half_window_s + max_gap_s after it is stale and not returned.
+  double max_gap_s = 3.0;
   double refractory_s = 5.0;     ///< at most one encounter per link within this time
 };
 
 class EncounterDetector {
  public:
   explicit EncounterDetector(EncounterOptions options = {}) : options_(options) {}
-  /// Feeds one packet of the link; returns the time of a confirmed encounter (the peak,
-  /// half_window packets in the past) when there is one.
+  /// Feeds one packet of the link (in time order); returns the time of a confirmed encounter
+  /// (the peak, once half_window_s of packets after it have arrived) when there is one.
   std::optional<TimeS> Add(TimeS t, double rssi_dbm);
 
  private:
   EncounterOptions options_;
   std::deque<std::pair<TimeS, double>> window_;
+  /// Judges window_[next_] with the packets present (missing ones are weaker).
+  bool Judge();
+  std::size_t next_ = 0;  ///< the oldest packet of window_ not yet judged
   TimeS last_encounter_ = -1e300;
 };
 
