@@ -503,12 +503,12 @@ TEST(BreadcrumbPipeline, CrumbsHeardWithoutADropKeepTheAgentHonest) {
 
 // A poor BLE channel (6 dB shadowing and 3 dB more spatially correlated over 5 m, every node
 // offset by up to 6 dB, no radio model stated): a walker's approach to a crumb and its departure
-// from one just dropped have RSSI peaks above the encounter threshold metres away. The
-// strongest peak within +-3 s of a link, no encounter of a dropper with the crumb it is
-// leaving, a node's estimated offset taken off its packets, against the detector before (the
-// first local maximum of +-1.5 s, own crumbs included). Six seeds; on two of them a node far
-// hotter than the others passes the threshold 10-20 m out before any offset is known, and both
-// arms are far off (docs/breadcrumb.md).
+// from one just dropped have RSSI peaks above the encounter threshold metres away, and a node
+// far hotter than the others passes it 10-20 m out before any offset is known. The strongest
+// peak within +-3 s of a link, no encounter of a dropper with the crumb it is leaving, a node's
+// estimated offset taken off its packets, encounters down-weighted beyond Huber's constant,
+// against the encounters before (the first local maximum of +-1.5 s, own crumbs included, each
+// at 1 m whatever its innovation).
 TEST(BreadcrumbPipeline, EncountersUnderAPoorChannelAreTheClosestApproach) {
   struct Arm {
     double in95 = 0, samples = 0, encounters = 0, own = 0;
@@ -546,7 +546,10 @@ TEST(BreadcrumbPipeline, EncountersUnderAPoorChannelAreTheClosestApproach) {
       arm->own += summary.numbers.at("encounters_after_own_drop");
     };
     run({}, &now);
-    run({{"encounter_window_s", "1.5"}, {"own_drop_encounter_after_s", "0"}}, &before);
+    run({{"encounter_window_s", "1.5"},
+         {"own_drop_encounter_after_s", "0"},
+         {"robust_encounters", "0"}},
+        &before);
     pdr_m.push_back(RunOnSim(RequirePipeline("pdr"), sim, dir).agents.stats.mean_m);
   }
   ASSERT_GT(now.samples, 0.0);
@@ -563,7 +566,8 @@ TEST(BreadcrumbPipeline, EncountersUnderAPoorChannelAreTheClosestApproach) {
   EXPECT_GT(now.own, 0.0);  // the departures' peaks were there, and refused
   EXPECT_EQ(before.own, 0.0);
   EXPECT_LT(now.encounters, before.encounters);
-  EXPECT_GE(better, 4);
+  EXPECT_GE(better, 5);
+  EXPECT_LE(now_worse_than_dr, 1);
   EXPECT_LT(now_worse_than_dr, before_worse_than_dr);
   EXPECT_GE(now.in95 / now.samples, before.in95 / before.samples + 0.10);
   std::printf(
@@ -613,6 +617,67 @@ TEST(BreadcrumbLocalizer, ADroppersPeakSoonAfterTheDropIsNotAnEncounter) {
   const LocalizerSummary every = walk(0.0);
   EXPECT_EQ(every.encounters_after_own_drop, 0u);
   EXPECT_EQ(every.encounters, 2u);
+}
+
+// robust_encounters against its reference (Chang 2014's inflation at IV-F's Huber constant,
+// 2-D radius 2.0): a walker whose start is known to 6 m walks east; a surveyed node 20 m north
+// of its track gives one false peak (a shadowing spike) as it passes. The encounter's innovation
+// nu (the node minus the agent) moves the agent by P (P + R~)^-1 nu, R~ = kappa R + (kappa - 1) P,
+// kappa = d / 2.0, d its Mahalanobis distance; with robust_encounters=false by P (P + R)^-1 nu.
+TEST(BreadcrumbLocalizer, AnEncounterFarOutsideItsSigmaMovesTheAgentAsHuberSays) {
+  struct Run {
+    Vec2 end = Vec2::Zero();
+    Mat2 cov_at_peak = Mat2::Identity();
+    LocalizerSummary summary;
+  };
+  auto walk = [](bool spike, bool robust) {
+    LocalizerOptions o;
+    o.radio_given = true;  // alpha -40 dBm, n 2.3
+    o.calibrate_online = false;
+    o.estimate_heading_scale = false;  // positions only: the update is the reference's exactly
+    o.entry_heading = false;
+    o.use_agent_rssi = false;  // the spike an encounter only, not also a range edge
+    o.robust_encounters = robust;
+    BreadcrumbLocalizer loc(o);
+    loc.AddKnownNode("b", Vec2(10, 20), 1e-3);
+    loc.AddAgent("ff1", Vec2::Zero(), 6.0, 0.02);
+    Run run;
+    TimeS t = 0;
+    for (int k = 0; k < 60; ++k) {
+      loc.AddStep({t, t + 0.5, "ff1", Vec3(0.5, 0, 0), std::nullopt});
+      t += 0.5;
+      const double x = 0.5 * (k + 1);
+      const bool peak = spike && x == 10.0;
+      loc.AddRssi({t, "ff1", "b", peak ? -20.0 : -90.0});  // below min_rssi_dbm but the spike
+      loc.AdvanceTo(t);
+      if (x == 10.0) run.cov_at_peak = loc.Estimate("ff1")->covariance;
+    }
+    loc.Finish();
+    run.end = loc.Estimate("ff1")->position_n;
+    run.summary = loc.summary();
+    return run;
+  };
+  const Run none = walk(false, true), robust = walk(true, true), plain = walk(true, false);
+  ASSERT_EQ(none.summary.encounters, 0u);
+  ASSERT_EQ(robust.summary.encounters, 1u);
+  ASSERT_EQ(plain.summary.encounters, 1u);
+  EXPECT_EQ(robust.summary.encounters_downweighted, 1u);
+  EXPECT_EQ(plain.summary.encounters_downweighted, 0u);
+  const Vec2 nu = Vec2(10, 20) - Vec2(10, 0);  // the node minus the agent at the peak
+  const Mat2 P = none.cov_at_peak + Mat2::Identity() * 1e-3;
+  const Mat2 R = Mat2::Identity();  // encounter_sigma_m 1
+  const double d = std::sqrt(nu.dot((P + R).ldlt().solve(nu)));
+  const double kappa = d / 2.006;
+  ASSERT_GT(kappa, 1.0);
+  ASSERT_LT(d, 5.0);  // inside the gate
+  const Mat2 R_robust = kappa * R + (kappa - 1.0) * P;
+  const Vec2 expected_robust = P * (P + R_robust).ldlt().solve(nu);
+  const Vec2 expected_plain = P * (P + R).ldlt().solve(nu);
+  EXPECT_NEAR((robust.end - none.end - expected_robust).norm(), 0.0, 0.05 * nu.norm())
+      << (robust.end - none.end).transpose() << " vs " << expected_robust.transpose();
+  EXPECT_NEAR((plain.end - none.end - expected_plain).norm(), 0.0, 0.05 * nu.norm())
+      << (plain.end - none.end).transpose() << " vs " << expected_plain.transpose();
+  EXPECT_LT(expected_robust.norm(), 0.8 * expected_plain.norm());
 }
 
 // encounter_places_crumbs: a crumb no drop named, passed at 0.3 m, enters the network at its

@@ -105,6 +105,8 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
     t.Real(
         "encounter_window_s", [](L& o) -> double& { return o.encounter.half_window_s; }, "s",
         nonneg, "an encounter's peak is its link's strongest packet within +- this");
+    t.Flag("robust_encounters", &L::robust_encounters,
+           "encounters beyond Huber's constant down-weighted (IV-F), as every other measurement");
     t.Flag("encounter_places_crumbs", &L::encounter_places_crumbs,
            "a crumb no drop named enters the network at its first encounter");
     t.Real("own_drop_encounter_after_s", &L::own_drop_encounter_after_s, "s", nonneg,
@@ -360,6 +362,7 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
   num["encounters"] = static_cast<double>(s.encounters);
   num["encounters_after_own_drop"] = static_cast<double>(s.encounters_after_own_drop);
   num["crumbs_placed_by_encounters"] = static_cast<double>(s.crumbs_placed_by_encounters);
+  num["encounters_downweighted"] = static_cast<double>(s.encounters_downweighted);
   num["drops"] = static_cast<double>(s.drops);
   num["moved_detected"] = static_cast<double>(s.moved_detected);
   num["agent_states"] = static_cast<double>(s.agent_states);

@@ -31,6 +31,13 @@ constexpr std::size_t kMotionWarmEdges = 20;
 /// A flagged node whose mean is within this factor of the agent's median is like its peers.
 constexpr double kMotionPeerFactor = 4.0;
 
+/// The radius of a 2-D innovation's Mahalanobis distance with the tail probability of a scalar
+/// residual beyond k sigma: P(chi2_2 > r^2) = exp(-r^2 / 2) = 2 (1 - Phi(k)) (1.5 -> 2.01).
+double HuberRadius2d(double k) {
+  const double tail = std::erfc(k / std::sqrt(2.0));
+  return std::sqrt(-2.0 * std::log(std::max(tail, 1e-300)));
+}
+
 double Huber(double r, double k) {
   const double a = std::abs(r);
   return a <= k ? 0.5 * r * r : k * (a - 0.5 * k);
@@ -1028,16 +1035,26 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
     }
     case Kind::kEncounter: {
       // x_state + offset - x_node = 0 + e: passed within ~1 m (sec. V-A)
-      const double s = options_.encounter_sigma_m;
+      const double var = options_.encounter_sigma_m * options_.encounter_sigma_m;
       const Vec2 innovation = gen_.Estimate(node->index) - here;
-      const Mat2 S = Mat2::Identity() * s * s + cov_here + node->cached_cov;
-      if (innovation.dot(S.ldlt().solve(innovation)) >
-          options_.gate_sigma * options_.gate_sigma) {
+      const Mat2 P = cov_here + node->cached_cov;
+      const Mat2 S = Mat2::Identity() * var + P;
+      const double nis = innovation.dot(S.ldlt().solve(innovation));
+      if (nis > options_.gate_sigma * options_.gate_sigma) {
         ++summary_.gated;
         break;
       }
-      gen_.AddRelative(a.state, node->index, -offset, Mat2::Identity() * s * s + Diag(offset_var),
-                       Turned(a, -offset));
+      // Down-weighted beyond IV-F's Huber constant, as every other measurement is (its 2-D
+      // radius: the same tail probability, 2.0 for huber_k 1.5): the innovation's covariance
+      // scaled to put it on that radius, the positions' share left as it is (Chang 2014,
+      // J. Geodesy 88: R~ = kappa R + (kappa - 1) P). On a poor channel peaks 10-20 m from a
+      // crumb pass the threshold; at 1 m each moved the agent by nearly all of its innovation.
+      const double kappa = options_.robust_encounters
+                               ? std::max(1.0, std::sqrt(nis) / HuberRadius2d(options_.huber_k))
+                               : 1.0;
+      const Mat2 R = Mat2::Identity() * (kappa * var) + (kappa - 1.0) * P;
+      if (kappa > 1.0) ++summary_.encounters_downweighted;
+      gen_.AddRelative(a.state, node->index, -offset, R + Diag(offset_var), Turned(a, -offset));
       ++summary_.encounters;
       SetCalibrationAnchor(a, p.other, p.t);
       break;

@@ -154,6 +154,10 @@ struct LocalizerOptions {
   bool use_encounters = true;
   radio::EncounterOptions encounter;
   double encounter_sigma_m = 1.0;
+  /// Encounters beyond IV-F's Huber constant down-weighted, as every other measurement is (its
+  /// 2-D radius: the tail probability of huber_k, 2.0 for 1.5); false: each at
+  /// encounter_sigma_m whatever its innovation (the paper's).
+  bool robust_encounters = true;
   /// A dropper's peak from its own crumb within this long after the drop is not an encounter:
   /// the drop's edge and the steps since (precise over seconds) already say where the crumb is,
   /// and walking away its near field peaks 2-4 m behind (measured on BLE channels of 6-8 dB;
@@ -276,6 +280,7 @@ struct LocalizerSummary {
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
   std::size_t encounters_after_own_drop = 0;  ///< peaks of a crumb its dropper was leaving, refused
   std::size_t crumbs_placed_by_encounters = 0;
+  std::size_t encounters_downweighted = 0;  ///< beyond huber_k sigma of their innovation
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   /// entry_heading: claims held, refuted (the measurement alone), entries not along the
   /// stated heading (the widened prior).
