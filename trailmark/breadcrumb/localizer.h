@@ -166,8 +166,8 @@ struct LocalizerOptions {
   double own_drop_encounter_after_s = 10.0;
   /// A crumb that no drop named and its packets have not yet placed enters the network at its
   /// first encounter, tied to the agent's state by encounter_sigma_m (as a drop by drop_sigma_m).
-  /// Off: measured mixed (docs/breadcrumb.md, "Encounters under a poor channel").
-  bool encounter_places_crumbs = false;
+  /// On since 2026-12-07 (with robust encounters; docs/breadcrumb.md).
+  bool encounter_places_crumbs = true;
   /// min_rssi_dbm and encounter.threshold_dbm are the paper's, for its channel (868 MHz: about
   /// -40 dBm at 1 m, sec. V-A). With relative_rssi_thresholds they move with this channel's
   /// level at 1 m (a BLE channel reads ~20 dB lower: every packet fell below -65 dBm, no
