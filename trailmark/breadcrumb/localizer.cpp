@@ -1049,8 +1049,13 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       // scaled to put it on that radius, the positions' share left as it is (Chang 2014,
       // J. Geodesy 88: R~ = kappa R + (kappa - 1) P). On a poor channel peaks 10-20 m from a
       // crumb pass the threshold; at 1 m each moved the agent by nearly all of its innovation.
+      // The agent's motion found beyond its stated noise (adapt_motion_noise's median over the
+      // nodes it hears) explains a larger innovation: the test uses P scaled by it.
+      const double motion = std::max(1.0, a.motion_median);
+      const Mat2 S_test = Mat2::Identity() * var + P * motion;
+      const double d_test = std::sqrt(innovation.dot(S_test.ldlt().solve(innovation)));
       const double kappa = options_.robust_encounters
-                               ? std::max(1.0, std::sqrt(nis) / HuberRadius2d(options_.huber_k))
+                               ? std::max(1.0, d_test / HuberRadius2d(options_.huber_k))
                                : 1.0;
       const Mat2 R = Mat2::Identity() * (kappa * var) + (kappa - 1.0) * P;
       if (kappa > 1.0) ++summary_.encounters_downweighted;
