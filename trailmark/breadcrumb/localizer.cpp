@@ -1052,8 +1052,10 @@ void BreadcrumbLocalizer::ApplyPending(Agent& a, const Pending& p) {
       // The agent's motion found beyond its stated noise (adapt_motion_noise's median over the
       // nodes it hears) explains a larger innovation: the test uses P scaled by it.
       const double motion = std::max(1.0, a.motion_median);
-      const Mat2 S_test = Mat2::Identity() * var + P * motion;
-      const double d_test = std::sqrt(innovation.dot(S_test.ldlt().solve(innovation)));
+      const double d_test =
+          motion > 1.0 ? std::sqrt(innovation.dot(
+                             (Mat2::Identity() * var + P * motion).ldlt().solve(innovation)))
+                       : std::sqrt(nis);
       const double kappa = options_.robust_encounters
                                ? std::max(1.0, d_test / HuberRadius2d(options_.huber_k))
                                : 1.0;

@@ -280,7 +280,7 @@ struct LocalizerSummary {
   std::size_t encounters = 0, drops = 0, moved_detected = 0;
   std::size_t encounters_after_own_drop = 0;  ///< peaks of a crumb its dropper was leaving, refused
   std::size_t crumbs_placed_by_encounters = 0;
-  std::size_t encounters_downweighted = 0;  ///< beyond huber_k sigma of their innovation
+  std::size_t encounters_downweighted = 0;  ///< beyond Huber's 2-D radius (robust_encounters)
   std::size_t agent_states = 0, delayed_initializations = 0, pending_uninitialized = 0;
   /// entry_heading: claims held, refuted (the measurement alone), entries not along the
   /// stated heading (the widened prior).
@@ -503,11 +503,11 @@ class BreadcrumbLocalizer {
   /// agent's median over the nodes it hears is above 1 and this node's mean is like its peers'
   /// (within kMotionPeerFactor of the median): then its edges are not refused.
   bool BlameMotion(const Agent& a, const std::string& node) const;
-  /// adapt_motion_noise: one edge of agent `a` to `node` at t, with the variance of one
-  /// measurement.
   /// Feeds an agent-to-static packet (weak ones too) to the link's encounter detector and
   /// enqueues a confirmed encounter (not one of a crumb its dropper is leaving).
   void DetectEncounter(Agent& a, const std::string& other, const RssiPacket& p);
+  /// adapt_motion_noise: one edge of agent `a` to `node` at t, with the variance of one
+  /// measurement.
   void ObserveMotion(Agent& a, const std::string& node, TimeS t,
                      const std::optional<EdgeInnovation>& edge, double measurement_variance);
   NodeIndex RangeBiasNode(const std::string& kind);
