@@ -585,6 +585,114 @@ TEST(StepFrontEnd, StepsOfAPhoneDuringADeclaredStopAreNotMotion) {
   EXPECT_EQ(run(true, RowOrder::kPerAgent, &ignored).size(), 7u);
 }
 
+/// Sums each agent's steps turned and stretched by a fixed M from its start, an estimate at
+/// each step's end (cov 0.01 I); says M as its StepTransform.
+class TurnedStepSum : public OnlineEstimator {
+ public:
+  explicit TurnedStepSum(const Mat2& m) : m_(m) {}
+  void Add(const MissionRow& row, EstimateSink& sink) override {
+    const auto* s = std::get_if<Step>(&row);
+    if (s == nullptr) return;
+    Vec2& p = position_.try_emplace(s->agent, Vec2::Zero()).first->second;
+    p += m_ * s->delta_n.head<2>();
+    sink.Add({s->t1, s->agent, Vec3(p.x(), p.y(), 0), 0.01, 0, 0.01});
+  }
+  void Finish(EstimateSink&) override {}
+  std::optional<Estimate> Current(const std::string&) const override { return std::nullopt; }
+  EstimatorSummary Summary() const override { return {}; }
+  std::optional<Mat2> StepTransform(const std::string&) const override { return m_; }
+
+ private:
+  Mat2 m_;
+  std::map<std::string, Vec2> position_;
+};
+
+// Between rows the walker walks on: the view is the last estimate moved on at the last step's
+// velocity as the estimator turns and stretches it — at most a step ahead, back where the step
+// ended 1.5 steps' durations after it or from a declared stop — its sigma 0.5 x speed x the time
+// ahead; every 0.1 s, from the rows before it only (each agent's own order gives the same rows).
+TEST(StepFrontEnd, TheViewBetweenRowsMovesTheLastEstimateOnAtTheTurnedStepVelocity) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3::Zero(), 0.1));
+  const Mat2 m = 1.1 * Eigen::Rotation2Dd(0.5).toRotationMatrix();
+  std::vector<MissionRow> rows;
+  auto step = [](TimeS t0, TimeS t1, const char* agent) {
+    return MissionRow(Step{t0, t1, agent, Vec3(0.6, 0, 0), std::nullopt});
+  };
+  rows.push_back(step(0.0, 0.5, "ff1"));
+  rows.push_back(step(0.5, 1.0, "ff1"));
+  rows.push_back(step(3.0, 3.5, "ff1"));
+  rows.push_back(step(3.5, 4.0, "ff1"));
+  rows.push_back(MissionEvent{4.0, "ff1", "stop", ""});
+  rows.push_back(MissionEvent{5.0, "ff1", "go", ""});
+  rows.push_back(step(5.0, 5.5, "ff1"));
+  for (int k = 1; k < 120; ++k) rows.push_back(RssiPacket{0.05 * k, "ff2", "ff1", -60});
+  std::stable_sort(rows.begin(), rows.end(), [](const MissionRow& a, const MissionRow& b) {
+    return RowTime(a) != RowTime(b) ? RowTime(a) < RowTime(b) : a.index() < b.index();
+  });
+  auto run = [&](RowOrder order, double period) {
+    StepFrontEndOptions options;
+    options.view_period_s = period;
+    StepFrontEnd front(info, options, order, Feed::kTimeOrdered,
+                       std::make_unique<TurnedStepSum>(m));
+    VectorSink sink;
+    for (const MissionRow& r : rows) front.Add(r, sink);
+    front.Finish(sink);
+    return sink.rows;
+  };
+  const std::vector<Estimate> global = run(RowOrder::kGlobal, 0.1);
+  const Vec2 v = m * Vec2(0.6 / 0.5, 0);  // the turned velocity, 1.32 m/s
+  // The expected view at t after the step that ended at t1, from the estimate p there.
+  auto expected = [&](TimeS t, TimeS t1, const Vec2& p, bool stopped) {
+    const double ahead = t - t1;
+    const double a = stopped || ahead > 0.75 ? 0.0 : std::min(ahead, 0.5);
+    return std::make_pair(Vec2(p + v * a), 0.01 + std::pow(0.5 * v.norm() * a, 2));
+  };
+  const Vec2 p1 = m * Vec2(1.2, 0), p2 = m * Vec2(2.4, 0);
+  std::size_t views = 0;
+  TimeS last = -1;
+  for (const Estimate& e : global) {
+    ASSERT_EQ(e.id, "ff1");
+    EXPECT_GE(e.t, last);
+    last = e.t;
+    const bool at_step = std::abs(e.t - std::round(e.t * 2) / 2) < 1e-9 &&
+                         (e.t == 0.5 || e.t == 1.0 || e.t == 3.5 || e.t == 4.0 || e.t == 5.5);
+    if (at_step) continue;
+    ++views;
+    std::pair<Vec2, double> want;
+    if (e.t > 1.0 && e.t < 3.5) {
+      want = expected(e.t, 1.0, p1, false);
+    } else if (e.t > 3.5 && e.t < 4.0) {
+      want = expected(e.t, 3.5, Vec2(m * Vec2(1.8, 0)), false);
+    } else if (e.t > 4.0 && e.t < 5.5) {
+      want = expected(e.t, 4.0, p2, true);  // the stop declared at the step's end
+    } else if (e.t > 5.5) {
+      want = expected(e.t, 5.5, Vec2(m * Vec2(3.0, 0)), false);  // walking again: the stop is over
+    } else {
+      ASSERT_GT(e.t, 0.5);
+      ASSERT_LT(e.t, 1.0);
+      want = expected(e.t, 0.5, m * Vec2(0.6, 0), false);
+    }
+    EXPECT_NEAR((e.position_n.head<2>() - want.first).norm(), 0.0, 1e-12) << e.t;
+    EXPECT_NEAR(e.sxx, want.second, 1e-12) << e.t;
+    EXPECT_NEAR(e.syy, want.second, 1e-12) << e.t;
+  }
+  // 0.6..0.9, 1.1..3.4, 3.6..3.9, 4.1..5.4, and 5.6..5.9 before the last row at 5.95
+  EXPECT_EQ(views, 4u + 24u + 4u + 14u + 4u);
+  // Each agent's own order: the views come before its next step only, the same rows up to the
+  // declared stop (which only global order can read: a device's events may run ahead of its
+  // steps).
+  const std::vector<Estimate> own = run(RowOrder::kPerAgent, 0.1);
+  ASSERT_GE(own.size(), 36u);
+  for (std::size_t i = 0; i < own.size() && global[i].t <= 4.0; ++i) {
+    EXPECT_EQ(own[i].t, global[i].t) << i;
+    EXPECT_EQ(own[i].position_n, global[i].position_n) << i;
+  }
+  // Off: the estimator's own estimates only.
+  EXPECT_EQ(run(RowOrder::kGlobal, 0.0).size(), 5u);
+}
+
 // A stop whose go never comes (a lost event) explains away a sway, not a walk: after
 // kMaxStepsInStop steps the agent is walking again, and a note says so.
 TEST(StepFrontEnd, AStopWithoutGoEndsWhenTheStepsAreMoreThanASway) {

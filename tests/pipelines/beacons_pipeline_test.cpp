@@ -153,16 +153,18 @@ TEST(BeaconsPipeline, AMapSolvedOnAWorkerIsPutInPlaceItsLagLaterAndEndsTheSame) 
 }
 
 TEST(BeaconsPipeline, TheViewIsNeverOlderThanTheOutputPeriodAndHeldItStaysHonest) {
-  // output_period_s (issue 22): between the ~3 Hz rows of a steps mission, each agent's
-  // estimate extrapolated every 0.1 s. Held until the next (the eval's online semantics), the
-  // view then keeps the truth in its ellipse (seed 1: in95 84 -> 91 %, mean 0.60 -> 0.57 m;
-  // seed 2, this test's seed until drops were placed within their step (drop_within_step),
-  // was 85 -> 93 % then and is 99 -> 97 % since: its map no longer lags the walk).
+  // The view between rows (issue 22; the step front end's view_period_s since 2026-12-07, the
+  // tracker's own output_period_s before, with the same figures on the randomized families):
+  // between the ~3 Hz rows of a steps mission, each agent's estimate extrapolated every 0.1 s.
+  // Held until the next (the eval's online semantics), the view then keeps the truth in its
+  // ellipse (seed 1: in95 84 -> 91 %, mean 0.60 -> 0.57 m; seed 2, this test's seed until drops
+  // were placed within their step (drop_within_step), was 85 -> 93 % then and is 99 -> 97 %
+  // since: its map no longer lags the walk).
   const SimulatedMission sim = SimulateScenario("beacon-trail", 1);
   const OnDisk disk(sim.data, sim.plan);
   const MissionDirectory& mission = disk.mission;
   const PipelineSpec& ekf = RequirePipeline("beacons-ekf");
-  const Outcome sparse = RunOn(ekf, mission, sim.data, {{"output_period_s", "0"}});
+  const Outcome sparse = RunOn(ekf, mission, sim.data, {{"view_period_s", "0"}});
   const Outcome ticked = RunOn(ekf, mission, sim.data);
   EXPECT_GT(ticked.metrics.agents.stats.in95, sparse.metrics.agents.stats.in95 + 0.05);
   EXPECT_LT(ticked.metrics.agents.stats.mean_m, sparse.metrics.agents.stats.mean_m);
@@ -178,6 +180,7 @@ TEST(BeaconsPipeline, TheViewIsNeverOlderThanTheOutputPeriodAndHeldItStaysHonest
   }
   // A period that would flood the sink is refused.
   EXPECT_THROW(RunOn(ekf, mission, sim.data, {{"output_period_s", "0.001"}}), std::invalid_argument);
+  EXPECT_THROW(RunOn(ekf, mission, sim.data, {{"view_period_s", "0.001"}}), std::invalid_argument);
 }
 
 TEST(BeaconsPipeline, BeaconsWithoutDropEventsAreAnchoredWhereTheyArePassedClosely) {

@@ -134,6 +134,29 @@ TEST(Registry, EachLandmarkPipelineListsAndTakesOnlyTheOptionsItReads) {
   EXPECT_EQ(MakeError("landmarks-ukf", in, {{"slam", "false"}}), "");
 }
 
+// One view between rows for every steps-based pipeline (the step front end's), on by default;
+// the views of their own that beacons-ekf and the fusion had are off by default (ablations).
+TEST(Registry, EveryStepsBasedPipelineHasTheFrontEndsViewBetweenRows) {
+  for (const PipelineSpec& spec : Pipelines()) {
+    std::optional<std::string> view, beacons_view, fusion_view;
+    for (const auto& o : spec.options) {
+      if (o.key == "view_period_s") view = o.default_value;
+      if (o.key == "extrapolate") beacons_view = o.default_value;
+      if (o.key == "fusion.predict_fraction") fusion_view = o.default_value;
+    }
+    EXPECT_EQ(view.has_value(), spec.steps_based) << spec.name;
+    if (view) EXPECT_EQ(*view, "0.1") << spec.name;
+    if (beacons_view) EXPECT_EQ(*beacons_view, "false") << spec.name;
+    if (fusion_view) EXPECT_EQ(*fusion_view, "0") << spec.name;
+  }
+  const SimulatedMission sim = SimulateScenario("beacon-trail", 1);
+  const EstimatorInputs in{sim.data.info, &sim.plan};
+  EXPECT_EQ(MakeError("pdr", in, {{"view_period_s", "0.2"}}), "");
+  EXPECT_THAT(MakeError("pdr", in, {{"view_period_s", "0.001"}}), HasSubstr("view_period_s"));
+  EXPECT_THAT(MakeError("ins", in, {{"view_period_s", "0.2"}}),
+              HasSubstr("unknown option 'view_period_s'"));
+}
+
 TEST(Registry, JsonListsNameNeedsUsesLiveAndOptions) {
   const auto j = nlohmann::json::parse(RegistryJson());
   ASSERT_EQ(j.size(), Pipelines().size());

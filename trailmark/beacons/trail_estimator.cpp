@@ -160,7 +160,9 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
     t.Real("measurement_hold_s", &O::measurement_hold_s, "s", OptionBounds::NonNegative(),
            "a measurement waits this long for the step spanning its time (0: at once)");
     t.Flag("extrapolate", &O::extrapolate,
-           "between steps, emit the position ahead of the last step by its velocity");
+           "between steps, emit the position ahead of the last step by its velocity (the tracker's "
+           "own view, before 2026-12-07; the step front end's view_period_s does it by default: "
+           "with both, the view moves on from a row already ahead)");
     t.Real("output_period_s", &O::output_period_s, "s", OptionBounds::NonNegative(),
            "with extrapolate: an agent's estimate is never older than this at the next row "
            "(0: at steps and measurements only)");
@@ -994,6 +996,13 @@ bool BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
   a.t = t;
   sink.Add({t, a.id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
   return true;
+}
+
+std::optional<Mat2> BeaconTrailEstimator::StepTransform(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  if (it == agents_.end() || !it->second.ekf) return std::nullopt;
+  const ScaatEkf& ekf = *it->second.ekf;
+  return Mat2(ekf.scale() * Eigen::Rotation2Dd(ekf.psi()).toRotationMatrix());
 }
 
 std::optional<Estimate> BeaconTrailEstimator::Current(const std::string& node) const {

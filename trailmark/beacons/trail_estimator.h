@@ -111,7 +111,10 @@ struct BeaconTrailOptions {
   /// last step end by the last step's velocity (at most one step's duration), its covariance
   /// grown by `extrapolation_speed_sigma` x that speed x the time ahead per axis (walking on,
   /// slowing, stopping): what is known online then. false: the last step's estimate only.
-  bool extrapolate = true;
+  /// Off by default since 2026-12-07: the step front end's view between rows (view_period_s,
+  /// ins/step_front_end.h) is this model for every steps-based pipeline, with this tracker's
+  /// StepTransform; on with it, the view would move on from a row already ahead.
+  bool extrapolate = false;
   double extrapolation_speed_sigma = 0.5;
   /// s; with `extrapolate` and a hold: an agent's estimate is never older than this when the
   /// next row comes (ours, issue 22): before a row at t, every `output_period_s` after the
@@ -119,7 +122,7 @@ struct BeaconTrailOptions {
   /// estimator rows at ~3 Hz; a view held for 0.3 s of walking was outside its own ellipse).
   /// Deterministic in the rows, so live = batch; each from the rows before it only. 0: at steps
   /// and measurements only (as before 2026-12-03). 0.1: a 10 Hz display (a priori).
-  double output_period_s = 0.1;
+  double output_period_s = 0.0;
   ScaatEkfOptions ekf;
   UltrasoundOnlyKfOptions us_kf;
   BeaconMapOptions map;
@@ -156,6 +159,8 @@ class BeaconTrailEstimator : public OnlineEstimator {
   /// The pending ranges, a last map solve, the beacons' final estimates.
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;
+  /// The SCAAT EKF's scale x R(psi): how it moves the agent's steps.
+  std::optional<Mat2> StepTransform(const std::string& agent) const override;
   EstimatorSummary Summary() const override;
   /// The way out of `agent` at time `at_s` from the map as it is now.
   WayOutReport WayOut(const std::string& agent, TimeS at_s, double window_s) const;

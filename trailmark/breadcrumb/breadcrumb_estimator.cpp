@@ -334,6 +334,10 @@ void BreadcrumbEstimator::Finish(EstimateSink& sink) {
   EmitStatic(any_ ? t_last_ : 0.0, true, sink);
 }
 
+std::optional<Mat2> BreadcrumbEstimator::StepTransform(const std::string& agent) const {
+  return loc_->StepTransform(agent);
+}
+
 std::optional<Estimate> BreadcrumbEstimator::Current(const std::string& node) const {
   const auto it = current_.find(node);
   if (it == current_.end()) return std::nullopt;

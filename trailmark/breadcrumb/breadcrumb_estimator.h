@@ -49,6 +49,8 @@ class BreadcrumbEstimator : public OnlineEstimator {
   /// The node's latest estimate as emitted (agents at their latest step, static nodes at their
   /// latest change).
   std::optional<Estimate> Current(const std::string& node) const override;
+  /// The agent's heading and scale node's (1 + s) R(psi), once the network has one.
+  std::optional<Mat2> StepTransform(const std::string& agent) const override;
   /// The localizer's counters, calibration, range offsets, latency percentiles and notes.
   EstimatorSummary Summary() const override;
   const BreadcrumbLocalizer& localizer() const { return *loc_; }

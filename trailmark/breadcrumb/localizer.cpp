@@ -253,6 +253,13 @@ std::vector<ConsiderRate> BreadcrumbLocalizer::Turned(const Agent& a, const Vec2
   return {{a.consider, Turn90(v)}};
 }
 
+std::optional<Mat2> BreadcrumbLocalizer::StepTransform(const std::string& id) const {
+  const auto it = agents_.find(id);
+  if (it == agents_.end() || it->second.theta < 0) return std::nullopt;
+  const Vec2 th = gen_.Estimate(it->second.theta);
+  return Mat2((1.0 + th.y()) * Eigen::Rotation2Dd(th.x()).toRotationMatrix());
+}
+
 Vec2 BreadcrumbLocalizer::Corrected(const Agent& a, const Vec2& raw) const {
   if (a.theta < 0) return raw;
   const Vec2 th = gen_.Estimate(a.theta);

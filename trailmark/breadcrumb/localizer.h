@@ -328,6 +328,9 @@ class BreadcrumbLocalizer {
   std::optional<Vec2> GyroScaleRate(const std::string& id) const;
   /// The factor on the agent's step and heading noise (adapt_motion_noise; 1: as stated).
   std::optional<double> MotionNoiseScale(const std::string& id) const;
+  /// How the network moves the agent's next step: (1 + s) R(psi) of its heading and scale
+  /// node (nullopt: an unknown agent, or none: heading_scale off).
+  std::optional<Mat2> StepTransform(const std::string& id) const;
   /// The agents, by id.
   std::vector<std::string> AgentIds() const;
 

@@ -178,6 +178,12 @@ class OnlineEstimator {
   /// members and their weights); empty when the estimator does not say (a single-source
   /// estimator). Wrappers pass it on.
   virtual std::vector<SourceShare> Sources(const std::string& /*node*/) const { return {}; }
+  /// How the estimator turns and stretches the agent's steps now (its estimated heading and
+  /// step-scale corrections: a step d moves its estimate by M d), for the view between rows
+  /// (ins/step_front_end.h); nullopt: as the steps come. Wrappers pass it on.
+  virtual std::optional<Mat2> StepTransform(const std::string& /*agent*/) const {
+    return std::nullopt;
+  }
 };
 
 }  // namespace trailmark

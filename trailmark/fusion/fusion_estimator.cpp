@@ -71,7 +71,9 @@ const OptionTable<FusionOptions>& FusionOptionTable() {
     t.Real("fusion.predict_fraction", &FusionOptions::predict_fraction, "",
            OptionBounds::NonNegative(),
            "between fused rows, predict an agent's estimate for at most this part of the "
-           "interval behind the last one, at its velocity; 0: hold the last fused row");
+           "interval behind the last one, at its velocity; 0: hold the last fused row (the step "
+           "front end's view_period_s moves it on by default: with both, the view moves on from "
+           "a row already ahead)");
     t.Real("fusion.predict_period_s", &FusionOptions::predict_period_s, "s",
            OptionBounds::Positive(), "at most one predicted row per agent this often");
     t.Real("fusion.predict_baseline_s", &FusionOptions::predict_baseline_s, "s",
@@ -288,6 +290,20 @@ std::vector<SourceShare> FusionEstimator::Sources(const std::string& node) const
   const auto it = sources_.find(node);
   if (it == sources_.end()) return {};
   return it->second;
+}
+
+std::optional<Mat2> FusionEstimator::StepTransform(const std::string& agent) const {
+  const auto it = sources_.find(agent);
+  if (it == sources_.end()) return std::nullopt;
+  const SourceShare* top = nullptr;
+  for (const SourceShare& s : it->second) {
+    if (top == nullptr || s.weight > top->weight) top = &s;
+  }
+  if (top == nullptr) return std::nullopt;
+  for (const FusionMember& m : members_) {
+    if (m.name == top->source) return m.estimator->StepTransform(agent);
+  }
+  return std::nullopt;
 }
 
 std::optional<Estimate> FusionEstimator::Current(const std::string& node) const {

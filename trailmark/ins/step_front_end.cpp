@@ -15,6 +15,14 @@ bool StepFrontEndOptions::IsValid(std::string* why) const {
     if (why) *why = "reorder_s must be >= 0";
     return false;
   }
+  if (!(view_period_s == 0 || (view_period_s >= 0.01 && std::isfinite(view_period_s)))) {
+    if (why) *why = "view_period_s must be 0 or at least 0.01 s";
+    return false;
+  }
+  if (!(view_speed_sigma >= 0) || !std::isfinite(view_speed_sigma)) {
+    if (why) *why = "view_speed_sigma must be finite and >= 0";
+    return false;
+  }
   return true;
 }
 
@@ -41,6 +49,20 @@ const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable() {
            "live: the window is 2 x the feed's largest lateness of the last 20-30 s + 50 ms, "
            "at least 0.2 s, at most reorder_s, which it is for the first 10 s (false: always "
            "reorder_s; on: lower latency, a row late when a device falls further behind)");
+    return t;
+  }();
+  return table;
+}
+
+const OptionTable<StepFrontEndOptions>& StepViewOptionTable() {
+  static const OptionTable<StepFrontEndOptions> table = [] {
+    OptionTable<StepFrontEndOptions> t;
+    t.Real("view_period_s", &StepFrontEndOptions::view_period_s, "s", OptionBounds::NonNegative(),
+           "between rows, an agent's estimate is written again this often, moved on at its last "
+           "step's velocity (at most a step ahead; 0: the estimator's own estimates only)");
+    t.Real("view_speed_sigma", &StepFrontEndOptions::view_speed_sigma, "",
+           OptionBounds::NonNegative(),
+           "the view's sigma per axis, x the last step's speed x the time ahead of its end");
     return t;
   }();
   return table;
@@ -89,6 +111,51 @@ StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrd
   };
 }
 
+class StepFrontEnd::ViewRecordingSink : public EstimateSink {
+ public:
+  ViewRecordingSink(StepFrontEnd& front, EstimateSink& out) : front_(front), out_(out) {}
+  void Add(const Estimate& estimate) override {
+    out_.Add(estimate);
+    if (front_.options_.view_period_s <= 0) return;
+    const auto it = front_.views_.find(estimate.id);
+    if (it == front_.views_.end()) return;  // not an agent
+    it->second.inner = estimate;
+    it->second.out_t = std::max(it->second.out_t, estimate.t);
+  }
+
+ private:
+  StepFrontEnd& front_;
+  EstimateSink& out_;
+};
+
+void StepFrontEnd::EmitViews(View& v, TimeS t, EstimateSink& sink) {
+  constexpr double kTolS = 1e-9;
+  // The estimate must know the last step (a steps-based estimate is where its last step ended).
+  if (!v.inner || !v.has_step || v.inner->t < v.step_t1 - kTolS) return;
+  const double step_s = v.step_t1 - v.step_t0;
+  std::optional<Vec2> velocity_n;  // the last step's, as the estimator turns and scales it
+  for (TimeS tk = v.out_t + options_.view_period_s; tk < t - kTolS;
+       tk = v.out_t + options_.view_period_s) {
+    Estimate e = *v.inner;
+    e.t = tk;
+    const double ahead = tk - v.step_t1;
+    if (tk < v.stopped_t && ahead <= StepFrontEndOptions::kViewStoppedSteps * step_s) {
+      if (!velocity_n) {
+        const std::optional<Mat2> m = inner_->StepTransform(v.agent);
+        velocity_n = m ? Vec2(*m * v.velocity_n) : v.velocity_n;
+      }
+      const double a = std::clamp(ahead, 0.0, step_s);
+      e.position_n.head<2>() += *velocity_n * a;
+      const double s = options_.view_speed_sigma * velocity_n->norm() * a;
+      e.sxx += s * s;
+      e.syy += s * s;
+    }
+    sink.Add(e);
+    v.out_t = tk;
+    ++view_rows_;
+  }
+}
+
 bool StepFrontEnd::UseSource(const std::string& agent, bool imu) {
   const NodeInfo* node = info_.Find(agent);
   if (node == nullptr || node->kind != NodeKind::kAgent) {
@@ -123,8 +190,41 @@ void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
       }
     }
   }
+  const Step* step = std::get_if<Step>(&row);
+  if (options_.view_period_s > 0) {
+    // The view between rows, from the rows before this one: in global order every agent's
+    // (no earlier row can come); in each agent's order its own, before its next step.
+    const TimeS t = RowTime(row);
+    if (order_ == RowOrder::kGlobal) {
+      for (auto& [agent, v] : views_) EmitViews(v, t, sink);
+    } else if (step != nullptr) {
+      if (const auto it = views_.find(step->agent); it != views_.end())
+        EmitViews(it->second, t, sink);
+    }
+    if (const auto* event = std::get_if<MissionEvent>(&row);
+        event != nullptr && event->event == "stop" && order_ == RowOrder::kGlobal) {
+      // A declared stop (in global order, where no later row of the agent came before it):
+      // the walker stands where the last step ended.
+      if (const auto it = views_.find(event->agent); it != views_.end())
+        it->second.stopped_t = event->t;
+    }
+    if (step != nullptr) {
+      View& v = views_[step->agent];
+      v.agent = step->agent;
+      // A stop declared before this step began is over; one within it or at its end (events
+      // come before steps of the same time) holds from then.
+      if (v.stopped_t < step->t0) v.stopped_t = std::numeric_limits<double>::infinity();
+      v.has_step = true;
+      v.step_t0 = step->t0;
+      v.step_t1 = step->t1;
+      v.velocity_n = step->t1 - step->t0 > 1e-6
+                         ? Vec2(step->delta_n.head<2>() / (step->t1 - step->t0))
+                         : Vec2::Zero();
+    }
+  }
   height_.Add(row);
-  HeightAnnotatingSink annotated(height_, sink);
+  ViewRecordingSink recorded(*this, sink);
+  HeightAnnotatingSink annotated(height_, recorded);
   inner_->Add(row, annotated);
 }
 
@@ -164,7 +264,8 @@ void StepFrontEnd::Finish(EstimateSink& sink) {
   sink_ = &sink;
   ins_.Finish();
   buffer_.ReleaseAll([&](const MissionRow& r) { Pass(r, sink); });
-  HeightAnnotatingSink annotated(height_, sink);
+  ViewRecordingSink recorded(*this, sink);
+  HeightAnnotatingSink annotated(height_, recorded);
   inner_->Finish(annotated);
 }
 
@@ -191,6 +292,7 @@ EstimatorSummary StepFrontEnd::Summary() const {
   }
   height_.AddToSummary(s);
   s.numbers["rows_ignored"] += static_cast<double>(ignored_);
+  if (options_.view_period_s > 0) s.numbers["view_rows"] = static_cast<double>(view_rows_);
   if (order_ == RowOrder::kGlobal) {
     if (options_.ignore_steps_in_stops) {
       s.numbers["steps_in_declared_stops"] = static_cast<double>(steps_in_stops_);

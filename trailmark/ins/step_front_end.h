@@ -53,6 +53,23 @@ struct StepFrontEndOptions {
   static constexpr int kMaxStepsInStop = 4;
   /// Every agent's height channel (`height.` keys): z, szz and floor of the estimates.
   HeightOptions height;
+  /// s; the view between rows (ours, issues 20 and 21): a steps-based estimator knows an agent
+  /// only as of its last step's end, while the walker walks on and the next step ends ~0.6 s
+  /// later (scored at the truth's instants, a held estimate lags by up to a step). Before each
+  /// row at t, every `view_period_s` after an agent's last estimate and before t gets that
+  /// estimate moved on at the last step's velocity, turned and scaled as the estimator moves
+  /// steps (OnlineEstimator::StepTransform) — at most one step ahead, back to the last estimate
+  /// once 1.5 steps' durations passed without a step or a declared stop came (the walker
+  /// stands where the step ended) — its covariance grown by `view_speed_sigma` x that speed x
+  /// the time ahead per axis (walking on, slowing, turning, stopping): the model of
+  /// beacons-ekf's own view (docs/beacons.md). From the rows before it only, so live = batch.
+  /// 0: at the estimator's own estimates only. 0.1: a 10 Hz display (a priori, as
+  /// beacons-ekf's).
+  double view_period_s = 0.1;
+  double view_speed_sigma = 0.5;
+  /// Beyond one step ahead, how many steps' durations without a step make the view go back to
+  /// the last estimate (a priori: a step 50 % slower than the last is still walking).
+  static constexpr double kViewStoppedSteps = 1.5;
   bool IsValid(std::string* why) const;
 };
 /// The `ins.` keys (the INS options with the prefix).
@@ -60,6 +77,9 @@ const OptionTable<StepFrontEndOptions>& StepSourceOptionTable();
 /// The `ins.` keys, `reorder_s` and `reorder_adaptive`, for estimators that need global time
 /// order.
 const OptionTable<StepFrontEndOptions>& OrderedStepSourceOptionTable();
+/// `view_period_s` and `view_speed_sigma`, for estimators that do not write their own view
+/// between rows.
+const OptionTable<StepFrontEndOptions>& StepViewOptionTable();
 
 /// How long a live row waits behind the newest row for older rows of other devices, from what
 /// the feed shows: a row's lateness is how far its time is behind the newest row seen before
@@ -107,6 +127,9 @@ class StepFrontEnd : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;
+  std::optional<Mat2> StepTransform(const std::string& agent) const override {
+    return inner_->StepTransform(agent);
+  }
   std::vector<SourceShare> Sources(const std::string& node) const override {
     return inner_->Sources(node);
   }
@@ -121,6 +144,9 @@ class StepFrontEnd : public OnlineEstimator {
   void Pass(const MissionRow& row, EstimateSink& sink);
   void Release(EstimateSink& sink);
   bool UseSource(const std::string& agent, bool imu);
+  /// The view between rows (StepFrontEndOptions::view_period_s) of `agent` before a row at `t`.
+  struct View;
+  void EmitViews(View& view, TimeS t, EstimateSink& sink);
 
   MissionInfo info_;
   StepFrontEndOptions options_;
@@ -133,6 +159,22 @@ class StepFrontEnd : public OnlineEstimator {
   TimeOrderBuffer buffer_;
   ReorderWindow window_;
   std::map<std::string, bool> source_is_imu_;
+  /// Per agent: its latest estimate out (the inner estimator's or a view), the latest of the
+  /// inner estimator's, and the last step passed to it (the view's base and velocity).
+  struct View {
+    std::string agent;
+    TimeS out_t = -std::numeric_limits<double>::infinity();
+    /// A declared stop (events.csv) since the last step: no view ahead from then on.
+    TimeS stopped_t = std::numeric_limits<double>::infinity();
+    std::optional<Estimate> inner;
+    bool has_step = false;
+    TimeS step_t0 = 0, step_t1 = 0;
+    Vec2 velocity_n = Vec2::Zero();
+  };
+  std::map<std::string, View> views_;
+  std::size_t view_rows_ = 0;
+  /// Passes estimates on and keeps each agent's latest in views_.
+  class ViewRecordingSink;
   /// Agents standing by a declared stop (events.csv), and since when (global order only).
   struct DeclaredStop {
     TimeS since = 0;

@@ -165,6 +165,9 @@ class StreamCheck : public OnlineEstimator {
   void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
     inner_->StepsFromFootIns(agent, foot_ins);
   }
+  std::optional<Mat2> StepTransform(const std::string& agent) const override {
+    return inner_->StepTransform(agent);
+  }
   std::vector<SourceShare> Sources(const std::string& node) const override {
     return inner_->Sources(node);
   }

@@ -247,6 +247,11 @@ EstimatorSummary DeadReckoningGuard::Summary() const {
   return s;
 }
 
+std::optional<Mat2> DeadReckoningGuard::StepTransform(const std::string& agent) const {
+  if (options_.on_disagreement == GuardAction::kFallback && Disagrees(agent)) return std::nullopt;
+  return inner_->StepTransform(agent);
+}
+
 std::vector<SourceShare> DeadReckoningGuard::Sources(const std::string& node) const {
   if (options_.on_disagreement == GuardAction::kFallback && Disagrees(node))
     return {{"dead reckoning", 1.0}};

@@ -83,6 +83,9 @@ class DeadReckoningGuard : public OnlineEstimator {
   /// The inner estimator's; dead reckoning alone while it stands in for a disagreeing
   /// estimate (on_disagreement=fallback).
   std::vector<SourceShare> Sources(const std::string& node) const override;
+  /// The inner estimator's; none (the steps as they come) while dead reckoning stands in for
+  /// a disagreeing estimate (on_disagreement=fallback).
+  std::optional<Mat2> StepTransform(const std::string& agent) const override;
   /// The inner summary, and: integrity.disagreements (times an estimate left the region),
   /// integrity.disagreement_share (of the agents' estimates), the notes.
   EstimatorSummary Summary() const override;

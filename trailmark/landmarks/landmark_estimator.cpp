@@ -705,6 +705,14 @@ std::optional<Estimate> LandmarkEstimator::Current(const std::string& node) cons
   return std::nullopt;
 }
 
+std::optional<Mat2> LandmarkEstimator::StepTransform(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  if (it == agents_.end() || !it->second.tracker) return std::nullopt;
+  const LandmarkTracker& t = it->second.tracker->best();
+  return Mat2((1.0 + t.scale_correction()) *
+              Eigen::Rotation2Dd(t.heading_correction_rad()).toRotationMatrix());
+}
+
 EstimatorSummary LandmarkEstimator::Summary() const {
   EstimatorSummary summary;
   summary.notes = setup_notes_;

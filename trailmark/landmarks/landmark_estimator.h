@@ -172,6 +172,9 @@ class LandmarkEstimator : public OnlineEstimator {
   /// The landmarks' final estimates.
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;
+  /// The error-state tracker's (its most probable motion model's): (1 + s) R(psi), the step
+  /// scale and heading corrections it moves each step by; none for the other trackers.
+  std::optional<Mat2> StepTransform(const std::string& agent) const override;
   EstimatorSummary Summary() const override;
   /// The radio model in use (mission.json's, the default, or the latest online fit).
   const radio::LogDistanceModel& radio_model() const { return model_; }

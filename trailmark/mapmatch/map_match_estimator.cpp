@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <deque>
@@ -527,6 +528,12 @@ std::optional<Estimate> MapMatchEstimator::Current(const std::string& node) cons
   Estimate e{it->second.t, node, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
   if (impl_->levels.size() > 1) e.floor = impl_->levels[it->second.level].level;
   return e;
+}
+
+std::optional<Mat2> MapMatchEstimator::StepTransform(const std::string& agent) const {
+  const auto it = impl_->agents.find(agent);
+  if (it == impl_->agents.end()) return std::nullopt;
+  return Mat2(Eigen::Rotation2Dd(it->second.filter->MeanHeadingOffset()).toRotationMatrix());
 }
 
 std::optional<AgentMapEvidence> MapMatchEstimator::Evidence(const std::string& agent) const {

@@ -97,6 +97,8 @@ class MapMatchEstimator : public OnlineEstimator {
   void Finish(EstimateSink&) override {}
   void UseLevels(const LevelSource* levels) override;
   std::optional<Estimate> Current(const std::string& node) const override;
+  /// R of the particles' mean heading offset (odometry frame -> map frame).
+  std::optional<Mat2> StepTransform(const std::string& agent) const override;
   /// Per agent: the filter's counters, the variance and wall alarms, the verdict, the level
   /// changes (and those made with no particle in a stairwell).
   EstimatorSummary Summary() const override;

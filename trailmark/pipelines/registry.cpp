@@ -77,6 +77,8 @@ PipelineSpec Make(PipelineSpec spec, E defaults, const OptionTable<E>& table, Fr
   all->Include("", &P::estimator, table);
   if (front == Front::kPerAgent) all->Include("", &P::steps, StepSourceOptionTable());
   if (front == Front::kGlobal) all->Include("", &P::steps, OrderedStepSourceOptionTable());
+  // Every steps-based estimator's agents are moved on between rows by the front end's view.
+  if (front != Front::kNone) all->Include("", &P::steps, StepViewOptionTable());
   // Every steps-based estimator but dead reckoning itself runs beside its dead-reckoning
   // shadow (integrity/dead_reckoning_guard.h).
   const bool guarded = front != Front::kNone && !spec.baseline;
