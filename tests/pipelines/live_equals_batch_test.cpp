@@ -255,6 +255,53 @@ TEST(LiveEqualsBatch, MapMatchOnTheFloorItIsGiven) {
   EXPECT_THROW(spec.floor_level({{"level", "1.5"}}), std::invalid_argument);
 }
 
+// The view between rows turns and stretches the last step as the estimator does: each one's
+// StepTransform, through every wrapper of the pipeline, is the heading and scale correction its
+// summary reports (a rotation for map matching, none for dead reckoning).
+TEST(LiveEqualsBatch, EachPipelinesStepTransformIsTheCorrectionItReports) {
+  struct Want {
+    std::string pipeline, scenario, heading_key, scale_key;
+    bool degrees, scale_is_factor;
+  };
+  for (const Want& w :
+       std::vector<Want>{{"landmarks-ukf", "landmark-office", "ff1.heading_correction_deg",
+                          "ff1.step_scale_correction", true, false},
+                         {"breadcrumb", "office-loop", "ff1.heading_correction_deg",
+                          "ff1.step_scale_error", true, false},
+                         {"beacons-ekf", "beacon-trail", "ff1.heading_correction_rad",
+                          "ff1.scale_correction", false, true},
+                         {"mapmatch", "house1-search", "", "", false, false},
+                         {"pdr", "office-loop", "", "", false, false}}) {
+    SCOPED_TRACE(w.pipeline);
+    const SimulatedMission sim = SimulateScenario(w.scenario, 1);
+    const PipelineSpec& spec = RequirePipeline(w.pipeline);
+    auto estimator = spec.make({sim.data.info, &sim.plan}, {}, Feed::kTimeOrdered);
+    VectorSink sink;
+    for (const MissionRow& r : MergedRows(spec, sim.data)) estimator->Add(r, sink);
+    const std::optional<Mat2> m = estimator->StepTransform("ff1");
+    if (w.pipeline == "pdr") {
+      EXPECT_FALSE(m.has_value());
+      continue;
+    }
+    ASSERT_TRUE(m.has_value());
+    const double scale = std::sqrt(m->determinant());
+    const double heading = std::atan2((*m)(1, 0), (*m)(0, 0));
+    const Mat2 r = *m / scale;
+    EXPECT_NEAR((r.transpose() * r - Mat2::Identity()).norm(), 0.0, 1e-12);  // a rotation x scale
+    if (w.heading_key.empty()) {
+      EXPECT_NEAR(scale, 1.0, 1e-12);
+      continue;
+    }
+    const EstimatorSummary summary = estimator->Summary();
+    const double reported = summary.numbers.at(w.heading_key) * (w.degrees ? M_PI / 180 : 1.0);
+    const double reported_scale =
+        w.scale_is_factor ? summary.numbers.at(w.scale_key) : 1.0 + summary.numbers.at(w.scale_key);
+    EXPECT_NEAR(heading, reported, 1e-9);
+    EXPECT_NEAR(scale, reported_scale, 1e-9);
+    EXPECT_GT(std::abs(reported) + std::abs(reported_scale - 1), 1e-4);  // a correction to see
+  }
+}
+
 TEST(LiveEqualsBatch, RefusesNonAgentsAndBadOptionsNamingTheKeys) {
   MissionInfo info;
   info.nodes.push_back({.id = "ff1", .kind = NodeKind::kAgent, .start = Vec3::Zero()});
