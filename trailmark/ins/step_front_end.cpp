@@ -121,6 +121,8 @@ class StepFrontEnd::ViewRecordingSink : public EstimateSink {
     if (it == front_.views_.end()) return;  // not an agent
     it->second.inner = estimate;
     it->second.out_t = std::max(it->second.out_t, estimate.t);
+    front_.next_view_t_ =
+        std::min(front_.next_view_t_, it->second.out_t + front_.options_.view_period_s);
   }
 
  private:
@@ -196,7 +198,15 @@ void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
     // (no earlier row can come); in each agent's order its own, before its next step.
     const TimeS t = RowTime(row);
     if (order_ == RowOrder::kGlobal) {
-      for (auto& [agent, v] : views_) EmitViews(v, t, sink);
+      // Only once some agent's view can be due (a lower bound of every agent's next tick):
+      // an incident's rows are many more than its agents' ticks.
+      if (t > next_view_t_) {
+        next_view_t_ = std::numeric_limits<double>::infinity();
+        for (auto& [agent, v] : views_) {
+          EmitViews(v, t, sink);
+          next_view_t_ = std::min(next_view_t_, v.out_t + options_.view_period_s);
+        }
+      }
     } else if (step != nullptr) {
       if (const auto it = views_.find(step->agent); it != views_.end())
         EmitViews(it->second, t, sink);

@@ -172,6 +172,8 @@ class StepFrontEnd : public OnlineEstimator {
     Vec2 velocity_n = Vec2::Zero();
   };
   std::map<std::string, View> views_;
+  /// Global order: no agent's view is due before this (a lower bound; +inf: none can be).
+  TimeS next_view_t_ = -std::numeric_limits<double>::infinity();
   std::size_t view_rows_ = 0;
   /// Passes estimates on and keeps each agent's latest in views_.
   class ViewRecordingSink;
