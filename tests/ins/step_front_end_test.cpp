@@ -693,6 +693,46 @@ TEST(StepFrontEnd, TheViewBetweenRowsMovesTheLastEstimateOnAtTheTurnedStepVeloci
   EXPECT_EQ(run(RowOrder::kGlobal, 0.0).size(), 5u);
 }
 
+// A foot INS ends a step at each landing and half way through each swing: 0.8 s and 0.2 s
+// for half a stride each. The view moves on at the walk's speed over the last half second of
+// steps (the stride), not at the last one's (the swinging foot's, 4x the walker's), for up to
+// the longer step's duration.
+TEST(StepFrontEnd, TheViewMovesOnAtTheStridesSpeedNotTheSwingingFoots) {
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3::Zero(), 0.1));
+  std::vector<MissionRow> rows;
+  TimeS t = 0;
+  for (int k = 0; k < 6; ++k) {
+    const double d = k % 2 == 0 ? 0.8 : 0.2;
+    rows.push_back(Step{t, t + d, "ff1", Vec3(0.7, 0, 0), std::nullopt});
+    t += d;
+  }
+  for (int k = 1; k < 80; ++k) rows.push_back(RssiPacket{0.05 * k, "ff1", "x", -60});
+  std::stable_sort(rows.begin(), rows.end(), [](const MissionRow& a, const MissionRow& b) {
+    return RowTime(a) != RowTime(b) ? RowTime(a) < RowTime(b) : a.index() < b.index();
+  });
+  StepFrontEnd front(info, {}, RowOrder::kGlobal, Feed::kTimeOrdered,
+                     std::make_unique<TurnedStepSum>(Mat2::Identity()));
+  VectorSink sink;
+  for (const MissionRow& r : rows) front.Add(r, sink);
+  front.Finish(sink);
+  // After the last step (ends at 3.0 s at x = 4.2 m): 1.4 m a second for up to 0.8 s.
+  int checked = 0;
+  for (const Estimate& e : sink.rows) {
+    if (e.t <= 3.0 + 1e-9) continue;
+    EXPECT_NEAR(e.position_n.x(), 4.2 + 1.4 * std::min(e.t - 3.0, 0.8), 1e-9) << e.t;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 9);  // 3.1 .. 3.9, before the last row at 3.95
+  // Between the landing step and the next: after the short step (0.2 s) the walker is not
+  // taken for stopped at 0.3 s.
+  for (const Estimate& e : sink.rows) {
+    if (e.t > 1.0 + 1e-9 && e.t < 1.8 - 1e-9) {
+      EXPECT_NEAR(e.position_n.x(), 1.4 + 1.4 * (e.t - 1.0), 1e-9) << e.t;
+    }
+  }
+}
+
 // A stop whose go never comes (a lost event) explains away a sway, not a walk: after
 // kMaxStepsInStop steps the agent is walking again, and a note says so.
 TEST(StepFrontEnd, AStopWithoutGoEndsWhenTheStepsAreMoreThanASway) {

@@ -134,8 +134,8 @@ void StepFrontEnd::EmitViews(View& v, TimeS t, EstimateSink& sink) {
   constexpr double kTolS = 1e-9;
   // The estimate must know the last step (a steps-based estimate is where its last step ended).
   if (!v.inner || !v.has_step || v.inner->t < v.step_t1 - kTolS) return;
-  const double step_s = v.step_t1 - v.step_t0;
-  std::optional<Vec2> velocity_n;  // the last step's, as the estimator turns and scales it
+  const double step_s = v.step_s;
+  std::optional<Vec2> velocity_n;  // the walk's, as the estimator turns and scales its steps
   for (TimeS tk = v.out_t + options_.view_period_s; tk < t - kTolS;
        tk = v.out_t + options_.view_period_s) {
     Estimate e = *v.inner;
@@ -225,11 +225,22 @@ void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
       // come before steps of the same time) holds from then.
       if (v.stopped_t < step->t0) v.stopped_t = std::numeric_limits<double>::infinity();
       v.has_step = true;
-      v.step_t0 = step->t0;
       v.step_t1 = step->t1;
-      v.velocity_n = step->t1 - step->t0 > 1e-6
-                         ? Vec2(step->delta_n.head<2>() / (step->t1 - step->t0))
-                         : Vec2::Zero();
+      if (!v.recent.empty() &&
+          step->t0 > v.recent.back().t1 + StepFrontEndOptions::kViewContiguousS)
+        v.recent.clear();  // it stood between: the walk starts again
+      v.recent.push_back({step->t0, step->t1, step->delta_n.head<2>()});
+      while (v.recent.size() > 1 &&
+             v.recent.back().t1 - v.recent[1].t0 >= StepFrontEndOptions::kViewBaselineS)
+        v.recent.pop_front();
+      Vec2 sum = Vec2::Zero();
+      v.step_s = 0;
+      for (const auto& r : v.recent) {
+        sum += r.delta_n;
+        v.step_s = std::max(v.step_s, r.t1 - r.t0);
+      }
+      const double span = v.recent.back().t1 - v.recent.front().t0;
+      v.velocity_n = span > 1e-6 ? Vec2(sum / span) : Vec2::Zero();
     }
   }
   height_.Add(row);

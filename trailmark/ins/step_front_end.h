@@ -18,6 +18,7 @@
 /// height channel (ins/height.h), which sets z, szz and floor of what it estimates. No I/O.
 
 #include <cstdint>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <string>
@@ -70,6 +71,10 @@ struct StepFrontEndOptions {
   /// Beyond one step ahead, how many steps' durations without a step make the view go back to
   /// the last estimate (a priori: a step 50 % slower than the last is still walking).
   static constexpr double kViewStoppedSteps = 1.5;
+  /// The view's velocity is the last steps' over at least this span (a stride of a foot INS's
+  /// two steps; a priori), steps that follow each other within kViewContiguousS.
+  static constexpr double kViewBaselineS = 0.5;
+  static constexpr double kViewContiguousS = 0.1;
   bool IsValid(std::string* why) const;
 };
 /// The `ins.` keys (the INS options with the prefix).
@@ -168,8 +173,17 @@ class StepFrontEnd : public OnlineEstimator {
     TimeS stopped_t = std::numeric_limits<double>::infinity();
     std::optional<Estimate> inner;
     bool has_step = false;
-    TimeS step_t0 = 0, step_t1 = 0;
+    TimeS step_t1 = 0;  ///< the last step's end
+    /// The walk's velocity over its latest contiguous steps spanning kViewBaselineS (a foot
+    /// INS's two steps a stride, from the landing and from mid-swing, are 0.8 and 0.2 s long:
+    /// one alone is a foot's speed, not the walker's), and the longest of their durations.
     Vec2 velocity_n = Vec2::Zero();
+    double step_s = 0;
+    struct Recent {
+      TimeS t0, t1;
+      Vec2 delta_n;
+    };
+    std::deque<Recent> recent;
   };
   std::map<std::string, View> views_;
   /// Global order: no agent's view is due before this (a lower bound; +inf: none can be).
