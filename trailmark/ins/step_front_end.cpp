@@ -58,11 +58,13 @@ const OptionTable<StepFrontEndOptions>& StepViewOptionTable() {
   static const OptionTable<StepFrontEndOptions> table = [] {
     OptionTable<StepFrontEndOptions> t;
     t.Real("view_period_s", &StepFrontEndOptions::view_period_s, "s", OptionBounds::NonNegative(),
-           "between rows, an agent's estimate is written again this often, moved on at its last "
-           "step's velocity (at most a step ahead; 0: the estimator's own estimates only)");
+           "between rows, an agent's estimate is written again this often, moved on at the walk's "
+           "velocity (its last 0.5 s of steps, as the estimator turns them; at most a step "
+           "ahead; 0: the estimator's own estimates only)");
     t.Real("view_speed_sigma", &StepFrontEndOptions::view_speed_sigma, "",
            OptionBounds::NonNegative(),
-           "the view's sigma per axis, x the last step's speed x the time ahead of its end");
+           "the view's sigma per axis, x the walk's speed x the time ahead of the last step's "
+           "end");
     return t;
   }();
   return table;
