@@ -135,14 +135,16 @@ class StepFrontEnd::ViewRecordingSink : public EstimateSink {
 void StepFrontEnd::EmitViews(View& v, TimeS t, EstimateSink& sink) {
   constexpr double kTolS = 1e-9;
   // The estimate must know the last step (a steps-based estimate is where its last step ended).
-  if (!v.inner || !v.has_step || v.inner->t < v.step_t1 - kTolS) return;
+  if (!v.inner || v.recent.empty()) return;
+  const TimeS step_t1 = v.recent.back().t1;  // the last step's end
+  if (v.inner->t < step_t1 - kTolS) return;
   const double step_s = v.step_s;
   std::optional<Vec2> velocity_n;  // the walk's, as the estimator turns and scales its steps
   for (TimeS tk = v.out_t + options_.view_period_s; tk < t - kTolS;
        tk = v.out_t + options_.view_period_s) {
     Estimate e = *v.inner;
     e.t = tk;
-    const double ahead = tk - v.step_t1;
+    const double ahead = tk - step_t1;
     if (tk < v.stopped_t && ahead <= StepFrontEndOptions::kViewStoppedSteps * step_s) {
       if (!velocity_n) {
         const std::optional<Mat2> m = inner_->StepTransform(v.agent);
@@ -226,8 +228,6 @@ void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
       // A stop declared before this step began is over; one within it or at its end (events
       // come before steps of the same time) holds from then.
       if (v.stopped_t < step->t0) v.stopped_t = std::numeric_limits<double>::infinity();
-      v.has_step = true;
-      v.step_t1 = step->t1;
       if (!v.recent.empty() &&
           step->t0 > v.recent.back().t1 + StepFrontEndOptions::kViewContiguousS)
         v.recent.clear();  // it stood between: the walk starts again

@@ -172,8 +172,6 @@ class StepFrontEnd : public OnlineEstimator {
     /// A declared stop (events.csv) since the last step: no view ahead from then on.
     TimeS stopped_t = std::numeric_limits<double>::infinity();
     std::optional<Estimate> inner;
-    bool has_step = false;
-    TimeS step_t1 = 0;  ///< the last step's end
     /// The walk's velocity over its latest contiguous steps spanning kViewBaselineS (a foot
     /// INS's two steps a stride, from the landing and from mid-swing, are 0.8 and 0.2 s long:
     /// one alone is a foot's speed, not the walker's), and the longest of their durations.
