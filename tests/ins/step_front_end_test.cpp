@@ -906,5 +906,71 @@ TEST(DeadReckoningEstimator, IsDeadReckoningPerAgent) {
   EXPECT_EQ(est.Summary().numbers.at("rows_ignored"), 1.0);
 }
 
+TEST(DeadReckoningEstimator, AFootInsAgentMovesWithTheInsOwnErrors) {
+  // Told that ff1's steps come from a foot INS (the step front end does, before its first
+  // step), the estimator's dead reckoning of ff1 is exactly that of PdrOptions::ForFootIns,
+  // each step's own yaw variance as its heading walk; ff2 (a phone) keeps the PDR's errors.
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(0, 0, 0), 0.1));
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3(0, 0, 0), 0.1));
+  const PdrOptions o;
+  DeadReckoningEstimator est(info, o);
+  est.StepsFromFootIns("ff1", true);
+  est.StepsFromFootIns("ff2", false);
+  DeadReckoning foot(Vec3::Zero(), 0.1, o.ForFootIns()), phone(Vec3::Zero(), 0.1, o);
+  VectorSink sink;
+  for (int k = 0; k < 40; ++k) {
+    const Vec2 d = Eigen::Rotation2Dd(k / 10 * M_PI / 2) * Vec2(0.7, 0.0);  // a square
+    Step s{0.6 * k,       0.6 * (k + 1), "ff1", Vec3(d.x(), d.y(), 0), Vec3(1e-4, 1e-4, 1e-4),
+           1e-6 * (k % 3)};
+    est.Add(s, sink);
+    foot.AddStep(s);
+    s.agent = "ff2";
+    est.Add(s, sink);
+    phone.AddStep(s);
+  }
+  const Estimate a = *est.Current("ff1"), b = *est.Current("ff2");
+  EXPECT_NEAR(a.sxx, foot.covariance()(0, 0), 1e-15);
+  EXPECT_NEAR(a.syy, foot.covariance()(1, 1), 1e-15);
+  EXPECT_NEAR(b.sxx, phone.covariance()(0, 0), 1e-15);
+  EXPECT_LT(a.sxx + a.syy, 0.5 * (b.sxx + b.syy));  // the INS's errors are the smaller ones
+  // Off: the foot INS's steps with the PDR's errors.
+  PdrOptions off = o;
+  off.foot_ins.own_errors = false;
+  DeadReckoningEstimator est_off(info, off);
+  est_off.StepsFromFootIns("ff1", true);
+  est_off.Add(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)}, sink);
+  DeadReckoning pdr(Vec3::Zero(), 0.1, o);
+  pdr.AddStep(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)});
+  EXPECT_NEAR(est_off.Current("ff1")->syy, pdr.covariance()(1, 1), 1e-15);
+}
+
+TEST(DeadReckoning, AStepsOwnHeadingVarianceIsItsHeadingWalkWhereLarger) {
+  PdrOptions o;
+  Step s{0, 0.5, "a", Vec3(0.6, 0, 0), Vec3(1e-4, 1e-4, 1e-4)};
+  const double walk = o.heading_walk_sigma_rad * o.heading_walk_sigma_rad;
+  EXPECT_EQ(o.HeadingWalkVariance(s), walk);
+  s.heading_var_rad2 = 0.1 * walk;
+  EXPECT_EQ(o.HeadingWalkVariance(s), walk);
+  s.heading_var_rad2 = 10 * walk;
+  EXPECT_EQ(o.HeadingWalkVariance(s), 10 * walk);
+  s.delta_n.setZero();  // standing: no walk of the PDR's, the source's own growth still counts
+  EXPECT_EQ(o.HeadingWalkVariance(s), 10 * walk);
+  s.heading_var_rad2.reset();
+  EXPECT_EQ(o.HeadingWalkVariance(s), 0.0);
+  // The foot INS's options: its sigmas, no walk of its own; overbounding scales them too.
+  const PdrOptions f = o.ForFootIns();
+  EXPECT_EQ(f.heading_walk_sigma_rad, 0.0);
+  EXPECT_EQ(f.heading_drift_sigma_rad_per_s, o.foot_ins.heading_drift_sigma_rad_per_s);
+  EXPECT_EQ(f.step_scale_sigma, o.foot_ins.step_scale_sigma);
+  EXPECT_EQ(f.turn_scale_sigma, o.foot_ins.turn_scale_sigma);
+  EXPECT_EQ(f.start_heading_sigma_rad, o.start_heading_sigma_rad);
+  EXPECT_EQ(f.track_heading_offset_sigma_rad, o.track_heading_offset_sigma_rad);
+  EXPECT_DOUBLE_EQ(o.SharedErrorsScaled(3).ForFootIns().turn_scale_sigma, 3 * f.turn_scale_sigma);
+  PdrOptions bad = o;
+  bad.foot_ins.step_scale_sigma = -1;
+  EXPECT_FALSE(bad.IsValid(nullptr));
+}
+
 }  // namespace
 }  // namespace trailmark

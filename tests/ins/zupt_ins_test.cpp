@@ -66,6 +66,39 @@ TEST(ZuptIns, PureTranslationIsIntegratedExactlyAndGivesOneStepPerStride) {
   EXPECT_NEAR(ins.summary().distance_m, 1.25, 0.05);
 }
 
+TEST(ZuptIns, EachStepCarriesTheGrowthOfTheFiltersYawVariance) {
+  // The yaw is not observed by zero-velocity updates: its variance grows with the gyro's noise
+  // and bias, and each step carries its growth since the last step (what the consumers take as
+  // the INS's own heading walk, PdrOptions::HeadingWalkVariance). A noisier gyro stated makes
+  // it grow faster.
+  auto run = [](double gyro_noise_scale) {
+    InsOptions o;
+    o.detector.kind = DetectorKind::kMag;
+    o.detector.gamma = 1.0;
+    o.mid_swing_steps = false;
+    o.gyro_noise_radps *= gyro_noise_scale;
+    ZuptIns ins(o);
+    std::vector<Step> steps;
+    ins.on_step = [&](const Step& s) { steps.push_back(s); };
+    for (const auto& s : TranslationStrides(8, 4.0, 0.25, 0.4)) ins.Add(s);
+    ins.Finish();
+    return steps;
+  };
+  const auto steps = run(1.0), noisier = run(2.0);
+  ASSERT_EQ(steps.size(), 8u);
+  ASSERT_EQ(noisier.size(), 8u);
+  double sum = 0, sum_noisier = 0;
+  for (std::size_t k = 0; k < steps.size(); ++k) {
+    ASSERT_TRUE(steps[k].heading_var_rad2);
+    EXPECT_TRUE(std::isfinite(*steps[k].heading_var_rad2));
+    EXPECT_GT(*steps[k].heading_var_rad2, 0.0);
+    sum += *steps[k].heading_var_rad2;
+    sum_noisier += *noisier[k].heading_var_rad2;
+  }
+  EXPECT_GT(sum_noisier, 1.3 * sum);  // (the gyro bias's share grows less)
+  EXPECT_LT(sum_noisier, 4.5 * sum);  // at most the gyro noise's variance ratio (and bias)
+}
+
 // When a step ends: the strides above land at rest + k (2T + rest) + 2T and lift off at
 // (k + 1)(2T + rest) + rest. At the landing (default) each step's t1 is the landing, within the
 // detector's `min_stance_samples` (and its window); at the lift-off (the old behaviour) one rest

@@ -190,6 +190,57 @@ TEST(LandmarkTracker, BeforeTheWalkPacketsCalibrateTheRadioButDoNotMoveTheStart)
   EXPECT_TRUE(SymmetricPositiveDefinite(tracker.covariance()));
 }
 
+TEST(LandmarkTracker, AFootInsOwnErrorsSetBeforeTheWalkAreThoseOfATrackerBuiltWithThem) {
+  // Packets before the walk (radio calibration only), then the motion's errors replaced by a
+  // foot INS's (PdrOptions::ForFootIns) before the first step: the same state and covariance
+  // as a tracker built with those errors and given the same packets, through a walk with steps
+  // that carry their own yaw variance; the motion block then is that dead reckoning's. After a
+  // step the errors can no longer be replaced.
+  LandmarkTrackerOptions o;
+  LandmarkTrackerOptions foot = o;
+  foot.pdr = o.pdr.ForFootIns();
+  LandmarkTracker replaced(Vec3(0, 0, 0), 0.5, 0.05, std::nullopt, o);
+  LandmarkTracker built(Vec3(0, 0, 0), 0.5, 0.05, std::nullopt, foot);
+  Random rng(4);
+  for (int k = 0; k < 20; ++k) {
+    const double rssi = -60 - 20 * std::log10(std::hypot(5.0, 1.5)) + rng.Normal(0, 2);
+    // At the first step's time: no drift accumulated while standing (which the replacement
+    // leaves as it was: UseMotionErrors).
+    replaced.UpdateRssi(0.0, 0, Vec2(5, 0), 2.7, Mat2::Zero(), 0.0, rssi);
+    built.UpdateRssi(0.0, 0, Vec2(5, 0), 2.7, Mat2::Zero(), 0.0, rssi);
+  }
+  ASSERT_TRUE(replaced.UseMotionErrors(foot.pdr));
+  PdrOptions dr_options = foot.pdr;
+  dr_options.track_heading_offset_sigma_rad = 0.0;  // the tracker's filter leaves it out
+  DeadReckoning dr(Vec3(0, 0, 0), 0.5, dr_options, 0.05);
+  TimeS t = -0.1;
+  for (int k = 0; k < 40; ++k) {
+    Step s = MakeStep(t += 0.6, Eigen::Rotation2Dd(M_PI / 2 * (k / 10)) * Vec2(0.7, 0.1));
+    s.heading_var_rad2 = 2e-6 * (k % 4);
+    replaced.AddStep(s);
+    built.AddStep(s);
+    dr.AddStep(s);
+  }
+  EXPECT_FALSE(replaced.UseMotionErrors(o.pdr));
+  EXPECT_LT((replaced.state() - built.state()).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_LT((replaced.covariance() - built.covariance()).cwiseAbs().maxCoeff(),
+            1e-9 * built.covariance().cwiseAbs().maxCoeff());
+  // The motion block against the dead reckoning: the heading walk is each step's own.
+  LandmarkTracker quiet(Vec3(0, 0, 0), 0.5, 0.05, std::nullopt, o);
+  ASSERT_TRUE(quiet.UseMotionErrors(foot.pdr));
+  t = -0.1;
+  for (int k = 0; k < 40; ++k) {
+    Step s = MakeStep(t += 0.6, Eigen::Rotation2Dd(M_PI / 2 * (k / 10)) * Vec2(0.7, 0.1));
+    s.heading_var_rad2 = 2e-6 * (k % 4);
+    quiet.AddStep(s);
+  }
+  EXPECT_LT((Mat(quiet.covariance().topLeftCorner<6, 6>()) - Mat(dr.error_covariance()))
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-12 * dr.error_covariance().cwiseAbs().maxCoeff());
+  EXPECT_TRUE(SymmetricPositiveDefinite(replaced.covariance()));
+}
+
 TEST(LandmarkTracker, RecoversATurnScaleErrorFromSurveyedLandmarks) {
   // A square walked 6 times by a PDR whose every turn is 6 % too large; 8 landmarks around it.
   Random rng(5);

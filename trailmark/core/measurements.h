@@ -24,6 +24,9 @@ struct Step {
   std::string agent;
   Vec3 delta_n = Vec3::Zero();            ///< displacement, m
   std::optional<Vec3> variance_m2;        ///< per-axis variances; empty when unknown
+  /// The step source's own growth of its heading variance over the step (rad^2): a foot
+  /// INS's yaw variance (ins/zupt_ins.h); empty when the source does not say (steps.csv).
+  std::optional<double> heading_var_rad2 = std::nullopt;
 };
 
 /// rssi.csv: one received packet.

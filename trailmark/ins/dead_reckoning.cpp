@@ -13,9 +13,11 @@
 namespace trailmark {
 
 bool PdrOptions::IsValid(std::string* why) const {
-  for (double x : {default_step_noise_m, default_step_relative_sigma, start_heading_sigma_rad,
-                   track_heading_offset_sigma_rad, heading_drift_sigma_rad_per_s,
-                   heading_walk_sigma_rad, step_scale_sigma, turn_scale_sigma, turn_min_step_m}) {
+  for (double x :
+       {default_step_noise_m, default_step_relative_sigma, start_heading_sigma_rad,
+        track_heading_offset_sigma_rad, heading_drift_sigma_rad_per_s, heading_walk_sigma_rad,
+        step_scale_sigma, turn_scale_sigma, turn_min_step_m, foot_ins.heading_drift_sigma_rad_per_s,
+        foot_ins.step_scale_sigma, foot_ins.turn_scale_sigma}) {
     if (!(x >= 0) || !std::isfinite(x)) {
       if (why) {
         *why =
@@ -32,6 +34,26 @@ double PdrOptions::StartHeadingSigma(std::optional<double> stated_rad) const {
   return std::hypot(stated_rad.value_or(start_heading_sigma_rad), track_heading_offset_sigma_rad);
 }
 
+double PdrOptions::HeadingWalkVariance(const Step& step) const {
+  // A step that moves turns the body; a zero-length step (standing) adds no turn error. A
+  // source's own heading variance growth counts where it is larger (a foot INS's, standing
+  // time included).
+  const double walk = step.delta_n.head<2>().squaredNorm() > 0
+                          ? heading_walk_sigma_rad * heading_walk_sigma_rad
+                          : 0.0;
+  const double own = step.heading_var_rad2.value_or(0.0);
+  return std::isfinite(own) ? std::max(walk, own) : walk;
+}
+
+PdrOptions PdrOptions::ForFootIns() const {
+  PdrOptions o = *this;
+  o.heading_drift_sigma_rad_per_s = foot_ins.heading_drift_sigma_rad_per_s;
+  o.heading_walk_sigma_rad = 0.0;
+  o.step_scale_sigma = foot_ins.step_scale_sigma;
+  o.turn_scale_sigma = foot_ins.turn_scale_sigma;
+  return o;
+}
+
 PdrOptions PdrOptions::SharedErrorsScaled(double factor) const {
   if (!(factor > 0) || !std::isfinite(factor)) {
     throw std::invalid_argument("pdr: a scale of the shared error sigmas must be finite and > 0");
@@ -42,6 +64,9 @@ PdrOptions PdrOptions::SharedErrorsScaled(double factor) const {
   o.heading_walk_sigma_rad *= factor;
   o.step_scale_sigma *= factor;
   o.turn_scale_sigma *= factor;
+  o.foot_ins.heading_drift_sigma_rad_per_s *= factor;
+  o.foot_ins.step_scale_sigma *= factor;
+  o.foot_ins.turn_scale_sigma *= factor;
   return o;
 }
 
@@ -96,9 +121,7 @@ void DeadReckoning::AddStep(const Step& step) {
                      options_.default_step_relative_sigma * step.delta_n.head<2>().norm();
     q(kX, kX) = q(kY, kY) = s * s;
   }
-  // A step that moves turns the body; a zero-length step (standing) adds no turn error.
-  if (step.delta_n.head<2>().squaredNorm() > 0)
-    q(kHeading, kHeading) = options_.heading_walk_sigma_rad * options_.heading_walk_sigma_rad;
+  q(kHeading, kHeading) = options_.HeadingWalkVariance(step);
   error_cov_ = fg * error_cov_ * fg.transpose() + q;
   error_cov_ = 0.5 * (error_cov_ + error_cov_.transpose());
   last_transition_ = fg;
@@ -222,11 +245,12 @@ void DeadReckoningEstimator::Add(const MissionRow& row, EstimateSink& sink) {
           "needs a known start",
           step->agent));
     }
+    const bool foot_ins = options_.foot_ins.own_errors && foot_ins_.count(step->agent) != 0;
     it = agents_
-             .emplace(step->agent,
-                      Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0), options_,
-                                          node->start_heading_sigma_rad),
-                            step->t0})
+             .emplace(step->agent, Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0),
+                                                       foot_ins ? options_.ForFootIns() : options_,
+                                                       node->start_heading_sigma_rad),
+                                         step->t0})
              .first;
     const Mat2 c = it->second.dr.covariance();
     sink.Add({step->t0, step->agent, *start, c(0, 0), c(0, 1), c(1, 1)});

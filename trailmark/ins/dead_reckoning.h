@@ -6,6 +6,7 @@
 
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 
 #include "trailmark/core/mission.h"
@@ -56,11 +57,39 @@ struct PdrOptions {
   /// a turn (shuffling, zero-length steps while standing); the next longer step's turn is
   /// counted from the last longer step.
   double turn_min_step_m = 0.2;
+  /// Steps of a foot INS (ins/zupt_ins.h; OnlineEstimator::StepsFromFootIns) err less than a
+  /// phone's PDR, and in their own way (issue 24 item 2: the INS's own error, not a consumer
+  /// PDR's): its gyro bias is estimated again at every stance (ZARU), its step lengths are
+  /// integrated from the accelerometers between zero-velocity updates, and each step carries its
+  /// filter's heading variance growth (Step::heading_var_rad2), which replaces the per-step
+  /// heading walk. Set a priori, not fitted on any mission here:
+  struct FootIns {
+    /// The gyro bias left after the stance updates: 1 degree per minute (a third of the PDR's
+    /// 3 deg/min; our INS's own filter settles at 0.4 deg/min with its default noises).
+    double heading_drift_sigma_rad_per_s = 0.00029;
+    /// Step length from the accelerometers' scale factor: 1 % (ZUPT-aided foot INS distance
+    /// errors 0.3-1 % in the OpenShoe and PyShoe reports; our INS on the recorded footprint
+    /// walks: 1.06 % of distance, heading included, README).
+    double step_scale_sigma = 0.01;
+    /// The gyro's scale factor over turns: 1 %, a calibrated MEMS unit (a foot-mounted
+    /// research IMU; an uncalibrated consumer gyro's +-3 % is PdrOptions' own).
+    double turn_scale_sigma = 0.01;
+    /// false: a foot INS's steps are taken with the PDR's errors above (before 2026-12-07).
+    bool own_errors = true;
+  } foot_ins{};
+  /// These options for steps of a foot INS: the shared errors' sigmas of `foot_ins` (the start
+  /// heading and the track's offset unchanged: the INS aligns its yaw to the stated heading,
+  /// the foot may point off it), no heading walk of its own (each step's heading_var_rad2).
+  PdrOptions ForFootIns() const;
+  /// The heading random walk's variance a step adds (rad^2): heading_walk_sigma_rad squared
+  /// for a step that moves, or the step's own heading_var_rad2 where that is larger.
+  double HeadingWalkVariance(const Step& step) const;
   /// The heading's sigma at the start: the stated one (else start_heading_sigma_rad) with the
   /// track's own offset, in quadrature.
   double StartHeadingSigma(std::optional<double> stated_rad) const;
   /// A poorer device: the shared errors' sigmas (start heading, drift rate, heading walk, step
-  /// and turn scale) times `factor` (> 0); the step noise and the track's offset unchanged.
+  /// and turn scale; a foot INS's too) times `factor` (> 0); the step noise and the track's
+  /// offset unchanged.
   PdrOptions SharedErrorsScaled(double factor) const;
   bool IsValid(std::string* why) const;
 };
@@ -141,6 +170,11 @@ class DeadReckoningEstimator : public OnlineEstimator {
   /// single base).
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink&) override {}
+  /// An agent whose steps come from a foot INS gets PdrOptions::ForFootIns (unless
+  /// `foot_ins.own_errors` is off).
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    if (foot_ins) foot_ins_.insert(agent);
+  }
   std::optional<Estimate> Current(const std::string& node) const override;
   EstimatorSummary Summary() const override;
 
@@ -153,6 +187,7 @@ class DeadReckoningEstimator : public OnlineEstimator {
   MissionInfo info_;
   PdrOptions options_;
   std::map<std::string, Agent> agents_;
+  std::set<std::string> foot_ins_;  ///< agents whose steps come from a foot INS
   std::size_t steps_ = 0, ignored_ = 0;
 };
 

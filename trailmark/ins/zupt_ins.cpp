@@ -412,6 +412,7 @@ void ZuptIns::EmitStep(const InsState& end, bool horizontal_only) {
     last_stance_end_t_ = end.t;
     last_stance_end_p_ = end.position_n;
     last_stance_end_cov_ = end.position_cov;
+    last_stance_end_yaw_var_ = P_(kAtt + 2, kAtt + 2);
     return;
   }
   Vec3 delta = end.position_n - last_stance_end_p_;
@@ -420,13 +421,22 @@ void ZuptIns::EmitStep(const InsState& end, bool horizontal_only) {
   if (horizontal_only) delta.z() = 0.0;
   if (delta.head<2>().norm() < options_.min_step_length_m) return;  // shuffling, not a step
   const Vec3 var = (end.position_cov.diagonal() - last_stance_end_cov_.diagonal()).cwiseMax(1e-6);
-  Step step{*last_stance_end_t_, end.t, agent_, delta, var};
+  // The yaw's variance growth over the step (the attitude error is in the navigation frame:
+  // its z is the heading's): the INS's own heading error, for the consumers' motion models.
+  const double yaw_var = P_(kAtt + 2, kAtt + 2);
+  Step step{*last_stance_end_t_,
+            end.t,
+            agent_,
+            delta,
+            var,
+            std::max(0.0, yaw_var - last_stance_end_yaw_var_)};
   ++summary_.steps;
   summary_.distance_m += delta.head<2>().norm();
   last_stance_end_t_ = end.t;
   last_stance_end_p_.head<2>() = end.position_n.head<2>();
   if (!horizontal_only) last_stance_end_p_.z() = end.position_n.z();
   last_stance_end_cov_ = end.position_cov;
+  last_stance_end_yaw_var_ = yaw_var;
   if (on_step) on_step(step);
 }
 

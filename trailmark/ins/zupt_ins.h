@@ -181,6 +181,7 @@ class ZuptIns {
   std::optional<TimeS> last_stance_end_t_;
   Vec3 last_stance_end_p_ = Vec3::Zero();
   Eigen::Matrix3d last_stance_end_cov_ = Eigen::Matrix3d::Zero();
+  double last_stance_end_yaw_var_ = 0;  ///< rad^2, the filter's yaw variance at that end
   bool swinging_ = false;        ///< between a lift-off and the next landing
   long swing_samples_ = 0;       ///< samples since the lift-off
   long last_swing_samples_ = 0;  ///< the last swing's length in samples

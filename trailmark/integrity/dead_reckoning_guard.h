@@ -75,7 +75,10 @@ class DeadReckoningGuard : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink& sink) override;
   void UseLevels(const LevelSource* levels) override { inner_->UseLevels(levels); }
+  /// Also the shadow's: a foot INS's dead reckoning has its own errors (PdrOptions::ForFootIns,
+  /// overbounded as the typical device's).
   void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    shadow_.StepsFromFootIns(agent, foot_ins);
     inner_->StepsFromFootIns(agent, foot_ins);
   }
   /// The estimate the guard would emit for the node now.

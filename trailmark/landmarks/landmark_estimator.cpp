@@ -83,6 +83,9 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
            std::vector<std::pair<std::string, Loss>>{
                {"squared", Loss::kSquared}, {"huber", Loss::kHuber}, {"cauchy", Loss::kCauchy}},
            "stop-and-go loss (squared: the paper; huber/cauchy: robust to NLOS)");
+  t.Flag("foot_ins_errors", &O::foot_ins_own_errors,
+         "an agent whose steps come from a foot INS (imu.csv) moves with the INS's own errors "
+         "(pdr's foot_ins. sigmas, each step's yaw variance); false: a phone PDR's");
   t.Choice(
       "fix_fusion", [](O& o) -> FixFusion& { return o.fix_fusion; },
       std::vector<std::pair<std::string, FixFusion>>{{"independent", FixFusion::kIndependent},
@@ -284,6 +287,22 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     }
     agents_[n.id] = std::move(a);
   }
+}
+
+void LandmarkEstimator::StepsFromFootIns(const std::string& agent, bool foot_ins) {
+  const auto it = agents_.find(agent);
+  if (!foot_ins || !options_.foot_ins_own_errors || it == agents_.end() || it->second.stepped)
+    return;
+  Agent& a = it->second;
+  if (a.tracker) a.tracker->UseTypicalMotionErrors(options_.tracker.pdr.ForFootIns());
+  if (!a.dr && !a.clones) return;
+  const NodeInfo* node = info_.Find(agent);
+  const PdrOptions pdr = options_.stop_dead_reckoning.ForFootIns();
+  const Vec3 start(a.position.x(), a.position.y(), 0.0);
+  const double s = std::sqrt(a.cov(0, 0));
+  const std::optional<double> heading = node ? node->start_heading_sigma_rad : std::nullopt;
+  if (a.dr) a.dr.emplace(start, s, pdr, heading);
+  if (a.clones) a.clones.emplace(DeadReckoning(start, s, pdr, heading));
 }
 
 Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {

@@ -155,6 +155,10 @@ struct LandmarkEstimatorOptions {
   /// level from its height channel, the landmark's from its surveyed z) is not used: the
   /// path-loss model has no floors (a floor costs 10-20 dB).
   bool gate_other_floors = true;
+  /// Ours (issue 24 item 2): an agent whose steps come from a foot INS moves with the INS's
+  /// own errors (PdrOptions::ForFootIns of `tracker.pdr` for the error-state tracker's typical
+  /// device, of `stop_dead_reckoning` for the stops), not a phone PDR's; false: the PDR's.
+  bool foot_ins_own_errors = true;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -169,6 +173,10 @@ class LandmarkEstimator : public OnlineEstimator {
   /// others are counted and ignored.
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void UseLevels(const LevelSource* levels) override { levels_ = levels; }
+  /// An agent whose steps come from a foot INS: its motion's errors are the INS's own
+  /// (PdrOptions::ForFootIns; the error-state tracker's typical device, the stops' dead
+  /// reckoning), unless `foot_ins.own_errors` is off.
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override;
   /// The landmarks' final estimates.
   void Finish(EstimateSink& sink) override;
   std::optional<Estimate> Current(const std::string& node) const override;

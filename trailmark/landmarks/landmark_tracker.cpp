@@ -217,7 +217,31 @@ void LandmarkTracker::Propagate(TimeS t) {
   DecayShadowing(0.0, dt);
 }
 
+bool LandmarkTracker::UseMotionErrors(const PdrOptions& pdr) {
+  if (stepped_) return false;
+  const std::pair<int, double> sigmas[] = {
+      {kRate, std::max(pdr.heading_drift_sigma_rad_per_s, 1e-8)},
+      {kScale, std::max(pdr.step_scale_sigma, 1e-6)},
+      {kTurnScale, pdr.turn_scale_sigma}};
+  for (const auto& [i, sigma] : sigmas) {
+    const double old = std::sqrt(P_(i, i));
+    if (old > 0) {
+      const double r = sigma / old;
+      P_.row(i) *= r;
+      P_.col(i) *= r;
+      x_(i) *= r;
+      sens_(i) *= r;
+    } else {
+      P_(i, i) = sigma * sigma;
+    }
+  }
+  options_.pdr = pdr;
+  Symmetrize();
+  return true;
+}
+
 void LandmarkTracker::AddStep(const Step& step) {
+  stepped_ = true;
   Propagate(step.t1);
   const Vec2 d = step.delta_n.head<2>();
   const double len = d.norm();
@@ -257,10 +281,8 @@ void LandmarkTracker::AddStep(const Step& step) {
     P_(kPx, kPx) += sd * sd;
     P_(kPy, kPy) += sd * sd;
   }
-  if (len > 0) {
-    P_(kHeading, kHeading) += options_.pdr.heading_walk_sigma_rad * options_.pdr.heading_walk_sigma_rad;
-    moving_ = true;
-  }
+  P_(kHeading, kHeading) += options_.pdr.HeadingWalkVariance(step);
+  if (len > 0) moving_ = true;
   walked_m_ += len;
   DecayShadowing(len, 0.0);
   DropStaleBiases();

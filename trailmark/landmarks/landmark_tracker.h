@@ -117,6 +117,12 @@ class LandmarkTracker {
   void Propagate(TimeS t);
   /// One PDR step (its t1 is propagated to first).
   void AddStep(const Step& step);
+  /// The motion's error model replaced before the first step (e.g. a foot INS's own,
+  /// PdrOptions::ForFootIns): the drift-rate, step-scale and turn-scale errors' rows and
+  /// columns of the covariance are scaled to the new sigmas (a change of their prior: before
+  /// the walk only the prior is in them; the heading variance the old drift rate added while
+  /// standing before the walk is kept). Returns false, changing nothing, once a step was added.
+  bool UseMotionErrors(const PdrOptions& pdr);
   /// One packet from landmark `landmark` (any stable index) at `landmark_n` (z: empty for
   /// a landmark whose height is unknown: the handheld's height is taken), whose horizontal
   /// position has covariance `landmark_cov`; `agent_z_m`: the agent's height now (feet).
@@ -231,6 +237,7 @@ class LandmarkTracker {
   double walked_m_ = 0;
   std::optional<double> direction_rad_;  ///< the PDR's walking direction at the last long step
   bool moving_ = false;                   ///< a step that moved was seen
+  bool stepped_ = false;                  ///< a step was seen
   std::size_t gated_ = 0, calibration_only_ = 0;
   double noise_scale_ = 1.0;  ///< the RSSI variances' factor (adapt_noise)
   double nis_ema_ = 1.0;

@@ -77,6 +77,12 @@ class LandmarkTrackerBank {
                       const LandmarkTrackerOptions& options, const TrackerBankOptions& bank = {});
 
   void AddStep(const Step& step);
+  /// The typical device's motion errors replaced before the first step (the steps come from a
+  /// foot INS: PdrOptions::ForFootIns); the poor device's stay (an INS may be poorer than its
+  /// own model says). False once a step was added.
+  bool UseTypicalMotionErrors(const PdrOptions& pdr) {
+    return models_.front().UseMotionErrors(pdr);
+  }
   /// A surveyed landmark's packet to every model (LandmarkTracker::UpdateRssi); the weights
   /// follow each model's predictive density of it. `admit` (the integrity monitor) is asked
   /// once, by the most probable model; the others take its verdict (and use the packet when that

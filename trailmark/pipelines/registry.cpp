@@ -58,6 +58,22 @@ const OptionTable<PdrOptions>& PdrOptionTable() {
            "gyro scale-factor error shared by all turns, 1 sigma (fraction of the angle turned)");
     t.Real("turn_min_step_m", &PdrOptions::turn_min_step_m, "m", OptionBounds::NonNegative(),
            "steps shorter than this do not count as turns of the walking direction");
+    t.Flag(
+        "foot_ins.own_errors", [](PdrOptions& o) -> bool& { return o.foot_ins.own_errors; },
+        "steps of a foot INS (imu.csv) with the INS's own errors: the foot_ins. sigmas and each "
+        "step's yaw variance (false: the PDR's above)");
+    t.Real(
+        "foot_ins.heading_drift_sigma_rad_per_s",
+        [](PdrOptions& o) -> double& { return o.foot_ins.heading_drift_sigma_rad_per_s; }, "rad/s",
+        OptionBounds::NonNegative(), "a foot INS's heading drift rate (gyro bias after ZARU)");
+    t.Real(
+        "foot_ins.step_scale_sigma",
+        [](PdrOptions& o) -> double& { return o.foot_ins.step_scale_sigma; }, "",
+        OptionBounds::NonNegative(), "a foot INS's step-length scale error, 1 sigma");
+    t.Real(
+        "foot_ins.turn_scale_sigma",
+        [](PdrOptions& o) -> double& { return o.foot_ins.turn_scale_sigma; }, "",
+        OptionBounds::NonNegative(), "a foot INS's gyro scale-factor error over turns, 1 sigma");
     return t;
   }();
   return table;
