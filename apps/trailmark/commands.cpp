@@ -343,14 +343,16 @@ Metrics Eval(const fs::path& mission_dir, const fs::path& estimates_path,
       return std::isfinite(share) ? fmt::format("{:.0f}", 100.0 * share) : std::string("-");
     };
     auto row = [&Percent](const NodeMetrics& m) {
-      fmt::print(
-          "{:<10} {:<8} {:>7} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.2f} {:>8.1f} {:>9} {:>6} "
-          "{:>6}\n",
-          m.id, ToString(m.kind), m.stats.samples, m.stats.mean_m, m.stats.median_m, m.stats.p95_m,
-          m.stats.max_m, m.stats.final_m, m.distance_m,
-          m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-",
-          Percent(m.stats.in95),
-          m.at_estimates.samples > 0 ? Percent(m.at_estimates.in95) : std::string("-"));
+      // A node never scored (no estimate, or no truth at its estimates' times) has no error.
+      const bool scored = m.stats.samples > 0;
+      auto metres = [scored](double v) { return scored ? fmt::format("{:.2f}", v) : "-"; };
+      fmt::print("{:<10} {:<8} {:>7} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8.1f} {:>9} {:>6} {:>6}\n",
+                 m.id, ToString(m.kind), m.stats.samples, metres(m.stats.mean_m),
+                 metres(m.stats.median_m), metres(m.stats.p95_m), metres(m.stats.max_m),
+                 metres(m.stats.final_m), m.distance_m,
+                 m.mean_pct_of_distance ? fmt::format("{:.2f}", *m.mean_pct_of_distance) : "-",
+                 scored ? Percent(m.stats.in95) : std::string("-"),
+                 m.at_estimates.samples > 0 ? Percent(m.at_estimates.in95) : std::string("-"));
     };
     for (const auto& m : metrics.nodes) row(m);
     row(metrics.agents);

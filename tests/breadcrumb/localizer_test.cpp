@@ -440,6 +440,18 @@ TEST(BreadcrumbPipeline, TheTruncatedCalibrationDependsLessOnTheRssiFloor) {
 // steps, each at most (0.03 + 0.15 x 0.5 m)^2 per axis, plus the heading random walk) — with
 // an agent state at every step end (a range of 1 km sigma to a far anchor: no information) and
 // with none after the start (no radio at all: the walk since the state turns with the heading).
+/// An agent state of ff1 at `t` without information: a range of `sigma_m` to the anchor "far"
+/// 5 km away (AddKnownNode("far", (10, 5000))).
+void AddUninformativeRange(BreadcrumbLocalizer& loc, TimeS t, double sigma_m = 1000) {
+  RangeMeasurement r;
+  r.t = t;
+  r.a = "ff1";
+  r.b = "far";
+  r.range_m = 5000;
+  r.sigma_m = sigma_m;
+  loc.AddRange(r);
+}
+
 TEST(BreadcrumbLocalizer, AStartHeadingSigmaBelowTheFloorIsRaisedToIt) {
   auto sideways_variance = [](double floor_rad, bool states) {
     LocalizerOptions o;
@@ -452,14 +464,7 @@ TEST(BreadcrumbLocalizer, AStartHeadingSigmaBelowTheFloorIsRaisedToIt) {
     for (int k = 0; k < 40; ++k) {
       const TimeS t1 = 0.5 * k + 0.5;
       loc.AddStep({t1 - 0.5, t1, "ff1", Vec3(0.5, 0, 0), std::nullopt});
-      if (!states) continue;
-      RangeMeasurement r;
-      r.t = t1;
-      r.a = "ff1";
-      r.b = "far";
-      r.range_m = 5000;
-      r.sigma_m = 1000;
-      loc.AddRange(r);
+      if (states) AddUninformativeRange(loc, t1);
     }
     loc.Finish();
     return loc.Estimate("ff1")->covariance(1, 1);
@@ -473,6 +478,49 @@ TEST(BreadcrumbLocalizer, AStartHeadingSigmaBelowTheFloorIsRaisedToIt) {
     EXPECT_GT(floored, std::pow(0.087 * 20, 2)) << states;
     EXPECT_LT(floored, std::pow(0.087 * 20, 2) + steps_at_most) << states;
   }
+}
+
+TEST(BreadcrumbLocalizer, AFootInsAgentMovesWithTheInsOwnErrors) {
+  // 40 steps of 0.5 m along x from a known start, states kept by a far, uninformative range.
+  // Along the walk the error is the start's, the steps' noise (the floor: the INS's own variance
+  // is below it) and the scale error times the 20 m walked — linear, so its variance is their
+  // sum: with the foot INS's errors 1 % of scale (the PDR's prior tightened by a second one) and
+  // its step floor; with the PDR's, 5 % and its floor. Across, each step's own yaw variance
+  // (heading_var_rad2) is the heading's walk: larger ones widen it.
+  auto walk = [](bool foot_ins, bool own_errors, double heading_var) {
+    LocalizerOptions o;
+    o.estimate_range_bias = false;
+    o.track_heading_offset_sigma_rad = 0;
+    o.foot_ins.own_errors = own_errors;
+    BreadcrumbLocalizer loc(o);
+    loc.AddKnownNode("far", Vec2(10, 5000), 1e-3);
+    loc.AddAgent("ff1", Vec2::Zero(), 0.01, 0.01);
+    if (foot_ins) loc.UseFootInsMotion("ff1");
+    for (int k = 0; k < 40; ++k) {
+      const TimeS t1 = 0.5 * k + 0.5;
+      Step s{t1 - 0.5, t1, "ff1", Vec3(0.5, 0, 0), Vec3(1e-6, 1e-6, 1e-6), heading_var};
+      loc.AddStep(s);
+      AddUninformativeRange(loc, t1);
+    }
+    loc.Finish();
+    return Mat2(loc.Estimate("ff1")->covariance);
+  };
+  const LocalizerOptions o;
+  const double foot_floor =
+      o.foot_ins.step_sigma_floor_m + o.foot_ins.step_sigma_floor_relative * 0.5;
+  const double pdr_floor = o.step_sigma_floor_m + o.step_sigma_floor_relative * 0.5;
+  const double foot_along =
+      1e-4 + 40 * foot_floor * foot_floor + std::pow(o.foot_ins.scale_sigma0 * 20, 2);
+  const double pdr_along = 1e-4 + 40 * pdr_floor * pdr_floor + std::pow(o.scale_sigma0 * 20, 2);
+  const Mat2 foot = walk(true, true, 1e-6), pdr = walk(false, true, 1e-6);
+  EXPECT_NEAR(foot(0, 0), foot_along, 0.02 * foot_along);
+  EXPECT_NEAR(pdr(0, 0), pdr_along, 0.02 * pdr_along);
+  EXPECT_LT(foot(1, 1), 0.5 * pdr(1, 1));
+  // Off: the foot INS's steps with the PDR's errors, to the digit.
+  const Mat2 off = walk(true, false, 1e-6);
+  EXPECT_EQ(off, pdr);
+  // The INS's own heading walk: a larger yaw variance per step widens the walk across.
+  EXPECT_GT(walk(true, true, 1e-4)(1, 1), 1.5 * foot(1, 1));
 }
 
 // Crumbs heard but never dropped (events.csv absent) are placed from their packets once those
@@ -1203,13 +1251,7 @@ StatesWalk WalkWithStates(LocalizerOptions o, double start_sigma_m, int steps = 
     const Vec3 d(0.5, 0.02 * std::sin(0.3 * k), 0);
     loc.AddStep({t1 - 0.5, t1, "ff1", d, Vec3(1e-3, 1e-3, 1e-4)});
     w.walk_n += d.head<2>();
-    RangeMeasurement r;
-    r.t = t1;
-    r.a = "ff1";
-    r.b = "far";
-    r.range_m = 5000;
-    r.sigma_m = 1e6;
-    loc.AddRange(r);
+    AddUninformativeRange(loc, t1, 1e6);
     if (k == 0) loc.Estimate("ff1");  // the cached covariance refreshed here
   }
   w.covariance = loc.Estimate("ff1")->covariance;

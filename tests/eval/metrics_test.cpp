@@ -1,12 +1,15 @@
 // SPDX-License-Identifier: MIT
 // Metrics against hand-computed cases.
+#include "trailmark/eval/metrics.h"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
 #include <cmath>
+#include <nlohmann/json.hpp>
 
 #include "trailmark/core/random.h"
-#include "trailmark/eval/metrics.h"
+#include "trailmark/io/metrics_io.h"
 
 namespace trailmark {
 namespace {
@@ -153,6 +156,30 @@ TEST(Evaluate, StaticNodesAtEstimatesAndEndAgainstTruthInForce) {
   // The agent has no estimates at all: every instant uncovered.
   EXPECT_EQ(m.agents.stats.samples, 0u);
   EXPECT_EQ(m.agents.uncovered, 2u);
+}
+
+TEST(MetricsJson, ANodeNeverScoredHasNullErrorsNotZero) {
+  // ff1 has no estimate: its errors are unknown (null), its samples 0 and its instants
+  // uncovered; c1's are numbers.
+  std::vector<TruthSample> truth{
+      {0, "ff1", Vec3(0, 0, 0)}, {1, "c1", Vec3(5, 0, 0)}, {4, "ff1", Vec3(4, 0, 0)}};
+  std::vector<Estimate> est{{1, "c1", Vec3(5, 2, 0), 1, 0, 1}};
+  const auto j = nlohmann::json::parse(MetricsToJson(Evaluate(Info(), truth, est)));
+  const auto& agents = j["overall"]["agents"];
+  EXPECT_EQ(agents["samples"], 0);
+  EXPECT_EQ(agents["uncovered"], 2);
+  for (const char* key : {"mean_m", "median_m", "p75_m", "p95_m", "max_m", "rmse_m", "final_m",
+                          "in95", "mean_nees", "in95_at_estimates", "mean_nees_at_estimates"}) {
+    EXPECT_TRUE(agents[key].is_null()) << key;
+  }
+  bool seen = false;
+  for (const auto& n : j["nodes"]) {
+    if (n["id"] != "c1") continue;
+    seen = true;
+    EXPECT_NEAR(n["mean_m"].get<double>(), (2.0 + 2.0) / 2, 1e-12);  // at t = 1 and the end
+    EXPECT_TRUE(n["p75_m"].is_number());
+  }
+  EXPECT_TRUE(seen);
 }
 
 TEST(Nees, HandComputedAndClaimedCertainty) {

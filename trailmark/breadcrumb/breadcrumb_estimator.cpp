@@ -72,6 +72,11 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
            "prior sigma of the heading drift rate");
     t.Real("heading_rw", &L::heading_rw_rad_per_sqrt_s, "rad/sqrt(s)", nonneg,
            "heading random walk over time");
+    t.Flag(
+        "foot_ins_errors", [](L& l) -> bool& { return l.foot_ins.own_errors; },
+        "an agent whose steps come from a foot INS (imu.csv) moves with the INS's own errors "
+        "(each step's yaw variance, step and turn scale 1 %, a fifth of the step floor); false: "
+        "a phone PDR's");
     t.Real("track_heading_offset_sigma_rad", &L::track_heading_offset_sigma_rad, "rad", nonneg,
            "the steps' own heading offset, a consider parameter per agent (reported covariance "
            "only; 0: none)");

@@ -46,6 +46,10 @@ class BreadcrumbEstimator : public OnlineEstimator {
   /// Every agent's and static node's final estimate.
   void Finish(EstimateSink& sink) override;
   void UseLevels(const LevelSource* levels) override { levels_ = levels; }
+  /// A foot INS's agent moves with the INS's own errors (BreadcrumbLocalizer::UseFootInsMotion).
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    if (foot_ins) loc_->UseFootInsMotion(agent);
+  }
   /// The node's latest estimate as emitted (agents at their latest step, static nodes at their
   /// latest change).
   std::optional<Estimate> Current(const std::string& node) const override;

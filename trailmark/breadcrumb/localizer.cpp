@@ -229,6 +229,29 @@ void BreadcrumbLocalizer::AddAgent(const std::string& id, const std::optional<Ve
   ++summary_.agent_states;
 }
 
+void BreadcrumbLocalizer::UseFootInsMotion(const std::string& id) {
+  const auto it = agents_.find(id);
+  if (it == agents_.end() || it->second.foot_ins || !options_.foot_ins.own_errors) return;
+  Agent& a = it->second;
+  a.foot_ins = true;
+  // A second prior N(0, c) on a component whose prior was N(0, old^2) leaves it N(0, new^2)
+  // for 1/c = 1/new^2 - 1/old^2 (none where the new is not tighter); the other component gets
+  // no information (a variance of 1e12).
+  auto tighten = [](double old_sigma, double new_sigma) {
+    const double info = 1 / (new_sigma * new_sigma) - 1 / (old_sigma * old_sigma);
+    return info > 0 ? 1 / info : 0.0;
+  };
+  constexpr double kNone = 1e12;
+  if (a.theta >= 0) {
+    const double c = tighten(options_.scale_sigma0, options_.foot_ins.scale_sigma0);
+    if (c > 0) gen_.AddPrior(a.theta, Vec2::Zero(), Vec2(kNone, c).asDiagonal());
+  }
+  if (a.gyro >= 0 && options_.estimate_gyro_scale) {
+    const double c = tighten(options_.gyro_scale_sigma0, options_.foot_ins.gyro_scale_sigma0);
+    if (c > 0) gen_.AddPrior(a.gyro, Vec2::Zero(), Vec2(c, kNone).asDiagonal());
+  }
+}
+
 BreadcrumbLocalizer::StaticNode* BreadcrumbLocalizer::FindStatic(const std::string& id) {
   auto it = static_.find(id);
   return it == static_.end() ? nullptr : &it->second;
@@ -335,20 +358,17 @@ std::vector<std::string> BreadcrumbLocalizer::AgentIds() const {
 }
 
 Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn,
-                                double* cum_turn_signed) const {
+                                double* cum_turn_signed, double* cum_heading_var) const {
   const auto& k = a.knots;
-  if (t >= k.back().t) {
-    if (cum_var) *cum_var = k.back().cum_var;
-    if (cum_turn) *cum_turn = k.back().cum_turn;
-    if (cum_turn_signed) *cum_turn_signed = k.back().cum_turn_signed;
-    return k.back().cum;
-  }
-  if (t <= k.front().t) {
-    if (cum_var) *cum_var = k.front().cum_var;
-    if (cum_turn) *cum_turn = k.front().cum_turn;
-    if (cum_turn_signed) *cum_turn_signed = k.front().cum_turn_signed;
-    return k.front().cum;
-  }
+  auto at = [&](const Knot& knot) {
+    if (cum_var) *cum_var = knot.cum_var;
+    if (cum_turn) *cum_turn = knot.cum_turn;
+    if (cum_turn_signed) *cum_turn_signed = knot.cum_turn_signed;
+    if (cum_heading_var) *cum_heading_var = knot.cum_heading_var;
+    return knot.cum;
+  };
+  if (t >= k.back().t) return at(k.back());
+  if (t <= k.front().t) return at(k.front());
   auto hi = std::upper_bound(k.begin(), k.end(), t,
                              [](TimeS v, const Knot& knot) { return v < knot.t; });
   auto lo = hi - 1;
@@ -358,6 +378,9 @@ Vec2 BreadcrumbLocalizer::CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* 
   if (cum_turn) *cum_turn = lo->cum_turn + f * (hi->cum_turn - lo->cum_turn);
   if (cum_turn_signed) {
     *cum_turn_signed = lo->cum_turn_signed + f * (hi->cum_turn_signed - lo->cum_turn_signed);
+  }
+  if (cum_heading_var) {
+    *cum_heading_var = lo->cum_heading_var + f * (hi->cum_heading_var - lo->cum_heading_var);
   }
   return lo->cum + f * (hi->cum - lo->cum);
 }
@@ -381,7 +404,7 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   TimeS t0 = std::max(step.t0, last.t);
   if (t0 > last.t) {  // stationary gap
     a.knots.push_back({t0, last.cum, last.cum_var, last.cum_turn, last.heading,
-                       last.cum_turn_signed});
+                       last.cum_turn_signed, last.cum_heading_var});
   }
   if (a.gyro >= 0 && options_.estimate_heading_rate &&
       t0 >= a.state_t + options_.heading_rate_state_period_s) {
@@ -406,17 +429,24 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
     const double s = options_.default_step_sigma_m + options_.default_step_relative_sigma * d.norm();
     var = Vec2::Constant(s * s);
   }
-  const double floor = options_.step_sigma_floor_m + options_.step_sigma_floor_relative * d.norm();
+  const auto& fi = options_.foot_ins;
+  const double floor =
+      a.foot_ins ? fi.step_sigma_floor_m + fi.step_sigma_floor_relative * d.norm()
+                 : options_.step_sigma_floor_m + options_.step_sigma_floor_relative * d.norm();
   var = var.cwiseMax(std::max(options_.min_step_variance_m2, floor * floor));
+  const double own = step.heading_var_rad2.value_or(0.0);
+  const double heading_var = std::isfinite(own) ? std::max(own, 0.0) : 0.0;
   const TimeS t1 = std::max(step.t1, t0);
   if (t1 > a.knots.back().t) {
     a.knots.push_back({t1, last.cum + d, last.cum_var + var, last.cum_turn + turn,
-                       a.last_heading.value_or(0.0), last.cum_turn_signed + turn_signed});
+                       a.last_heading.value_or(0.0), last.cum_turn_signed + turn_signed,
+                       last.cum_heading_var + heading_var});
   } else {  // zero-duration step: fold into the last knot
     a.knots.back().cum += d;
     a.knots.back().cum_var += var;
     a.knots.back().cum_turn += turn;
     a.knots.back().cum_turn_signed += turn_signed;
+    a.knots.back().cum_heading_var += heading_var;
   }
   if (a.entry_heading_rad) {
     a.entry_walked_m += d.norm();
@@ -616,8 +646,8 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   if (t < a.state_t + options_.state_period_s) return;
   // IV-E: AddNode+(new state) -> AddMeasurement(PDR) -> DeleteNode+(old state)
   Vec2 var_t;
-  double turn_t = 0, turn_signed_t = 0;
-  const Vec2 cum_t = CumAt(a, t, &var_t, &turn_t, &turn_signed_t);
+  double turn_t = 0, turn_signed_t = 0, heading_var_t = 0;
+  const Vec2 cum_t = CumAt(a, t, &var_t, &turn_t, &turn_signed_t, &heading_var_t);
   const Vec2 delta = cum_t - a.state_cum;
   const Vec2 q =
       (var_t - a.state_cum_var).cwiseMax(options_.min_step_variance_m2) * a.motion_noise_scale;
@@ -648,11 +678,17 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
     const Mat2 cov = Rm * Diag(q) * Rm.transpose();
     const double dt = t - a.state_t;
     const double turn = turn_t - a.state_cum_turn;
+    // A foot INS's heading walk is its own (the steps' yaw variance growth), else the PDR's.
+    const double walk =
+        a.foot_ins ? heading_var_t - a.state_cum_heading_var
+                   : options_.heading_rw_rad_per_sqrt_s * options_.heading_rw_rad_per_sqrt_s * dt;
+    const double per_turn =
+        a.foot_ins ? options_.foot_ins.heading_per_turn_sigma : options_.heading_per_turn_sigma;
+    const double scale_rw =
+        a.foot_ins ? options_.foot_ins.scale_rw_per_sqrt_s : options_.scale_rw_per_sqrt_s;
     const double q_psi =
-        (options_.heading_rw_rad_per_sqrt_s * options_.heading_rw_rad_per_sqrt_s * dt +
-         std::pow(options_.heading_per_turn_sigma * turn, 2)) *
-        a.motion_noise_scale;
-    const double q_s = options_.scale_rw_per_sqrt_s * options_.scale_rw_per_sqrt_s * dt;
+        (std::max(walk, 0.0) + std::pow(per_turn * turn, 2)) * a.motion_noise_scale;
+    const double q_s = scale_rw * scale_rw * dt;
     const double turned = turn_signed_t - a.state_cum_turn_signed;
     const Vec2 kb_hat = a.gyro >= 0 ? gen_.Estimate(a.gyro) : Vec2::Zero();
     const double rate_dt = options_.estimate_heading_rate ? dt : 0.0;
@@ -702,6 +738,7 @@ void BreadcrumbLocalizer::AttachState(Agent& a, TimeS t) {
   a.state_cum_var = var_t;
   a.state_cum_turn = turn_t;
   a.state_cum_turn_signed = turn_signed_t;
+  a.state_cum_heading_var = heading_var_t;
   // The cached covariance follows the new state by its edge's variance and is then as of
   // state_cum_var: an estimate before the next refresh must not add that walk's variance again
   // (it did, found by a review 2026-12-06).

@@ -103,6 +103,21 @@ struct LocalizerOptions {
   /// (rad, signed, as the PDR measured it) adds k Delta to psi. MEMS gyros: 1-3 % (sigma0 5 %).
   bool estimate_gyro_scale = true;
   double gyro_scale_sigma0 = 0.05;
+  /// Ours (issue 24 item 2, for the RSSI network too): an agent whose steps come from a foot
+  /// INS (UseFootInsMotion) moves with the INS's own errors, not a phone PDR's: its heading's
+  /// random walk is each step's own yaw variance growth (Step::heading_var_rad2) instead of
+  /// heading_rw, and these instead of the PDR's (set a priori, as PdrOptions::FootIns: step
+  /// and turn scale 1 %; the step floor a fifth of the PDR's — the INS measures each step;
+  /// the random part of a turn half of it).
+  struct FootIns {
+    bool own_errors = true;  ///< false: a foot INS's steps with the PDR's errors
+    double step_sigma_floor_m = 0.01;
+    double step_sigma_floor_relative = 0.02;
+    double heading_per_turn_sigma = 0.005;
+    double scale_sigma0 = 0.01;
+    double gyro_scale_sigma0 = 0.01;
+    double scale_rw_per_sqrt_s = 1e-5;
+  } foot_ins{};
   /// The PDR heading's drift rate as a constant per agent (issue 25, item 1): the gyro bias a
   /// foot or phone PDR leaves, which turns its heading at b rad/s whether the agent walks or
   /// stands (the second component of the gyro node (k, b)): psi_new - psi_old = k Delta + b dt
@@ -322,6 +337,12 @@ class BreadcrumbLocalizer {
   void AddAgent(const std::string& id, const std::optional<Vec2>& start, double start_sigma_m,
                 std::optional<double> start_heading_sigma_rad = std::nullopt,
                 std::optional<double> start_heading_rad = std::nullopt);
+  /// The agent's steps come from a foot INS: from now on it moves with the INS's own errors
+  /// (LocalizerOptions::FootIns; unless `foot_ins.own_errors` is off). Its scale and gyro
+  /// nodes' priors are tightened to the INS's sigmas by a second prior each (information adds:
+  /// exact for independent Gaussian priors). Call it before the agent's first step. Unknown
+  /// agents are ignored.
+  void UseFootInsMotion(const std::string& id);
   /// Estimated PDR heading correction (rad) and scale error of an agent.
   std::optional<Vec2> HeadingScale(const std::string& id) const;
   /// Estimated gyro scale-factor error and PDR heading drift rate (rad/s) of an agent.
@@ -372,6 +393,7 @@ class BreadcrumbLocalizer {
     double cum_turn = 0;  ///< accumulated |turn| of the step directions, rad
     double heading = 0;   ///< raw PDR direction of the step ending here
     double cum_turn_signed = 0;
+    double cum_heading_var = 0;  ///< the steps' own heading variance growth (rad^2)
   };
   enum class Kind { kRssi, kRange, kEncounter, kDrop };
   struct Pending {
@@ -400,6 +422,8 @@ class BreadcrumbLocalizer {
     std::optional<double> last_heading;
     double state_cum_turn = 0;
     double state_cum_turn_signed = 0;
+    double state_cum_heading_var = 0;
+    bool foot_ins = false;  ///< the steps come from a foot INS (UseFootInsMotion)
     TimeS state_t = 0;
     Vec2 state_cum = Vec2::Zero();      ///< PDR displacement at the state's time
     Vec2 state_cum_var = Vec2::Zero();
@@ -469,7 +493,7 @@ class BreadcrumbLocalizer {
   /// Into the agent's time-ordered queue of measurements waiting for its PDR.
   static void Enqueue(Agent& a, const Pending& q);
   Vec2 CumAt(const Agent& a, TimeS t, Vec2* cum_var, double* cum_turn = nullptr,
-             double* cum_turn_signed = nullptr) const;
+             double* cum_turn_signed = nullptr, double* cum_heading_var = nullptr) const;
   /// The PDR displacement `raw` corrected by the agent's current heading/scale estimate.
   Vec2 Corrected(const Agent& a, const Vec2& raw) const;
   /// How a displacement v of agent a's PDR turns with its heading offset (empty: none).

@@ -7,26 +7,34 @@
 namespace trailmark {
 namespace {
 
+/// A statistic over `samples` errors: null when there were none (a node never scored has no
+/// error, not an error of 0 m).
+nlohmann::json Stat(double value, std::size_t samples) {
+  return samples > 0 ? nlohmann::json(value) : nlohmann::json(nullptr);
+}
+
 nlohmann::json NodeJson(const NodeMetrics& m, std::size_t max_series) {
   nlohmann::json j;
   j["id"] = m.id;
   j["kind"] = std::string(ToString(m.kind));
-  j["samples"] = m.stats.samples;
+  const std::size_t n = m.stats.samples;
+  j["samples"] = n;
   j["uncovered"] = m.uncovered;
-  j["mean_m"] = m.stats.mean_m;
-  j["median_m"] = m.stats.median_m;
-  j["p75_m"] = m.stats.p75_m;
-  j["p95_m"] = m.stats.p95_m;
-  j["max_m"] = m.stats.max_m;
-  j["rmse_m"] = m.stats.rmse_m;
-  j["final_m"] = m.stats.final_m;
-  j["in95"] = m.stats.in95;  // share of truth inside the estimate's own 95 % ellipse
-  j["mean_nees"] = m.stats.mean_nees;
+  j["mean_m"] = Stat(m.stats.mean_m, n);
+  j["median_m"] = Stat(m.stats.median_m, n);
+  j["p75_m"] = Stat(m.stats.p75_m, n);
+  j["p95_m"] = Stat(m.stats.p95_m, n);
+  j["max_m"] = Stat(m.stats.max_m, n);
+  j["rmse_m"] = Stat(m.stats.rmse_m, n);
+  j["final_m"] = Stat(m.stats.final_m, n);
+  j["in95"] = Stat(m.stats.in95, n);  // share of truth inside the estimate's own 95 % ellipse
+  j["mean_nees"] = Stat(m.stats.mean_nees, n);
   if (m.kind == NodeKind::kAgent) {
     // The same check at each estimate's own instant (truth interpolated): no lag of a held row.
-    j["in95_at_estimates"] = m.at_estimates.in95;
-    j["mean_nees_at_estimates"] = m.at_estimates.mean_nees;
-    j["estimates_scored"] = m.at_estimates.samples;
+    const std::size_t ne = m.at_estimates.samples;
+    j["in95_at_estimates"] = Stat(m.at_estimates.in95, ne);
+    j["mean_nees_at_estimates"] = Stat(m.at_estimates.mean_nees, ne);
+    j["estimates_scored"] = ne;
   }
   j["distance_m"] = m.distance_m;
   j["mean_pct_of_distance"] = m.mean_pct_of_distance ? nlohmann::json(*m.mean_pct_of_distance)
@@ -34,9 +42,10 @@ nlohmann::json NodeJson(const NodeMetrics& m, std::size_t max_series) {
   j["max_pct_of_distance"] = m.max_pct_of_distance ? nlohmann::json(*m.max_pct_of_distance)
                                                    : nlohmann::json(nullptr);
   nlohmann::json t = nlohmann::json::array(), e = nlohmann::json::array();
-  const std::size_t n = m.series.size();
-  const std::size_t stride = (max_series == 0 || n <= max_series) ? 1 : (n + max_series - 1) / max_series;
-  for (std::size_t i = 0; i < n; i += stride) {
+  const std::size_t points = m.series.size();
+  const std::size_t stride =
+      (max_series == 0 || points <= max_series) ? 1 : (points + max_series - 1) / max_series;
+  for (std::size_t i = 0; i < points; i += stride) {
     t.push_back(m.series[i].t);
     e.push_back(m.series[i].error_m);
   }
