@@ -934,12 +934,20 @@ TEST(DeadReckoningEstimator, AFootInsAgentMovesWithTheInsOwnErrors) {
   EXPECT_NEAR(a.syy, foot.covariance()(1, 1), 1e-15);
   EXPECT_NEAR(b.sxx, phone.covariance()(0, 0), 1e-15);
   EXPECT_LT(a.sxx + a.syy, 0.5 * (b.sxx + b.syy));  // the INS's errors are the smaller ones
+  // A foot INS outside its noise model (its first step carries no heading variance:
+  // ZuptIns::OwnErrorsHold) keeps the PDR's errors.
+  DeadReckoningEstimator est_out(info, o);
+  est_out.StepsFromFootIns("ff1", true);
+  est_out.Add(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)}, sink);
+  DeadReckoning pdr_out(Vec3::Zero(), 0.1, o);
+  pdr_out.AddStep(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)});
+  EXPECT_NEAR(est_out.Current("ff1")->syy, pdr_out.covariance()(1, 1), 1e-15);
   // Off: the foot INS's steps with the PDR's errors.
   PdrOptions off = o;
   off.foot_ins.own_errors = false;
   DeadReckoningEstimator est_off(info, off);
   est_off.StepsFromFootIns("ff1", true);
-  est_off.Add(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)}, sink);
+  est_off.Add(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4), 1e-6}, sink);
   DeadReckoning pdr(Vec3::Zero(), 0.1, o);
   pdr.AddStep(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)});
   EXPECT_NEAR(est_off.Current("ff1")->syy, pdr.covariance()(1, 1), 1e-15);

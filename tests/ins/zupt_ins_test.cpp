@@ -99,6 +99,38 @@ TEST(ZuptIns, EachStepCarriesTheGrowthOfTheFiltersYawVariance) {
   EXPECT_LT(sum_noisier, 4.5 * sum);  // at most the gyro noise's variance ratio (and bias)
 }
 
+TEST(ZuptIns, AGyroOutsideTheStatedModelGivesStepsWithoutAHeadingVarianceOfTheirOwn) {
+  // The same strides read by a gyro with 1.7 deg/s of bias on z (an uncalibrated consumer
+  // part's), ten times the stated sigma: the INS says its own errors are not this device's —
+  // no heading variance on its steps (consumers go on with a PDR's errors) and a warning.
+  InsOptions o;
+  o.detector.kind = DetectorKind::kMag;
+  o.detector.gamma = 1.0;
+  o.mid_swing_steps = false;
+  auto run = [&o](double bias_radps) {
+    ZuptIns ins(o);
+    std::vector<Step> steps;
+    ins.on_step = [&](const Step& s) { steps.push_back(s); };
+    for (auto s : TranslationStrides(4, 4.0, 0.25, 0.4)) {
+      s.gyro_b.z() += bias_radps;
+      ins.Add(s);
+    }
+    ins.Finish();
+    return std::make_pair(steps, ins);
+  };
+  const auto [biased, biased_ins] = run(0.03);
+  ASSERT_EQ(biased.size(), 4u);
+  EXPECT_FALSE(biased_ins.OwnErrorsHold());
+  for (const auto& s : biased) EXPECT_FALSE(s.heading_var_rad2.has_value());
+  ASSERT_FALSE(biased_ins.summary().warnings.empty());
+  EXPECT_NE(biased_ins.summary().warnings.back().find("gyro bias at rest"), std::string::npos);
+  // Within the stated sigma (a third of it): the steps carry it.
+  const auto [fine, fine_ins] = run(o.gyro_bias_sigma0 / 3);
+  EXPECT_TRUE(fine_ins.OwnErrorsHold());
+  ASSERT_EQ(fine.size(), 4u);
+  for (const auto& s : fine) EXPECT_TRUE(s.heading_var_rad2.has_value());
+}
+
 // When a step ends: the strides above land at rest + k (2T + rest) + 2T and lift off at
 // (k + 1)(2T + rest) + rest. At the landing (default) each step's t1 is the landing, within the
 // detector's `min_stance_samples` (and its window); at the lift-off (the old behaviour) one rest

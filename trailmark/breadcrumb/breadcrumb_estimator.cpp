@@ -300,6 +300,10 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   t_last_ = std::max(t_last_, t);
   const auto clock0 = std::chrono::steady_clock::now();
   if (const auto* step = std::get_if<Step>(&row)) {
+    if (const auto f = foot_ins_.find(step->agent); f != foot_ins_.end()) {
+      if (step->heading_var_rad2) loc_->UseFootInsMotion(step->agent);
+      foot_ins_.erase(f);  // decided at the first step
+    }
     loc_->AddStep(*step);
     EmitAgent(step->agent, sink);
   } else if (const auto* p = std::get_if<RssiPacket>(&row)) {

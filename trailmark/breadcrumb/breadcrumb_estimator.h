@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -46,9 +47,11 @@ class BreadcrumbEstimator : public OnlineEstimator {
   /// Every agent's and static node's final estimate.
   void Finish(EstimateSink& sink) override;
   void UseLevels(const LevelSource* levels) override { levels_ = levels; }
-  /// A foot INS's agent moves with the INS's own errors (BreadcrumbLocalizer::UseFootInsMotion).
+  /// A foot INS's agent moves with the INS's own errors (BreadcrumbLocalizer::UseFootInsMotion)
+  /// from its first step on, where that step carries its heading variance (an INS that holds its
+  /// noise model, ZuptIns::OwnErrorsHold).
   void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
-    if (foot_ins) loc_->UseFootInsMotion(agent);
+    if (foot_ins) foot_ins_.insert(agent);
   }
   /// The node's latest estimate as emitted (agents at their latest step, static nodes at their
   /// latest change).
@@ -67,6 +70,7 @@ class BreadcrumbEstimator : public OnlineEstimator {
   BreadcrumbEstimatorOptions options_;
   std::unique_ptr<BreadcrumbLocalizer> loc_;
   std::map<std::string, double> agent_z_;
+  std::set<std::string> foot_ins_;  ///< foot INS agents not yet stepped
   std::vector<std::string> known_starts_;
   std::vector<std::string> setup_notes_;
   std::map<std::string, Vec2> last_static_;

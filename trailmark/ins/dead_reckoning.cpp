@@ -245,7 +245,10 @@ void DeadReckoningEstimator::Add(const MissionRow& row, EstimateSink& sink) {
           "needs a known start",
           step->agent));
     }
-    const bool foot_ins = options_.foot_ins.own_errors && foot_ins_.count(step->agent) != 0;
+    // A foot INS's own errors where its first step carries its heading variance (the INS holds
+    // its noise model: ZuptIns::OwnErrorsHold).
+    const bool foot_ins = options_.foot_ins.own_errors && foot_ins_.count(step->agent) != 0 &&
+                          step->heading_var_rad2.has_value();
     it = agents_
              .emplace(step->agent, Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0),
                                                        foot_ins ? options_.ForFootIns() : options_,

@@ -171,7 +171,8 @@ class DeadReckoningEstimator : public OnlineEstimator {
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void Finish(EstimateSink&) override {}
   /// An agent whose steps come from a foot INS gets PdrOptions::ForFootIns (unless
-  /// `foot_ins.own_errors` is off).
+  /// `foot_ins.own_errors` is off, or its first step carries no heading variance: an INS outside
+  /// its noise model, ZuptIns::OwnErrorsHold).
   void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
     if (foot_ins) foot_ins_.insert(agent);
   }

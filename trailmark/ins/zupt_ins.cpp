@@ -157,6 +157,19 @@ void ZuptIns::Align() {
   // bias states the IMU is taken as unbiased (an alignment estimate subtracted for good would be
   // an error the covariance never learns of: mean NEES 380 on the exact-model test).
   bg_ = options_.estimate_biases && w.norm() < 0.05 ? w : Vec3::Zero();
+  // The IMU checked against the noise model the filter states: a resting gyro's bias beyond
+  // kOwnErrorsBiasSigmas of its stated sigma (an uncalibrated consumer gyro: degrees per second)
+  // says the filter's own covariance, its yaw's included, is not this device's. Its steps then
+  // carry no heading variance of their own, and consumers take them with a PDR's errors.
+  own_errors_hold_ = !options_.estimate_biases ||
+                     w.cwiseAbs().maxCoeff() <= kOwnErrorsBiasSigmas * options_.gyro_bias_sigma0;
+  if (!own_errors_hold_) {
+    summary_.warnings.push_back(fmt::format(
+        "gyro bias at rest {:.3f} deg/s, beyond {:g} sigma of the stated {:.3f} deg/s: the INS's "
+        "own errors are not this device's (its steps go on with a PDR's errors)",
+        w.cwiseAbs().maxCoeff() * 180 / M_PI, kOwnErrorsBiasSigmas,
+        options_.gyro_bias_sigma0 * 180 / M_PI));
+  }
   P_.setZero();
   P_.block<3, 3>(kVel, kVel) = Eigen::Matrix3d::Identity() * 1e-4;
   const double sa = options_.initial_attitude_sigma_rad, sy = options_.initial_yaw_sigma_rad;
@@ -424,12 +437,8 @@ void ZuptIns::EmitStep(const InsState& end, bool horizontal_only) {
   // The yaw's variance growth over the step (the attitude error is in the navigation frame:
   // its z is the heading's): the INS's own heading error, for the consumers' motion models.
   const double yaw_var = P_(kAtt + 2, kAtt + 2);
-  Step step{*last_stance_end_t_,
-            end.t,
-            agent_,
-            delta,
-            var,
-            std::max(0.0, yaw_var - last_stance_end_yaw_var_)};
+  Step step{*last_stance_end_t_, end.t, agent_, delta, var};
+  if (own_errors_hold_) step.heading_var_rad2 = std::max(0.0, yaw_var - last_stance_end_yaw_var_);
   ++summary_.steps;
   summary_.distance_m += delta.head<2>().norm();
   last_stance_end_t_ = end.t;

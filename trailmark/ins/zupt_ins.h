@@ -124,6 +124,12 @@ class ZuptIns {
     return have_last_ ? std::optional<InsState>(last_state_) : std::nullopt;
   }
 
+  /// Whether the IMU holds the filter's stated noise model, as far as the alignment can tell:
+  /// its gyro bias at rest within kOwnErrorsBiasSigmas x gyro_bias_sigma0 on every axis (true
+  /// before the alignment and without bias states). Only then do its steps carry the filter's
+  /// heading variance (Step::heading_var_rad2). 3 sigma: a priori.
+  bool OwnErrorsHold() const { return own_errors_hold_; }
+  static constexpr double kOwnErrorsBiasSigmas = 3.0;
   /// Offsets of the error-state blocks (each 3 wide): dp, dv, dtheta, dba, dbg.
   static constexpr int kPos = 0, kVel = 3, kAtt = 6, kAccelBias = 9, kGyroBias = 12;
   static constexpr int kErrorStateSize = 15;
@@ -182,6 +188,7 @@ class ZuptIns {
   Vec3 last_stance_end_p_ = Vec3::Zero();
   Eigen::Matrix3d last_stance_end_cov_ = Eigen::Matrix3d::Zero();
   double last_stance_end_yaw_var_ = 0;  ///< rad^2, the filter's yaw variance at that end
+  bool own_errors_hold_ = true;         ///< OwnErrorsHold()
   bool swinging_ = false;        ///< between a lift-off and the next landing
   long swing_samples_ = 0;       ///< samples since the lift-off
   long last_swing_samples_ = 0;  ///< the last swing's length in samples

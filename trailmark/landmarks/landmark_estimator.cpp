@@ -290,10 +290,10 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
 }
 
 void LandmarkEstimator::StepsFromFootIns(const std::string& agent, bool foot_ins) {
-  const auto it = agents_.find(agent);
-  if (!foot_ins || !options_.foot_ins_own_errors || it == agents_.end() || it->second.stepped)
-    return;
-  Agent& a = it->second;
+  if (foot_ins) foot_ins_.insert(agent);
+}
+
+void LandmarkEstimator::UseFootInsErrors(const std::string& agent, Agent& a) {
   if (a.tracker) a.tracker->UseTypicalMotionErrors(options_.tracker.pdr.ForFootIns());
   if (!a.dr && !a.clones) return;
   const NodeInfo* node = info_.Find(agent);
@@ -620,6 +620,12 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   t_last_ = std::max(t_last_, t);
   if (const auto* step = std::get_if<Step>(&row)) {
     Agent& a = agents_.at(step->agent);
+    // A foot INS's agent moves with the INS's own errors where its first step carries them (the
+    // INS holds its noise model: ZuptIns::OwnErrorsHold).
+    if (!a.stepped && options_.foot_ins_own_errors && foot_ins_.count(step->agent) != 0 &&
+        step->heading_var_rad2) {
+      UseFootInsErrors(step->agent, a);
+    }
     if (a.tracker && !a.stepped) EmitAgent(step->t0, step->agent, a, sink);  // the start, first
     a.stepped = true;
     const Vec2 d = step->delta_n.head<2>();

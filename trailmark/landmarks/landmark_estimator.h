@@ -173,9 +173,10 @@ class LandmarkEstimator : public OnlineEstimator {
   /// others are counted and ignored.
   void Add(const MissionRow& row, EstimateSink& sink) override;
   void UseLevels(const LevelSource* levels) override { levels_ = levels; }
-  /// An agent whose steps come from a foot INS: its motion's errors are the INS's own
-  /// (PdrOptions::ForFootIns; the error-state tracker's typical device, the stops' dead
-  /// reckoning), unless `foot_ins.own_errors` is off.
+  /// An agent whose steps come from a foot INS: from its first step on its motion's errors are
+  /// the INS's own (PdrOptions::ForFootIns; the error-state tracker's typical device, the stops'
+  /// dead reckoning), unless `foot_ins_own_errors` is off or that step carries no heading
+  /// variance (an INS outside its noise model, ZuptIns::OwnErrorsHold).
   void StepsFromFootIns(const std::string& agent, bool foot_ins) override;
   /// The landmarks' final estimates.
   void Finish(EstimateSink& sink) override;
@@ -216,6 +217,8 @@ class LandmarkEstimator : public OnlineEstimator {
     std::vector<std::optional<double>> rssi;  ///< averaged per landmark
   };
   void EmitAgent(TimeS t, const std::string& id, const Agent& a, EstimateSink& sink);
+  /// Before the agent's first step: its motion's errors become the foot INS's own.
+  void UseFootInsErrors(const std::string& agent, Agent& a);
   void EmitLandmarks(TimeS t, EstimateSink& sink);
   void EmitLandmark(TimeS t, std::size_t j, EstimateSink& sink);
   /// A landmark's estimate: surveyed, stop-and-go's, or (unknown) the most certain tracker's.
@@ -249,6 +252,7 @@ class LandmarkEstimator : public OnlineEstimator {
   std::vector<TimeS> estimate_t_;
   std::vector<int> grid_heard_;  ///< stops that had heard each landmark at its last grid search
   std::map<std::string, Agent> agents_;
+  std::set<std::string> foot_ins_;  ///< agents whose steps come from a foot INS
   std::vector<Stop> stops_;
   std::vector<radio::CalibrationPair> calibration_;
   std::vector<std::string> setup_notes_;
