@@ -911,8 +911,8 @@ TEST(DeadReckoningEstimator, AFootInsAgentMovesWithTheInsOwnErrors) {
   // step), the estimator's dead reckoning of ff1 is exactly that of PdrOptions::ForFootIns,
   // each step's own yaw variance as its heading walk; ff2 (a phone) keeps the PDR's errors.
   MissionInfo info;
-  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(0, 0, 0), 0.1));
-  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3(0, 0, 0), 0.1));
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(0, 0, 0), 0.1, 0.0));  // a stated heading
+  info.nodes.push_back(NodeInfo::Agent("ff2", Vec3(0, 0, 0), 0.1, 0.0));
   const PdrOptions o;
   DeadReckoningEstimator est(info, o);
   est.StepsFromFootIns("ff1", true);
@@ -951,6 +951,57 @@ TEST(DeadReckoningEstimator, AFootInsAgentMovesWithTheInsOwnErrors) {
   DeadReckoning pdr(Vec3::Zero(), 0.1, o);
   pdr.AddStep(Step{0, 0.6, "ff1", Vec3(0.7, 0, 0), Vec3(1e-4, 1e-4, 1e-4)});
   EXPECT_NEAR(est_off.Current("ff1")->syy, pdr.covariance()(1, 1), 1e-15);
+}
+
+TEST(DeadReckoning, AnUnknownHeadingsCovarianceIsTheUniformTurnsSecondMomentAndCoversTheCircle) {
+  // Against the second moment of R(theta) d - d over theta uniform on the circle, by quadrature,
+  // and every point of the circle the truth may be on inside the 95 % ellipse.
+  const Vec2 d(3.0, -1.5);
+  const Mat2 c = UnknownHeadingCovariance(d);
+  Mat2 m = Mat2::Zero();
+  const int n = 3600;
+  for (int k = 0; k < n; ++k) {
+    const Vec2 e = Eigen::Rotation2Dd(2 * M_PI * k / n) * d - d;
+    m += e * e.transpose() / n;
+  }
+  EXPECT_LT((c - m).cwiseAbs().maxCoeff(), 1e-9);
+  for (int k = 0; k < 360; ++k) {
+    const Vec2 e = Eigen::Rotation2Dd(2 * M_PI * k / 360) * d - d;
+    EXPECT_LE(e.dot(c.inverse() * e), 3.0 + 1e-9);  // < 5.99, the 95 % quantile
+  }
+}
+
+TEST(DeadReckoningEstimator, AFootInsWithoutAStatedHeadingCarriesTheUnknownTurn) {
+  // ff1 has a start but no start_heading: its foot INS's steps are in the INS's own frame. The
+  // estimate is the sum of the steps; its covariance the dead reckoning's without any heading
+  // error at the start plus the unknown turn's. A phone's steps (in the navigation frame by the
+  // spec) keep the default heading sigma.
+  MissionInfo info;
+  info.nodes.push_back(NodeInfo::Agent("ff1", Vec3(1, 0, 0), 0.1));
+  info.nodes.back().start_heading_rad.reset();
+  info.nodes.back().start_heading_sigma_rad.reset();
+  const PdrOptions o;
+  DeadReckoningEstimator est(info, o);
+  est.StepsFromFootIns("ff1", true);
+  PdrOptions ref_options = o.ForFootIns();
+  ref_options.track_heading_offset_sigma_rad = 0;
+  DeadReckoning ref(Vec3(1, 0, 0), 0.1, ref_options, 0.0);
+  VectorSink sink;
+  for (int k = 0; k < 10; ++k) {
+    const Step s{0.5 * k, 0.5 * (k + 1), "ff1", Vec3(0.6, 0.1, 0), Vec3(1e-4, 1e-4, 1e-4), 1e-6};
+    est.Add(s, sink);
+    ref.AddStep(s);
+  }
+  const Estimate e = *est.Current("ff1");
+  EXPECT_EQ(e.position_n, ref.position_n());
+  const Mat2 expected = ref.covariance() + UnknownHeadingCovariance(Vec2(6.0, 1.0));
+  EXPECT_NEAR(e.sxx, expected(0, 0), 1e-9);
+  EXPECT_NEAR(e.sxy, expected(0, 1), 1e-9);
+  EXPECT_NEAR(e.syy, expected(1, 1), 1e-9);
+  bool noted = false;
+  for (const auto& note : est.Summary().notes)
+    noted |= note.find("without a start_heading") != std::string::npos;
+  EXPECT_TRUE(noted);
 }
 
 TEST(DeadReckoning, AStepsOwnHeadingVarianceIsItsHeadingWalkWhereLarger) {

@@ -219,6 +219,11 @@ double DeadReckoning::FusePosition(const Vec2& fix_n, const Mat2& fix_cov_in) {
   return omega;
 }
 
+Mat2 UnknownHeadingCovariance(const Vec2& displacement_n) {
+  return 0.5 * displacement_n.squaredNorm() * Mat2::Identity() +
+         displacement_n * displacement_n.transpose();
+}
+
 DeadReckoningEstimator::DeadReckoningEstimator(MissionInfo info, PdrOptions options)
     : info_(std::move(info)), options_(options) {
   std::string why;
@@ -247,31 +252,47 @@ void DeadReckoningEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     // A foot INS's own errors where its first step carries its heading variance (the INS holds
     // its noise model: ZuptIns::OwnErrorsHold).
-    const bool foot_ins = options_.foot_ins.own_errors && foot_ins_.count(step->agent) != 0 &&
-                          step->heading_var_rad2.has_value();
+    const bool from_foot_ins = foot_ins_.count(step->agent) != 0;
+    const bool foot_ins =
+        options_.foot_ins.own_errors && from_foot_ins && step->heading_var_rad2.has_value();
+    PdrOptions o = foot_ins ? options_.ForFootIns() : options_;
+    std::optional<double> heading_sigma = node->start_heading_sigma_rad;
+    // A foot INS without a stated heading: its frame is its own, turned by an unknown angle (the
+    // unknown heading's covariance instead of any heading sigma at the start).
+    const bool unknown_heading = from_foot_ins && !node->start_heading_rad;
+    if (unknown_heading) {
+      o.track_heading_offset_sigma_rad = 0.0;
+      heading_sigma = 0.0;
+      unknown_heading_.insert(step->agent);
+    }
     it = agents_
-             .emplace(step->agent, Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0),
-                                                       foot_ins ? options_.ForFootIns() : options_,
-                                                       node->start_heading_sigma_rad),
+             .emplace(step->agent, Agent{DeadReckoning(*start, node->start_sigma_m.value_or(0.0), o,
+                                                       heading_sigma),
                                          step->t0})
              .first;
-    const Mat2 c = it->second.dr.covariance();
-    sink.Add({step->t0, step->agent, *start, c(0, 0), c(0, 1), c(1, 1)});
+    if (unknown_heading) it->second.unknown_heading_start = start->head<2>();
+    sink.Add(EstimateOf(step->agent, it->second, step->t0));
   }
   Agent& a = it->second;
   a.dr.AddStep(*step);
   a.t = step->t1;
   ++a.steps;
   ++steps_;
-  const Mat2 c = a.dr.covariance();
-  sink.Add({step->t1, step->agent, a.dr.position_n(), c(0, 0), c(0, 1), c(1, 1)});
+  sink.Add(EstimateOf(step->agent, a, step->t1));
+}
+
+Estimate DeadReckoningEstimator::EstimateOf(const std::string& id, const Agent& a, TimeS t) const {
+  Mat2 c = a.dr.covariance();
+  if (a.unknown_heading_start) {
+    c += UnknownHeadingCovariance(a.dr.position_n().head<2>() - *a.unknown_heading_start);
+  }
+  return Estimate{t, id, a.dr.position_n(), c(0, 0), c(0, 1), c(1, 1)};
 }
 
 std::optional<Estimate> DeadReckoningEstimator::Current(const std::string& node) const {
   const auto it = agents_.find(node);
   if (it == agents_.end()) return std::nullopt;
-  const Mat2 c = it->second.dr.covariance();
-  return Estimate{it->second.t, node, it->second.dr.position_n(), c(0, 0), c(0, 1), c(1, 1)};
+  return EstimateOf(node, it->second, it->second.t);
 }
 
 EstimatorSummary DeadReckoningEstimator::Summary() const {
@@ -280,6 +301,12 @@ EstimatorSummary DeadReckoningEstimator::Summary() const {
   s.numbers["agents"] = static_cast<double>(agents_.size());
   s.numbers["rows_ignored"] = static_cast<double>(ignored_);
   for (const auto& [id, a] : agents_) s.notes.push_back(fmt::format("{}: {} steps", id, a.steps));
+  for (const auto& id : unknown_heading_) {
+    s.notes.push_back(fmt::format(
+        "{}: foot INS steps without a start_heading in mission.json: the walk is in the INS's "
+        "own frame, turned by an unknown angle about the start (its ellipse covers every turn)",
+        id));
+  }
   return s;
 }
 

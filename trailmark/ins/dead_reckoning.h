@@ -160,8 +160,19 @@ class DeadReckoning {
   std::optional<double> last_direction_rad_;  ///< of the last step >= turn_min_step_m
 };
 
+/// The covariance, about the dead reckoning, of a walk turned about its start by an unknown
+/// angle (uniform on the circle): a foot INS's walk when mission.json states no start_heading
+/// (the INS's yaw starts at 0 in a frame nobody aligned). With d the walk's displacement from
+/// the start and R the unknown rotation, the error R d - d has E[R] = 0, so its second moment
+/// is |d|^2 / 2 I + d d^T; every point of the circle the truth lies on is inside its 95 %
+/// ellipse (Mahalanobis^2 at most 3, against 5.99). A linear heading sigma cannot say this.
+Mat2 UnknownHeadingCovariance(const Vec2& displacement_n);
+
 /// `pdr`: each agent's dead reckoning, an estimate at every step (and its start at the first
-/// step's t0). Agents are independent: each agent's steps in time order is all it needs.
+/// step's t0). A foot INS's agent whose start_heading mission.json does not state walks in the
+/// INS's own frame: its covariance carries UnknownHeadingCovariance instead of a start heading
+/// sigma (steps.csv's are in the navigation frame by the spec: the stated or default sigma). Agents
+/// are independent: each agent's steps in time order is all it needs.
 class DeadReckoningEstimator : public OnlineEstimator {
  public:
   explicit DeadReckoningEstimator(MissionInfo info, PdrOptions options = {});
@@ -184,11 +195,15 @@ class DeadReckoningEstimator : public OnlineEstimator {
     DeadReckoning dr;
     TimeS t = 0;
     std::size_t steps = 0;
+    std::optional<Vec2> unknown_heading_start;  ///< a foot INS without a stated heading
   };
+  /// The agent's estimate now (its covariance with the unknown heading's, if any).
+  Estimate EstimateOf(const std::string& id, const Agent& a, TimeS t) const;
   MissionInfo info_;
   PdrOptions options_;
   std::map<std::string, Agent> agents_;
   std::set<std::string> foot_ins_;  ///< agents whose steps come from a foot INS
+  std::set<std::string> unknown_heading_;  ///< of those, without a stated start heading
   std::size_t steps_ = 0, ignored_ = 0;
 };
 

@@ -215,6 +215,10 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
       const double stated = n.start_heading_sigma_rad.value_or(own);
       const double offset = options_.track_heading_offset_sigma_rad;
       prior.extra_yaw_var_rad2 = std::max(0.0, stated * stated + offset * offset - own * own);
+    } else {
+      // No heading stated: the filter's yaw starts at 0 in a frame nobody aligned — the walk is
+      // turned about the start by an unknown angle (UnknownHeadingCovariance).
+      prior.unknown_heading = true;
     }
     start_prior_[n.id] = prior;
   }
@@ -254,6 +258,7 @@ Estimate InsEstimator::ToEstimate(const std::string& agent, const InsState& st) 
     const Vec2 from = st.position_n.head<2>() - prior.start;
     const Vec2 u(-from.y(), from.x());
     c += prior.position_var_m2 * Mat2::Identity() + prior.extra_yaw_var_rad2 * u * u.transpose();
+    if (prior.unknown_heading) c += UnknownHeadingCovariance(from);
   }
   Estimate e{st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)};
   height_.Annotate(e);

@@ -94,7 +94,9 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable();
 /// filter leaves out (its position starts exact, its yaw at `initial_yaw_sigma_rad`): the start
 /// position's variance, and a start heading error beyond the filter's own, which turns the
 /// whole walk about the start — the variance (sigma_h^2 - sigma_filter^2) u u^T with
-/// u = (-(y - y0), x - x0) (the steps it emits are differences: neither enters them).
+/// u = (-(y - y0), x - x0) (the steps it emits are differences: neither enters them). Without a
+/// stated start_heading the filter's frame is its own: the covariance carries
+/// UnknownHeadingCovariance of the walk since the start instead (dead_reckoning.h).
 class InsEstimator : public OnlineEstimator {
  public:
   InsEstimator(MissionInfo info, InsEstimatorOptions options);
@@ -116,6 +118,7 @@ class InsEstimator : public OnlineEstimator {
     Vec2 start = Vec2::Zero();
     double position_var_m2 = 0;
     double extra_yaw_var_rad2 = 0;
+    bool unknown_heading = false;  ///< no start_heading stated (UnknownHeadingCovariance)
   };
   std::map<std::string, StartPrior> start_prior_;
   EstimateSink* sink_ = nullptr;
