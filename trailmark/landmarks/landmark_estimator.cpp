@@ -246,16 +246,7 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
     a.cov = Mat2::Identity() * s * s;
     a.pdr_position = a.position;
     a.z_m = start ? start->z() : 0.0;
-    if (options_.tracking != Tracking::kUkf && (options_.fix_fusion == FixFusion::kIntersection ||
-                                                (options_.fix_fusion == FixFusion::kIndependent &&
-                                                 options_.drift == DriftModel::kDeadReckoning))) {
-      a.dr.emplace(Vec3(a.position.x(), a.position.y(), 0.0), s, options_.stop_dead_reckoning,
-                   n.start_heading_sigma_rad);
-    }
-    if (options_.tracking != Tracking::kUkf && options_.fix_fusion == FixFusion::kJoint) {
-      a.clones.emplace(DeadReckoning(Vec3(a.position.x(), a.position.y(), 0.0), s,
-                                     options_.stop_dead_reckoning, n.start_heading_sigma_rad));
-    }
+    StartStopDeadReckoning(a, options_.stop_dead_reckoning, n.start_heading_sigma_rad);
     if (!start) {
       setup_notes_.push_back(
           fmt::format("agent '{}' has no start: {:g} m prior", n.id, options_.unknown_start_sigma_m));
@@ -293,16 +284,27 @@ void LandmarkEstimator::StepsFromFootIns(const std::string& agent, bool foot_ins
   if (foot_ins) foot_ins_.insert(agent);
 }
 
-void LandmarkEstimator::UseFootInsErrors(const std::string& agent, Agent& a) {
-  if (a.tracker) a.tracker->UseTypicalMotionErrors(options_.tracker.pdr.ForFootIns());
-  if (!a.dr && !a.clones) return;
-  const NodeInfo* node = info_.Find(agent);
-  const PdrOptions pdr = options_.stop_dead_reckoning.ForFootIns();
+void LandmarkEstimator::StartStopDeadReckoning(Agent& a, const PdrOptions& pdr,
+                                               std::optional<double> start_heading_sigma_rad) {
+  if (options_.tracking == Tracking::kUkf) return;
+  // Before any step: a.position and a.cov are the start's.
   const Vec3 start(a.position.x(), a.position.y(), 0.0);
   const double s = std::sqrt(a.cov(0, 0));
-  const std::optional<double> heading = node ? node->start_heading_sigma_rad : std::nullopt;
-  if (a.dr) a.dr.emplace(start, s, pdr, heading);
-  if (a.clones) a.clones.emplace(DeadReckoning(start, s, pdr, heading));
+  if (options_.fix_fusion == FixFusion::kIntersection ||
+      (options_.fix_fusion == FixFusion::kIndependent &&
+       options_.drift == DriftModel::kDeadReckoning)) {
+    a.dr.emplace(start, s, pdr, start_heading_sigma_rad);
+  }
+  if (options_.fix_fusion == FixFusion::kJoint) {
+    a.clones.emplace(DeadReckoning(start, s, pdr, start_heading_sigma_rad));
+  }
+}
+
+void LandmarkEstimator::UseFootInsErrors(const std::string& agent, Agent& a) {
+  if (a.tracker) a.tracker->UseTypicalMotionErrors(options_.tracker.pdr.ForFootIns());
+  const NodeInfo* node = info_.Find(agent);
+  StartStopDeadReckoning(a, options_.stop_dead_reckoning.ForFootIns(),
+                         node ? node->start_heading_sigma_rad : std::nullopt);
 }
 
 Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {

@@ -217,6 +217,11 @@ class LandmarkEstimator : public OnlineEstimator {
     std::vector<std::optional<double>> rssi;  ///< averaged per landmark
   };
   void EmitAgent(TimeS t, const std::string& id, const Agent& a, EstimateSink& sink);
+  /// The stops' dead reckoning of stop-and-go from the agent's start (a.position, a.cov) with
+  /// these errors: a.dr for intersection or independent fixes with DriftModel::kDeadReckoning,
+  /// a.clones for joint ones; none for continuous tracking.
+  void StartStopDeadReckoning(Agent& a, const PdrOptions& pdr,
+                              std::optional<double> start_heading_sigma_rad);
   /// Before the agent's first step: its motion's errors become the foot INS's own.
   void UseFootInsErrors(const std::string& agent, Agent& a);
   void EmitLandmarks(TimeS t, EstimateSink& sink);
