@@ -131,6 +131,55 @@ TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
   }
 }
 
+// An INS outside its noise model (a gyro bias at rest of 1.7 deg/s against the stated 0.11:
+// ZuptIns::OwnErrorsHold) has a covariance that is not this device's; its estimates carry the
+// dead reckoning of its own steps with a PDR's errors (the `pdr` estimator's covariance on the
+// same steps) on top of the filter's, written out here at every step end; a note says so.
+TEST(InsEstimator, AnInsOutsideItsModelCarriesItsStepsDeadReckoningWithAPdrsErrors) {
+  Walked w = SimulatedFoot();
+  for (auto& s : w.imu) s.gyro_b.z() += 0.03;
+  const Output out = RunEstimator(w, {});
+  const NodeInfo& agent = FirstAgent(w.info);
+  DeadReckoningEstimator pdr(w.info);
+  pdr.StepsFromFootIns(agent.id, true);
+  NullSink none;
+  std::map<double, Mat2> dr_at;
+  ASSERT_GT(out.steps.size(), 50u);
+  for (const Step& step : out.steps) {
+    EXPECT_FALSE(step.heading_var_rad2.has_value());  // (the INS says so on its steps)
+    pdr.Add(MissionRow(step), none);
+    const Estimate e = *pdr.Current(agent.id);
+    dr_at[step.t1] = Mat2{{e.sxx, e.sxy}, {e.sxy, e.syy}};
+  }
+  const auto states = ByTime(out);
+  std::size_t checked = 0;
+  for (const Estimate& e : out.estimates) {
+    const auto dr = dr_at.find(e.t);
+    if (dr == dr_at.end()) continue;
+    const Mat3& filter = states.at(e.t)->position_cov;
+    EXPECT_NEAR(e.sxx, filter(0, 0) + dr->second(0, 0), 1e-12);
+    EXPECT_NEAR(e.sxy, filter(0, 1) + dr->second(0, 1), 1e-12);
+    EXPECT_NEAR(e.syy, filter(1, 1) + dr->second(1, 1), 1e-12);
+    ++checked;
+  }
+  EXPECT_EQ(checked, out.steps.size());
+  // Wider than the filter's own with the start's (what the estimator writes for an INS that
+  // holds its model) by the end of the walk.
+  const Estimate& last = out.estimates.back();
+  const InsState& st = *states.at(last.t);
+  const Mat2 own = st.position_cov.topLeftCorner<2, 2>() +
+                   StartVariance(w.info, st, InsEstimatorOptions{}.track_heading_offset_sigma_rad);
+  EXPECT_GT(last.sxx + last.syy, own.trace());
+  InsEstimator estimator(w.info, {});
+  VectorSink sink;
+  for (const auto& s : w.imu) estimator.Add(MissionRow(s), sink);
+  estimator.Finish(sink);
+  const auto notes = estimator.Summary().notes;
+  EXPECT_TRUE(std::any_of(notes.begin(), notes.end(), [](const std::string& n) {
+    return n.find("dead reckoning with a PDR's errors") != std::string::npos;
+  }));
+}
+
 TEST(InsEstimator, RateOutputKeepsEveryStepEndAndTheLastState) {
   const Walked w = SimulatedFoot();
   InsEstimatorOptions o;  // defaults: rate, 50 Hz

@@ -41,6 +41,15 @@ std::vector<ImuSample> TranslationStrides(int strides, double a, double T, doubl
   return out;
 }
 
+/// The strides' detector (accelerometer-only: stance = |a| == g) and one step per stride.
+InsOptions StrideOptions() {
+  InsOptions o;
+  o.detector.kind = DetectorKind::kMag;
+  o.detector.gamma = 1.0;
+  o.mid_swing_steps = false;
+  return o;
+}
+
 TEST(ZuptIns, PureTranslationIsIntegratedExactlyAndGivesOneStepPerStride) {
   InsOptions o;
   o.detector.kind = DetectorKind::kMag;  // accelerometer-only: stance = |a| == g
@@ -103,10 +112,7 @@ TEST(ZuptIns, AGyroOutsideTheStatedModelGivesStepsWithoutAHeadingVarianceOfTheir
   // The same strides read by a gyro with 1.7 deg/s of bias on z (an uncalibrated consumer
   // part's), ten times the stated sigma: the INS says its own errors are not this device's —
   // no heading variance on its steps (consumers go on with a PDR's errors) and a warning.
-  InsOptions o;
-  o.detector.kind = DetectorKind::kMag;
-  o.detector.gamma = 1.0;
-  o.mid_swing_steps = false;
+  const InsOptions o = StrideOptions();
   auto run = [&o](double bias_radps) {
     ZuptIns ins(o);
     std::vector<Step> steps;
@@ -131,6 +137,75 @@ TEST(ZuptIns, AGyroOutsideTheStatedModelGivesStepsWithoutAHeadingVarianceOfTheir
   for (const auto& s : fine) EXPECT_TRUE(s.heading_var_rad2.has_value());
 }
 
+// A resting gyro's mean above kRestGyroBiasRadps is ambiguous over the short alignment: a large
+// turn-on bias (an uncalibrated consumer part: 4 deg/s here) or a foot still turning as it
+// settles (6 deg/s for the first 0.1 s, nothing after: the LLIO walks' start). Either way the
+// first stances' ZARU must find the bias: with the stated prior alone the gate refused the
+// 4 deg/s at every stance and the walk turned 30 deg in 8 strides (before 2026-12-07); taken as
+// the bias from the alignment, the settling foot's 6 deg/s would have been refused the same way.
+TEST(ZuptIns, AnAmbiguousGyroMeanAtTheStartIsSettledByTheFirstStances) {
+  const InsOptions o = StrideOptions();
+  ASSERT_GT(0.07, ZuptIns::kRestGyroBiasRadps);
+  auto run = [&o](double bias_radps, double settling_radps) {
+    ZuptIns ins(o);
+    std::vector<Step> steps;
+    ins.on_step = [&](const Step& s) { steps.push_back(s); };
+    for (auto s : TranslationStrides(8, 4.0, 0.25, 0.4)) {
+      s.gyro_b.z() += bias_radps + (s.t < 0.1 ? settling_radps : 0.0);
+      ins.Add(s);
+    }
+    ins.Finish();
+    return std::make_pair(steps, ins.summary().gyro_bias);
+  };
+  for (const auto& [bias, settling] : {std::pair{0.07, 0.0}, std::pair{0.0, 0.1}}) {
+    const auto [steps, estimated] = run(bias, settling);
+    ASSERT_EQ(steps.size(), 8u) << bias;
+    EXPECT_NEAR(estimated.z(), bias, 0.005) << bias;
+    for (const auto& s : steps) {  // every stride along +x (0.25 m), none turned
+      const double turned_deg = std::atan2(s.delta_n.y(), s.delta_n.x()) * 180 / M_PI;
+      EXPECT_LT(std::abs(turned_deg), 2.0) << bias << " " << s.t1;
+    }
+  }
+}
+
+// A gyro bias that jumps during the walk (3.4 deg/s on z from the fourth stride on: a
+// temperature step, a knock) is refused by the ZARU gate at every stance, steadily: after
+// zaru_recover_s of such stance the bias's covariance grows to take it and the walk stops
+// turning; the heading already turned stays (nothing observes the yaw), its variance grown by
+// what the bias turned meanwhile. With the gate alone (zaru_recover_s = 0) it turns for ever.
+TEST(ZuptIns, ABiasTheGateRefusesSteadilyIsTakenAfterASecondOfStance) {
+  auto run = [](double recover_s) {
+    InsOptions o = StrideOptions();
+    o.zaru_recover_s = recover_s;
+    ZuptIns ins(o);
+    std::vector<Step> steps;
+    ins.on_step = [&](const Step& s) { steps.push_back(s); };
+    for (auto s : TranslationStrides(12, 4.0, 0.25, 0.4)) {
+      if (s.t > 3 * 0.9 + 0.4) s.gyro_b.z() += 0.06;
+      ins.Add(s);
+    }
+    ins.Finish();
+    return std::make_tuple(steps, ins.summary(), ins.LastState()->position_cov);
+  };
+  const auto [steps, summary, cov] = run(1.0);
+  const auto [gated, gated_summary, gated_cov] = run(0.0);
+  ASSERT_EQ(steps.size(), 12u);
+  ASSERT_EQ(gated.size(), 12u);
+  EXPECT_EQ(summary.zaru_recoveries, 1u);
+  EXPECT_EQ(gated_summary.zaru_recoveries, 0u);
+  EXPECT_NEAR(summary.gyro_bias.z(), 0.06, 0.005);
+  EXPECT_LT(gated_summary.gyro_bias.z(), 0.01);
+  auto direction_deg = [](const Step& s) {
+    return std::atan2(s.delta_n.y(), s.delta_n.x()) * 180 / M_PI;
+  };
+  // The last strides no longer turn once the bias is taken; with the gate alone each turns by
+  // the bias times a stride's 0.9 s (3 deg).
+  EXPECT_LT(std::abs(direction_deg(steps[11]) - direction_deg(steps[10])), 0.3);
+  EXPECT_GT(std::abs(direction_deg(gated[11]) - direction_deg(gated[10])), 2.5);
+  // The turn before the recovery is in the covariance: wider than the gated run's across the walk.
+  EXPECT_GT(cov(1, 1), gated_cov(1, 1));
+}
+
 // When a step ends: the strides above land at rest + k (2T + rest) + 2T and lift off at
 // (k + 1)(2T + rest) + rest. At the landing (default) each step's t1 is the landing, within the
 // detector's `min_stance_samples` (and its window); at the lift-off (the old behaviour) one rest
@@ -139,11 +214,8 @@ TEST(ZuptIns, AStepEndsWhenTheFootLandsUnlessAskedForTheLiftOff) {
   const double T = 0.25, rest = 0.4, dt = 0.005;
   const auto imu = TranslationStrides(5, 4.0, T, rest);
   auto steps_of = [&](bool at_landing) {
-    InsOptions o;
-    o.detector.kind = DetectorKind::kMag;
-    o.detector.gamma = 1.0;
+    InsOptions o = StrideOptions();
     o.step_at_landing = at_landing;
-    o.mid_swing_steps = false;
     ZuptIns ins(o);
     std::vector<Step> steps;
     ins.on_step = [&](const Step& s) { steps.push_back(s); };

@@ -60,6 +60,9 @@ const OptionTable<InsOptions>& InsOptionTable() {
            "ZUPT measurement sigma");
     t.Real("zaru_gate", &O::zaru_gate_chi2, "", OptionBounds::Positive(),
            "ZARU chi-square gate (3 degrees of freedom)");
+    t.Real("zaru_recover_s", &O::zaru_recover_s, "s", OptionBounds::NonNegative(),
+           "stance over which every ZARU refused grows the gyro bias's covariance to take it "
+           "(0: never)");
     t.Real("alignment_s", &O::alignment_s, "s", OptionBounds::NonNegative(),
            "stationary start used for roll, pitch and gyro bias");
     t.Real("gravity", &O::gravity_mps2, "m/s^2", OptionBounds::Positive(), "local gravity");
@@ -122,6 +125,11 @@ std::optional<InsState> MultiAgentIns::State(const std::string& agent) const {
 std::optional<TimeS> MultiAgentIns::EarliestNextStepEnd(const std::string& agent) const {
   const auto it = agents_.find(agent);
   return it == agents_.end() ? std::nullopt : it->second->ins->EarliestNextStepEnd();
+}
+
+bool MultiAgentIns::OwnErrorsHold(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  return it == agents_.end() || it->second->ins->OwnErrorsHold();
 }
 
 std::optional<TimeS> MultiAgentIns::NewestSample(const std::string& agent) const {
@@ -200,13 +208,16 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
 }
 
 InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
-    : options_(options), ins_(info, options.ins), height_(info, options.height) {
+    : options_(options), ins_(info, options.ins), height_(info, options.height), steps_dr_(info) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("ins: " + why);
   for (const NodeInfo& n : info.nodes) {
     if (n.kind != NodeKind::kAgent) continue;
     StartPrior prior;
-    if (const auto start = info.AgentStart(n)) prior.start = start->head<2>();
+    if (const auto start = info.AgentStart(n)) {
+      prior.start = start->head<2>();
+      prior.known_start = true;
+    }
     if (n.start_sigma_m) prior.position_var_m2 = *n.start_sigma_m * *n.start_sigma_m;
     // The filter starts its yaw at the stated heading with its own sigma (MultiAgentIns); the
     // stated sigma (the filter's own when none is stated) and the foot's offset are beyond it.
@@ -236,6 +247,12 @@ InsEstimator::InsEstimator(MissionInfo info, InsEstimatorOptions options)
   // A step is emitted when its stance has ended: the agent's latest state is the stance end.
   ins_.on_step = [this](const Step& step) {
     height_.Add(step);
+    if (!ins_.OwnErrorsHold(step.agent) && start_prior_.count(step.agent) != 0 &&
+        start_prior_.at(step.agent).known_start) {
+      if (outside_model_.insert(step.agent).second) steps_dr_.StepsFromFootIns(step.agent, true);
+      NullSink none;
+      steps_dr_.Add(step, none);
+    }
     if (sink_ == nullptr) return;
     if (const auto st = ins_.State(step.agent); st && st->t == step.t1) Write(step.agent, *st);
   };
@@ -259,6 +276,14 @@ Estimate InsEstimator::ToEstimate(const std::string& agent, const InsState& st) 
     const Vec2 u(-from.y(), from.x());
     c += prior.position_var_m2 * Mat2::Identity() + prior.extra_yaw_var_rad2 * u * u.transpose();
     if (prior.unknown_heading) c += UnknownHeadingCovariance(from);
+  }
+  if (outside_model_.count(agent) != 0) {
+    // The filter's covariance is not this device's: its steps' dead reckoning with a PDR's
+    // errors (start and heading included) on top of the filter's own, whose start terms above
+    // that one carries already.
+    if (const auto dr = steps_dr_.Current(agent)) {
+      c = st.position_cov.topLeftCorner<2, 2>() + Mat2{{dr->sxx, dr->sxy}, {dr->sxy, dr->syy}};
+    }
   }
   Estimate e{st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)};
   height_.Annotate(e);
@@ -296,6 +321,11 @@ std::optional<Estimate> InsEstimator::Current(const std::string& node) const {
 EstimatorSummary InsEstimator::Summary() const {
   EstimatorSummary s = ins_.Summary();
   height_.AddToSummary(s);
+  for (const std::string& agent : outside_model_) {
+    s.notes.push_back(agent +
+                      ": covariance from its steps' dead reckoning with a PDR's errors "
+                      "(the INS's own is not this device's)");
+  }
   s.numbers["rows_ignored"] = static_cast<double>(ignored_);
   return s;
 }

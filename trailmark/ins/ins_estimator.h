@@ -10,6 +10,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 
 #include "trailmark/core/mission.h"
@@ -46,6 +47,9 @@ class MultiAgentIns {
   /// EarliestNextStepEnd), and the time of its newest sample; nullopt for an agent not seen.
   std::optional<TimeS> EarliestNextStepEnd(const std::string& agent) const;
   std::optional<TimeS> NewestSample(const std::string& agent) const;
+  /// Whether the agent's INS holds its noise model (ZuptIns::OwnErrorsHold); true before it is
+  /// aligned and for an agent not seen.
+  bool OwnErrorsHold(const std::string& agent) const;
   /// The earliest EarliestNextStepEnd of the agents whose newest sample is at or after
   /// `active_since` (a device further behind does not hold the others back); nullopt if none.
   std::optional<TimeS> EarliestNextStepEndOfActive(TimeS active_since) const;
@@ -97,6 +101,11 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable();
 /// u = (-(y - y0), x - x0) (the steps it emits are differences: neither enters them). Without a
 /// stated start_heading the filter's frame is its own: the covariance carries
 /// UnknownHeadingCovariance of the walk since the start instead (dead_reckoning.h).
+/// An agent whose INS does not hold its noise model (ZuptIns::OwnErrorsHold: a gyro bias at rest
+/// far beyond the stated one, an uncalibrated consumer unit) has a filter covariance that is not
+/// this device's: its estimates carry instead the dead reckoning of its own steps with a PDR's
+/// errors (the `pdr` estimator's covariance on the same steps: start, heading drift, step and
+/// turn scale) on top of the filter's, and a note says so.
 class InsEstimator : public OnlineEstimator {
  public:
   InsEstimator(MissionInfo info, InsEstimatorOptions options);
@@ -119,8 +128,12 @@ class InsEstimator : public OnlineEstimator {
     double position_var_m2 = 0;
     double extra_yaw_var_rad2 = 0;
     bool unknown_heading = false;  ///< no start_heading stated (UnknownHeadingCovariance)
+    bool known_start = false;      ///< the mission states it (else the origin)
   };
   std::map<std::string, StartPrior> start_prior_;
+  /// The dead reckoning of every agent's steps (a PDR's errors for an INS outside its model).
+  DeadReckoningEstimator steps_dr_;
+  std::set<std::string> outside_model_;  ///< agents whose INS does not hold its noise model
   EstimateSink* sink_ = nullptr;
   std::map<std::string, TimeS> written_;  ///< per agent: the time of the last state written
   std::size_t ignored_ = 0;

@@ -41,6 +41,8 @@ bool InsOptions::IsValid(std::string* why) const {
   else if (!(zupt_sigma_mps > 0) || !(zaru_sigma_radps > 0)) problem = "ZUPT/ZARU sigmas must be > 0";
   else if (!(accel_noise_mps2 > 0) || !(gyro_noise_radps > 0)) problem = "noises must be > 0";
   else if (!(alignment_s >= 0)) problem = "alignment_s must be >= 0";
+  else if (!(zaru_recover_s >= 0) || !std::isfinite(zaru_recover_s))
+    problem = "zaru_recover_s must be >= 0 and finite";
   else if (!(gravity_mps2 > 0)) problem = "gravity must be > 0";
   if (problem && why) *why = problem;
   return problem == nullptr;
@@ -82,7 +84,7 @@ void ZuptIns::Add(const ImuSample& s) {
   if (agent_.empty()) agent_ = s.agent;
   if (!aligned_) {
     alignment_.push_back(s);
-    if (alignment_.size() >= 5 && s.t - alignment_.front().t >= options_.alignment_s) Align();
+    if (AlignmentComplete(s.t)) Align();
     return;
   }
   const double dt = have_last_ || delay_size_ > 0
@@ -103,20 +105,35 @@ void ZuptIns::AddWithStance(const ImuSample& s, bool stance) {
   if (!aligned_) {
     alignment_.push_back(s);
     alignment_stance_.push_back(stance);
-    if (alignment_.size() >= 5 && s.t - alignment_.front().t >= options_.alignment_s) Align();
+    if (AlignmentComplete(s.t)) Align();
     return;
   }
   Process({s.t, s.accel_b, s.gyro_b}, stance);
 }
 
-void ZuptIns::Align() {
-  Vec3 f = Vec3::Zero(), w = Vec3::Zero();
-  for (const auto& s : alignment_) {
-    f += s.accel_b;
-    w += s.gyro_b;
+bool ZuptIns::AlignmentComplete(TimeS t) {
+  if (alignment_.size() < 5 || t - alignment_.front().t < options_.alignment_s) return false;
+  if (alignment_window_ == 0) {  // the first window is complete: is its gyro mean ambiguous?
+    alignment_window_ = alignment_.size();
+    Vec3 w = Vec3::Zero();
+    for (const auto& s : alignment_) w += s.gyro_b;
+    w /= static_cast<double>(alignment_.size());
+    if (!options_.estimate_biases || w.norm() < kRestGyroBiasRadps) return true;
   }
-  f /= static_cast<double>(alignment_.size());
-  w /= static_cast<double>(alignment_.size());
+  return t - alignment_.front().t >= std::max(options_.alignment_s, kAmbiguousAlignmentS);
+}
+
+void ZuptIns::Align() {
+  // Roll, pitch and the gyro's mean from the first window (alignment_s; all of a shorter start).
+  const std::size_t window =
+      alignment_window_ > 0 ? std::min(alignment_window_, alignment_.size()) : alignment_.size();
+  Vec3 f = Vec3::Zero(), w = Vec3::Zero();
+  for (std::size_t k = 0; k < window; ++k) {
+    f += alignment_[k].accel_b;
+    w += alignment_[k].gyro_b;
+  }
+  f /= static_cast<double>(window);
+  w /= static_cast<double>(window);
   const double m = f.norm();
   if (m > 0.5 && m < 1.5) {
     throw std::invalid_argument(fmt::format(
@@ -128,11 +145,6 @@ void ZuptIns::Align() {
         "specific force over the first {:.2f} s is {:.2f} m/s^2, not ~{:.2f}: the IMU is not "
         "at rest at the start (needed for alignment) or the units are wrong",
         options_.alignment_s, m, options_.gravity_mps2));
-  }
-  if (w.norm() > 0.3) {
-    summary_.warnings.push_back(fmt::format(
-        "mean gyro over the alignment is {:.2f} rad/s: not at rest, or deg/s instead of rad/s",
-        w.norm()));
   }
   if (options_.detector.window_s > 0 && alignment_.size() >= 2) {
     const double dt = (alignment_.back().t - alignment_.front().t) / (alignment_.size() - 1);
@@ -156,18 +168,46 @@ void ZuptIns::Align() {
   // A resting gyro reads its bias: the estimate's start, with its prior covariance below. Without
   // bias states the IMU is taken as unbiased (an alignment estimate subtracted for good would be
   // an error the covariance never learns of: mean NEES 380 on the exact-model test).
-  bg_ = options_.estimate_biases && w.norm() < 0.05 ? w : Vec3::Zero();
+  // Above kRestGyroBiasRadps the first window's mean is ambiguous: an uncalibrated gyro's bias (a
+  // consumer MEMS's turn-on bias reaches +-5 deg/s) or a foot still settling (the LLIO walks: 6
+  // deg/s over the first 0.1 s, 0.6 deg/s half a second later). The alignment then went on
+  // (AlignmentComplete) and the bias is the quietest window's mean: a bias reads in every window,
+  // a settling foot's turn not in all. Before 2026-12-07 such a start left the bias at zero, and
+  // the gate refused a consumer gyro's 3 deg/s at every stance (the yaw drifted 170 deg/min).
+  // A window counts if the foot rests in it: every reading within kRestGyroSpreadRadps of the
+  // window's mean (a swing's turn is not steady).
+  Vec3 rest_w = w;
+  if (w.norm() >= kRestGyroBiasRadps && alignment_.size() > window) {
+    const std::size_t hop = std::max<std::size_t>(1, window / 2);
+    for (std::size_t k = hop; k + window <= alignment_.size(); k += hop) {
+      Vec3 wk = Vec3::Zero();
+      for (std::size_t j = k; j < k + window; ++j) wk += alignment_[j].gyro_b;
+      wk /= static_cast<double>(window);
+      bool steady = true;
+      for (std::size_t j = k; j < k + window && steady; ++j) {
+        steady = (alignment_[j].gyro_b - wk).norm() < kRestGyroSpreadRadps;
+      }
+      if (steady && wk.norm() < rest_w.norm()) rest_w = wk;
+    }
+  }
+  if (rest_w.norm() > kRestGyroMaxRadps) {
+    summary_.warnings.push_back(fmt::format(
+        "mean gyro over the alignment is {:.2f} rad/s: not at rest, or deg/s instead of rad/s",
+        rest_w.norm()));
+  }
+  bg_ = options_.estimate_biases && rest_w.norm() < kRestGyroMaxRadps ? rest_w : Vec3::Zero();
   // The IMU checked against the noise model the filter states: a resting gyro's bias beyond
   // kOwnErrorsBiasSigmas of its stated sigma (an uncalibrated consumer gyro: degrees per second)
   // says the filter's own covariance, its yaw's included, is not this device's. Its steps then
   // carry no heading variance of their own, and consumers take them with a PDR's errors.
-  own_errors_hold_ = !options_.estimate_biases ||
-                     w.cwiseAbs().maxCoeff() <= kOwnErrorsBiasSigmas * options_.gyro_bias_sigma0;
+  own_errors_hold_ =
+      !options_.estimate_biases ||
+      rest_w.cwiseAbs().maxCoeff() <= kOwnErrorsBiasSigmas * options_.gyro_bias_sigma0;
   if (!own_errors_hold_) {
     summary_.warnings.push_back(fmt::format(
         "gyro bias at rest {:.3f} deg/s, beyond {:g} sigma of the stated {:.3f} deg/s: the INS's "
         "own errors are not this device's (its steps go on with a PDR's errors)",
-        w.cwiseAbs().maxCoeff() * 180 / M_PI, kOwnErrorsBiasSigmas,
+        rest_w.cwiseAbs().maxCoeff() * 180 / M_PI, kOwnErrorsBiasSigmas,
         options_.gyro_bias_sigma0 * 180 / M_PI));
   }
   P_.setZero();
@@ -311,7 +351,7 @@ void ZuptIns::Inject(const ErrorVector& dx) {
 
 void ZuptIns::UpdateZupt() { Update3<kVel>(-v_, options_.zupt_sigma_mps); }
 
-void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
+void ZuptIns::UpdateZaru(const Vec3& gyro_b, TimeS t) {
   if (!options_.estimate_biases) return;
   // At rest the gyro reads its bias. Gated (chi-square, 3 dof): a "stance" that still rotates
   // (the detector accepted a slow roll-over) must not be read as bias.
@@ -320,8 +360,34 @@ void ZuptIns::UpdateZaru(const Vec3& gyro_b) {
                             Eigen::Matrix3d::Identity() * options_.zaru_sigma_radps * options_.zaru_sigma_radps;
   if (y.dot(S.inverse() * y) > options_.zaru_gate_chi2) {  // 3x3 SPD: closed-form inverse
     ++summary_.zaru_gated;
+    if (zaru_refused_run_++ == 0) {
+      zaru_refused_sum_.setZero();
+      zaru_refused_sum2_.setZero();
+      zaru_refused_since_ = t;
+    }
+    zaru_refused_sum_ += y;
+    zaru_refused_sum2_ += y.cwiseAbs2();
+    // Refused over zaru_recover_s of stance, and steadily (a bias reads the same at every
+    // stance; a foot rolling on its stance does not): a bias the covariance does not allow.
+    const double n = static_cast<double>(zaru_refused_run_);
+    const Vec3 m = zaru_refused_sum_ / n;
+    const double spread = (zaru_refused_sum2_ / n - m.cwiseAbs2()).cwiseMax(0.0).sum();
+    if (options_.zaru_recover_s > 0 && median_dt_ > 0 &&
+        n * median_dt_ >= options_.zaru_recover_s && spread < m.squaredNorm() / 9) {
+      const Vec3 turned = q_.toRotationMatrix() * m * (t - zaru_refused_since_);
+      P_.block<3, 3>(kGyroBias, kGyroBias) += m * m.transpose();
+      P_.block<3, 3>(kAtt, kAtt) += turned * turned.transpose();
+      zaru_refused_run_ = 0;
+      if (++summary_.zaru_recoveries <= 3) {
+        summary_.warnings.push_back(fmt::format(
+            "ZARU refused for {:.1f} s of stance before t={:.2f} (gyro {:.2f} deg/s off the bias "
+            "estimate): the bias's covariance grown to take it",
+            options_.zaru_recover_s, t, m.norm() * 180 / M_PI));
+      }
+    }
     return;
   }
+  zaru_refused_run_ = 0;
   Update3<kGyroBias>(y, options_.zaru_sigma_radps);
 }
 
@@ -368,7 +434,7 @@ void ZuptIns::Process(const Sample& s, bool stance) {
   if (stance) {
     ++summary_.stance_samples;
     UpdateZupt();
-    if (options_.zaru) UpdateZaru(s.gyro_b);
+    if (options_.zaru) UpdateZaru(s.gyro_b, s.t);
   }
   // The propagation leaves its p, v, theta block symmetric to rounding (an update mirrors all).
   if (!options_.reference_arithmetic && !stance) MirrorUpper(kAccelBias);

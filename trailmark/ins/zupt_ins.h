@@ -53,6 +53,13 @@ struct InsOptions {
   bool zaru = true;
   double zaru_sigma_radps = 0.01;
   double zaru_gate_chi2 = 11.3;       ///< 99 % of chi-square with 3 degrees of freedom
+  /// A gate that refuses every ZARU for this much stance (s) refuses a bias, not a rotation: the
+  /// bias estimate is wrong beyond its covariance (an ambiguous start, a turn-on bias or a jump
+  /// the prior did not allow), and nothing else would ever correct it. Its covariance then grows
+  /// by the refused residuals' mean m (m m^T) and the attitude's by the heading that bias error
+  /// turned meanwhile, so that the next ZARU is taken. 1 s: two to three strides' stances, a
+  /// second of standing. 0: never (the gate alone, before 2026-12-07).
+  double zaru_recover_s = 1.0;
   double alignment_s = 0.1;           ///< stationary start used for roll/pitch (and gyro bias)
   double initial_yaw_rad = 0.0;
   Vec3 initial_position_n = Vec3::Zero();
@@ -93,6 +100,7 @@ struct InsState {
 struct InsSummary {
   std::size_t samples = 0, stance_samples = 0, steps = 0;
   std::size_t gaps = 0, zero_dt = 0, zaru_gated = 0;
+  std::size_t zaru_recoveries = 0;  ///< times the bias's covariance grew after refused ZARUs
   std::size_t saturated = 0;  ///< samples with an axis stuck at its extreme (clipped)
   double distance_m = 0;
   Vec3 gyro_bias = Vec3::Zero(), accel_bias = Vec3::Zero();
@@ -130,6 +138,14 @@ class ZuptIns {
   /// heading variance (Step::heading_var_rad2). 3 sigma: a priori.
   bool OwnErrorsHold() const { return own_errors_hold_; }
   static constexpr double kOwnErrorsBiasSigmas = 3.0;
+  /// A resting gyro's mean over the alignment (alignment_s) below this (rad/s, 2.9 deg/s) is its
+  /// bias, the estimate's start. Above it the mean may be a bias or a foot still settling: the
+  /// alignment goes on to kAmbiguousAlignmentS and the quietest window's mean is the bias (up to
+  /// kRestGyroMaxRadps; beyond, the IMU is not at rest or in deg/s: zero and a warning).
+  static constexpr double kRestGyroBiasRadps = 0.05;
+  static constexpr double kAmbiguousAlignmentS = 1.0;
+  static constexpr double kRestGyroMaxRadps = 0.3;
+  static constexpr double kRestGyroSpreadRadps = 0.05;
   /// Offsets of the error-state blocks (each 3 wide): dp, dv, dtheta, dba, dbg.
   static constexpr int kPos = 0, kVel = 3, kAtt = 6, kAccelBias = 9, kGyroBias = 12;
   static constexpr int kErrorStateSize = 15;
@@ -148,7 +164,9 @@ class ZuptIns {
   void PropagateCovariance(const Eigen::Matrix3d& R, const Vec3& f_n, double dt);
   void PropagateCovarianceDense(const Eigen::Matrix3d& R, const Vec3& f_n, double dt);
   void UpdateZupt();
-  void UpdateZaru(const Vec3& gyro_b);
+  void UpdateZaru(const Vec3& gyro_b, TimeS t);
+  /// Whether the samples buffered for the alignment (up to `t`) are enough to align on.
+  bool AlignmentComplete(TimeS t);
   template <int Offset>
   void Update3(const Vec3& innovation, double sigma);
   void Inject(const ErrorVector& dx);
@@ -181,6 +199,12 @@ class ZuptIns {
   TimeS t_last_ = 0;
   bool have_last_ = false;
   double median_dt_ = 0;
+  std::size_t alignment_window_ = 0;  ///< samples in the first alignment_s (0: not yet)
+  /// The ZARUs refused since the last one taken: how many, their residuals' sum, the first's t.
+  std::size_t zaru_refused_run_ = 0;
+  Vec3 zaru_refused_sum_ = Vec3::Zero();
+  Vec3 zaru_refused_sum2_ = Vec3::Zero();  ///< of the residuals' squares (their spread)
+  TimeS zaru_refused_since_ = 0;
   // steps
   int stance_run_ = 0;
   bool in_stance_phase_ = false;
