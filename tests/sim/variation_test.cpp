@@ -90,6 +90,41 @@ TEST(Variation, TheFrameFamilyMovesEverythingRigidly) {
   EXPECT_GT(moved.data.info.Find("base")->position->head<2>().norm(), 1.0);
 }
 
+// imu.csv is in "the body frame", its axes unstated: the frame family also mounts the foot IMU
+// another way — turned about its vertical, maybe upside down. Each sample is the same vector
+// read in the turned axes (its length kept; at rest gravity reads along -z when upside down),
+// and the variant says what it drew.
+TEST(Variation, TheFrameFamilyMountsTheFootImuAnotherWay) {
+  SimulatedMission base = SimulateScenario("office-loop-1lap", 2);
+  ImuSimOptions o;
+  o.rate_hz = 100;
+  AddFootImu(base, o, 3);
+  ASSERT_FALSE(base.data.imu.empty());
+  std::uint64_t k = 0;
+  while (!DrawVariation(VariationFamily::kFrame, k).imu_z_down) ++k;
+  const Variation v = DrawVariation(VariationFamily::kFrame, k);
+  SimulatedMission moved = base;
+  const auto notes = ApplyVariation(v, moved);
+  ASSERT_EQ(moved.data.imu.size(), base.data.imu.size());
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(v.imu_mount_yaw_rad, Vec3::UnitZ()) *
+                             Eigen::AngleAxisd(std::numbers::pi, Vec3::UnitX()))
+                                .toRotationMatrix();
+  for (std::size_t i = 0; i < base.data.imu.size(); i += 101) {
+    const ImuSample& a = base.data.imu[i];
+    const ImuSample& b = moved.data.imu[i];
+    EXPECT_NEAR((R * b.accel_b - a.accel_b).norm(), 0.0, 1e-9);
+    EXPECT_NEAR((R * b.gyro_b - a.gyro_b).norm(), 0.0, 1e-9);
+  }
+  EXPECT_LT(moved.data.imu.front().accel_b.z(), -9.0);  // at rest, upside down
+  EXPECT_GT(base.data.imu.front().accel_b.z(), 9.0);
+  bool said = false;
+  for (const auto& n : notes) said = said || n.find("foot IMU mounted turned") != std::string::npos;
+  EXPECT_TRUE(said);
+  bool described = false;
+  for (const auto& [key, value] : v.Describe()) described = described || key == "imu_mount_yaw_deg";
+  EXPECT_TRUE(described);
+}
+
 TEST(Variation, DoorsAcrossGapsCutTheSameOpenings) {
   // Find a K whose frame variant draws the other door convention.
   std::uint64_t k = 0;

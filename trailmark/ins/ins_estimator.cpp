@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <deque>
 #include <numbers>
 #include <stdexcept>
 
@@ -60,6 +61,35 @@ const OptionTable<InsOptions>& InsOptionTable() {
            "ZUPT measurement sigma");
     t.Real("zaru_gate", &O::zaru_gate_chi2, "", OptionBounds::Positive(),
            "ZARU chi-square gate (3 degrees of freedom)");
+    t.Integer(
+        "mount_yaw_strides", [](O& o) -> int& { return o.mount_yaw.strides; },
+        OptionBounds::Between(0, 1000),
+        "forward strides that find the IMU's mounting about the vertical (0: its forward "
+        "axis is the foot's)");
+    t.Real(
+        "mount_yaw_min_stride_m", [](O& o) -> double& { return o.mount_yaw.min_stride_m; }, "m",
+        OptionBounds::Positive(), "the shortest stride counted for the mounting");
+    t.Real(
+        "mount_yaw_max_spread", [](O& o) -> double& { return o.mount_yaw.max_spread_rad; }, "rad",
+        OptionBounds::Positive(),
+        "a stride further than this from the strides' median is a side step (decided when "
+        "three in four lie within it)");
+    t.Real(
+        "mount_yaw_hold_above", [](O& o) -> double& { return o.mount_yaw.hold_above_rad; }, "rad",
+        OptionBounds::NonNegative(),
+        "a straight stride this far off the reference holds the INS's output until the mounting "
+        "is decided");
+    t.Real(
+        "mount_yaw_max_turn", [](O& o) -> double& { return o.mount_yaw.max_turn_rad; }, "rad",
+        OptionBounds::Positive(), "a stride whose foot turned more than this is not counted");
+    t.Real(
+        "mount_yaw_min_turn", [](O& o) -> double& { return o.mount_yaw.min_turn_rad; }, "rad",
+        OptionBounds::NonNegative(),
+        "a mounting found within this of the foot's is not turned for");
+    t.Integer(
+        "mount_yaw_max_landings", [](O& o) -> int& { return o.mount_yaw.max_landings; },
+        OptionBounds::Between(1, 100000),
+        "landings after which the mounting is decided with what there is");
     t.Real("zaru_recover_s", &O::zaru_recover_s, "s", OptionBounds::NonNegative(),
            "stance over which every ZARU refused grows the gyro bias's covariance to take it "
            "(0: never)");
@@ -74,12 +104,108 @@ const OptionTable<InsOptions>& InsOptionTable() {
 struct MultiAgentIns::Agent {
   std::unique_ptr<ZuptIns> ins;
   TimeS newest = -1e300;
+  Vec2 start_n = Vec2::Zero();
+  /// The IMU's mounting about the vertical (a stated start heading only). Nothing waits for it:
+  /// until it is decided the INS's frame is given out as it is; from then on everything is turned
+  /// about the start by its correction (when it is worth a turn, `turn_rad`), and the steps after
+  /// it also make up, kCatchUpPerStepM at a time (within a walker's speed, for consumers that gate
+  /// a step's speed), what the earlier steps were turned short by: a consumer's sum of the steps
+  /// lands where the turned INS is.
+  std::optional<MountYawEstimator> mount;
+  double turn_rad = 0;
+  bool turned_any_step = false;
+  Vec2 catch_up_n = Vec2::Zero();              ///< still to make up (m)
+  double catch_up_m = 0, catch_up_var_m2 = 0;  ///< its length and variance when it began
+  static constexpr double kCatchUpPerStepM = 0.3;
+  /// Waiting for the mounting (a stride far off the reference): states and steps (with their
+  /// end state) in the order the INS gave them; the last one given out.
+  bool holding = false;
+  struct Waiting {
+    std::optional<Step> step;
+    InsState state;  ///< the state, or the step's end
+  };
+  std::deque<Waiting> waiting;
+  std::optional<InsState> given;
+  /// A lower bound on t1 of every step still to be given: a waiting step's, else the INS's.
+  std::optional<TimeS> EarliestNextStepEnd() const {
+    const std::optional<TimeS> own = ins->EarliestNextStepEnd();
+    for (const Waiting& w : waiting) {
+      if (w.step) return own ? std::min(*own, w.step->t1) : w.step->t1;
+    }
+    return own;
+  }
+  InsState Turned(InsState st) const {
+    if (turn_rad == 0.0) return st;
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(turn_rad, Vec3::UnitZ()).toRotationMatrix();
+    st.position_n.head<2>() =
+        start_n + R.topLeftCorner<2, 2>() * (st.position_n.head<2>() - start_n);
+    st.velocity_n = R * st.velocity_n;
+    st.q_nb = Eigen::Quaterniond(R) * st.q_nb;
+    st.position_cov = R * st.position_cov * R.transpose();
+    return st;
+  }
+  /// The step turned; `end_n`: where it ends in the INS's frame.
+  Step Turned(Step step, const Vec3& end_n) {
+    if (turn_rad == 0.0) return step;
+    const Eigen::Matrix2d R = Eigen::Rotation2Dd(turn_rad).toRotationMatrix();
+    const Vec2 delta = step.delta_n.head<2>();
+    step.delta_n.head<2>() = R * delta;
+    if (step.variance_m2) {  // the turned covariance's marginal variances
+      const Vec3 v = *step.variance_m2;
+      const double c = R(0, 0), s = R(1, 0);
+      step.variance_m2 = Vec3(c * c * v.x() + s * s * v.y(), s * s * v.x() + c * c * v.y(), v.z());
+    }
+    if (!turned_any_step) {
+      // The steps before were in the INS's frame: their sum ends at start + from, the turned INS
+      // at start + R from.
+      turned_any_step = true;
+      const Vec2 from = end_n.head<2>() - delta - start_n;
+      catch_up_n = (R - Eigen::Matrix2d::Identity()) * from;
+      catch_up_m = catch_up_n.norm();
+      catch_up_var_m2 = std::pow(mount->SigmaRad() * from.norm(), 2);
+    }
+    if (catch_up_m > 0 && catch_up_n.norm() > 0) {
+      // A share f of the catch-up carries f of its variance (the shares' errors are one error).
+      const double take = std::min(kCatchUpPerStepM, catch_up_n.norm());
+      const Vec2 part = catch_up_n * (take / catch_up_n.norm());
+      catch_up_n -= part;
+      step.delta_n.head<2>() += part;
+      if (step.variance_m2) {
+        step.variance_m2->head<2>() += Vec2::Constant(catch_up_var_m2 * take / catch_up_m);
+      }
+    }
+    return step;
+  }
 };
 
 MultiAgentIns::MultiAgentIns(MissionInfo info, InsOptions options)
     : info_(std::move(info)), options_(options) {}
 
 MultiAgentIns::~MultiAgentIns() = default;
+
+void MultiAgentIns::Give(Agent& a, const std::string& id, const InsState& st) {
+  if (on_state) on_state(id, a.Turned(st));
+}
+
+void MultiAgentIns::Give(Agent& a, const Step& step, const InsState& end) {
+  a.given = a.Turned(end);  // State() while the step is given: its end
+  if (on_step) on_step(a.Turned(step, end.position_n));
+}
+
+void MultiAgentIns::Release(Agent& a, const std::string& id) {
+  a.holding = false;
+  if (a.mount->Decided()) a.turn_rad = a.mount->TurnWorthTakingRad();
+  while (!a.waiting.empty()) {
+    const Agent::Waiting w = std::move(a.waiting.front());
+    a.waiting.pop_front();
+    if (w.step) {
+      Give(a, *w.step, w.state);
+    } else {
+      a.given = a.Turned(w.state);
+      Give(a, id, w.state);
+    }
+  }
+}
 
 void MultiAgentIns::Add(const ImuSample& sample) {
   auto it = agents_.find(sample.agent);
@@ -95,12 +221,36 @@ void MultiAgentIns::Add(const ImuSample& sample) {
     it = agents_.emplace(sample.agent, std::make_unique<Agent>()).first;
     Agent* a = it->second.get();
     a->ins = std::make_unique<ZuptIns>(o);
+    a->start_n = o.initial_position_n.head<2>();
+    // Without a stated heading the INS's frame is its own (any turn of it is as good).
+    if (node->start_heading_rad && o.mount_yaw.strides > 0) {
+      a->mount.emplace(o.mount_yaw, o.initial_yaw_rad);
+    }
     const std::string id = sample.agent;
-    a->ins->on_state = [this, id](const InsState& st) {
-      if (on_state) on_state(id, st);
+    a->ins->on_state = [this, a, id](const InsState& st) {
+      if (a->mount) a->mount->Start(st.q_nb);
+      if (a->holding) {
+        a->waiting.push_back({std::nullopt, st});
+      } else {
+        Give(*a, id, st);
+      }
     };
-    a->ins->on_step = [this](const Step& step) {
-      if (on_step) on_step(step);
+    a->ins->on_step = [this, a, id](const Step& step) {
+      const InsState end = *a->ins->LastState();  // the step's end (ZuptIns::EmitStep)
+      if (a->mount && !a->mount->Decided() && end.stance) {
+        a->mount->AddLanding(end.position_n, end.q_nb);
+        const auto last = a->mount->LastStrideRad();
+        if (!a->mount->Decided() && last && std::abs(*last) > options_.mount_yaw.hold_above_rad) {
+          a->holding = true;
+        }
+        if (a->mount->Decided()) a->turn_rad = a->mount->TurnWorthTakingRad();
+      }
+      if (a->holding) {
+        a->waiting.push_back({step, end});
+      } else {
+        Give(*a, step, end);
+      }
+      if (a->mount && a->mount->Decided() && a->holding) Release(*a, id);
     };
   }
   it->second->newest = std::max(it->second->newest, sample.t);
@@ -114,17 +264,25 @@ void MultiAgentIns::Finish() {
     } catch (const std::invalid_argument& e) {
       throw std::invalid_argument(id + ": " + e.what());
     }
+    if (a->mount) {
+      a->mount->Settle();
+      Release(*a, id);
+    }
   }
 }
 
 std::optional<InsState> MultiAgentIns::State(const std::string& agent) const {
   const auto it = agents_.find(agent);
-  return it == agents_.end() ? std::nullopt : it->second->ins->LastState();
+  if (it == agents_.end()) return std::nullopt;
+  const Agent& a = *it->second;
+  if (a.holding) return a.given;
+  const auto st = a.ins->LastState();
+  return st ? std::optional<InsState>(a.Turned(*st)) : std::nullopt;
 }
 
 std::optional<TimeS> MultiAgentIns::EarliestNextStepEnd(const std::string& agent) const {
   const auto it = agents_.find(agent);
-  return it == agents_.end() ? std::nullopt : it->second->ins->EarliestNextStepEnd();
+  return it == agents_.end() ? std::nullopt : it->second->EarliestNextStepEnd();
 }
 
 bool MultiAgentIns::OwnErrorsHold(const std::string& agent) const {
@@ -141,7 +299,7 @@ std::optional<TimeS> MultiAgentIns::EarliestNextStepEndOfActive(TimeS active_sin
   std::optional<TimeS> earliest;
   for (const auto& [id, a] : agents_) {
     if (a->newest < active_since) continue;
-    if (const auto b = a->ins->EarliestNextStepEnd()) {
+    if (const auto b = a->EarliestNextStepEnd()) {
       earliest = earliest ? std::min(*earliest, *b) : *b;
     }
   }
@@ -167,6 +325,14 @@ EstimatorSummary MultiAgentIns::Summary() const {
     summary.numbers[id + ".saturated_samples"] = static_cast<double>(s.saturated);
     summary.numbers[id + ".gyro_bias_z_deg_per_h"] =
         s.gyro_bias.z() * 180 / std::numbers::pi * 3600;
+    summary.numbers[id + ".zaru_recoveries"] = static_cast<double>(s.zaru_recoveries);
+    if (a->mount) {
+      summary.numbers[id + ".mount_yaw_deg"] = a->mount->CorrectionRad() * 180 / std::numbers::pi;
+      summary.numbers[id + ".mount_yaw_turned_deg"] = a->turn_rad * 180 / std::numbers::pi;
+      summary.numbers[id + ".mount_yaw_sigma_deg"] = a->mount->SigmaRad() * 180 / std::numbers::pi;
+      summary.numbers[id + ".mount_yaw_strides"] = static_cast<double>(a->mount->Strides());
+      if (!a->mount->Note().empty()) summary.notes.push_back(id + ": " + a->mount->Note());
+    }
     for (const auto& w : s.warnings) summary.notes.push_back(id + ": " + w);
   }
   summary.notes.push_back("detector: " + ToString(options_.detector.kind));

@@ -62,6 +62,10 @@ class MultiAgentIns {
 
  private:
   struct Agent;
+  /// A state, or a step with its end state, given out turned; every waiting one given out.
+  void Give(Agent& a, const std::string& id, const InsState& st);
+  void Give(Agent& a, const Step& step, const InsState& end);
+  void Release(Agent& a, const std::string& id);
   MissionInfo info_;
   InsOptions options_;
   std::map<std::string, std::unique_ptr<Agent>> agents_;

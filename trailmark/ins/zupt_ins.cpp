@@ -45,7 +45,7 @@ bool InsOptions::IsValid(std::string* why) const {
     problem = "zaru_recover_s must be >= 0 and finite";
   else if (!(gravity_mps2 > 0)) problem = "gravity must be > 0";
   if (problem && why) *why = problem;
-  return problem == nullptr;
+  return problem == nullptr && mount_yaw.IsValid(why);
 }
 
 ZuptIns::ZuptIns(InsOptions options) : options_(options), detector_(options.detector) {

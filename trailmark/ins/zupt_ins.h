@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "trailmark/core/measurements.h"
+#include "trailmark/ins/mount_yaw.h"
 #include "trailmark/ins/zupt_detectors.h"
 
 namespace trailmark::ins {
@@ -60,6 +61,9 @@ struct InsOptions {
   /// turned meanwhile, so that the next ZARU is taken. 1 s: two to three strides' stances, a
   /// second of standing. 0: never (the gate alone, before 2026-12-07).
   double zaru_recover_s = 1.0;
+  /// The IMU's mounting about the vertical found from the strides (mount_yaw.h; used by
+  /// MultiAgentIns for an agent whose start heading the mission states).
+  MountYawOptions mount_yaw;
   double alignment_s = 0.1;           ///< stationary start used for roll/pitch (and gyro bias)
   double initial_yaw_rad = 0.0;
   Vec3 initial_position_n = Vec3::Zero();

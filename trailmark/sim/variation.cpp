@@ -120,6 +120,8 @@ void DrawFamily(VariationFamily f, Random& r, Variation& v) {
       v.frame.shift_m = Vec2(r.Uniform(-2000, 2000), r.Uniform(-2000, 2000));
       v.doors_across_gaps = Coin(r);
       v.write.polyline_walls = Coin(r);
+      v.imu_mount_yaw_rad = r.Uniform(0, 2 * std::numbers::pi);
+      v.imu_z_down = Coin(r);
       break;
     case VariationFamily::kRadio: {
       v.radio = true;
@@ -630,6 +632,21 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
       for (auto& [level, plan] : sim.levels) plan = across(plan);
     }
     sim = DrawnInFrame(std::move(sim), v.frame);
+    if (!sim.data.imu.empty()) {
+      // The IMU's axes in the foot's frame: turned about the vertical, then maybe upside down
+      // (about its x axis); a foot-frame vector reads R^T v in the IMU's.
+      const Eigen::Matrix3d R =
+          (Eigen::AngleAxisd(v.imu_mount_yaw_rad, Vec3::UnitZ()) *
+           Eigen::AngleAxisd(v.imu_z_down ? std::numbers::pi : 0.0, Vec3::UnitX()))
+              .toRotationMatrix();
+      for (ImuSample& s : sim.data.imu) {
+        s.accel_b = R.transpose() * s.accel_b;
+        s.gyro_b = R.transpose() * s.gyro_b;
+      }
+      notes.push_back("foot IMU mounted turned " +
+                      Num(v.imu_mount_yaw_rad * 180 / std::numbers::pi) + " deg" +
+                      (v.imu_z_down ? ", upside down" : ""));
+    }
   }
   return notes;
 }
@@ -643,6 +660,8 @@ std::vector<std::pair<std::string, std::string>> Variation::Describe() const {
     out.emplace_back("origin_shift_m", Num(frame.shift_m.x()) + "," + Num(frame.shift_m.y()));
     out.emplace_back("doors", doors_across_gaps ? "across gaps" : "along walls");
     out.emplace_back("walls", write.polyline_walls ? "multi-vertex" : "two-point");
+    out.emplace_back("imu_mount_yaw_deg", Num(imu_mount_yaw_rad * 180 / std::numbers::pi));
+    out.emplace_back("imu_z", imu_z_down ? "down" : "up");
   }
   if (on(VariationFamily::kRadio)) {
     out.emplace_back("band", Name(band));

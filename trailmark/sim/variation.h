@@ -35,7 +35,7 @@ struct FrameMotion {
 SimulatedMission DrawnInFrame(SimulatedMission sim, const FrameMotion& f);
 
 enum class VariationFamily {
-  kFrame,   ///< rotation, origin, door convention, multi-vertex walls
+  kFrame,   ///< rotation, origin, door convention, multi-vertex walls, the foot IMU's mounting
   kRadio,   ///< band, path-loss parameters, offsets, correlated shadowing, censoring, stated model
   kRanges,  ///< NLOS long-tailed ranges, neighbour-only link graphs
   kNodes,   ///< surveyed positions drawn with their stated sigma (one error shared by all uses)
@@ -46,7 +46,7 @@ enum class VariationFamily {
   /// hand-held phone steps: carrying-mode heading jumps, scale, missed/phantom steps (after the
   /// others: a family's number seeds its draws, so the older families keep their variants)
   kPhone,
-  kAll,     ///< every family at once
+  kAll,  ///< every family at once
 };
 std::vector<std::pair<VariationFamily, std::string>> VariationFamilies();
 /// Throws std::invalid_argument naming the known families.
@@ -65,6 +65,10 @@ struct Variation {
   // frame
   FrameMotion frame;
   bool doors_across_gaps = false;  ///< walls drawn with gaps, doors across them (spec 1.1)
+  /// The foot IMU mounted another way (imu.csv is in "the body frame", axes unstated): turned
+  /// about its vertical by this, and upside down (z down, an x-forward NED body frame) or not.
+  double imu_mount_yaw_rad = 0;
+  bool imu_z_down = false;
 
   // radio (applied to rssi.csv; the simulator's own model is the reference it is moved from)
   bool radio = false;

@@ -1,0 +1,187 @@
+// SPDX-License-Identifier: MIT
+// The IMU's mounting about the vertical from a foot INS's strides (ins/mount_yaw.h): exact on
+// synthetic landings, turns and side steps left out, undecided when the strides disagree; and
+// end to end (MultiAgentIns): the same simulated walk with the IMU mounted another way gives the
+// same steps and positions, a foot-aligned IMU exactly what it gave before.
+#include "trailmark/ins/mount_yaw.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "trailmark/core/random.h"
+#include "trailmark/ins/ins_estimator.h"
+#include "trailmark/sim/imu_sim.h"
+#include "trailmark/sim/scenarios.h"
+
+namespace trailmark::ins {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180;
+
+/// Landings of a foot walking straight along `walk_rad` and then along `turn_to_rad`, its IMU's
+/// reference (the body vector along the stated heading at the start) turned `mount_rad` from
+/// where the foot points: the attitude at each landing is the foot's heading plus the mount.
+struct Landing {
+  Vec3 position_n;
+  Eigen::Quaterniond q_nb;
+};
+std::vector<Landing> Walk(double stated_rad, double mount_rad,
+                          const std::vector<double>& headings) {
+  std::vector<Landing> out;
+  Vec3 p = Vec3::Zero();
+  for (double h : headings) {
+    p += 1.2 * Vec3(std::cos(h), std::sin(h), 0);
+    // At the start the INS put the IMU's reference along the stated heading; the foot's heading
+    // is h, so the IMU's yaw (as the INS sees it, turned by the mount) is stated + (h - h0) - 0
+    // with the INS frame turned by -mount: the stride in the INS frame is along h - mount.
+    out.push_back(
+        {Vec3(std::cos(-mount_rad) * p.x() - std::sin(-mount_rad) * p.y(),
+              std::sin(-mount_rad) * p.x() + std::cos(-mount_rad) * p.y(), 0),
+         Eigen::Quaterniond(Eigen::AngleAxisd(stated_rad + h - headings.front(), Vec3::UnitZ()))});
+  }
+  return out;
+}
+
+TEST(MountYaw, TheStridesAngleFromTheReferenceIsTheTurnThatBringsTheWalkOntoTheStatedHeading) {
+  for (double mount_deg : {0.0, 7.0, -90.0, 135.0, 180.0}) {
+    const double stated = 0.4, mount = mount_deg * kDeg;
+    MountYawEstimator m({}, stated);
+    m.Start(Eigen::Quaterniond(Eigen::AngleAxisd(stated, Vec3::UnitZ())));
+    // The walker walks along the stated heading; the INS's frame is turned by -mount.
+    for (const Landing& l : Walk(stated, mount, {stated, stated, stated, stated})) {
+      m.AddLanding(l.position_n, l.q_nb);
+    }
+    ASSERT_TRUE(m.Decided()) << mount_deg;
+    EXPECT_NEAR(WrapAngle(m.CorrectionRad() - mount), 0.0, 1e-9) << mount_deg;
+    EXPECT_LT(m.SigmaRad(), 1e-9);
+    EXPECT_EQ(m.TurnWorthTakingRad(), std::abs(mount_deg) < 1 ? 0.0 : m.CorrectionRad());
+  }
+}
+
+TEST(MountYaw, TurningStridesAreLeftOut) {
+  const double stated = 0.0, mount = 30 * kDeg;
+  MountYawEstimator m({}, stated);
+  m.Start(Eigen::Quaterniond::Identity());
+  // A turn of 60 deg over one stride (the chord of a turn: not counted), then straight strides.
+  const auto landings = Walk(stated, mount, {0.0, 0.0, 60 * kDeg, 60 * kDeg, 60 * kDeg, 60 * kDeg});
+  for (const Landing& l : landings) m.AddLanding(l.position_n, l.q_nb);
+  ASSERT_TRUE(m.Decided());
+  EXPECT_NEAR(m.CorrectionRad(), mount, 1e-9);
+  // Decided at the third straight stride (the fourth landing after the start's): the turning
+  // one not counted.
+  EXPECT_EQ(m.Strides(), 3u);
+}
+
+TEST(MountYaw, StridesThatDisagreeDecideNothingAndSaySo) {
+  MountYawOptions o;
+  o.max_landings = 8;
+  MountYawEstimator m(o, 0.0);
+  m.Start(Eigen::Quaterniond::Identity());
+  // Strides 50 deg apart each way with the foot facing the same way (side steps, crawling).
+  Vec3 p = Vec3::Zero();
+  for (int k = 0; k < 8; ++k) {
+    const double a = (k % 2 == 0 ? 50.0 : -50.0) * kDeg;
+    p += Vec3(std::cos(a), std::sin(a), 0);
+    m.AddLanding(p, Eigen::Quaterniond::Identity());
+  }
+  ASSERT_TRUE(m.Decided());
+  EXPECT_EQ(m.CorrectionRad(), 0.0);
+  EXPECT_NE(m.Note().find("not found"), std::string::npos);
+  MountYawOptions bad;
+  bad.max_spread_rad = -1;
+  std::string why;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("mount_yaw_max_spread"), std::string::npos);
+}
+
+/// The IMU's samples as read by one mounted turned by R (foot frame -> IMU frame: v_imu = R^T v).
+std::vector<ImuSample> Mounted(std::vector<ImuSample> imu, const Eigen::Matrix3d& R) {
+  for (auto& s : imu) {
+    s.accel_b = R.transpose() * s.accel_b;
+    s.gyro_b = R.transpose() * s.gyro_b;
+  }
+  return imu;
+}
+
+struct InsRun {
+  std::vector<Step> steps;
+  std::vector<InsState> states;
+};
+InsRun RunIns(const MissionInfo& info, const std::vector<ImuSample>& imu, InsOptions o = {}) {
+  InsRun r;
+  MultiAgentIns ins(info, o);
+  ins.on_step = [&](const Step& s) { r.steps.push_back(s); };
+  ins.on_state = [&](const std::string&, const InsState& s) { r.states.push_back(s); };
+  for (const auto& s : imu) ins.Add(s);
+  ins.Finish();
+  return r;
+}
+
+/// The largest distance between the two runs' sums of steps so far, from the k-th step on.
+double WorstAlongTheWalk(const InsRun& x, const InsRun& y, std::size_t from_step) {
+  Vec2 a = Vec2::Zero(), b = Vec2::Zero();
+  double worst = 0;
+  for (std::size_t k = 0; k < std::min(x.steps.size(), y.steps.size()); ++k) {
+    a += x.steps[k].delta_n.head<2>();
+    b += y.steps[k].delta_n.head<2>();
+    if (k >= from_step) worst = std::max(worst, (a - b).norm());
+  }
+  return worst;
+}
+
+Vec2 SumOfSteps(const InsRun& r) {
+  Vec2 sum = Vec2::Zero();
+  for (const Step& s : r.steps) sum += s.delta_n.head<2>();
+  return sum;
+}
+
+TEST(MountYaw, TheSameWalkWithTheImuMountedAnotherWayGivesTheSameSteps) {
+  const SimulatedMission sim = SimulateScenario("office-loop-1lap", 7);
+  const auto& [id, walk] = sim.walks.front();
+  ImuSimOptions io;
+  io.rate_hz = 200;
+  const std::vector<ImuSample> imu = SimulateFootImu(walk, id, io, Random(8)).samples;
+  const MissionInfo& info = sim.data.info;
+  const InsRun aligned = RunIns(info, imu);
+  // Mounted as the foot: exactly what the INS gave without looking for the mounting.
+  InsOptions off;
+  off.mount_yaw.strides = 0;
+  const InsRun before = RunIns(info, imu, off);
+  ASSERT_EQ(aligned.steps.size(), before.steps.size());
+  for (std::size_t k = 0; k < aligned.steps.size(); ++k) {
+    ASSERT_EQ(aligned.steps[k].delta_n, before.steps[k].delta_n) << k;
+  }
+  ASSERT_GT(aligned.steps.size(), 100u);
+  const Vec2 start = info.AgentStart(*info.Find(id))->head<2>();
+  double walked = 0;
+  for (const Step& s : aligned.steps) walked += s.delta_n.head<2>().norm();
+  ASSERT_GT(walked, 50.0);
+  // Turned 90 deg (another axis forward), 10 deg (a toe-out, below the hold: made up after),
+  // and upside down and turned 120 deg: the same walk.
+  const std::vector<Eigen::Matrix3d> mounts = {
+      Eigen::AngleAxisd(90 * kDeg, Vec3::UnitZ()).toRotationMatrix(),
+      Eigen::AngleAxisd(10 * kDeg, Vec3::UnitZ()).toRotationMatrix(),
+      (Eigen::AngleAxisd(120 * kDeg, Vec3::UnitZ()) * Eigen::AngleAxisd(M_PI, Vec3::UnitX()))
+          .toRotationMatrix()};
+  for (const auto& R : mounts) {
+    const InsRun turned = RunIns(info, Mounted(imu, R));
+    ASSERT_FALSE(turned.states.empty());
+    // The steps add up to where the turned INS ends (the catch-up), and both where the aligned
+    // IMU's walk ends, within the INS's own differences (noise in another frame).
+    const Vec2 sum = SumOfSteps(turned);
+    const Vec2 last_state = turned.states.back().position_n.head<2>() - start;
+    EXPECT_LT((sum - SumOfSteps(aligned)).norm(), 0.3) << R;
+    EXPECT_LT((last_state - (aligned.states.back().position_n.head<2>() - start)).norm(), 0.3);
+    // Along the walk, after the first metres: the sums of the steps so far within 0.3 m.
+    ASSERT_EQ(turned.steps.size(), aligned.steps.size());
+    EXPECT_LT(WorstAlongTheWalk(turned, aligned, 20), 0.3);
+  }
+  // Without looking for the mounting the 90 deg IMU walks off sideways (what it did before).
+  const InsRun blind = RunIns(info, Mounted(imu, mounts[0]), off);
+  EXPECT_GT(WorstAlongTheWalk(blind, aligned, 20), 5.0);
+}
+
+}  // namespace
+}  // namespace trailmark::ins

@@ -1,0 +1,120 @@
+// SPDX-License-Identifier: MIT
+#include "trailmark/ins/mount_yaw.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace trailmark::ins {
+
+namespace {
+
+double Median(std::vector<double> v) {
+  const std::size_t n = v.size();
+  std::nth_element(v.begin(), v.begin() + n / 2, v.end());
+  const double upper = v[n / 2];
+  if (n % 2 == 1) return upper;
+  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + n / 2));
+}
+
+}  // namespace
+
+bool MountYawOptions::IsValid(std::string* why) const {
+  const char* problem = nullptr;
+  if (strides < 0)
+    problem = "mount_yaw_strides must be >= 0";
+  else if (!(min_stride_m > 0) || !std::isfinite(min_stride_m))
+    problem = "mount_yaw_min_stride_m must be > 0";
+  else if (!(max_spread_rad > 0) || !std::isfinite(max_spread_rad))
+    problem = "mount_yaw_max_spread must be > 0";
+  else if (!(max_turn_rad > 0) || !std::isfinite(max_turn_rad))
+    problem = "mount_yaw_max_turn must be > 0";
+  else if (!(min_turn_rad >= 0) || !std::isfinite(min_turn_rad))
+    problem = "mount_yaw_min_turn must be >= 0";
+  else if (!(hold_above_rad >= 0) || !std::isfinite(hold_above_rad))
+    problem = "mount_yaw_hold_above must be >= 0";
+  else if (max_landings < strides)
+    problem = "mount_yaw_max_landings must be >= mount_yaw_strides";
+  if (problem && why) *why = problem;
+  return problem == nullptr;
+}
+
+MountYawEstimator::MountYawEstimator(MountYawOptions options, double stated_heading_rad)
+    : options_(options), stated_heading_rad_(stated_heading_rad) {}
+
+void MountYawEstimator::Start(const Eigen::Quaterniond& q_nb) {
+  if (reference_b_) return;
+  const Vec3 along_n(std::cos(stated_heading_rad_), std::sin(stated_heading_rad_), 0.0);
+  reference_b_ = q_nb.conjugate() * along_n;
+}
+
+double MountYawEstimator::HeadingOf(const Eigen::Quaterniond& q_nb) const {
+  const Vec3 r_n = q_nb * *reference_b_;
+  return std::atan2(r_n.y(), r_n.x());
+}
+
+void MountYawEstimator::AddLanding(const Vec3& position_n, const Eigen::Quaterniond& q_nb) {
+  if (decided_) return;
+  Start(q_nb);
+  ++landings_;
+  const double heading = HeadingOf(q_nb);
+  if (last_landing_n_) {
+    const Vec2 stride = (position_n - *last_landing_n_).head<2>();
+    const double turned = WrapAngle(heading - last_heading_rad_);
+    if (stride.norm() >= options_.min_stride_m && std::abs(turned) <= options_.max_turn_rad) {
+      // The reference's heading half way through the stride (the foot turns in the air).
+      const double mid = last_heading_rad_ + 0.5 * turned;
+      double angle = WrapAngle(std::atan2(stride.y(), stride.x()) - mid);
+      if (!angles_rad_.empty())
+        angle = angles_rad_.front() + WrapAngle(angle - angles_rad_.front());
+      angles_rad_.push_back(angle);
+    }
+  }
+  last_landing_n_ = position_n;
+  last_heading_rad_ = heading;
+  if (static_cast<int>(angles_rad_.size()) >= options_.strides) TryDecide(false);
+  if (!decided_ && landings_ >= options_.max_landings) Settle();
+}
+
+void MountYawEstimator::TryDecide(bool force) {
+  const std::size_t n = angles_rad_.size();
+  if (n < (force ? 3u : static_cast<std::size_t>(std::max(options_.strides, 1)))) return;
+  // Decided when three in four strides (all of the first three) lie within the spread of their
+  // median: a walk forward with a stride taken sideways now and then, not a zig-zag.
+  const double median = Median(angles_rad_);
+  double sum = 0, sum2 = 0;
+  std::size_t inliers = 0;
+  for (double a : angles_rad_) {
+    if (std::abs(a - median) > options_.max_spread_rad) continue;
+    ++inliers;
+    sum += a - median;
+    sum2 += (a - median) * (a - median);
+  }
+  if (4 * inliers < 3 * n || inliers < 3) return;
+  const double mean = sum / static_cast<double>(inliers);
+  const double var = std::max(0.0, sum2 / static_cast<double>(inliers) - mean * mean);
+  decided_ = true;
+  correction_rad_ = -WrapAngle(median);
+  sigma_rad_ = std::sqrt(var / static_cast<double>(inliers));
+}
+
+double MountYawEstimator::TurnWorthTakingRad() const {
+  const double c = correction_rad_;
+  return decided_ && std::abs(c) > std::max(3 * sigma_rad_, options_.min_turn_rad) ? c : 0.0;
+}
+
+void MountYawEstimator::Settle() {
+  if (decided_) return;
+  TryDecide(true);
+  if (decided_) return;
+  decided_ = true;
+  correction_rad_ = sigma_rad_ = 0;
+  note_ = fmt::format(
+      "the IMU's mounting about the vertical not found from {} strides in {} landings (no "
+      "forward walk): its forward axis taken as the foot's",
+      angles_rad_.size(), landings_);
+}
+
+}  // namespace trailmark::ins

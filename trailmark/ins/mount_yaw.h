@@ -1,0 +1,98 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+/// How a foot IMU is mounted about the vertical, from its own strides. The mission format says
+/// only that imu.csv is in the IMU's body frame; the INS starts its yaw at the stated start
+/// heading, which puts the IMU's forward axis along it. An IMU mounted with another axis forward
+/// (a unit strapped sideways, an axis convention with y forward) turns the whole walk by that
+/// angle, and a boot's toe-out by a few degrees (measured: a 90-degree mount, 41 m p75 on the
+/// landmark office). A walker walks forward: each stride, taken between two landings of the foot,
+/// points the same way relative to the foot, whatever the walk's turns. So the angle between a
+/// stride and a body-fixed horizontal reference — the body vector along the stated heading at the
+/// start — is the same at every straight stride, and its median over the first ones is the turn
+/// that brings the walk onto the stated heading. No I/O.
+
+#include <Eigen/Geometry>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "trailmark/core/types.h"
+
+namespace trailmark::ins {
+
+struct MountYawOptions {
+  /// Straight strides to decide on (0: off, the IMU's forward axis is taken as the foot's). 3:
+  /// decided within the first metres (the steps before it are in the INS's frame and made up
+  /// after), their median rejects one taken sideways; more are counted while they disagree.
+  int strides = 3;
+  /// A stride shorter than this (m, horizontal) says little about its direction: not counted.
+  double min_stride_m = 0.3;
+  /// A stride over which the foot turned more than this (rad, 10 deg) is a turn, not counted: the
+  /// foot turns in the air and the stride is the chord of the turn.
+  double max_turn_rad = 0.17;
+  /// A stride further than this from the strides' median is not walking forward (a side step);
+  /// decided when three in four lie within it (all of the first three), else keep counting (rad,
+  /// 15 deg; side steps, crawling and zig-zags never decide).
+  double max_spread_rad = 0.26;
+  /// Landings after which it decides with what it has (a walk that never settles): the median if
+  /// the spread holds, else no turn and a note.
+  int max_landings = 40;
+  /// A correction smaller than this is not applied (rad, 1 deg): not worth turning the walk for.
+  double min_turn_rad = 0.0175;
+  /// A straight stride further than this from the reference before it is decided (rad, 15 deg:
+  /// beyond a boot's toe-out) says the IMU is mounted turned: the INS's steps and states wait
+  /// until it is decided (at most a few strides), so that no consumer walks into walls sideways.
+  /// Within it nothing waits (a mounting within a few degrees costs little until it is decided).
+  double hold_above_rad = 0.26;
+  bool IsValid(std::string* why) const;
+};
+
+class MountYawEstimator {
+ public:
+  /// `stated_heading_rad`: where the INS's yaw was started (the mission's start heading).
+  MountYawEstimator(MountYawOptions options, double stated_heading_rad);
+  /// The attitude at the INS's first state: fixes the body-frame reference (the body vector
+  /// along the stated heading then).
+  void Start(const Eigen::Quaterniond& q_nb);
+  /// The foot landed: at rest at `position_n` with attitude `q_nb`. Decides when enough strides
+  /// agree (Decided()).
+  void AddLanding(const Vec3& position_n, const Eigen::Quaterniond& q_nb);
+  /// End of data: decides with what there is (at least 3 strides within the spread), else no
+  /// turn.
+  void Settle();
+  bool Decided() const { return decided_; }
+  /// The turn (rad, about the vertical) that takes the INS's frame to the stated one: minus the
+  /// strides' median angle from the reference. 0 until decided and when undecidable.
+  double CorrectionRad() const { return correction_rad_; }
+  /// The correction if it is worth a turn (beyond 3 standard errors and `min_turn_rad`), else 0:
+  /// a mounting within a degree of the foot's is left as it is (no jump for nothing).
+  double TurnWorthTakingRad() const;
+  /// Its standard error: the standard deviation of the strides within the spread over the root
+  /// of their number (0 without).
+  double SigmaRad() const { return sigma_rad_; }
+  /// The strides counted so far, and the angle of the last one from the reference (rad).
+  std::size_t Strides() const { return angles_rad_.size(); }
+  std::optional<double> LastStrideRad() const {
+    return angles_rad_.empty() ? std::nullopt : std::optional<double>(angles_rad_.back());
+  }
+  /// Why no turn was applied, if one could not be decided (empty otherwise).
+  const std::string& Note() const { return note_; }
+
+ private:
+  /// Decides if the strides so far agree (or `force`: with at least 3 that do).
+  void TryDecide(bool force);
+  double HeadingOf(const Eigen::Quaterniond& q_nb) const;
+
+  MountYawOptions options_;
+  double stated_heading_rad_;
+  std::optional<Vec3> reference_b_;  ///< body vector along the stated heading at the start
+  std::optional<Vec3> last_landing_n_;
+  double last_heading_rad_ = 0;
+  int landings_ = 0;
+  std::vector<double> angles_rad_;  ///< each stride's angle from the reference, unwrapped
+  bool decided_ = false;
+  double correction_rad_ = 0, sigma_rad_ = 0;
+  std::string note_;
+};
+
+}  // namespace trailmark::ins
