@@ -9,12 +9,14 @@
 
 #include <algorithm>
 #include <fstream>
+#include <numbers>
 #include <random>
 #include <set>
 
 #include "device_batches.h"
 #include "pipelines/run_named.h"
 #include "test_util.h"
+#include "trailmark/ins/ins_estimator.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/sim/house_search.h"
 #include "trailmark/sim/imu_sim.h"
@@ -121,6 +123,18 @@ SimulatedMission WithImuOnly(SimulatedMission sim, std::uint64_t seed) {
   return sim;
 }
 
+/// The same with the foot IMUs mounted turned 90 deg about their vertical: the INS holds its
+/// output for a few strides until it has found the mounting (ins/mount_yaw.h).
+SimulatedMission MountedTurned(SimulatedMission sim) {
+  const Eigen::Matrix3d R =
+      Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitZ()).toRotationMatrix();
+  for (ImuSample& s : sim.data.imu) {
+    s.accel_b = R.transpose() * s.accel_b;
+    s.gyro_b = R.transpose() * s.gyro_b;
+  }
+  return sim;
+}
+
 SimulatedMission TwoFirefighters() {
   TrainingBuildingOptions o;  // two firefighters, walls, crumbs, RSSI between all
   o.rooms_per_side = 2;
@@ -174,16 +188,35 @@ void CheckCase(const Case& c) {
 TEST(LiveEqualsBatch, Pdr) {
   CheckCase({"pdr", "training building, steps", TwoFirefighters(), {}});
   CheckCase({"pdr", "training building, foot IMU", WithImuOnly(TwoFirefighters(), 9), {}});
+  CheckCase({"pdr",
+             "training building, foot IMU mounted turned",
+             MountedTurned(WithImuOnly(TwoFirefighters(), 9)),
+             {}});
 }
 
 TEST(LiveEqualsBatch, Ins) {
   CheckCase({"ins", "training building, foot IMU", WithImuOnly(TwoFirefighters(), 9),
              {{"output_hz", "5"}}});
+  const SimulatedMission turned = MountedTurned(WithImuOnly(TwoFirefighters(), 9));
+  CheckCase({"ins", "training building, foot IMU mounted turned", turned, {{"output_hz", "5"}}});
+  // (The case does exercise the wait: each agent's INS turned its walk by the mounting.)
+  ins::MultiAgentIns ins(turned.data.info, {});
+  for (const auto& s : turned.data.imu) ins.Add(s);
+  ins.Finish();
+  const auto numbers = ins.Summary().numbers;
+  for (const std::string agent : {"ff1", "ff2"}) {
+    ASSERT_TRUE(numbers.count(agent + ".mount_yaw_turned_deg")) << agent;
+    EXPECT_NEAR(numbers.at(agent + ".mount_yaw_turned_deg"), 90.0, 3.0) << agent;
+  }
 }
 
 TEST(LiveEqualsBatch, Breadcrumb) {
   CheckCase({"breadcrumb", "training building, steps", TwoFirefighters(), {}});
   CheckCase({"breadcrumb", "training building, foot IMU", WithImuOnly(TwoFirefighters(), 9), {}});
+  CheckCase({"breadcrumb",
+             "training building, foot IMU mounted turned",
+             MountedTurned(WithImuOnly(TwoFirefighters(), 9)),
+             {}});
 }
 
 TEST(LiveEqualsBatch, Landmarks) {
