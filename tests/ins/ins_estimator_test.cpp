@@ -73,7 +73,9 @@ const NodeInfo& FirstAgent(const MissionInfo& info) {
   throw std::logic_error("no agent");
 }
 
-Mat2 StartVariance(const MissionInfo& info, const InsState& st, double offset_rad) {
+/// (And the foot's distance from the walker, isotropic: InsEstimatorOptions::foot_offset_sigma_m.)
+Mat2 StartVariance(const MissionInfo& info, const InsState& st, double offset_rad,
+                   double foot_m = InsEstimatorOptions{}.foot_offset_sigma_m) {
   const NodeInfo& n = FirstAgent(info);
   const double sp = n.start_sigma_m.value_or(0.0);
   const double own = InsOptions{}.initial_yaw_sigma_rad;
@@ -81,7 +83,8 @@ Mat2 StartVariance(const MissionInfo& info, const InsState& st, double offset_ra
   const double yaw_var = n.start_heading_rad ? sh * sh + offset_rad * offset_rad - own * own : 0.0;
   const Vec2 from = st.position_n.head<2>() - info.AgentStart(n).value_or(Vec3::Zero()).head<2>();
   const Vec2 u(-from.y(), from.x());
-  return sp * sp * Mat2::Identity() + std::max(0.0, yaw_var) * u * u.transpose();
+  return (sp * sp + foot_m * foot_m) * Mat2::Identity() +
+         std::max(0.0, yaw_var) * u * u.transpose();
 }
 
 TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
@@ -97,6 +100,7 @@ TEST(InsEstimator, TheCovarianceCarriesTheStatedStartItsFilterLeavesOut) {
   agent.start_heading_sigma_rad = InsOptions{}.initial_yaw_sigma_rad;
   InsEstimatorOptions as_stated;
   as_stated.track_heading_offset_sigma_rad = 0.0;
+  as_stated.foot_offset_sigma_m = 0.0;  // the foot is what is tracked
   const Output exact = RunEstimator(w, as_stated);
   // Stated as a door a firefighter walks in by: 0.2 m, 0.05 rad; the foot's own offset (toe-out)
   // at its default.
@@ -157,9 +161,10 @@ TEST(InsEstimator, AnInsOutsideItsModelCarriesItsStepsDeadReckoningWithAPdrsErro
     const auto dr = dr_at.find(e.t);
     if (dr == dr_at.end()) continue;
     const Mat3& filter = states.at(e.t)->position_cov;
-    EXPECT_NEAR(e.sxx, filter(0, 0) + dr->second(0, 0), 1e-12);
+    const double foot = std::pow(InsEstimatorOptions{}.foot_offset_sigma_m, 2);
+    EXPECT_NEAR(e.sxx, filter(0, 0) + dr->second(0, 0) + foot, 1e-12);
     EXPECT_NEAR(e.sxy, filter(0, 1) + dr->second(0, 1), 1e-12);
-    EXPECT_NEAR(e.syy, filter(1, 1) + dr->second(1, 1), 1e-12);
+    EXPECT_NEAR(e.syy, filter(1, 1) + dr->second(1, 1) + foot, 1e-12);
     ++checked;
   }
   EXPECT_EQ(checked, out.steps.size());
@@ -197,9 +202,10 @@ TEST(InsEstimator, RateOutputKeepsEveryStepEndAndTheLastState) {
     EXPECT_EQ(e.position_n.z(), 0.0);
     ASSERT_TRUE(e.szz && e.floor);
     EXPECT_EQ(*e.floor, 0);
-    EXPECT_EQ(e.sxx,
-              it->second->position_cov(0, 0) +
-                  StartVariance(w.info, *it->second, o.track_heading_offset_sigma_rad)(0, 0));
+    EXPECT_NEAR(e.sxx,
+                it->second->position_cov(0, 0) +
+                    StartVariance(w.info, *it->second, o.track_heading_offset_sigma_rad)(0, 0),
+                1e-12);
     times.push_back(e.t);
   }
   ASSERT_TRUE(std::is_sorted(times.begin(), times.end()));

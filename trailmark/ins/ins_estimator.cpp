@@ -345,6 +345,10 @@ bool InsEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "output_hz must be >= 0 and finite";
     return false;
   }
+  if (!(foot_offset_sigma_m >= 0) || !std::isfinite(foot_offset_sigma_m)) {
+    if (why) *why = "foot_offset_sigma_m must be >= 0 and finite";
+    return false;
+  }
   if (!(track_heading_offset_sigma_rad >= 0) || !std::isfinite(track_heading_offset_sigma_rad)) {
     if (why) *why = "track_heading_offset_sigma_rad must be >= 0 and finite";
     return false;
@@ -367,6 +371,10 @@ const OptionTable<InsEstimatorOptions>& InsEstimatorOptionTable() {
            "rad", OptionBounds::NonNegative(),
            "the foot's own heading offset from the stated start heading (toe-out), in the "
            "covariance written");
+    t.Real("foot_offset_sigma_m", &InsEstimatorOptions::foot_offset_sigma_m, "m",
+           OptionBounds::NonNegative(),
+           "the foot's distance from the walker, in the covariance written (0: the foot is what "
+           "is tracked)");
     t.Include("height.", &InsEstimatorOptions::height, HeightOptionTable());
     return t;
   }();
@@ -451,6 +459,9 @@ Estimate InsEstimator::ToEstimate(const std::string& agent, const InsState& st) 
       c = st.position_cov.topLeftCorner<2, 2>() + Mat2{{dr->sxx, dr->sxy}, {dr->sxy, dr->syy}};
     }
   }
+  // The foot is not the walker: within half a stride of it along the walk, a foot's width
+  // beside it (foot_offset_sigma_m).
+  c += options_.foot_offset_sigma_m * options_.foot_offset_sigma_m * Mat2::Identity();
   Estimate e{st.t, agent, st.position_n, c(0, 0), c(0, 1), c(1, 1)};
   height_.Annotate(e);
   return e;

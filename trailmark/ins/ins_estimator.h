@@ -89,6 +89,11 @@ struct InsEstimatorOptions {
   /// the start heading's variance in the covariance written (as dead reckoning's,
   /// PdrOptions::track_heading_offset_sigma_rad); rad. 0: the foot points as stated.
   double track_heading_offset_sigma_rad = PdrOptions{}.track_heading_offset_sigma_rad;
+  /// The walker is not the foot the INS tracks: the foot is within half a stride of the walker
+  /// along the walk (uniform over +-0.65 m for a 1.3 m stride: sigma 0.375 m) and a foot's width
+  /// beside (0.1 m); isotropic 0.35 m in the covariance written, a priori (m). 0: the foot is
+  /// what is tracked (the recorded sets' truth is the foot's).
+  double foot_offset_sigma_m = 0.35;
   /// The height channel (`height.` keys): z, szz and floor from the steps and baro.csv.
   HeightOptions height;
   bool IsValid(std::string* why) const;
