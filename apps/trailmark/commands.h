@@ -22,6 +22,7 @@ struct SimulateImu {
   std::string grade = "industrial";
   std::string motion = "walk";
   bool drop_steps = false;  ///< write imu.csv only (no steps.csv): pipelines then run the INS
+  std::string mount;  ///< "YAW[,ROLL[,PITCH]]" in degrees: the IMU mounted another way (MountImu)
 };
 /// The `search` scenario of `trailmark simulate`: a directional search on the user's floor plan
 /// (one floor of it), entering at `entry` ("X,Y" in the plan's metres).

@@ -88,6 +88,9 @@ int main(int argc, char** argv) {
   simulate->add_option("--imu-motion", sim_imu.motion, "walk (default), crawl, stairs");
   simulate->add_flag("--imu-only", sim_imu.drop_steps,
                      "no steps.csv: pipelines run the INS on imu.csv");
+  simulate->add_option("--imu-mount", sim_imu.mount,
+                       "the foot IMU mounted another way: YAW[,ROLL[,PITCH]] in degrees (e.g. 90: "
+                       "y forward; 0,180: upside down)");
   cli::SimulateSearchArgs sim_search;
   simulate->add_option("--floorplan", sim_search.floorplan,
                        "search: the floor plan (GeoJSON) to search, e.g. from 'trailmark convert'");

@@ -185,6 +185,14 @@ run_failing "$TM" run --pipeline landmarks-stopgo "$dir/si" --out "$dir/x"  # im
   && ! grep -q "steps.csv: missing" "$dir/err" || { cat "$dir/err"; fail "imu.csv stands for steps.csv"; }
 run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-grade navigation --out "$dir/x"
 [ $rc -eq 1 ] && grep -q "unknown IMU grade 'navigation'" "$dir/err" || fail "bad IMU grade"
+# The same foot IMU mounted turned 90 deg (y forward): the INS finds the mounting from its strides.
+"$TM" simulate office-loop-1lap --seed 3 --imu-rate 100 --imu-grade tactical --imu-only --imu-mount 90 \
+  --out "$dir/sim90" > /dev/null || fail "simulate --imu-mount"
+"$TM" run --pipeline ins "$dir/sim90" --out "$dir/sim90r" > /dev/null || fail "ins on a mounted IMU"
+grep -q '"ff1.mount_yaw_turned_deg": 9[0-9]\|"ff1.mount_yaw_turned_deg": 8[0-9]' "$dir/sim90r/diagnostics.json" \
+  || { grep mount "$dir/sim90r/diagnostics.json"; fail "the mounting found"; }
+run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-mount 9a --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "imu-mount: '9a' is not a number" "$dir/err" || { cat "$dir/err"; fail "bad --imu-mount"; }
 
 "$TM" energy | matches "sleep-only lifetime: 8.62 years" || fail "energy"
 "$TM" simulate landmark-corridor --seed 1 --out "$dir/lc" > /dev/null || fail "simulate landmark-corridor"

@@ -126,12 +126,7 @@ SimulatedMission WithImuOnly(SimulatedMission sim, std::uint64_t seed) {
 /// The same with the foot IMUs mounted turned 90 deg about their vertical: the INS holds its
 /// output for a few strides until it has found the mounting (ins/mount_yaw.h).
 SimulatedMission MountedTurned(SimulatedMission sim) {
-  const Eigen::Matrix3d R =
-      Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitZ()).toRotationMatrix();
-  for (ImuSample& s : sim.data.imu) {
-    s.accel_b = R.transpose() * s.accel_b;
-    s.gyro_b = R.transpose() * s.gyro_b;
-  }
+  MountImu(sim.data.imu, ImuMounting(std::numbers::pi / 2));
   return sim;
 }
 

@@ -304,8 +304,10 @@ EstimatorSummary StepFrontEnd::Summary() const {
   if (!agents.empty()) {
     const EstimatorSummary ins = ins_.Summary();
     for (const auto& id : agents) {
-      const auto it = ins.numbers.find(id + ".steps");
-      if (it != ins.numbers.end()) s.numbers["ins." + id + ".steps"] = it->second;
+      for (const char* key : {".steps", ".mount_yaw_turned_deg", ".zaru_recoveries"}) {
+        const auto it = ins.numbers.find(id + key);
+        if (it != ins.numbers.end()) s.numbers["ins." + id + key] = it->second;
+      }
     }
     for (const auto& note : ins.notes) {
       if (note.rfind("detector: ", 0) != 0) s.notes.push_back("ins " + note);

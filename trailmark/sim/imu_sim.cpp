@@ -251,4 +251,17 @@ void AddFootImu(SimulatedMission& sim, const ImuSimOptions& options, std::uint64
                    [](const ImuSample& a, const ImuSample& b) { return a.t < b.t; });
 }
 
+void MountImu(std::vector<ImuSample>& samples, const Eigen::Matrix3d& imu_in_foot) {
+  for (ImuSample& s : samples) {
+    s.accel_b = imu_in_foot.transpose() * s.accel_b;
+    s.gyro_b = imu_in_foot.transpose() * s.gyro_b;
+  }
+}
+
+Eigen::Matrix3d ImuMounting(double yaw_rad, double roll_rad, double pitch_rad) {
+  return (Eigen::AngleAxisd(yaw_rad, Vec3::UnitZ()) * Eigen::AngleAxisd(pitch_rad, Vec3::UnitY()) *
+          Eigen::AngleAxisd(roll_rad, Vec3::UnitX()))
+      .toRotationMatrix();
+}
+
 }  // namespace trailmark

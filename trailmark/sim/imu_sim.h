@@ -86,4 +86,12 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent,
 /// `seed`.
 void AddFootImu(SimulatedMission& sim, const ImuSimOptions& options, std::uint64_t seed);
 
+/// The IMU mounted another way on the foot: `imu_in_foot` holds the IMU's axes in the foot's frame
+/// (x forward, z up), so each sample, a foot-frame vector v, reads imu_in_foot^T v (imu.csv's
+/// axes are unstated by the spec: another axis forward, upside down, tilted).
+void MountImu(std::vector<ImuSample>& samples, const Eigen::Matrix3d& imu_in_foot);
+/// That rotation from yaw (about z), then pitch (about y), then roll (about x), in radians:
+/// Rz(yaw) Ry(pitch) Rx(roll).
+Eigen::Matrix3d ImuMounting(double yaw_rad, double roll_rad = 0, double pitch_rad = 0);
+
 }  // namespace trailmark

@@ -14,6 +14,7 @@
 #include <stdexcept>
 
 #include "trailmark/core/random.h"
+#include "trailmark/sim/imu_sim.h"
 
 namespace trailmark {
 
@@ -635,14 +636,8 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
     if (!sim.data.imu.empty()) {
       // The IMU's axes in the foot's frame: turned about the vertical, then maybe upside down
       // (about its x axis); a foot-frame vector reads R^T v in the IMU's.
-      const Eigen::Matrix3d R =
-          (Eigen::AngleAxisd(v.imu_mount_yaw_rad, Vec3::UnitZ()) *
-           Eigen::AngleAxisd(v.imu_z_down ? std::numbers::pi : 0.0, Vec3::UnitX()))
-              .toRotationMatrix();
-      for (ImuSample& s : sim.data.imu) {
-        s.accel_b = R.transpose() * s.accel_b;
-        s.gyro_b = R.transpose() * s.gyro_b;
-      }
+      MountImu(sim.data.imu,
+               ImuMounting(v.imu_mount_yaw_rad, v.imu_z_down ? std::numbers::pi : 0.0));
       notes.push_back("foot IMU mounted turned " +
                       Num(v.imu_mount_yaw_rad * 180 / std::numbers::pi) + " deg" +
                       (v.imu_z_down ? ", upside down" : ""));
