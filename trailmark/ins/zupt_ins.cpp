@@ -111,14 +111,20 @@ void ZuptIns::AddWithStance(const ImuSample& s, bool stance) {
   Process({s.t, s.accel_b, s.gyro_b}, stance);
 }
 
+Vec3 ZuptIns::AlignmentGyroMean(std::size_t first, std::size_t n) const {
+  Vec3 w = Vec3::Zero();
+  for (std::size_t j = first; j < first + n; ++j) w += alignment_[j].gyro_b;
+  return w / static_cast<double>(n);
+}
+
 bool ZuptIns::AlignmentComplete(TimeS t) {
   if (alignment_.size() < 5 || t - alignment_.front().t < options_.alignment_s) return false;
   if (alignment_window_ == 0) {  // the first window is complete: is its gyro mean ambiguous?
     alignment_window_ = alignment_.size();
-    Vec3 w = Vec3::Zero();
-    for (const auto& s : alignment_) w += s.gyro_b;
-    w /= static_cast<double>(alignment_.size());
-    if (!options_.estimate_biases || w.norm() < kRestGyroBiasRadps) return true;
+    if (!options_.estimate_biases ||
+        AlignmentGyroMean(0, alignment_window_).norm() < kRestGyroBiasRadps) {
+      return true;
+    }
   }
   return t - alignment_.front().t >= std::max(options_.alignment_s, kAmbiguousAlignmentS);
 }
@@ -127,13 +133,10 @@ void ZuptIns::Align() {
   // Roll, pitch and the gyro's mean from the first window (alignment_s; all of a shorter start).
   const std::size_t window =
       alignment_window_ > 0 ? std::min(alignment_window_, alignment_.size()) : alignment_.size();
-  Vec3 f = Vec3::Zero(), w = Vec3::Zero();
-  for (std::size_t k = 0; k < window; ++k) {
-    f += alignment_[k].accel_b;
-    w += alignment_[k].gyro_b;
-  }
+  Vec3 f = Vec3::Zero();
+  for (std::size_t k = 0; k < window; ++k) f += alignment_[k].accel_b;
   f /= static_cast<double>(window);
-  w /= static_cast<double>(window);
+  const Vec3 w = AlignmentGyroMean(0, window);
   const double m = f.norm();
   if (m > 0.5 && m < 1.5) {
     throw std::invalid_argument(fmt::format(
@@ -180,9 +183,7 @@ void ZuptIns::Align() {
   if (w.norm() >= kRestGyroBiasRadps && alignment_.size() > window) {
     const std::size_t hop = std::max<std::size_t>(1, window / 2);
     for (std::size_t k = hop; k + window <= alignment_.size(); k += hop) {
-      Vec3 wk = Vec3::Zero();
-      for (std::size_t j = k; j < k + window; ++j) wk += alignment_[j].gyro_b;
-      wk /= static_cast<double>(window);
+      const Vec3 wk = AlignmentGyroMean(k, window);
       bool steady = true;
       for (std::size_t j = k; j < k + window && steady; ++j) {
         steady = (alignment_[j].gyro_b - wk).norm() < kRestGyroSpreadRadps;
@@ -370,10 +371,11 @@ void ZuptIns::UpdateZaru(const Vec3& gyro_b, TimeS t) {
     // Refused over zaru_recover_s of stance, and steadily (a bias reads the same at every
     // stance; a foot rolling on its stance does not): a bias the covariance does not allow.
     const double n = static_cast<double>(zaru_refused_run_);
+    if (!(options_.zaru_recover_s > 0 && median_dt_ > 0 && n * median_dt_ >= options_.zaru_recover_s))
+      return;
     const Vec3 m = zaru_refused_sum_ / n;
     const double spread = (zaru_refused_sum2_ / n - m.cwiseAbs2()).cwiseMax(0.0).sum();
-    if (options_.zaru_recover_s > 0 && median_dt_ > 0 &&
-        n * median_dt_ >= options_.zaru_recover_s && spread < m.squaredNorm() / 9) {
+    if (spread < m.squaredNorm() / 9) {
       const Vec3 turned = q_.toRotationMatrix() * m * (t - zaru_refused_since_);
       P_.block<3, 3>(kGyroBias, kGyroBias) += m * m.transpose();
       P_.block<3, 3>(kAtt, kAtt) += turned * turned.transpose();

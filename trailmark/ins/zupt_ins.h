@@ -171,6 +171,8 @@ class ZuptIns {
   void UpdateZaru(const Vec3& gyro_b, TimeS t);
   /// Whether the samples buffered for the alignment (up to `t`) are enough to align on.
   bool AlignmentComplete(TimeS t);
+  /// The gyro's mean over `n` buffered alignment samples from `first`.
+  Vec3 AlignmentGyroMean(std::size_t first, std::size_t n) const;
   template <int Offset>
   void Update3(const Vec3& innovation, double sigma);
   void Inject(const ErrorVector& dx);
