@@ -28,6 +28,12 @@ constexpr int kRangesForFix = 3;
 /// FixFusion::kJoint: an error of each stop that no other shares, (1 mm)^2 per axis (keeps the
 /// stops' prior positive definite when two stops have no step between them).
 constexpr double kStopOwnVarianceM2 = 1e-6;
+
+bool DrFirstValid(double reject, double accept, std::string* why) {
+  if (reject > 0 && reject < 1 && accept > 0 && accept <= reject) return true;
+  if (why) *why = "dr_first: 0 < dr_accept_probability <= dr_reject_probability < 1";
+  return false;
+}
 }  // namespace
 
 bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
@@ -58,7 +64,8 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     return false;
   }
   return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why) &&
-         bank.IsValid(why) && stop_dead_reckoning.IsValid(why);
+         DrFirstValid(dr_reject_probability, dr_accept_probability, why) && bank.IsValid(why) &&
+         stop_dead_reckoning.IsValid(why);
 }
 
 namespace {
@@ -164,6 +171,17 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
         "error-state: the poor device's shared PDR error sigmas, x the typical ones");
     t.Flag("adapt_noise", [](O& o) -> bool& { return o.tracker.adapt_noise; },
            "error-state: the RSSI variances scaled up while the packets' mean NIS is above 1");
+    t.Flag("dr_first", &O::dr_first,
+           "error-state: an agent on a foot INS within its noise model (known start, stated "
+           "heading) is written as its dead reckoning while the tracker does not doubt it");
+    t.Real("dr_reject_probability", &O::dr_reject_probability, "",
+           OptionBounds::Between(0.5, 0.999999),
+           "error-state: dr_first: the tracker's estimate is written where the dead reckoning is "
+           "outside the tracker's region of this probability (2-dof chi-square)");
+    t.Real("dr_accept_probability", &O::dr_accept_probability, "",
+           OptionBounds::Between(0.5, 0.999999),
+           "error-state: dr_first: the dead reckoning where it is inside this one (a blend in "
+           "between)");
     t.Flag("slam", &O::slam,
            "error-state: unknown landmarks placed from moving packets and tracked jointly");
     t.Flag("track_with_estimated_landmarks", &O::track_with_estimated_landmarks,
@@ -189,6 +207,8 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
       landmark_integrity_("landmark", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
+  dr_reject_d2_ = integrity::ChiSquareQuantile(2, options_.dr_reject_probability);
+  dr_accept_d2_ = integrity::ChiSquareQuantile(2, options_.dr_accept_probability);
   calibrated_ = info.radio && info.radio->Complete();
   if (calibrated_) {
     model_ = radio::LogDistanceModel::From(*info.radio);
@@ -303,16 +323,38 @@ void LandmarkEstimator::StartStopDeadReckoning(Agent& a, const PdrOptions& pdr,
 void LandmarkEstimator::UseFootInsErrors(const std::string& agent, Agent& a) {
   if (a.tracker) a.tracker->UseTypicalMotionErrors(options_.tracker.pdr.ForFootIns());
   const NodeInfo* node = info_.Find(agent);
+  if (options_.dr_first && a.tracker && node && node->start_heading_rad &&
+      info_.AgentStart(*node)) {
+    // Before the first step: a.position and a.cov are the start's.
+    a.own_dr.emplace(Vec3(a.position.x(), a.position.y(), a.z_m), std::sqrt(a.cov(0, 0)),
+                     options_.tracker.pdr.ForFootIns(), node->start_heading_sigma_rad);
+    setup_notes_.push_back(fmt::format(
+        "'{}': steps from a foot INS within its noise model: its dead reckoning is written until "
+        "it leaves the tracker's {:g} % region (dr_first)",
+        agent, 100 * options_.dr_reject_probability));
+  }
   StartStopDeadReckoning(a, options_.stop_dead_reckoning.ForFootIns(),
                          node ? node->start_heading_sigma_rad : std::nullopt);
 }
 
 Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {
+  if (a.own_dr && a.dr_doubt < 1) {
+    const Vec2 dr = a.own_dr->position_n().head<2>();
+    return dr + a.dr_doubt * (a.tracker->position() - dr);
+  }
   if (a.tracker) return a.tracker->position();
   return a.ukf ? a.ukf->position() : a.position;
 }
 
 Mat2 LandmarkEstimator::CovarianceOf(const Agent& a) const {
+  if (a.own_dr && a.dr_doubt < 1) {
+    // The mixture's mean squared error about the blend (each one's covariance, and the spread
+    // of the two means).
+    const double w = a.dr_doubt;
+    const Vec2 d = a.tracker->position() - a.own_dr->position_n().head<2>();
+    return (1 - w) * a.own_dr->covariance() + w * a.tracker->reported_position_cov() +
+           w * (1 - w) * d * d.transpose() + Mat2::Identity() * kStepVarianceFloorM2;
+  }
   if (a.tracker) return a.tracker->reported_position_cov();
   if (a.ukf) return a.ukf->position_cov();
   // Independent fixes, DriftModel::kDeadReckoning: the estimate is the paper's, its covariance
@@ -329,8 +371,8 @@ double LandmarkEstimator::HeightOf(const std::string& id, const Agent& a) const 
   return a.z_m;
 }
 
-void LandmarkEstimator::EmitAgent(TimeS t, const std::string& id, const Agent& a,
-                                  EstimateSink& sink) {
+void LandmarkEstimator::EmitAgent(TimeS t, const std::string& id, Agent& a, EstimateSink& sink) {
+  if (a.own_dr) ++(WritesDeadReckoning(a) ? a.dr_written : a.tracker_written);
   const Vec2 p = PositionOf(a);
   const Mat2 c = CovarianceOf(a);
   sink.Add({t, id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
@@ -604,6 +646,31 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
   }
 }
 
+bool LandmarkEstimator::TestDeadReckoning(TimeS t, const std::string& agent, Agent& a) {
+  if (!a.own_dr || !a.stepped) return false;
+  const Vec2 d = a.tracker->position() - a.own_dr->position_n().head<2>();
+  const Mat2 c = a.tracker->best().position_cov();
+  const Eigen::LDLT<Mat2> ldlt(c);
+  if (ldlt.info() != Eigen::Success || !(c.determinant() > 0)) return false;
+  const double d2 = d.dot(ldlt.solve(d));
+  if (!std::isfinite(d2)) return false;
+  // From the dead reckoning (inside the accept region) to the tracker's estimate (outside the
+  // reject region), linearly in the squared distance between them.
+  a.dr_doubt = std::clamp((d2 - dr_accept_d2_) / (dr_reject_d2_ - dr_accept_d2_), 0.0, 1.0);
+  const bool rejected = a.dr_rejected ? a.dr_doubt > 0 : a.dr_doubt >= 1;
+  if (rejected == a.dr_rejected) return false;
+  a.dr_rejected = rejected;
+  dr_notes_.push_back(
+      {t, "agent " + agent, agent, rejected ? "resumed" : "fallback",
+       fmt::format(
+           "{} at t {:.1f} s: its foot INS's dead reckoning {} the tracker's {:g} % "
+           "region (squared Mahalanobis distance {:.1f}, {:.1f} m away): {} written",
+           agent, t, rejected ? "left" : "is back in",
+           100 * (rejected ? options_.dr_reject_probability : options_.dr_accept_probability), d2,
+           d.norm(), rejected ? "the tracker's estimate" : "dead reckoning")});
+  return true;
+}
+
 void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   const TimeS t = RowTime(row);
   const bool used = std::holds_alternative<Step>(row) || std::holds_alternative<RssiPacket>(row) ||
@@ -647,8 +714,10 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     if (a.ukf) a.ukf->PredictWithDisplacement(d, Mat2::Identity() * (s * s + kStepVarianceFloorM2));
     if (a.tracker) a.tracker->AddStep(*step);
+    if (a.own_dr) a.own_dr->AddStep(*step);
     a.z_m += step->delta_n.z();
     a.t = step->t1;
+    TestDeadReckoning(step->t1, step->agent, a);
     EmitAgent(step->t1, step->agent, a, sink);
   } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
     const bool rx_agent = agents_.count(p->rx) != 0;
@@ -688,9 +757,15 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
         }
       }
       ukf_updates_ += used;
+      if (used && TestDeadReckoning(p->t, agent, a)) {
+        a.t = p->t;  // the change is shown at once
+        EmitAgent(p->t, agent, a, sink);
+      }
       // Radio moves a responder who stands still too: an estimate after a used packet, at most
       // every kRadioEmitPeriodS, once the walk has started (a live view between steps).
-      if (used && a.stepped && p->t - a.t >= kRadioEmitPeriodS - kTimeTolS) {
+      // Not while dead reckoning is written: the radio does not move it.
+      if (used && a.stepped && !WritesDeadReckoning(a) &&
+          p->t - a.t >= kRadioEmitPeriodS - kTimeTolS) {
         a.t = p->t;
         EmitAgent(p->t, agent, a, sink);
       }
@@ -735,6 +810,8 @@ std::optional<Estimate> LandmarkEstimator::Current(const std::string& node) cons
 std::optional<Mat2> LandmarkEstimator::StepTransform(const std::string& agent) const {
   const auto it = agents_.find(agent);
   if (it == agents_.end() || !it->second.tracker) return std::nullopt;
+  if (it->second.own_dr && it->second.dr_doubt < 0.5)
+    return std::nullopt;  // the steps as they come
   const LandmarkTracker& t = it->second.tracker->best();
   return Mat2((1.0 + t.scale_correction()) *
               Eigen::Rotation2Dd(t.heading_correction_rad()).toRotationMatrix());
@@ -786,7 +863,15 @@ EstimatorSummary LandmarkEstimator::Summary() const {
     summary.numbers[id + ".radio_exponent_sigma"] = k.exponent_sigma();
     summary.numbers[id + ".radio_mean_nis"] = k.mean_nis();
     summary.numbers[id + ".radio_noise_scale"] = k.noise_scale();
+    if (a.own_dr) {
+      // dr_first: the share of the agent's estimates that are not its dead reckoning's (moved
+      // toward the tracker's, or the tracker's).
+      const std::size_t n = a.dr_written + a.tracker_written;
+      summary.numbers[id + ".dr_first_tracker_share"] =
+          n ? static_cast<double>(a.tracker_written) / static_cast<double>(n) : 0.0;
+    }
   }
+  for (const IntegrityNote& n : dr_notes_) summary.integrity.push_back(n);
   if (options_.filter == TrackingFilter::kErrorState) {
     summary.numbers["rssi_gated"] = static_cast<double>(gated);
     summary.numbers["rssi_calibration_only"] = static_cast<double>(calibration_only);

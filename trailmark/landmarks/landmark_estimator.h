@@ -159,6 +159,26 @@ struct LandmarkEstimatorOptions {
   /// own errors (PdrOptions::ForFootIns of `tracker.pdr` for the error-state tracker's typical
   /// device, of `stop_dead_reckoning` for the stops), not a phone PDR's; false: the PDR's.
   bool foot_ins_own_errors = true;
+  /// Error-state (ours, issues 21 and 24: never worse than dead reckoning): an agent whose
+  /// steps come from a foot INS within its noise model (with its own errors, above), with a
+  /// known start and a stated heading, is written as its dead reckoning (`pdr`'s estimate:
+  /// PdrOptions::ForFootIns of `tracker.pdr`) while the tracker does not doubt it. Why: such an
+  /// INS dead-reckons a floor's search to decimetres, RSSI places a handheld to metres (walls,
+  /// each landmark's offset, shadowing that stays over a room: errors the log-distance model
+  /// does not have), and the motion's a-priori errors (PdrOptions::ForFootIns, set for any foot
+  /// INS) are wider than a good one's; fused, the radio pulled right tracks off by a metre or two
+  /// (docs/landmarks.md, "A good foot INS and the radio"). The tracker runs all along; d2 is the
+  /// dead reckoning's squared Mahalanobis distance from the tracker's estimate under the
+  /// tracker's own covariance (its most probable model's, without the steps' heading offset,
+  /// which the dead reckoning shares): if the dead reckoning is right, d2 is the tracker's error,
+  /// chi-square with 2 dof when the tracker is honest. Inside the `dr_accept_probability`
+  /// quantile the dead reckoning is written; beyond `dr_reject_probability`'s the tracker's
+  /// estimate (the dead reckoning is rejected: an integrity note, and another when it is
+  /// accepted again); in between, a blend linear in d2, with the mixture's covariance. false:
+  /// always the tracker's estimate.
+  bool dr_first = true;
+  double dr_reject_probability = 0.9999;
+  double dr_accept_probability = 0.99;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -209,6 +229,14 @@ class LandmarkEstimator : public OnlineEstimator {
     /// those stops' indices in stops_ (one per clone, in order).
     std::optional<DeadReckoningClones> clones;
     std::vector<std::size_t> clone_stops;
+    /// dr_first: the foot INS's dead reckoning, written while the tracker does not reject it.
+    std::optional<DeadReckoning> own_dr;
+    /// How far the estimate is moved from the dead reckoning to the tracker's (0: dead reckoning,
+    /// 1: the tracker's), and whether the dead reckoning was rejected (dr_doubt reached 1) and
+    /// not yet accepted again (back to 0).
+    double dr_doubt = 0;
+    bool dr_rejected = false;
+    std::size_t dr_written = 0, tracker_written = 0;  ///< estimates written from each
   };
   struct Stop {
     /// The standing position: the dead reckoning's, or with FixFusion::kJoint the latest
@@ -216,7 +244,7 @@ class LandmarkEstimator : public OnlineEstimator {
     Vec2 standing = Vec2::Zero();
     std::vector<std::optional<double>> rssi;  ///< averaged per landmark
   };
-  void EmitAgent(TimeS t, const std::string& id, const Agent& a, EstimateSink& sink);
+  void EmitAgent(TimeS t, const std::string& id, Agent& a, EstimateSink& sink);
   /// The stops' dead reckoning of stop-and-go from the agent's start (a.position, a.cov) with
   /// these errors: a.dr for intersection or independent fixes with DriftModel::kDeadReckoning,
   /// a.clones for joint ones; none for continuous tracking.
@@ -224,6 +252,11 @@ class LandmarkEstimator : public OnlineEstimator {
                               std::optional<double> start_heading_sigma_rad);
   /// Before the agent's first step: its motion's errors become the foot INS's own.
   void UseFootInsErrors(const std::string& agent, Agent& a);
+  /// dr_first: the agent's dead reckoning checked against the tracker's region after the
+  /// tracker moved; a change of the verdict is an integrity note. Returns whether it changed.
+  bool TestDeadReckoning(TimeS t, const std::string& agent, Agent& a);
+  /// Whether the agent's estimate is its dead reckoning now (dr_first, not rejected).
+  static bool WritesDeadReckoning(const Agent& a) { return a.own_dr && a.dr_doubt == 0; }
   void EmitLandmarks(TimeS t, EstimateSink& sink);
   void EmitLandmark(TimeS t, std::size_t j, EstimateSink& sink);
   /// A landmark's estimate: surveyed, stop-and-go's, or (unknown) the most certain tracker's.
@@ -262,6 +295,8 @@ class LandmarkEstimator : public OnlineEstimator {
   std::vector<radio::CalibrationPair> calibration_;
   std::vector<std::string> setup_notes_;
   std::set<std::string> solve_notes_;  ///< the latest solve's geometry report
+  std::vector<IntegrityNote> dr_notes_;  ///< dr_first: the tracker's verdicts on dead reckoning
+  double dr_reject_d2_ = 0, dr_accept_d2_ = 0;  ///< dr_first's chi-square thresholds
   TimeS t_last_ = -1e300;  ///< the latest row's time
   bool first_ = true;
   int refits_ = 0;
