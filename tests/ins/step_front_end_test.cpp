@@ -758,6 +758,57 @@ TEST(StepFrontEnd, AStopWithoutGoEndsWhenTheStepsAreMoreThanASway) {
 }
 
 // A foot INS measures its displacement: its steps are kept in a declared stop.
+// The foot is not the walker: every estimate of an agent on foot-INS steps carries the foot's
+// offset from the body, along (sigma 0.35 m) the last step's direction and across it (0.1 m);
+// an agent on steps.csv keeps its estimator's covariance. Exact, with the view off.
+TEST(StepFrontEnd, AnAgentOnFootInsStepsCarriesTheFootsOffsetFromTheWalker) {
+  const TwoWalkers w = MakeTwoWalkers();
+  StepFrontEndOptions o;
+  o.view_period_s = 0;
+  const double along = o.foot_offset_along_sigma_m, across = o.foot_offset_across_sigma_m;
+  ASSERT_GT(along, across);
+  StepFrontEnd front(w.sim.data.info, o, RowOrder::kGlobal, Feed::kTimeOrdered,
+                     std::make_unique<TurnedStepSum>(Mat2::Identity()));
+  VectorSink sink;
+  for (const MissionRow& r : w.merged) front.Add(r, sink);
+  front.Finish(sink);
+  std::map<std::string, Vec2> last;
+  std::size_t checked = 0;
+  for (const Estimate& e : sink.rows) {
+    const Vec2 p = e.position_n.head<2>();
+    const auto it = last.find(e.id);
+    const Vec2 step = it == last.end() ? p : Vec2(p - it->second);  // TurnedStepSum starts at 0
+    last[e.id] = p;
+    if (step.norm() < 0.05) continue;  // the direction is an earlier step's
+    Mat2 added;
+    added << e.sxx - 0.01, e.sxy, e.sxy, e.syy - 0.01;
+    const Vec2 u = step.normalized();
+    const Mat2 want = along * along * u * u.transpose() +
+                      across * across * (Mat2::Identity() - u * u.transpose());
+    ASSERT_NEAR((added - want).norm(), 0.0, 1e-9) << e.id << " at " << e.t;
+    ++checked;
+  }
+  EXPECT_GT(checked, 40u);
+  // The same walks as steps.csv rows: no foot, no offset.
+  StepFrontEnd phone(w.sim.data.info, o, RowOrder::kGlobal, Feed::kTimeOrdered,
+                     std::make_unique<TurnedStepSum>(Mat2::Identity()));
+  VectorSink phone_sink;
+  for (const MissionRow& r : w.expected) phone.Add(r, phone_sink);
+  phone.Finish(phone_sink);
+  ASSERT_GT(phone_sink.rows.size(), 40u);
+  for (const Estimate& e : phone_sink.rows) {
+    ASSERT_EQ(e.sxx, 0.01);
+    ASSERT_EQ(e.sxy, 0.0);
+    ASSERT_EQ(e.syy, 0.01);
+  }
+  // Refused: a negative or non-finite sigma.
+  o.foot_offset_across_sigma_m = -0.1;
+  EXPECT_FALSE(o.IsValid(nullptr));
+  o.foot_offset_across_sigma_m = 0.1;
+  o.foot_offset_along_sigma_m = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(o.IsValid(nullptr));
+}
+
 TEST(StepFrontEnd, AFootInsStepsAreKeptInADeclaredStop) {
   const TwoWalkers w = MakeTwoWalkers();
   std::vector<MissionRow> rows = w.merged;

@@ -19,6 +19,12 @@ bool StepFrontEndOptions::IsValid(std::string* why) const {
     if (why) *why = "view_period_s must be 0 or at least 0.01 s";
     return false;
   }
+  if (!(foot_offset_along_sigma_m >= 0) || !std::isfinite(foot_offset_along_sigma_m) ||
+      !(foot_offset_across_sigma_m >= 0) || !std::isfinite(foot_offset_across_sigma_m)) {
+    if (why)
+      *why = "foot_offset_along_sigma_m and foot_offset_across_sigma_m must be finite and >= 0";
+    return false;
+  }
   if (!(view_speed_sigma >= 0) || !std::isfinite(view_speed_sigma)) {
     if (why) *why = "view_speed_sigma must be finite and >= 0";
     return false;
@@ -31,6 +37,12 @@ const OptionTable<StepFrontEndOptions>& StepSourceOptionTable() {
     OptionTable<StepFrontEndOptions> t;
     t.Include("ins.", &StepFrontEndOptions::ins, ins::InsOptionTable());
     t.Include("height.", &StepFrontEndOptions::height, HeightOptionTable());
+    t.Real("foot_offset_along_sigma_m", &StepFrontEndOptions::foot_offset_along_sigma_m, "m",
+           OptionBounds::NonNegative(),
+           "an agent on foot-INS steps: the foot's distance from the walker along the walking "
+           "direction, in the covariance of its estimates");
+    t.Real("foot_offset_across_sigma_m", &StepFrontEndOptions::foot_offset_across_sigma_m, "m",
+           OptionBounds::NonNegative(), "and across it");
     return t;
   }();
   return table;
@@ -116,7 +128,9 @@ StepFrontEnd::StepFrontEnd(MissionInfo info, StepFrontEndOptions options, RowOrd
 class StepFrontEnd::ViewRecordingSink : public EstimateSink {
  public:
   ViewRecordingSink(StepFrontEnd& front, EstimateSink& out) : front_(front), out_(out) {}
-  void Add(const Estimate& estimate) override {
+  void Add(const Estimate& inner) override {
+    Estimate estimate = inner;
+    front_.AddFootOffset(estimate);
     out_.Add(estimate);
     if (front_.options_.view_period_s <= 0) return;
     const auto it = front_.views_.find(estimate.id);
@@ -174,6 +188,11 @@ bool StepFrontEnd::UseSource(const std::string& agent, bool imu) {
   ++ignored_;
   return false;
 }
+
+namespace {
+/// A step at least this long (m) says which way the walker walks.
+constexpr double kMovedM = 0.05;
+}  // namespace
 
 void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
   if (options_.ignore_steps_in_stops && order_ == RowOrder::kGlobal) {
@@ -245,6 +264,13 @@ void StepFrontEnd::Pass(const MissionRow& row, EstimateSink& sink) {
       v.velocity_n = span > 1e-6 ? Vec2(sum / span) : Vec2::Zero();
     }
   }
+  if (step != nullptr) {
+    const auto source = source_is_imu_.find(step->agent);
+    const Vec2 d = step->delta_n.head<2>();
+    if (source != source_is_imu_.end() && source->second && d.norm() > kMovedM) {
+      walking_direction_[step->agent] = d.normalized();
+    }
+  }
   height_.Add(row);
   ViewRecordingSink recorded(*this, sink);
   HeightAnnotatingSink annotated(height_, recorded);
@@ -294,8 +320,29 @@ void StepFrontEnd::Finish(EstimateSink& sink) {
 
 std::optional<Estimate> StepFrontEnd::Current(const std::string& node) const {
   std::optional<Estimate> e = inner_->Current(node);
-  if (e) height_.Annotate(*e);
+  if (e) {
+    height_.Annotate(*e);
+    AddFootOffset(*e);
+  }
   return e;
+}
+
+void StepFrontEnd::AddFootOffset(Estimate& e) const {
+  const auto it = source_is_imu_.find(e.id);
+  if (it == source_is_imu_.end() || !it->second) return;
+  const double along = options_.foot_offset_along_sigma_m * options_.foot_offset_along_sigma_m;
+  const double across = options_.foot_offset_across_sigma_m * options_.foot_offset_across_sigma_m;
+  const auto d = walking_direction_.find(e.id);
+  if (d == walking_direction_.end()) {  // no step yet: either way
+    e.sxx += along;
+    e.syy += along;
+    return;
+  }
+  // along u u^T + across (I - u u^T)
+  const Vec2& u = d->second;
+  e.sxx += across + (along - across) * u.x() * u.x();
+  e.sxy += (along - across) * u.x() * u.y();
+  e.syy += across + (along - across) * u.y() * u.y();
 }
 
 EstimatorSummary StepFrontEnd::Summary() const {

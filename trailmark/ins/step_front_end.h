@@ -54,6 +54,15 @@ struct StepFrontEndOptions {
   static constexpr int kMaxStepsInStop = 4;
   /// Every agent's height channel (`height.` keys): z, szz and floor of the estimates.
   HeightOptions height;
+  /// m: the foot is not the walker. A foot INS's steps say where the foot lands, the truth is
+  /// the walker's body: the body passes over a standing foot, from half a stride behind it to
+  /// half a stride ahead (a stride of 1.2-1.4 m: uniform over +-0.6-0.7 m, sigma 0.35-0.4 m),
+  /// and a foot is half a foot's width beside the body's line (0.1 m). Added to the covariance
+  /// of every estimate of an agent whose steps come from its foot INS: `along` on the walking
+  /// direction of its last step, `across` on the other axis (set a priori; the `ins` pipeline's
+  /// own `foot_offset_sigma_m`, ins_estimator.h, is the along one on both axes). 0: none.
+  double foot_offset_along_sigma_m = 0.35;
+  double foot_offset_across_sigma_m = 0.1;
   /// s; the view between rows (ours, issues 20 and 21): a steps-based estimator knows an agent
   /// only as of its last step's end, while the walker walks on and the next step ends ~0.6 s
   /// later (scored at the truth's instants, a held estimate lags by up to a step). Before each
@@ -149,6 +158,9 @@ class StepFrontEnd : public OnlineEstimator {
   void Pass(const MissionRow& row, EstimateSink& sink);
   void Release(EstimateSink& sink);
   bool UseSource(const std::string& agent, bool imu);
+  /// The foot's offset from the walker (foot_offset_*_sigma_m) in the covariance of an
+  /// estimate of an agent on foot-INS steps.
+  void AddFootOffset(Estimate& e) const;
   /// The view between rows (StepFrontEndOptions::view_period_s) of `agent` before a row at `t`.
   struct View;
   void EmitViews(View& view, TimeS t, EstimateSink& sink);
@@ -164,6 +176,8 @@ class StepFrontEnd : public OnlineEstimator {
   TimeOrderBuffer buffer_;
   ReorderWindow window_;
   std::map<std::string, bool> source_is_imu_;
+  /// Agents on foot-INS steps: the unit direction of the last step that moved.
+  std::map<std::string, Vec2> walking_direction_;
   /// Per agent: its latest estimate out (the inner estimator's or a view), the latest of the
   /// inner estimator's, and the last step passed to it (the view's base and velocity).
   struct View {
