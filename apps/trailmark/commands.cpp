@@ -105,9 +105,9 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     sim.data.info.description += ". Foot IMU at " + fmt::format("{:g}", imu.rate_hz) + " Hz, " +
                                  o.grade.name + " grade, " + imu.motion + ".";
     if (imu.drop_steps) sim.data.steps.clear();
-    if (!imu.mount.empty()) {
+    if (imu.mount) {
       std::vector<double> deg;
-      std::stringstream in(imu.mount);
+      std::stringstream in(*imu.mount);
       for (std::string part; std::getline(in, part, ',');) {
         std::size_t used = 0;
         double value = 0;
@@ -123,14 +123,14 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
       }
       if (deg.empty() || deg.size() > 3)
         throw std::invalid_argument("--imu-mount takes YAW[,ROLL[,PITCH]] in degrees, not '" +
-                                    imu.mount + "'");
+                                    *imu.mount + "'");
       deg.resize(3, 0.0);
       const double rad = std::numbers::pi / 180;
       MountImu(sim.data.imu, ImuMounting(deg[0] * rad, deg[1] * rad, deg[2] * rad));
       sim.data.info.description += fmt::format(
           " Mounted turned {:g} deg, roll {:g} deg, pitch {:g} deg.", deg[0], deg[1], deg[2]);
     }
-  } else if (!imu.mount.empty()) {
+  } else if (imu.mount) {
     throw std::invalid_argument("--imu-mount needs --imu-rate (a foot IMU to mount)");
   }
   MissionWriteStyle style;

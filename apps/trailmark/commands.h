@@ -22,7 +22,8 @@ struct SimulateImu {
   std::string grade = "industrial";
   std::string motion = "walk";
   bool drop_steps = false;  ///< write imu.csv only (no steps.csv): pipelines then run the INS
-  std::string mount;  ///< "YAW[,ROLL[,PITCH]]" in degrees: the IMU mounted another way (MountImu)
+  /// "YAW[,ROLL[,PITCH]]" in degrees: the IMU mounted another way (MountImu); given empty: refused
+  std::optional<std::string> mount;
 };
 /// The `search` scenario of `trailmark simulate`: a directional search on the user's floor plan
 /// (one floor of it), entering at `entry` ("X,Y" in the plan's metres).

@@ -193,6 +193,9 @@ grep -q '"ff1.mount_yaw_turned_deg": 9[0-9]\|"ff1.mount_yaw_turned_deg": 8[0-9]'
   || { grep mount "$dir/sim90r/diagnostics.json"; fail "the mounting found"; }
 run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-mount 9a --out "$dir/x"
 [ $rc -eq 1 ] && grep -q "imu-mount: '9a' is not a number" "$dir/err" || { cat "$dir/err"; fail "bad --imu-mount"; }
+run_failing "$TM" simulate office-loop-1lap --imu-rate 100 --imu-mount "" --out "$dir/x"
+[ $rc -eq 1 ] && grep -q "imu-mount takes YAW\[,ROLL\[,PITCH\]\] in degrees, not ''" "$dir/err" \
+  || { cat "$dir/err"; fail "an empty --imu-mount"; }
 
 "$TM" energy | matches "sleep-only lifetime: 8.62 years" || fail "energy"
 "$TM" simulate landmark-corridor --seed 1 --out "$dir/lc" > /dev/null || fail "simulate landmark-corridor"
