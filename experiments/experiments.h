@@ -28,6 +28,8 @@ struct ReproductionArgs {
   int first_seed = 1;
   /// Reproductions over several pipelines: only these (empty: all of them).
   std::vector<std::string> pipelines;
+  /// robustness: only these variation families (empty: all of them).
+  std::vector<std::string> families;
 };
 
 struct Reproduction {
@@ -96,10 +98,12 @@ int ReproduceMapMatch(int seeds, const std::filesystem::path& out, const OptionV
 /// the same variant (issue 21, item 5): variants K = first_seed .. first_seed + variants - 1.
 /// `pipelines`: only these (empty: every pipeline but the baseline and ins); `options` go to
 /// each of them (not to the dead reckoning they are compared with) and need `pipelines`.
-/// Throws std::invalid_argument for a pipeline not in the table or an option one of them refuses.
+/// `families`: only these variation families (empty: all). Throws std::invalid_argument for a
+/// pipeline not in the table, an unknown family or an option one of the pipelines refuses.
 int ReproduceRobustness(int variants, const std::filesystem::path& out, int first_seed = 1,
                         const std::vector<std::string>& pipelines = {},
-                        const OptionValues& options = {});
+                        const OptionValues& options = {},
+                        const std::vector<std::string>& families = {});
 
 /// The kinds of lie of the integrity mechanism (sim/lies.h) x magnitudes, on seeds
 /// first_seed .. first_seed + seeds - 1 (issue 21, item 3): how often the lying source is named,

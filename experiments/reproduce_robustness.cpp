@@ -35,7 +35,8 @@ std::vector<std::string> Scenarios(const PipelineSpec& p) {
 }  // namespace
 
 int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
-                        const std::vector<std::string>& only, const OptionValues& options) {
+                        const std::vector<std::string>& only, const OptionValues& options,
+                        const std::vector<std::string>& only_families) {
   // Scenario seeds 100 + K and variants K = first_seed .. first_seed + variants - 1: no default
   // of any estimator was chosen on a variant (the families are newer than every default).
   std::vector<const PipelineSpec*> pipelines;
@@ -78,7 +79,13 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
   };
   std::map<std::tuple<std::string, std::string, std::string>, Cell> cells;  // (pipeline,
                                                                             // scenario, family)
-  const auto families = VariationFamilies();
+  std::vector<std::pair<VariationFamily, std::string>> families;
+  for (const std::string& name : only_families) ParseVariationFamily(name);  // names it, or throws
+  for (const auto& f : VariationFamilies()) {
+    if (only_families.empty() ||
+        std::find(only_families.begin(), only_families.end(), f.second) != only_families.end())
+      families.push_back(f);
+  }
   int done = 0;
   const int total = static_cast<int>(by_scenario.size() * families.size()) * variants;
   for (const auto& [scenario, names] : by_scenario) {

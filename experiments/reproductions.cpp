@@ -236,7 +236,7 @@ const std::vector<Reproduction>& Reproductions() {
        true,
        [](const ReproductionArgs& a) {
          return ReproduceRobustness(a.seeds, a.out / "robustness", a.first_seed, a.pipelines,
-                                    a.options);
+                                    a.options, a.families);
        },
        /*takes_pipelines=*/true},
       {"integrity",
@@ -282,6 +282,8 @@ int Reproduce(const std::string& name, const ReproductionArgs& args) {
       throw std::invalid_argument("the " + name + " reproduction takes no --option");
     if (!args.pipelines.empty() && !r.takes_pipelines)
       throw std::invalid_argument("the " + name + " reproduction takes no --pipeline");
+    if (!args.families.empty() && name != "robustness")
+      throw std::invalid_argument("the " + name + " reproduction takes no --family");
     return r.run(args);
   }
   throw std::invalid_argument("unknown reproduction '" + name + "' (known: " + known + ")");

@@ -265,6 +265,9 @@ int main(int argc, char** argv) {
   std::vector<std::string> reproduce_pipelines;
   reproduce->add_option("--pipeline", reproduce_pipelines,
                         "robustness: only this pipeline (repeatable; needed with --option)");
+  std::vector<std::string> reproduce_families;
+  reproduce->add_option("--family", reproduce_families,
+                        "robustness: only this variation family (repeatable)");
 
   std::string convert_format, convert_src, convert_out;
   auto* convert =
@@ -617,6 +620,7 @@ int main(int argc, char** argv) {
       args.data_dir = reproduce_data;
       args.first_seed = reproduce_first_seed;
       args.pipelines = reproduce_pipelines;
+      args.families = reproduce_families;
       return experiments::Reproduce(reproduce_name, args);
     }
   } catch (const InputError& e) {

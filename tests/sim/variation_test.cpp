@@ -387,6 +387,46 @@ TEST(Variation, EventsAbsentDeclareTheCrumbsAndNodesGetOneSurveyError) {
   EXPECT_GT(surveyed, 0);
 }
 
+// The imu family: the same walks from a foot IMU of a drawn grade and rate, turned on the foot,
+// instead of steps.csv; every pipeline then runs the ZUPT INS, which finds the turn. Not part of
+// `all`, whose variants keep their steps.
+TEST(Variation, TheImuFamilyReplacesTheStepsByAFootImuOfTheDrawnGrade) {
+  std::set<std::string> grades;
+  for (std::uint64_t k = 1; k <= 40; ++k) {
+    const Variation v = DrawVariation(VariationFamily::kImu, k);
+    ASSERT_TRUE(v.foot_imu);
+    grades.insert(v.imu_grade);
+    EXPECT_TRUE(v.imu_rate_hz == 100 || v.imu_rate_hz == 200) << k;
+    EXPECT_LE(std::abs(v.imu_turn_rad), 30 * std::numbers::pi / 180) << k;
+    EXPECT_FALSE(DrawVariation(VariationFamily::kAll, k).foot_imu) << k;
+  }
+  EXPECT_EQ(grades, (std::set<std::string>{"tactical", "industrial", "consumer"}));
+  const testing::TempDir dir;
+  int checked = 0;
+  for (std::uint64_t k = 1; k <= 8 && checked < 2; ++k) {
+    const Variation v = DrawVariation(VariationFamily::kImu, k);
+    if (v.imu_grade == "consumer" || std::abs(v.imu_turn_rad) < 5 * std::numbers::pi / 180)
+      continue;  // the turn must be worth finding; a consumer gyro's start is another test's
+    const SimulatedMission sim = Varied("office-loop-1lap", 4, VariationFamily::kImu, k);
+    const SimulatedMission again = Varied("office-loop-1lap", 4, VariationFamily::kImu, k);
+    EXPECT_TRUE(sim.data.steps.empty());
+    ASSERT_GT(sim.data.imu.size(), 1000u);
+    ASSERT_EQ(sim.data.imu.size(), again.data.imu.size());
+    EXPECT_EQ(sim.data.imu.back().gyro_b, again.data.imu.back().gyro_b);
+    EXPECT_NEAR(sim.data.imu[1].t - sim.data.imu[0].t, 1.0 / v.imu_rate_hz, 1e-9) << k;
+    const auto path = dir.path() / ("imu-" + std::to_string(k));
+    WriteMissionDirectory(path, sim.data, &sim.plan, v.write);
+    VectorSink sink;
+    const EstimatorSummary s = RunBatch(RequirePipeline("pdr"), {MissionDirectory(path), {}}, sink);
+    ASSERT_TRUE(s.numbers.count("ins.ff1.mount_yaw_turned_deg")) << k;
+    EXPECT_NEAR(s.numbers.at("ins.ff1.mount_yaw_turned_deg"),
+                v.imu_turn_rad * 180 / std::numbers::pi, 3.0)
+        << k;
+    ++checked;
+  }
+  EXPECT_EQ(checked, 2);
+}
+
 TEST(Variation, EveryFamilyOfEveryScenarioWritesAValidMissionThatReadsBack) {
   const testing::TempDir dir;
   for (const std::string scenario : {"office-loop-1lap", "landmark-corridor", "beacon-trail", "house1-search"}) {

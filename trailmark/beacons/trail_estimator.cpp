@@ -760,11 +760,16 @@ bool BeaconTrailEstimator::OnFirstTrack(const Agent& a) const {
 void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
   if (!OnFirstTrack(a)) return;  // entry_track_m = 0: never
   a.first_track_n += d;
-  if (a.first_track_n.norm() < options_.entry_track_m) return;
+  // A foot INS's steps are in the stated frame once its mounting is found (StepsFromFootIns):
+  // the heading fixed at its first step, as an entry heading of zero.
+  const bool foot_ins = foot_ins_.contains(a.id);
+  if (!foot_ins && a.first_track_n.norm() < options_.entry_track_m) return;
   a.heading_fixed = true;
   const double sigma = std::hypot(a.entry_heading_sigma_rad, options_.entry_track_heading_sigma_rad);
   const double psi =
-      WrapAngle(*a.entry_heading_rad - std::atan2(a.first_track_n.y(), a.first_track_n.x()));
+      foot_ins
+          ? 0.0
+          : WrapAngle(*a.entry_heading_rad - std::atan2(a.first_track_n.y(), a.first_track_n.x()));
   if (options_.tracker != Tracker::kNone) a.drop_dr_rotation_rad = psi;
   if (a.ekf) {
     entry_fixes_ += a.ekf->UpdateHeadingCorrection(psi, sigma) == UpdateResult::kAccepted;
@@ -773,7 +778,7 @@ void BeaconTrailEstimator::FixEntryHeading(Agent& a, const Vec2& d) {
     a.pdr_n = a.start_n + Eigen::Rotation2Dd(psi) * Vec2(a.pdr_n - a.start_n);
     ++entry_fixes_;
   }
-  if (a.drop_dr) ReplayFirstTrack(a);
+  if (a.drop_dr && !foot_ins) ReplayFirstTrack(a);  // (not turned: nothing to run again)
 }
 
 void BeaconTrailEstimator::ReplayFirstTrack(Agent& a) {

@@ -15,6 +15,7 @@
 
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -161,6 +162,13 @@ class BeaconTrailEstimator : public OnlineEstimator {
   std::optional<Estimate> Current(const std::string& node) const override;
   /// The SCAAT EKF's scale x R(psi): how it moves the agent's steps.
   std::optional<Mat2> StepTransform(const std::string& agent) const override;
+  /// An agent on a foot INS's steps: no entry-heading measurement from its first metre (the INS
+  /// aligned its yaw to the stated heading and finds its mounting from its strides, ins/
+  /// mount_yaw.h; the steps before that decision are not in the stated frame). Its heading gets
+  /// the stated sigma at once, as an entry heading of zero.
+  void StepsFromFootIns(const std::string& agent, bool foot_ins) override {
+    if (foot_ins) foot_ins_.insert(agent);
+  }
   EstimatorSummary Summary() const override;
   /// The way out of `agent` at time `at_s` from the map as it is now.
   WayOutReport WayOut(const std::string& agent, TimeS at_s, double window_s) const;
@@ -339,6 +347,7 @@ class BeaconTrailEstimator : public OnlineEstimator {
   std::vector<IntegrityNote> map_notes_;
   std::map<std::string, std::size_t> ignored_;
   std::size_t rows_ignored_ = 0, close_pass_anchors_ = 0, entry_fixes_ = 0;
+  std::set<std::string> foot_ins_;  ///< agents on a foot INS's steps (StepsFromFootIns)
 };
 
 }  // namespace trailmark::beacons

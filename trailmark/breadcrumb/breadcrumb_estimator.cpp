@@ -302,6 +302,7 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
   if (const auto* step = std::get_if<Step>(&row)) {
     if (const auto f = foot_ins_.find(step->agent); f != foot_ins_.end()) {
       if (step->heading_var_rad2) loc_->UseFootInsMotion(step->agent);
+      loc_->NoEntryHeading(step->agent);  // any foot INS: its mounting search is the entry's
       foot_ins_.erase(f);  // decided at the first step
     }
     loc_->AddStep(*step);

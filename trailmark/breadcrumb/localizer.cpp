@@ -458,7 +458,13 @@ void BreadcrumbLocalizer::AddStep(const Step& step) {
   AdvanceTo(step.t1);
 }
 
-void BreadcrumbLocalizer::EntryHeading(Agent& a) {
+void BreadcrumbLocalizer::NoEntryHeading(const std::string& id) {
+  const auto it = agents_.find(id);
+  if (it == agents_.end() || !it->second.entry_heading_rad) return;
+  EntryHeading(it->second, /*measured=*/false);
+}
+
+void BreadcrumbLocalizer::EntryHeading(Agent& a, bool measured) {
   const double stated = a.entry_heading_sigma_rad;
   const double weak = std::max(options_.entry_prior_sigma_rad, stated);
   const double wide = std::hypot(stated, options_.track_heading_offset_sigma_rad);
@@ -472,6 +478,10 @@ void BreadcrumbLocalizer::EntryHeading(Agent& a) {
   auto prior_to = [&](double sigma) {
     if (sigma < weak) psi_prior(0.0, 1.0 / std::sqrt(1.0 / (sigma * sigma) - 1.0 / (weak * weak)));
   };
+  if (!measured) {
+    prior_to(stated);
+    return;
+  }
   const Vec2 track = a.knots.back().cum;
   if (track.norm() < options_.entry_track_m) {  // walked without leaving the start
     prior_to(wide);

@@ -343,6 +343,12 @@ class BreadcrumbLocalizer {
   /// exact for independent Gaussian priors). Call it before the agent's first step. Unknown
   /// agents are ignored.
   void UseFootInsMotion(const std::string& id);
+  /// The agent's steps come from a foot INS (any grade), before its first step: no entry
+  /// heading is measured from its first metre (the INS aligned its yaw to the stated heading and
+  /// finds its mounting from its strides, ins/mount_yaw.h; the steps before that decision are
+  /// not in the stated frame): the heading node gets the stated prior at once, as when the
+  /// entry heading's claim holds, without the measurement.
+  void NoEntryHeading(const std::string& id);
   /// Estimated PDR heading correction (rad) and scale error of an agent.
   std::optional<Vec2> HeadingScale(const std::string& id) const;
   /// Estimated gyro scale-factor error and PDR heading drift rate (rad/s) of an agent.
@@ -506,7 +512,8 @@ class BreadcrumbLocalizer {
   void AttachState(Agent& a, TimeS t);
   /// entry_heading: once the agent's PDR has walked entry_track_m, the measurement of its
   /// heading node.
-  void EntryHeading(Agent& a);
+  /// `measured` false: the stated prior only (NoEntryHeading).
+  void EntryHeading(Agent& a, bool measured = true);
   /// fixed_lag_s: marginalizes the agent's states older than the window (their persistent
   /// edges folded at the current estimates).
   void RetireLagged(Agent& a, TimeS t);

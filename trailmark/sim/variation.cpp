@@ -71,10 +71,11 @@ SimulatedMission DrawnInFrame(SimulatedMission sim, const FrameMotion& f) {
 
 namespace {
 
-constexpr VariationFamily kSingleFamilies[] = {
-    VariationFamily::kFrame, VariationFamily::kRadio, VariationFamily::kRanges,
-    VariationFamily::kNodes, VariationFamily::kPdr,   VariationFamily::kPhone,
-    VariationFamily::kEvents, VariationFamily::kStart, VariationFamily::kCsv};
+constexpr VariationFamily kSingleFamilies[] = {VariationFamily::kFrame,  VariationFamily::kRadio,
+                                               VariationFamily::kRanges, VariationFamily::kNodes,
+                                               VariationFamily::kPdr,    VariationFamily::kPhone,
+                                               VariationFamily::kEvents, VariationFamily::kStart,
+                                               VariationFamily::kCsv,    VariationFamily::kImu};
 
 /// A seed for (k, family, purpose) that does not collide across families (splitmix64).
 std::uint64_t Mix(std::uint64_t k, int family, int purpose) {
@@ -174,6 +175,17 @@ void DrawFamily(VariationFamily f, Random& r, Variation& v) {
         v.write.csv_shuffled_columns = Coin(r);
         v.write.csv_extra_column = Coin(r);
       } while (!v.write.csv_comments && !v.write.csv_shuffled_columns && !v.write.csv_extra_column);
+      break;
+    }
+    case VariationFamily::kImu: {
+      // A quarter tactical, half industrial (the simulator's default), a quarter consumer
+      // (uncalibrated: +-5 deg/s of gyro bias at turn-on); 100 or 200 Hz; turned on the foot
+      // by up to 30 degrees either way (toe-out and a strap: the INS's mounting search).
+      v.foot_imu = true;
+      const double u = r.Uniform();
+      v.imu_grade = u < 0.25 ? "tactical" : u < 0.75 ? "industrial" : "consumer";
+      v.imu_rate_hz = Coin(r) ? 100.0 : 200.0;
+      v.imu_turn_rad = r.Uniform(-30.0, 30.0) * std::numbers::pi / 180;
       break;
     }
     case VariationFamily::kAll: break;
@@ -558,8 +570,8 @@ std::vector<std::pair<VariationFamily, std::string>> VariationFamilies() {
   return {{VariationFamily::kFrame, "frame"},   {VariationFamily::kRadio, "radio"},
           {VariationFamily::kRanges, "ranges"}, {VariationFamily::kNodes, "nodes"},
           {VariationFamily::kPdr, "pdr"},       {VariationFamily::kPhone, "phone"},
-          {VariationFamily::kEvents, "events"},
-          {VariationFamily::kStart, "start"},   {VariationFamily::kCsv, "csv"},
+          {VariationFamily::kEvents, "events"}, {VariationFamily::kStart, "start"},
+          {VariationFamily::kCsv, "csv"},       {VariationFamily::kImu, "imu"},
           {VariationFamily::kAll, "all"}};
 }
 
@@ -584,7 +596,7 @@ Variation DrawVariation(VariationFamily family, std::uint64_t k) {
   v.family = family;
   v.k = k;
   for (VariationFamily f : kSingleFamilies) {
-    if (family != f && family != VariationFamily::kAll) continue;
+    if (family != f && (family != VariationFamily::kAll || f == VariationFamily::kImu)) continue;
     Random r(Mix(k, static_cast<int>(f), 0));
     DrawFamily(f, r, v);
   }
@@ -596,7 +608,23 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
   auto rng = [&](VariationFamily f) { return Random(Mix(v.k, static_cast<int>(f), 1)); };
   auto on = [&](VariationFamily f) { return v.family == f || v.family == VariationFamily::kAll; };
   // The walk first (a start outside extends it), then the measurements, in the simulator's
-  // frame; the frame last.
+  // frame; the frame last. The imu family is its own (not part of `all`).
+  if (v.family == VariationFamily::kImu && v.foot_imu) {
+    if (sim.walks.empty()) {
+      notes.push_back("no walks: imu variation not applied");
+    } else {
+      ImuSimOptions o;
+      o.rate_hz = v.imu_rate_hz;
+      o.grade = ImuGrade::ByName(v.imu_grade);
+      sim.data.imu.clear();
+      AddFootImu(sim, o, Mix(v.k, static_cast<int>(VariationFamily::kImu), 2));
+      sim.data.steps.clear();
+      MountImu(sim.data.imu, ImuMounting(v.imu_turn_rad));
+      notes.push_back("steps.csv replaced by a " + v.imu_grade + " foot IMU at " +
+                      Num(v.imu_rate_hz) + " Hz, turned " +
+                      Num(v.imu_turn_rad * 180 / std::numbers::pi) + " deg on the foot");
+    }
+  }
   if (on(VariationFamily::kStart)) {
     Random r = rng(VariationFamily::kStart);
     ApplyStartOutside(v, sim, r, notes);
@@ -697,6 +725,11 @@ std::vector<std::pair<std::string, std::string>> Variation::Describe() const {
   if (on(VariationFamily::kStart)) {
     out.emplace_back("start_heading", drop_start_heading ? "not given" : "given");
     out.emplace_back("start_outside_m", Num(start_outside_m));
+  }
+  if (family == VariationFamily::kImu) {
+    out.emplace_back("imu_grade", imu_grade);
+    out.emplace_back("imu_rate_hz", Num(imu_rate_hz));
+    out.emplace_back("imu_turn_deg", Num(imu_turn_rad * 180 / std::numbers::pi));
   }
   if (on(VariationFamily::kCsv)) {
     out.emplace_back("csv_comments", write.csv_comments ? "yes" : "no");

@@ -46,7 +46,10 @@ enum class VariationFamily {
   /// hand-held phone steps: carrying-mode heading jumps, scale, missed/phantom steps (after the
   /// others: a family's number seeds its draws, so the older families keep their variants)
   kPhone,
-  kAll,  ///< every family at once
+  /// steps.csv replaced by a foot IMU's imu.csv (the pipelines run the ZUPT INS): grade, rate
+  /// and a small mounting turn drawn. Not part of `all` (its variants keep their steps).
+  kImu,
+  kAll,  ///< every family at once (but imu)
 };
 std::vector<std::pair<VariationFamily, std::string>> VariationFamilies();
 /// Throws std::invalid_argument naming the known families.
@@ -99,6 +102,12 @@ struct Variation {
   double phone_scale = 1.0;              ///< step-length scale of the phone's model (shared)
   double phone_first_offset_rad = 0;     ///< heading offset of the first carrying mode
   double phone_mode_period_s = 60.0;     ///< mean time between carrying-mode changes
+
+  // imu (only as its own family)
+  bool foot_imu = false;
+  std::string imu_grade = "industrial";  ///< ImuGrade::ByName
+  double imu_rate_hz = 100.0;
+  double imu_turn_rad = 0;  ///< the IMU turned about its vertical on the foot (toe-out, strap)
 
   // events, start
   EventsKept events = EventsKept::kAll;
