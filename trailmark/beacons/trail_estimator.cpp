@@ -34,7 +34,7 @@ bool BeaconTrailOptions::IsValid(std::string* why) const {
           "measurement_hold_s, entry_heading_fallback_m, sighting_loop_m, sighting_spacing_m >= 0";
     return false;
   }
-  return ekf.IsValid(why) && map.IsValid(why) && integrity.IsValid(why);
+  return ekf.IsValid(why) && map.IsValid(why) && integrity.IsValid(why) && dr_test.IsValid(why);
 }
 
 namespace {
@@ -188,6 +188,10 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
     t.Real("bearing_sigma_rad", [](O& o) -> double& { return o.ekf.bearing_sigma_rad; }, "rad",
            OptionBounds::Positive(), "sigma of a bearing without one");
     t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
+    t.Flag("dr_first", &O::dr_first,
+           "an agent on a foot INS within its noise model (start and heading stated) is written "
+           "as its dead reckoning while the filter does not doubt it");
+    t.Include("", &O::dr_test, integrity::DeadReckoningFirstOptionTable());
     AddMapOptions(t);
     return t;
   }();
@@ -520,6 +524,12 @@ std::vector<std::vector<int>> BeaconTrailEstimator::Neighbours() const {
 
 std::pair<std::optional<Vec2>, std::optional<Mat2>> BeaconTrailEstimator::AgentEstimate(
     const Agent& a) const {
+  if (a.ekf && a.dr_first) {
+    const Vec2 dr = a.own_dr->position_n().head<2>();
+    return {a.dr_first->Position(a.ekf->position(), dr),
+            a.dr_first->Covariance(a.ekf->position(), a.ekf->position_cov(), dr,
+                                   a.own_dr->covariance())};
+  }
   if (a.ekf) return {a.ekf->position(), a.ekf->position_cov()};
   if (a.us_kf) return {a.us_kf->position(), a.us_kf->position_cov()};
   if (a.AwaitingHeading()) {
@@ -626,6 +636,7 @@ void BeaconTrailEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       cov(1, 1) = v.y();
       PredictWithMeasurements(a, step->t0, step->t1, d, cov);
       FixEntryHeading(a, d);
+      TestDeadReckoning(a, *step);
       a.step_t0 = step->t0;
       a.step_t1 = step->t1;
       // The step's velocity as the filter moved the node (updates within it excluded).
@@ -740,7 +751,9 @@ void BeaconTrailEstimator::ApplyStanding(TimeS before, TimeS now, EstimateSink& 
         keep.push_back(m);
     }
     a.deferred = std::move(keep);
-    if (accepted) Emit(now, a, sink);
+    // (Not while dead reckoning is written: the ranges do not move it; its row would be the
+    // last step's, late.)
+    if (accepted && !WritesDeadReckoning(a)) Emit(now, a, sink);
   }
 }
 
@@ -751,6 +764,25 @@ void BeaconTrailEstimator::Finish(EstimateSink& sink) {
   map_.EndSolve();
   if (map_.dirty()) map_.Solve();
   SolveAndEmit(last_t_, sink, /*begin=*/false);
+}
+
+void BeaconTrailEstimator::TestDeadReckoning(Agent& a, const Step& step) {
+  if (!a.dr_first_decided) {
+    // At the first step: a foot INS within its noise model (its steps carry the INS's heading
+    // variance, ZuptIns::OwnErrorsHold), a start and a stated heading.
+    a.dr_first_decided = true;
+    if (options_.dr_first && foot_ins_.contains(a.id) && step.heading_var_rad2 && a.has_start &&
+        a.entry_heading_rad) {
+      a.own_dr.emplace(Vec3(a.start_n.x(), a.start_n.y(), 0), a.start_sigma_m,
+                       PdrOptions{}.ForFootIns(), a.entry_heading_sigma_rad);
+      a.dr_first.emplace(options_.dr_test);
+    }
+  }
+  if (!a.dr_first) return;
+  a.own_dr->AddStep(step);
+  auto note = a.dr_first->Test(step.t1, a.id, "the filter", a.ekf->position(),
+                               a.ekf->position_cov(), a.own_dr->position_n().head<2>());
+  if (note) dr_notes_.push_back(std::move(*note));
 }
 
 bool BeaconTrailEstimator::OnFirstTrack(const Agent& a) const {
@@ -906,7 +938,7 @@ void BeaconTrailEstimator::Measure(Agent& a, TimeS t, int beacon,
     if (options_.extrapolate) EmitAhead(t, a, sink);
     return;
   }
-  if (Apply(a, m)) Emit(t, a, sink);
+  if (Apply(a, m) && !WritesDeadReckoning(a)) Emit(t, a, sink);
 }
 
 bool BeaconTrailEstimator::Apply(Agent& a, const Deferred& m) {
@@ -987,12 +1019,14 @@ void BeaconTrailEstimator::Emit(TimeS t, Agent& a, EstimateSink& sink) {
   if (options_.tracker == Tracker::kNone) return;
   const auto [p, c] = AgentEstimate(a);
   if (!p) return;
+  if (a.dr_first) a.dr_first->Count();
   a.t = t;
   sink.Add({t, a.id, Vec3(p->x(), p->y(), 0), (*c)(0, 0), (*c)(0, 1), (*c)(1, 1)});
 }
 
 bool BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
   if (!a.ekf || !std::isfinite(a.step_t1) || !(t > a.step_t1) || t <= a.t) return false;
+  if (a.dr_first) return false;  // the step front end's view moves a written dead reckoning on
   const double ahead_s = std::min(t - a.step_t1, a.step_t1 - a.step_t0);
   const double speed = a.step_velocity_n.norm();
   const Vec2 p = a.ekf->position() + a.step_velocity_n * ahead_s;
@@ -1006,6 +1040,8 @@ bool BeaconTrailEstimator::EmitAhead(TimeS t, Agent& a, EstimateSink& sink) {
 std::optional<Mat2> BeaconTrailEstimator::StepTransform(const std::string& agent) const {
   const auto it = agents_.find(agent);
   if (it == agents_.end() || !it->second.ekf) return std::nullopt;
+  if (it->second.dr_first && it->second.dr_first->doubt() < 0.5)
+    return std::nullopt;  // the steps as they come
   const ScaatEkf& ekf = *it->second.ekf;
   return Mat2(ekf.scale() * Eigen::Rotation2Dd(ekf.psi()).toRotationMatrix());
 }
@@ -1085,6 +1121,12 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["implausible_beacon_links"] = static_cast<double>(implausible_links_);
   num["rows_ignored"] = static_cast<double>(rows_ignored_);
   summary.integrity.insert(summary.integrity.end(), map_notes_.begin(), map_notes_.end());
+  summary.integrity.insert(summary.integrity.end(), dr_notes_.begin(), dr_notes_.end());
+  for (const auto& [id, a] : agents_) {
+    // dr_first: the share of the agent's estimates that are not its dead reckoning's.
+    if (a.dr_first)
+      summary.numbers[id + ".dr_first_filter_share"] = a.dr_first->share_not_dead_reckoning();
+  }
   for (const auto& [id, a] : agents_) {
     if (!a.heading_unknown) continue;
     if (a.heading_fixed && a.heading_assumed) {

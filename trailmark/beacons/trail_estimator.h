@@ -26,6 +26,7 @@
 #include "trailmark/core/options.h"
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/integrity/consistency.h"
+#include "trailmark/integrity/dead_reckoning_first.h"
 
 namespace trailmark::beacons {
 
@@ -131,6 +132,14 @@ struct BeaconTrailOptions {
   /// SCAAT EKF: each beacon's ranges and bearings checked against their stated noise (issue
   /// 21); an inconsistent beacon (moved, offset, its NLOS) is left out until it agrees again.
   integrity::ConsistencyOptions integrity;
+  /// SCAAT EKF (ours, issues 21 and 22: never worse than dead reckoning): an agent on a foot INS
+  /// within its noise model, with a start and a stated heading, is written as its dead reckoning
+  /// (`pdr`'s estimate of the same steps) while that is inside the filter's own 99 % region, the
+  /// filter's estimate beyond 99.99 %, a blend between (integrity/dead_reckoning_first.h; the
+  /// landmark tracker's `dr_first`, docs/landmarks.md). Measured on the `imu` family: the filter
+  /// at its ranges' resolution pulled a good INS's walk (docs/robustness.md).
+  bool dr_first = true;
+  integrity::DeadReckoningFirstOptions dr_test;
   bool IsValid(std::string* why) const;
   /// Whether the agents' starts of mission.json are used (not with init=ultrasound): the
   /// dead-reckoning guard (integrity/) only checks estimators that trust the same start.
@@ -212,6 +221,11 @@ class BeaconTrailEstimator : public OnlineEstimator {
     double pdr_var_m2 = 0.01;
     bool has_start = false;
     std::optional<ScaatEkf> ekf;
+    /// dr_first: decided at the agent's first step; its foot INS's dead reckoning and the
+    /// filter's verdict on it.
+    bool dr_first_decided = false;
+    std::optional<DeadReckoning> own_dr;
+    std::optional<integrity::DeadReckoningFirst> dr_first;
     std::optional<UltrasoundOnlyKf> us_kf;
     std::vector<InitMeasurement> init_buffer;
     std::string init_why;
@@ -275,6 +289,12 @@ class BeaconTrailEstimator : public OnlineEstimator {
   void AdvanceDropDeadReckoning(Agent& a, const Step& step, const Vec2& d);
   /// Whether the agent is on its first track, before the entry heading fixes its steps' turn.
   bool OnFirstTrack(const Agent& a) const;
+  /// dr_first: decided at the agent's first step; then the step to its dead reckoning and the
+  /// filter's verdict on it (an integrity note when it changes).
+  void TestDeadReckoning(Agent& a, const Step& step);
+  static bool WritesDeadReckoning(const Agent& a) {
+    return a.dr_first && a.dr_first->WritesDeadReckoning();
+  }
   /// The drop priors' dead reckoning from the start again, the first track's steps turned by the
   /// entry fix as every later step is, its drops hinted again (FixEntryHeading).
   void ReplayFirstTrack(Agent& a);
@@ -348,6 +368,7 @@ class BeaconTrailEstimator : public OnlineEstimator {
   std::map<std::string, std::size_t> ignored_;
   std::size_t rows_ignored_ = 0, close_pass_anchors_ = 0, entry_fixes_ = 0;
   std::set<std::string> foot_ins_;  ///< agents on a foot INS's steps (StepsFromFootIns)
+  std::vector<IntegrityNote> dr_notes_;  ///< dr_first: the filter's verdicts on dead reckoning
 };
 
 }  // namespace trailmark::beacons

@@ -29,11 +29,6 @@ constexpr int kRangesForFix = 3;
 /// stops' prior positive definite when two stops have no step between them).
 constexpr double kStopOwnVarianceM2 = 1e-6;
 
-bool DrFirstValid(double reject, double accept, std::string* why) {
-  if (reject > 0 && reject < 1 && accept > 0 && accept <= reject) return true;
-  if (why) *why = "dr_first: 0 < dr_accept_probability <= dr_reject_probability < 1";
-  return false;
-}
 }  // namespace
 
 bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
@@ -64,8 +59,7 @@ bool LandmarkEstimatorOptions::IsValid(std::string* why) const {
     return false;
   }
   return calibration.IsValid(why) && integrity.IsValid(why) && tracker.IsValid(why) &&
-         DrFirstValid(dr_reject_probability, dr_accept_probability, why) && bank.IsValid(why) &&
-         stop_dead_reckoning.IsValid(why);
+         dr_test.IsValid(why) && bank.IsValid(why) && stop_dead_reckoning.IsValid(why);
 }
 
 namespace {
@@ -174,14 +168,7 @@ OptionTable<LandmarkEstimatorOptions> MakeLandmarkOptionTable(bool tracker) {
     t.Flag("dr_first", &O::dr_first,
            "error-state: an agent on a foot INS within its noise model (known start, stated "
            "heading) is written as its dead reckoning while the tracker does not doubt it");
-    t.Real("dr_reject_probability", &O::dr_reject_probability, "",
-           OptionBounds::Between(0.5, 0.999999),
-           "error-state: dr_first: the tracker's estimate is written where the dead reckoning is "
-           "outside the tracker's region of this probability (2-dof chi-square)");
-    t.Real("dr_accept_probability", &O::dr_accept_probability, "",
-           OptionBounds::Between(0.5, 0.999999),
-           "error-state: dr_first: the dead reckoning where it is inside this one (a blend in "
-           "between)");
+    t.Include("", &O::dr_test, integrity::DeadReckoningFirstOptionTable());
     t.Flag("slam", &O::slam,
            "error-state: unknown landmarks placed from moving packets and tracked jointly");
     t.Flag("track_with_estimated_landmarks", &O::track_with_estimated_landmarks,
@@ -207,8 +194,6 @@ LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorO
       landmark_integrity_("landmark", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
-  dr_reject_d2_ = integrity::ChiSquareQuantile(2, options_.dr_reject_probability);
-  dr_accept_d2_ = integrity::ChiSquareQuantile(2, options_.dr_accept_probability);
   calibrated_ = info.radio && info.radio->Complete();
   if (calibrated_) {
     model_ = radio::LogDistanceModel::From(*info.radio);
@@ -328,32 +313,28 @@ void LandmarkEstimator::UseFootInsErrors(const std::string& agent, Agent& a) {
     // Before the first step: a.position and a.cov are the start's.
     a.own_dr.emplace(Vec3(a.position.x(), a.position.y(), a.z_m), std::sqrt(a.cov(0, 0)),
                      options_.tracker.pdr.ForFootIns(), node->start_heading_sigma_rad);
+    a.dr_first.emplace(options_.dr_test);
     setup_notes_.push_back(fmt::format(
         "'{}': steps from a foot INS within its noise model: its dead reckoning is written until "
         "it leaves the tracker's {:g} % region (dr_first)",
-        agent, 100 * options_.dr_reject_probability));
+        agent, 100 * options_.dr_test.reject_probability));
   }
   StartStopDeadReckoning(a, options_.stop_dead_reckoning.ForFootIns(),
                          node ? node->start_heading_sigma_rad : std::nullopt);
 }
 
 Vec2 LandmarkEstimator::PositionOf(const Agent& a) const {
-  if (a.own_dr && a.dr_doubt < 1) {
-    const Vec2 dr = a.own_dr->position_n().head<2>();
-    return dr + a.dr_doubt * (a.tracker->position() - dr);
-  }
+  if (a.dr_first)
+    return a.dr_first->Position(a.tracker->position(), a.own_dr->position_n().head<2>());
   if (a.tracker) return a.tracker->position();
   return a.ukf ? a.ukf->position() : a.position;
 }
 
 Mat2 LandmarkEstimator::CovarianceOf(const Agent& a) const {
-  if (a.own_dr && a.dr_doubt < 1) {
-    // The mixture's mean squared error about the blend (each one's covariance, and the spread
-    // of the two means).
-    const double w = a.dr_doubt;
-    const Vec2 d = a.tracker->position() - a.own_dr->position_n().head<2>();
-    return (1 - w) * a.own_dr->covariance() + w * a.tracker->reported_position_cov() +
-           w * (1 - w) * d * d.transpose() + Mat2::Identity() * kStepVarianceFloorM2;
+  if (a.dr_first && a.dr_first->doubt() < 1) {
+    return a.dr_first->Covariance(a.tracker->position(), a.tracker->reported_position_cov(),
+                                  a.own_dr->position_n().head<2>(), a.own_dr->covariance()) +
+           Mat2::Identity() * kStepVarianceFloorM2;
   }
   if (a.tracker) return a.tracker->reported_position_cov();
   if (a.ukf) return a.ukf->position_cov();
@@ -372,7 +353,7 @@ double LandmarkEstimator::HeightOf(const std::string& id, const Agent& a) const 
 }
 
 void LandmarkEstimator::EmitAgent(TimeS t, const std::string& id, Agent& a, EstimateSink& sink) {
-  if (a.own_dr) ++(WritesDeadReckoning(a) ? a.dr_written : a.tracker_written);
+  if (a.dr_first) a.dr_first->Count();
   const Vec2 p = PositionOf(a);
   const Mat2 c = CovarianceOf(a);
   sink.Add({t, id, Vec3(p.x(), p.y(), 0), c(0, 0), c(0, 1), c(1, 1)});
@@ -647,27 +628,13 @@ void LandmarkEstimator::EndOfStop(TimeS t, const std::string& id, Agent& a, Esti
 }
 
 bool LandmarkEstimator::TestDeadReckoning(TimeS t, const std::string& agent, Agent& a) {
-  if (!a.own_dr || !a.stepped) return false;
-  const Vec2 d = a.tracker->position() - a.own_dr->position_n().head<2>();
-  const Mat2 c = a.tracker->best().position_cov();
-  const Eigen::LDLT<Mat2> ldlt(c);
-  if (ldlt.info() != Eigen::Success || !(c.determinant() > 0)) return false;
-  const double d2 = d.dot(ldlt.solve(d));
-  if (!std::isfinite(d2)) return false;
-  // From the dead reckoning (inside the accept region) to the tracker's estimate (outside the
-  // reject region), linearly in the squared distance between them.
-  a.dr_doubt = std::clamp((d2 - dr_accept_d2_) / (dr_reject_d2_ - dr_accept_d2_), 0.0, 1.0);
-  const bool rejected = a.dr_rejected ? a.dr_doubt > 0 : a.dr_doubt >= 1;
-  if (rejected == a.dr_rejected) return false;
-  a.dr_rejected = rejected;
-  dr_notes_.push_back(
-      {t, "agent " + agent, agent, rejected ? "resumed" : "fallback",
-       fmt::format(
-           "{} at t {:.1f} s: its foot INS's dead reckoning {} the tracker's {:g} % "
-           "region (squared Mahalanobis distance {:.1f}, {:.1f} m away): {} written",
-           agent, t, rejected ? "left" : "is back in",
-           100 * (rejected ? options_.dr_reject_probability : options_.dr_accept_probability), d2,
-           d.norm(), rejected ? "the tracker's estimate" : "dead reckoning")});
+  if (!a.dr_first || !a.stepped) return false;
+  // The tracker's own covariance: its most probable model's, without the steps' heading offset
+  // (a consider parameter the dead reckoning shares).
+  auto note = a.dr_first->Test(t, agent, "the tracker", a.tracker->position(),
+                               a.tracker->best().position_cov(), a.own_dr->position_n().head<2>());
+  if (!note) return false;
+  dr_notes_.push_back(std::move(*note));
   return true;
 }
 
@@ -810,7 +777,7 @@ std::optional<Estimate> LandmarkEstimator::Current(const std::string& node) cons
 std::optional<Mat2> LandmarkEstimator::StepTransform(const std::string& agent) const {
   const auto it = agents_.find(agent);
   if (it == agents_.end() || !it->second.tracker) return std::nullopt;
-  if (it->second.own_dr && it->second.dr_doubt < 0.5)
+  if (it->second.dr_first && it->second.dr_first->doubt() < 0.5)
     return std::nullopt;  // the steps as they come
   const LandmarkTracker& t = it->second.tracker->best();
   return Mat2((1.0 + t.scale_correction()) *
@@ -863,12 +830,10 @@ EstimatorSummary LandmarkEstimator::Summary() const {
     summary.numbers[id + ".radio_exponent_sigma"] = k.exponent_sigma();
     summary.numbers[id + ".radio_mean_nis"] = k.mean_nis();
     summary.numbers[id + ".radio_noise_scale"] = k.noise_scale();
-    if (a.own_dr) {
+    if (a.dr_first) {
       // dr_first: the share of the agent's estimates that are not its dead reckoning's (moved
       // toward the tracker's, or the tracker's).
-      const std::size_t n = a.dr_written + a.tracker_written;
-      summary.numbers[id + ".dr_first_tracker_share"] =
-          n ? static_cast<double>(a.tracker_written) / static_cast<double>(n) : 0.0;
+      summary.numbers[id + ".dr_first_tracker_share"] = a.dr_first->share_not_dead_reckoning();
     }
   }
   for (const IntegrityNote& n : dr_notes_) summary.integrity.push_back(n);

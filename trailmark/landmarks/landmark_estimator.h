@@ -27,6 +27,7 @@
 #include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/ins/dead_reckoning_clones.h"
 #include "trailmark/integrity/consistency.h"
+#include "trailmark/integrity/dead_reckoning_first.h"
 #include "trailmark/landmarks/landmark_tracker.h"
 #include "trailmark/landmarks/landmark_ukf.h"
 #include "trailmark/landmarks/stop_and_go.h"
@@ -177,8 +178,7 @@ struct LandmarkEstimatorOptions {
   /// accepted again); in between, a blend linear in d2, with the mixture's covariance. false:
   /// always the tracker's estimate.
   bool dr_first = true;
-  double dr_reject_probability = 0.9999;
-  double dr_accept_probability = 0.99;
+  integrity::DeadReckoningFirstOptions dr_test;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -229,14 +229,9 @@ class LandmarkEstimator : public OnlineEstimator {
     /// those stops' indices in stops_ (one per clone, in order).
     std::optional<DeadReckoningClones> clones;
     std::vector<std::size_t> clone_stops;
-    /// dr_first: the foot INS's dead reckoning, written while the tracker does not reject it.
+    /// dr_first: the foot INS's dead reckoning and the tracker's verdict on it.
     std::optional<DeadReckoning> own_dr;
-    /// How far the estimate is moved from the dead reckoning to the tracker's (0: dead reckoning,
-    /// 1: the tracker's), and whether the dead reckoning was rejected (dr_doubt reached 1) and
-    /// not yet accepted again (back to 0).
-    double dr_doubt = 0;
-    bool dr_rejected = false;
-    std::size_t dr_written = 0, tracker_written = 0;  ///< estimates written from each
+    std::optional<integrity::DeadReckoningFirst> dr_first;
   };
   struct Stop {
     /// The standing position: the dead reckoning's, or with FixFusion::kJoint the latest
@@ -256,7 +251,9 @@ class LandmarkEstimator : public OnlineEstimator {
   /// tracker moved; a change of the verdict is an integrity note. Returns whether it changed.
   bool TestDeadReckoning(TimeS t, const std::string& agent, Agent& a);
   /// Whether the agent's estimate is its dead reckoning now (dr_first, not rejected).
-  static bool WritesDeadReckoning(const Agent& a) { return a.own_dr && a.dr_doubt == 0; }
+  static bool WritesDeadReckoning(const Agent& a) {
+    return a.dr_first && a.dr_first->WritesDeadReckoning();
+  }
   void EmitLandmarks(TimeS t, EstimateSink& sink);
   void EmitLandmark(TimeS t, std::size_t j, EstimateSink& sink);
   /// A landmark's estimate: surveyed, stop-and-go's, or (unknown) the most certain tracker's.
@@ -296,7 +293,6 @@ class LandmarkEstimator : public OnlineEstimator {
   std::vector<std::string> setup_notes_;
   std::set<std::string> solve_notes_;  ///< the latest solve's geometry report
   std::vector<IntegrityNote> dr_notes_;  ///< dr_first: the tracker's verdicts on dead reckoning
-  double dr_reject_d2_ = 0, dr_accept_d2_ = 0;  ///< dr_first's chi-square thresholds
   TimeS t_last_ = -1e300;  ///< the latest row's time
   bool first_ = true;
   int refits_ = 0;
