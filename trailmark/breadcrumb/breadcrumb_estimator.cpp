@@ -33,7 +33,7 @@ bool BreadcrumbEstimatorOptions::IsValid(std::string* why) const {
     if (why) *why = "motion_noise_scale_max must be finite and >= 1";
     return false;
   }
-  return l.integrity.IsValid(why);
+  return l.integrity.IsValid(why) && dr_test.IsValid(why);
 }
 
 const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
@@ -178,6 +178,10 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
              "how often static estimates are checked for output");
     out.Flag("gate_other_floors", &O::gate_other_floors,
              "radio between nodes on different levels is not used");
+    out.Flag("dr_first", &O::dr_first,
+             "an agent on a foot INS within its noise model (known start, stated heading) is "
+             "written as its dead reckoning while the network does not doubt it");
+    out.Include("", &O::dr_test, integrity::DeadReckoningFirstOptionTable());
     return out;
   }();
   return table;
@@ -239,12 +243,40 @@ void BreadcrumbEstimator::Emit(const Estimate& e, EstimateSink& sink) {
 }
 
 void BreadcrumbEstimator::EmitAgent(const std::string& id, EstimateSink& sink) {
-  if (auto e = loc_->Estimate(id)) {
-    const Mat2& c = e->covariance;
-    Emit({loc_->AgentTime(id), id, Vec3(e->position_n.x(), e->position_n.y(), agent_z_[id]),
-          c(0, 0), c(0, 1), c(1, 1)},
-         sink);
+  auto e = loc_->Estimate(id);
+  if (!e) return;
+  const TimeS t = loc_->AgentTime(id);
+  Vec2 p = e->position_n;
+  Mat2 c = e->covariance;
+  if (const auto it = dr_first_.find(id); it != dr_first_.end()) {
+    // The verdict on the network's own covariance: the consider terms are the steps' heading
+    // offset, which the dead reckoning shares.
+    auto& [dr, verdict] = it->second;
+    const Vec2 dr_n = dr.position_n().head<2>();
+    if (auto note = verdict.Test(t, id, "the network", p, e->own_covariance, dr_n))
+      dr_notes_.push_back(std::move(*note));
+    c = verdict.Covariance(p, c, dr_n, dr.covariance());
+    p = verdict.Position(p, dr_n);
+    verdict.Count();
   }
+  Emit({t, id, Vec3(p.x(), p.y(), agent_z_[id]), c(0, 0), c(0, 1), c(1, 1)}, sink);
+}
+
+void BreadcrumbEstimator::DecideDeadReckoningFirst(const Step& step) {
+  if (!options_.dr_first || !step.heading_var_rad2) return;
+  const NodeInfo* node = info_.Find(step.agent);
+  if (!node || !node->start_heading_rad) return;
+  const auto start = info_.AgentStart(*node);
+  if (!start) return;
+  const double start_sigma_m = node->start_sigma_m.value_or(options_.localizer.known_start_sigma_m);
+  dr_first_.emplace(step.agent, DeadReckoningFirstState{
+                                    DeadReckoning(*start, start_sigma_m, PdrOptions{}.ForFootIns(),
+                                                  node->start_heading_sigma_rad),
+                                    integrity::DeadReckoningFirst(options_.dr_test)});
+  setup_notes_.push_back(fmt::format(
+      "'{}': steps from a foot INS within its noise model: its dead reckoning is written until "
+      "it leaves the network's {:g} % region (dr_first)",
+      step.agent, 100 * options_.dr_test.reject_probability));
 }
 
 void BreadcrumbEstimator::EmitStatic(TimeS t, bool all, EstimateSink& sink) {
@@ -303,9 +335,12 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     if (const auto f = foot_ins_.find(step->agent); f != foot_ins_.end()) {
       if (step->heading_var_rad2) loc_->UseFootInsMotion(step->agent);
       loc_->NoEntryHeading(step->agent);  // any foot INS: its mounting search is the entry's
+      DecideDeadReckoningFirst(*step);
       foot_ins_.erase(f);  // decided at the first step
     }
     loc_->AddStep(*step);
+    if (const auto it = dr_first_.find(step->agent); it != dr_first_.end())
+      it->second.dr.AddStep(*step);
     EmitAgent(step->agent, sink);
   } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
     if (OnOtherFloors(p->rx, p->tx)) {
@@ -345,6 +380,9 @@ void BreadcrumbEstimator::Finish(EstimateSink& sink) {
 }
 
 std::optional<Mat2> BreadcrumbEstimator::StepTransform(const std::string& agent) const {
+  if (const auto it = dr_first_.find(agent);
+      it != dr_first_.end() && it->second.verdict.doubt() < 0.5)
+    return std::nullopt;  // the steps as they come: the dead reckoning is written
   return loc_->StepTransform(agent);
 }
 
@@ -431,6 +469,10 @@ EstimatorSummary BreadcrumbEstimator::Summary() const {
     }
   }
   for (const auto& n : s.notes) summary.notes.push_back(n);
+  summary.integrity.insert(summary.integrity.end(), dr_notes_.begin(), dr_notes_.end());
+  // dr_first: the share of the agent's estimates that are not its dead reckoning's.
+  for (const auto& [id, d] : dr_first_)
+    num[id + ".dr_first_network_share"] = d.verdict.share_not_dead_reckoning();
   for (const auto& [t, id] : loc_->MovedNodes()) {
     summary.notes.push_back(fmt::format("t={:.1f}: breadcrumb '{}' detected as moved", t, id));
   }

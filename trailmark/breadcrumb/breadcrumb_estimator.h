@@ -19,6 +19,8 @@
 #include "trailmark/core/mission.h"
 #include "trailmark/core/online_estimator.h"
 #include "trailmark/core/options.h"
+#include "trailmark/ins/dead_reckoning.h"
+#include "trailmark/integrity/dead_reckoning_first.h"
 
 namespace trailmark::breadcrumb {
 
@@ -30,6 +32,15 @@ struct BreadcrumbEstimatorOptions {
   /// reads as metres farther away). A node's level: the height channel's (an agent now, a
   /// crumb its dropper's at the drop), a node of known position its z's.
   bool gate_other_floors = true;
+  /// Ours (issues 21 and 25: never worse than dead reckoning): an agent on a foot INS within
+  /// its noise model, with a known start and a stated heading, is written as its dead
+  /// reckoning (`pdr`'s estimate of the same steps) while that is inside the network's own
+  /// 99 % region (the agent's marginal without the heading offsets' consider terms), the
+  /// network's estimate beyond 99.99 %, a blend between (integrity/dead_reckoning_first.h; the
+  /// landmark tracker's and the beacon filter's `dr_first`). Measured on the `imu` family:
+  /// docs/breadcrumb.md.
+  bool dr_first = true;
+  integrity::DeadReckoningFirstOptions dr_test;
   bool IsValid(std::string* why) const;
 };
 /// The `--option` keys (docs/pipeline-options.md).
@@ -66,6 +77,15 @@ class BreadcrumbEstimator : public OnlineEstimator {
   void Emit(const Estimate& e, EstimateSink& sink);
   void EmitAgent(const std::string& id, EstimateSink& sink);
   void EmitStatic(TimeS t, bool all, EstimateSink& sink);
+  /// dr_first, decided at the agent's first step (a foot INS within its noise model, a known
+  /// start, a stated heading): its dead reckoning and the network's verdict on it.
+  void DecideDeadReckoningFirst(const Step& step);
+  struct DeadReckoningFirstState {
+    DeadReckoning dr;
+    integrity::DeadReckoningFirst verdict;
+  };
+  std::map<std::string, DeadReckoningFirstState> dr_first_;
+  std::vector<IntegrityNote> dr_notes_;
   std::vector<std::string> agents_;
   BreadcrumbEstimatorOptions options_;
   std::unique_ptr<BreadcrumbLocalizer> loc_;

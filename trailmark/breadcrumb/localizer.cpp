@@ -1376,6 +1376,7 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
       e.covariance += J * a.cached_theta * J.transpose() + cross + cross.transpose();
       e.covariance = 0.5 * (e.covariance + e.covariance.transpose());
     }
+    e.own_covariance = e.covariance;
     if (a.started) e.covariance += ConsiderCovariance(a, cum);
     return e;
   }
@@ -1395,7 +1396,8 @@ std::optional<NodeEstimate> BreadcrumbLocalizer::Estimate(const std::string& id)
     }
     node->cov_t = now_;
   }
-  return NodeEstimate{id, gen_.Estimate(node->index), node->cached_cov + node->cached_consider};
+  return NodeEstimate{id, gen_.Estimate(node->index), node->cached_cov + node->cached_consider,
+                      node->cached_cov};
 }
 
 bool BreadcrumbLocalizer::SensitivitiesDue() {

@@ -315,6 +315,9 @@ struct NodeEstimate {
   std::string id;
   Vec2 position_n = Vec2::Zero();
   Mat2 covariance = Mat2::Identity();
+  /// The network's own covariance: `covariance` without the agents' heading offsets'
+  /// consider terms (track_heading_offset_sigma_rad), which dead reckoning shares.
+  Mat2 own_covariance = Mat2::Identity();
 };
 
 class BreadcrumbLocalizer {
