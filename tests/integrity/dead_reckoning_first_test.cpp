@@ -65,6 +65,24 @@ TEST(DeadReckoningFirst, WritesDeadReckoningInsideTheEstimatorsRegionTheEstimate
   EXPECT_EQ(first.share_not_dead_reckoning(), 0.0);
 }
 
+TEST(DeadReckoningFirst, AbandonedItWritesTheEstimateFromThenOnWithOneNote) {
+  DeadReckoningFirst first({});
+  const Mat2 own = Mat2::Identity(), reported = Mat2::Identity() * 2, dr_cov = Mat2::Identity();
+  const Vec2 dr(1.0, 2.0), est(1.2, 2.1);
+  EXPECT_FALSE(first.Test(1.0, "ff1", "the network", est, own, dr).has_value());
+  EXPECT_TRUE(first.WritesDeadReckoning());
+  const auto note = first.Abandon(2.0, "ff1", "the network");
+  ASSERT_TRUE(note.has_value());
+  EXPECT_EQ(note->action, "resumed");
+  EXPECT_NE(note->message.find("mounting not found"), std::string::npos) << note->message;
+  EXPECT_FALSE(first.Abandon(3.0, "ff1", "the network").has_value());  // once
+  // The dead reckoning inside the region again: still the estimate, and no note.
+  EXPECT_FALSE(first.Test(4.0, "ff1", "the network", est, own, dr).has_value());
+  EXPECT_EQ(first.doubt(), 1.0);
+  EXPECT_EQ(first.Position(est, dr), est);
+  EXPECT_EQ(first.Covariance(est, reported, dr, dr_cov), reported);
+}
+
 TEST(DeadReckoningFirst, RefusesThresholdsThatAreNotOrdered) {
   EXPECT_THROW(DeadReckoningFirst({0.9, 0.99}), std::invalid_argument);
   EXPECT_THROW(DeadReckoningFirst({0.99, 0.99}), std::invalid_argument);

@@ -106,5 +106,52 @@ TEST(RobustnessImu, TheRssiNetworkWritesAGoodFootInsDeadReckoningUntilItDoubtsIt
   }
 }
 
+// The IMU's mounting not found (no stride counts: `mount_yaw_min_stride_m` 5 m; on the `imu`
+// family's house 1, K 250, a search's short strides along walls): the walk is turned by what the
+// IMU is turned on the foot (20 degrees here) and nobody knows by how much. The INS's steps stop
+// claiming its own heading errors; dead reckoning and `ins` carry the unknown turn's covariance
+// from then on (in95 5 % before, on the same setup with another seed), and the landmark tracker
+// stops writing dead reckoning first, with a note.
+TEST(RobustnessImu, AnImuMountingNotFoundIsAHeadingNobodyKnows) {
+  SimulatedMission sim = SimulateScenario("landmark-office", 31);
+  ImuSimOptions imu;
+  imu.rate_hz = 100;
+  AddFootImu(sim, imu, 1031);
+  sim.data.steps.clear();
+  MountImu(sim.data.imu, ImuMounting(-20 * std::numbers::pi / 180));
+  testing::TempDir dir;
+  WriteMissionDirectory(dir.path(), sim.data, &sim.plan);
+  const MissionDirectory mission(dir.path());
+  const auto run = [&](const std::string& pipeline, const std::string& min_stride_m) {
+    const std::string key =
+        pipeline == "ins" ? "mount_yaw_min_stride_m" : "ins.mount_yaw_min_stride_m";
+    VectorSink rows;
+    EstimatorSummary summary =
+        RunBatch(RequirePipeline(pipeline), {mission, {{key, min_stride_m}}}, rows);
+    return std::pair(summary, Evaluate(sim.data.info, sim.data.truth, rows.rows).agents.stats);
+  };
+  const auto has = [](const std::vector<std::string>& notes, const std::string& what) {
+    for (const auto& n : notes) {
+      if (n.find(what) != std::string::npos) return true;
+    }
+    return false;
+  };
+  for (const std::string pipeline : {"pdr", "ins"}) {
+    const auto [found_summary, found] = run(pipeline, "0.3");
+    const auto [lost_summary, lost] = run(pipeline, "5");
+    EXPECT_GT(found.in95, 0.95) << pipeline;
+    EXPECT_GT(lost.p75_m, 5.0) << pipeline;  // turned by 20 degrees
+    EXPECT_GT(lost.in95, 0.7) << pipeline;   // before its 40 landings: the tight ellipse
+  }
+  EXPECT_TRUE(has(run("pdr", "5").first.notes, "mounting was not found"));
+  EXPECT_FALSE(has(run("pdr", "0.3").first.notes, "mounting was not found"));
+  const EstimatorSummary tracker = run("landmarks-ukf", "5").first;
+  bool abandoned = false;
+  for (const IntegrityNote& n : tracker.integrity)
+    abandoned |= n.message.find("mounting not found") != std::string::npos;
+  EXPECT_TRUE(abandoned);
+  EXPECT_GT(tracker.numbers.at("ff1.dr_first_tracker_share"), 0.5);
+}
+
 }  // namespace
 }  // namespace trailmark

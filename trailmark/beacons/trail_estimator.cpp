@@ -780,6 +780,10 @@ void BeaconTrailEstimator::TestDeadReckoning(Agent& a, const Step& step) {
   }
   if (!a.dr_first) return;
   a.own_dr->AddStep(step);
+  if (!step.heading_var_rad2) {  // the IMU's mounting not found
+    if (auto note = a.dr_first->Abandon(step.t1, a.id, "the filter"))
+      dr_notes_.push_back(std::move(*note));
+  }
   auto note = a.dr_first->Test(step.t1, a.id, "the filter", a.ekf->position(),
                                a.ekf->position_cov(), a.own_dr->position_n().head<2>());
   if (note) dr_notes_.push_back(std::move(*note));

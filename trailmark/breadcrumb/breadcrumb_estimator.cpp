@@ -339,8 +339,13 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       foot_ins_.erase(f);  // decided at the first step
     }
     loc_->AddStep(*step);
-    if (const auto it = dr_first_.find(step->agent); it != dr_first_.end())
+    if (const auto it = dr_first_.find(step->agent); it != dr_first_.end()) {
       it->second.dr.AddStep(*step);
+      if (!step->heading_var_rad2) {  // the IMU's mounting not found
+        if (auto note = it->second.verdict.Abandon(step->t1, step->agent, "the network"))
+          dr_notes_.push_back(std::move(*note));
+      }
+    }
     EmitAgent(step->agent, sink);
   } else if (const auto* p = std::get_if<RssiPacket>(&row)) {
     if (OnOtherFloors(p->rx, p->tx)) {

@@ -271,9 +271,17 @@ void DeadReckoningEstimator::Add(const MissionRow& row, EstimateSink& sink) {
                                          step->t0})
              .first;
     if (unknown_heading) it->second.unknown_heading_start = start->head<2>();
+    it->second.own_errors = foot_ins;
     sink.Add(EstimateOf(step->agent, it->second, step->t0));
   }
   Agent& a = it->second;
+  if (a.own_errors && !step->heading_var_rad2 && !a.unknown_heading_start) {
+    // The INS stopped claiming its own heading errors: its IMU's mounting was not found, and
+    // the walk is turned about the start by an unknown angle from here on.
+    const NodeInfo* node = info_.Find(step->agent);
+    a.unknown_heading_start = info_.AgentStart(*node)->head<2>();
+    mount_not_found_.insert(step->agent);
+  }
   a.dr.AddStep(*step);
   a.t = step->t1;
   ++a.steps;
@@ -305,6 +313,13 @@ EstimatorSummary DeadReckoningEstimator::Summary() const {
     s.notes.push_back(fmt::format(
         "{}: foot INS steps without a start_heading in mission.json: the walk is in the INS's "
         "own frame, turned by an unknown angle about the start (its ellipse covers every turn)",
+        id));
+  }
+  for (const auto& id : mount_not_found_) {
+    s.notes.push_back(fmt::format(
+        "{}: its foot IMU's mounting was not found (the INS's steps stopped claiming its own "
+        "heading errors): from then on the walk is turned by an unknown angle about the start "
+        "(its ellipse covers every turn)",
         id));
   }
   return s;

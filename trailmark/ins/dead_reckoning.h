@@ -195,7 +195,10 @@ class DeadReckoningEstimator : public OnlineEstimator {
     DeadReckoning dr;
     TimeS t = 0;
     std::size_t steps = 0;
-    std::optional<Vec2> unknown_heading_start;  ///< a foot INS without a stated heading
+    /// A foot INS without a stated heading, or whose mounting was not found (its steps stop
+    /// carrying the INS's heading variance after the first did: MultiAgentIns::MountNotFound).
+    std::optional<Vec2> unknown_heading_start;
+    bool own_errors = false;  ///< started with the foot INS's own errors
   };
   /// The agent's estimate now (its covariance with the unknown heading's, if any).
   Estimate EstimateOf(const std::string& id, const Agent& a, TimeS t) const;
@@ -204,6 +207,7 @@ class DeadReckoningEstimator : public OnlineEstimator {
   std::map<std::string, Agent> agents_;
   std::set<std::string> foot_ins_;  ///< agents whose steps come from a foot INS
   std::set<std::string> unknown_heading_;  ///< of those, without a stated start heading
+  std::set<std::string> mount_not_found_;  ///< of those, their IMU's mounting not found
   std::size_t steps_ = 0, ignored_ = 0;
 };
 

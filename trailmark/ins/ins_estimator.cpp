@@ -189,7 +189,14 @@ void MultiAgentIns::Give(Agent& a, const std::string& id, const InsState& st) {
 
 void MultiAgentIns::Give(Agent& a, const Step& step, const InsState& end) {
   a.given = a.Turned(end);  // State() while the step is given: its end
-  if (on_step) on_step(a.Turned(step, end.position_n));
+  if (!on_step) return;
+  Step out = a.Turned(step, end.position_n);
+  // A mounting not found leaves the walk turned by what the IMU's forward axis is off the
+  // foot's (up to the hold's 15 degrees, more for steps that waited): the INS's own heading
+  // variance is not these steps' error, and they no longer claim it (consumers take them with
+  // a PDR's errors; house 1, imu family K 250: turned 28.7 degrees, dead reckoning 4.1 m off).
+  if (a.mount && a.mount->Decided() && !a.mount->Found()) out.heading_var_rad2.reset();
+  on_step(out);
 }
 
 void MultiAgentIns::Release(Agent& a, const std::string& id) {
@@ -288,6 +295,12 @@ std::optional<TimeS> MultiAgentIns::EarliestNextStepEnd(const std::string& agent
 bool MultiAgentIns::OwnErrorsHold(const std::string& agent) const {
   const auto it = agents_.find(agent);
   return it == agents_.end() || it->second->ins->OwnErrorsHold();
+}
+
+bool MultiAgentIns::MountNotFound(const std::string& agent) const {
+  const auto it = agents_.find(agent);
+  return it != agents_.end() && it->second->mount && it->second->mount->Decided() &&
+         !it->second->mount->Found();
 }
 
 std::optional<TimeS> MultiAgentIns::NewestSample(const std::string& agent) const {
@@ -449,7 +462,8 @@ Estimate InsEstimator::ToEstimate(const std::string& agent, const InsState& st) 
     const Vec2 from = st.position_n.head<2>() - prior.start;
     const Vec2 u(-from.y(), from.x());
     c += prior.position_var_m2 * Mat2::Identity() + prior.extra_yaw_var_rad2 * u * u.transpose();
-    if (prior.unknown_heading) c += UnknownHeadingCovariance(from);
+    // No heading stated, or the IMU's mounting not found: turned by an unknown angle.
+    if (prior.unknown_heading || ins_.MountNotFound(agent)) c += UnknownHeadingCovariance(from);
   }
   if (outside_model_.count(agent) != 0) {
     // The filter's covariance is not this device's: its steps' dead reckoning with a PDR's

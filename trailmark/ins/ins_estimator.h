@@ -50,6 +50,11 @@ class MultiAgentIns {
   /// Whether the agent's INS holds its noise model (ZuptIns::OwnErrorsHold); true before it is
   /// aligned and for an agent not seen.
   bool OwnErrorsHold(const std::string& agent) const;
+  /// Whether the IMU's mounting about the vertical was searched for and not found (a walk
+  /// without straight strides: a search along walls, a crawl): its walk is turned about the
+  /// start by an angle nobody knows, and its steps no longer claim the INS's own heading
+  /// variance (MountYawEstimator::Found).
+  bool MountNotFound(const std::string& agent) const;
   /// The earliest EarliestNextStepEnd of the agents whose newest sample is at or after
   /// `active_since` (a device further behind does not hold the others back); nullopt if none.
   std::optional<TimeS> EarliestNextStepEndOfActive(TimeS active_since) const;

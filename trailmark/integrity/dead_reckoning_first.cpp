@@ -47,6 +47,7 @@ DeadReckoningFirst::DeadReckoningFirst(const DeadReckoningFirstOptions& options)
 std::optional<IntegrityNote> DeadReckoningFirst::Test(TimeS t, const std::string& agent,
                                                       const std::string& what, const Vec2& estimate,
                                                       const Mat2& own_cov, const Vec2& dr) {
+  if (abandoned_) return std::nullopt;
   const Eigen::LDLT<Mat2> ldlt(own_cov);
   if (ldlt.info() != Eigen::Success || !(own_cov.determinant() > 0)) return std::nullopt;
   const Vec2 d = estimate - dr;
@@ -65,6 +66,18 @@ std::optional<IntegrityNote> DeadReckoningFirst::Test(TimeS t, const std::string
                   agent, t, rejected ? "left" : "is back in", what,
                   100 * (rejected ? options_.reject_probability : options_.accept_probability), d2,
                   d.norm(), rejected ? what + "'s estimate" : std::string("dead reckoning"))};
+}
+
+std::optional<IntegrityNote> DeadReckoningFirst::Abandon(TimeS t, const std::string& agent,
+                                                         const std::string& what) {
+  if (abandoned_) return std::nullopt;
+  abandoned_ = rejected_ = true;
+  doubt_ = 1;
+  return IntegrityNote{
+      t, "agent " + agent, agent, "resumed",
+      fmt::format("{} at t {:.1f} s: its foot INS's steps no longer claim the INS's own errors "
+                  "(the IMU's mounting not found): {}'s estimate written from now on",
+                  agent, t, what)};
 }
 
 Vec2 DeadReckoningFirst::Position(const Vec2& estimate, const Vec2& dr) const {

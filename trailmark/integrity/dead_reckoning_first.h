@@ -43,6 +43,10 @@ class DeadReckoningFirst {
   /// is not positive definite changes nothing.
   std::optional<IntegrityNote> Test(TimeS t, const std::string& agent, const std::string& what,
                                     const Vec2& estimate, const Mat2& own_cov, const Vec2& dr);
+  /// The dead reckoning is no longer within its noise model (its foot INS's steps stopped
+  /// claiming the INS's own heading errors: the IMU's mounting not found): the estimate is
+  /// written from now on, and Test changes nothing. Returns the integrity note, once.
+  std::optional<IntegrityNote> Abandon(TimeS t, const std::string& agent, const std::string& what);
   /// What to write: the dead reckoning, the estimate, or the blend (the mixture's mean squared
   /// error about it: each one's covariance and the spread of the two).
   Vec2 Position(const Vec2& estimate, const Vec2& dr) const;
@@ -61,7 +65,7 @@ class DeadReckoningFirst {
   DeadReckoningFirstOptions options_;
   double reject_d2_ = 0, accept_d2_ = 0;
   double doubt_ = 0;
-  bool rejected_ = false;
+  bool rejected_ = false, abandoned_ = false;
   std::size_t written_ = 0, not_dr_ = 0;
 };
 

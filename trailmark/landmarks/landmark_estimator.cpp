@@ -682,6 +682,10 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     if (a.ukf) a.ukf->PredictWithDisplacement(d, Mat2::Identity() * (s * s + kStepVarianceFloorM2));
     if (a.tracker) a.tracker->AddStep(*step);
     if (a.own_dr) a.own_dr->AddStep(*step);
+    if (a.dr_first && !step->heading_var_rad2) {  // the IMU's mounting not found
+      if (auto note = a.dr_first->Abandon(step->t1, step->agent, "the tracker"))
+        dr_notes_.push_back(std::move(*note));
+    }
     a.z_m += step->delta_n.z();
     a.t = step->t1;
     TestDeadReckoning(step->t1, step->agent, a);
