@@ -90,6 +90,12 @@ const OptionTable<InsOptions>& InsOptionTable() {
         "mount_yaw_max_landings", [](O& o) -> int& { return o.mount_yaw.max_landings; },
         OptionBounds::Between(1, 100000),
         "landings after which the mounting is decided with what there is");
+    t.Integer(
+        "mount_yaw_hold_first_landings",
+        [](O& o) -> int& { return o.mount_yaw.hold_first_landings; },
+        OptionBounds::Between(0, 100000),
+        "from the first step the INS's output waits for the mounting, at most this many "
+        "landings (0: only a stride beyond mount_yaw_hold_above holds it)");
     t.Real("zaru_recover_s", &O::zaru_recover_s, "s", OptionBounds::NonNegative(),
            "stance over which every ZARU refused grows the gyro bias's covariance to take it "
            "(0: never)");
@@ -120,6 +126,9 @@ struct MultiAgentIns::Agent {
   /// Waiting for the mounting (a stride far off the reference): states and steps (with their
   /// end state) in the order the INS gave them; the last one given out.
   bool holding = false;
+  bool holding_first = false;  ///< the hold from the first step (hold_first_landings)
+  bool stepped = false;
+  bool releasing = false;  ///< giving out what waited
   struct Waiting {
     std::optional<Step> step;
     InsState state;  ///< the state, or the step's end
@@ -201,6 +210,7 @@ void MultiAgentIns::Give(Agent& a, const Step& step, const InsState& end) {
 
 void MultiAgentIns::Release(Agent& a, const std::string& id) {
   a.holding = false;
+  a.releasing = true;  // State() is each released one's while it is given
   if (a.mount->Decided()) a.turn_rad = a.mount->TurnWorthTakingRad();
   while (!a.waiting.empty()) {
     const Agent::Waiting w = std::move(a.waiting.front());
@@ -212,6 +222,7 @@ void MultiAgentIns::Release(Agent& a, const std::string& id) {
       Give(a, id, w.state);
     }
   }
+  a.releasing = false;
 }
 
 void MultiAgentIns::Add(const ImuSample& sample) {
@@ -244,11 +255,17 @@ void MultiAgentIns::Add(const ImuSample& sample) {
     };
     a->ins->on_step = [this, a, id](const Step& step) {
       const InsState end = *a->ins->LastState();  // the step's end (ZuptIns::EmitStep)
+      if (a->mount && !a->mount->Decided() && !a->stepped &&
+          options_.mount_yaw.hold_first_landings > 0) {
+        a->holding = a->holding_first = true;
+      }
+      a->stepped = true;
       if (a->mount && !a->mount->Decided() && end.stance) {
         a->mount->AddLanding(end.position_n, end.q_nb);
         const auto last = a->mount->LastStrideRad();
         if (!a->mount->Decided() && last && std::abs(*last) > options_.mount_yaw.hold_above_rad) {
           a->holding = true;
+          a->holding_first = false;  // turned: it waits for the decision
         }
         if (a->mount->Decided()) a->turn_rad = a->mount->TurnWorthTakingRad();
       }
@@ -257,7 +274,13 @@ void MultiAgentIns::Add(const ImuSample& sample) {
       } else {
         Give(*a, step, end);
       }
-      if (a->mount && a->mount->Decided() && a->holding) Release(*a, id);
+      if (a->mount && a->mount->Decided() && a->holding) {
+        Release(*a, id);
+      } else if (a->holding_first && a->holding &&
+                 a->mount->Landings() >= options_.mount_yaw.hold_first_landings) {
+        Release(*a, id);  // as they are: the decision's catch-up follows
+      }
+      if (!a->holding) a->holding_first = false;
     };
   }
   it->second->newest = std::max(it->second->newest, sample.t);
@@ -282,7 +305,7 @@ std::optional<InsState> MultiAgentIns::State(const std::string& agent) const {
   const auto it = agents_.find(agent);
   if (it == agents_.end()) return std::nullopt;
   const Agent& a = *it->second;
-  if (a.holding) return a.given;
+  if (a.holding || a.releasing) return a.given;
   const auto st = a.ins->LastState();
   return st ? std::optional<InsState>(a.Turned(*st)) : std::nullopt;
 }

@@ -44,6 +44,13 @@ struct MountYawOptions {
   /// until it is decided (at most a few strides), so that no consumer walks into walls sideways.
   /// Within it nothing waits (a mounting within a few degrees costs little until it is decided).
   double hold_above_rad = 0.26;
+  /// From the first step on, the INS's steps and states wait until it is decided, for at most
+  /// this many landings (then they go out as they are and the decision's catch-up follows):
+  /// steps given out in the INS's frame are where consumers drop beacons and crumbs, metres
+  /// off after a turn or two at the start (0: only a stride beyond hold_above_rad holds). 0 for
+  /// `ins` (its own output places nothing; waiting is only latency), 12 for the steps of every
+  /// other pipeline (StepFrontEndOptions).
+  int hold_first_landings = 0;
   bool IsValid(std::string* why) const;
 };
 
@@ -74,6 +81,7 @@ class MountYawEstimator {
   double SigmaRad() const { return sigma_rad_; }
   /// The strides counted so far, and the angle of the last one from the reference (rad).
   std::size_t Strides() const { return angles_rad_.size(); }
+  int Landings() const { return landings_; }
   std::optional<double> LastStrideRad() const {
     return angles_rad_.empty() ? std::nullopt : std::optional<double>(angles_rad_.back());
   }

@@ -32,8 +32,19 @@
 
 namespace trailmark {
 
+/// The INS of the step consumers: their first steps wait for the IMU's mounting, at most 12
+/// landings (ins::MountYawOptions::hold_first_landings; docs/ins.md): a step given out in the
+/// INS's own frame is where a beacon or a crumb is dropped. A priori: three straight strides
+/// usually come within the first metres; 12 landings are 10-15 s of a slow walk at most.
+inline ins::InsOptions StepFrontEndInsDefaults() {
+  ins::InsOptions o;
+  o.mount_yaw.hold_first_landings = 12;
+  return o;
+}
+
 struct StepFrontEndOptions {
-  ins::InsOptions ins;  ///< for agents whose steps come from their foot IMU
+  ins::InsOptions ins =
+      StepFrontEndInsDefaults();  ///< for agents whose steps come from their foot IMU
   /// Live feed, global order: the longest (s) a row waits behind the newest row for older rows
   /// of other devices (1 s covers a batch of 0.1-1 s per device); with `reorder_adaptive` off
   /// (the default), every row waits this long (estimates lag by it).
