@@ -6,6 +6,7 @@
 /// library (they read and write mission directories and run pipelines of the registry); the
 /// CLI only dispatches to them.
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -17,6 +18,7 @@
 #include "trailmark/ins/zupt_ins.h"
 #include "trailmark/io/mission_io.h"
 #include "trailmark/sim/mission_sim.h"
+#include "trailmark/sim/variation.h"
 
 namespace trailmark::experiments {
 
@@ -59,6 +61,11 @@ Metrics RunAndEvaluate(const std::string& pipeline, const std::filesystem::path&
 /// building of several floors, the one plan otherwise, none for a scenario without a building.
 void WriteSimulatedMission(const std::filesystem::path& dir, const SimulatedMission& sim,
                            const MissionWriteStyle& style = {});
+/// Writes `file` (variation.json) as `trailmark simulate --vary` does: the scenario, its seed, the
+/// drawn variation's values and the notes of what applying it changed. Throws on a failed write.
+void WriteVariationJson(const std::filesystem::path& file, const std::string& scenario,
+                        std::uint64_t seed, const Variation& variation,
+                        const std::vector<std::string>& notes);
 /// A pipeline's run on a mission, or why it did not run.
 struct RunOutcome {
   bool ran = false;

@@ -94,9 +94,10 @@ int ReproduceRobustness(int variants, const fs::path& out, int first_seed,
         const std::uint64_t seed = 100 + static_cast<std::uint64_t>(k);
         SimulatedMission sim = SimulateScenario(scenario, seed);
         const Variation v = DrawVariation(family, static_cast<std::uint64_t>(k));
-        ApplyVariation(v, sim);
+        const std::vector<std::string> notes = ApplyVariation(v, sim);
         const fs::path dir = out / "missions" / fmt::format("{}-{}-{}", scenario, family_name, k);
         WriteSimulatedMission(dir / "mission", sim, v.write);
+        WriteVariationJson(dir / "mission" / "variation.json", scenario, seed, v, notes);
         const RunOutcome dr = RunIfRunnable("pdr", dir / "mission", dir / "pdr");
         std::map<std::string, double> p75_of;  // agents' p75 of each pipeline on this variant
         for (const std::string& name : names) {

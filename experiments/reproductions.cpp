@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
 
 #include "experiments/experiments.h"
 #include "trailmark/eval/metrics.h"
@@ -147,6 +149,20 @@ Metrics RunAndEvaluate(const std::string& pipeline, const fs::path& mission_dir,
   const auto truth = ReadAll<TruthSample>(mission.Path("truth.csv").string(), &mission.registry());
   const auto est = ReadAll<Estimate>((out / "estimates.csv").string(), &mission.registry());
   return Evaluate(mission.info(), truth, est);
+}
+
+void WriteVariationJson(const fs::path& file, const std::string& scenario, std::uint64_t seed,
+                        const Variation& variation, const std::vector<std::string>& notes) {
+  nlohmann::json drawn = nlohmann::json::object();
+  for (const auto& [key, value] : variation.Describe()) drawn[key] = value;
+  std::ofstream j(file);
+  j << nlohmann::json{{"scenario", scenario},
+                      {"seed", seed},
+                      {"variation", drawn},
+                      {"notes", notes}}
+           .dump(2)
+    << "\n";
+  if (!j) throw std::runtime_error(file.string() + ": write failed");
 }
 
 void WriteSimulatedMission(const fs::path& dir, const SimulatedMission& sim,

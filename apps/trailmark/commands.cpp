@@ -13,6 +13,7 @@
 #include <set>
 #include <sstream>
 
+#include "experiments/experiments.h"
 #include "progress.h"
 #include "trailmark/core/error.h"
 #include "trailmark/eval/metrics.h"
@@ -139,19 +140,13 @@ void Simulate(const std::string& scenario, std::uint64_t seed, const fs::path& o
     const Variation v = DrawVariation(family, *vary.k);
     const std::vector<std::string> notes = ApplyVariation(v, sim);
     style = v.write;
-    nlohmann::json drawn = nlohmann::json::object();
-    for (const auto& [key, value] : v.Describe()) drawn[key] = value;
     sim.data.info.description += fmt::format(". Variant {} of family {}.", *vary.k, vary.family);
     if (sim.levels.empty()) {
       WriteMissionDirectory(out, sim.data, &sim.plan, style);
     } else {
       WriteMissionDirectory(out, sim.data, sim.levels, style);  // every level, drawn alike
     }
-    std::ofstream j(out / "variation.json");
-    j << nlohmann::json{{"scenario", scenario}, {"seed", seed}, {"variation", drawn}, {"notes", notes}}
-             .dump(2)
-      << "\n";
-    if (!j) throw std::runtime_error((out / "variation.json").string() + ": write failed");
+    experiments::WriteVariationJson(out / "variation.json", scenario, seed, v, notes);
     for (const auto& [key, value] : v.Describe()) fmt::print("  {:<26} {}\n", key, value);
   } else if (sim.levels.empty()) {
     // A scenario without a building (the synthetic incident) has no floor plan to write.

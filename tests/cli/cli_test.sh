@@ -215,6 +215,10 @@ grep -q "1,000 beacons" "$dir/repb.txt" && grep -q "| \*\*overall\*\* | 1.93 / 3
 grep -q "Options (the pipelines', not dead reckoning's): \`map_lag_s=1\`" "$dir/rob.txt" \
   && grep -q "^| beacons-mds | beacon-trail | frame |" "$dir/rob.txt" \
   && ! grep -q "^| beacons-ekf " "$dir/rob.txt" || fail "reproduce robustness, one pipeline"
+# Each variant keeps what was drawn, as `simulate --vary` writes it: the same draw.
+"$TM" simulate beacon-trail --seed 101 --vary 1 --family radio --out "$dir/rob-bt1" > /dev/null
+cmp "$dir/rob-bt1/variation.json" "$dir/rob/robustness/missions/beacon-trail-radio-1/mission/variation.json" \
+  || fail "reproduce robustness variation.json"
 run_failing "$TM" reproduce robustness --option map_lag_s=1 --seeds 1 --out "$dir/x"
 [ $rc -eq 1 ] && grep -q "option needs --pipeline" "$dir/err" || fail "robustness option alone"
 run_failing "$TM" reproduce robustness --pipeline pdr --seeds 1 --out "$dir/x"
