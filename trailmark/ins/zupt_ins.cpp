@@ -222,6 +222,12 @@ void ZuptIns::Align() {
         Eigen::Matrix3d::Identity() * std::pow(options_.gyro_bias_sigma0, 2);
   }
   aligned_ = true;
+  aligned_state_ = InsState{};
+  aligned_state_->t = alignment_.front().t;
+  aligned_state_->position_n = p_;
+  aligned_state_->q_nb = q_;
+  aligned_state_->position_cov = P_.block<3, 3>(kPos, kPos);
+  aligned_yaw_var_ = P_(kAtt + 2, kAtt + 2);
   const std::vector<ImuSample> buffered = std::move(alignment_);
   const std::vector<bool> stance = std::move(alignment_stance_);
   alignment_.clear();
@@ -490,11 +496,26 @@ void ZuptIns::StanceBookkeeping(bool stance, const InsState& previous) {
 
 void ZuptIns::EmitStep(const InsState& end, bool horizontal_only) {
   if (!last_stance_end_t_) {
-    last_stance_end_t_ = end.t;
-    last_stance_end_p_ = end.position_n;
-    last_stance_end_cov_ = end.position_cov;
-    last_stance_end_yaw_var_ = P_(kAtt + 2, kAtt + 2);
-    return;
+    // The first stance end is the steps' reference (the rest at the start). A detector that
+    // did not see that rest as stance (an uncalibrated consumer gyro reads degrees per second
+    // at rest, above the detector's threshold until the bias is estimated) first ends a stance
+    // metres into the walk: the walk to it would be in no step, and every consumer of the steps
+    // would start that far behind the INS (imu family, corridor K 1: 1.4 m for the whole walk).
+    // Then the first step starts at the alignment's state, the start.
+    constexpr double kMovedBeforeFirstStanceM = 0.1;
+    if (aligned_state_ &&
+        (end.position_n - aligned_state_->position_n).head<2>().norm() > kMovedBeforeFirstStanceM) {
+      last_stance_end_t_ = aligned_state_->t;
+      last_stance_end_p_ = aligned_state_->position_n;
+      last_stance_end_cov_ = aligned_state_->position_cov;
+      last_stance_end_yaw_var_ = aligned_yaw_var_;
+    } else {
+      last_stance_end_t_ = end.t;
+      last_stance_end_p_ = end.position_n;
+      last_stance_end_cov_ = end.position_cov;
+      last_stance_end_yaw_var_ = P_(kAtt + 2, kAtt + 2);
+      return;
+    }
   }
   Vec3 delta = end.position_n - last_stance_end_p_;
   // A step that ends in the air keeps the foot's lift out of the height: the landing's carries

@@ -218,6 +218,10 @@ class ZuptIns {
   Vec3 last_stance_end_p_ = Vec3::Zero();
   Eigen::Matrix3d last_stance_end_cov_ = Eigen::Matrix3d::Zero();
   double last_stance_end_yaw_var_ = 0;  ///< rad^2, the filter's yaw variance at that end
+  /// The state at alignment (the start): the first step's reference when the INS moved before
+  /// its first stance (a detector that does not see the first rest, EmitStep).
+  std::optional<InsState> aligned_state_;
+  double aligned_yaw_var_ = 0;
   bool own_errors_hold_ = true;         ///< OwnErrorsHold()
   bool swinging_ = false;        ///< between a lift-off and the next landing
   long swing_samples_ = 0;       ///< samples since the lift-off
