@@ -96,6 +96,12 @@ const OptionTable<InsOptions>& InsOptionTable() {
         OptionBounds::Between(0, 100000),
         "from the first step the INS's output waits for the mounting, at most this many "
         "landings (0: only a stride beyond mount_yaw_hold_above holds it)");
+    t.Real(
+        "mount_yaw_hold_first_release",
+        [](O& o) -> double& { return o.mount_yaw.hold_first_release_rad; }, "rad",
+        OptionBounds::NonNegative(),
+        "the first steps' hold ends at a straight stride within this of the reference (a "
+        "mounting about the foot's)");
     t.Real("zaru_recover_s", &O::zaru_recover_s, "s", OptionBounds::NonNegative(),
            "stance over which every ZARU refused grows the gyro bias's covariance to take it "
            "(0: never)");
@@ -260,12 +266,16 @@ void MultiAgentIns::Add(const ImuSample& sample) {
         a->holding = a->holding_first = true;
       }
       a->stepped = true;
+      bool release_first = false;
       if (a->mount && !a->mount->Decided() && end.stance) {
         a->mount->AddLanding(end.position_n, end.q_nb);
         const auto last = a->mount->LastStrideRad();
         if (!a->mount->Decided() && last && std::abs(*last) > options_.mount_yaw.hold_above_rad) {
           a->holding = true;
           a->holding_first = false;  // turned: it waits for the decision
+        } else if (a->holding_first && last &&
+                   std::abs(*last) <= options_.mount_yaw.hold_first_release_rad) {
+          release_first = true;  // mounted about as the foot: no need to wait for the decision
         }
         if (a->mount->Decided()) a->turn_rad = a->mount->TurnWorthTakingRad();
       }
@@ -277,7 +287,8 @@ void MultiAgentIns::Add(const ImuSample& sample) {
       if (a->mount && a->mount->Decided() && a->holding) {
         Release(*a, id);
       } else if (a->holding_first && a->holding &&
-                 a->mount->Landings() >= options_.mount_yaw.hold_first_landings) {
+                 (release_first ||
+                  a->mount->Landings() >= options_.mount_yaw.hold_first_landings)) {
         Release(*a, id);  // as they are: the decision's catch-up follows
       }
       if (!a->holding) a->holding_first = false;

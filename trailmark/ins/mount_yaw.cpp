@@ -37,6 +37,8 @@ bool MountYawOptions::IsValid(std::string* why) const {
     problem = "mount_yaw_hold_above must be >= 0";
   else if (hold_first_landings < 0)
     problem = "mount_yaw_hold_first_landings must be >= 0";
+  else if (!(hold_first_release_rad >= 0) || !std::isfinite(hold_first_release_rad))
+    problem = "mount_yaw_hold_first_release must be >= 0";
   else if (max_landings < strides)
     problem = "mount_yaw_max_landings must be >= mount_yaw_strides";
   if (problem && why) *why = problem;

@@ -51,6 +51,11 @@ struct MountYawOptions {
   /// `ins` (its own output places nothing; waiting is only latency), 12 for the steps of every
   /// other pipeline (StepFrontEndOptions).
   int hold_first_landings = 0;
+  /// That hold ends sooner at a straight stride within this of the reference (rad, 5 deg: a
+  /// mounting about the foot's, the common case; the decision's catch-up makes up the rest), so
+  /// that only a turned IMU keeps everyone's rows waiting (the step consumers need global time
+  /// order: a hold holds every agent's rows).
+  double hold_first_release_rad = 0.087;
   bool IsValid(std::string* why) const;
 };
 
