@@ -210,7 +210,7 @@ void MultiAgentIns::Give(Agent& a, const Step& step, const InsState& end) {
   // foot's (up to the hold's 15 degrees, more for steps that waited): the INS's own heading
   // variance is not these steps' error, and they no longer claim it (consumers take them with
   // a PDR's errors; house 1, imu family K 250: turned 28.7 degrees, dead reckoning 4.1 m off).
-  if (a.mount && a.mount->Decided() && !a.mount->Found()) out.heading_var_rad2.reset();
+  if (a.mount && a.mount->NotFound()) out.heading_var_rad2.reset();
   on_step(out);
 }
 
@@ -333,8 +333,7 @@ bool MultiAgentIns::OwnErrorsHold(const std::string& agent) const {
 
 bool MultiAgentIns::MountNotFound(const std::string& agent) const {
   const auto it = agents_.find(agent);
-  return it != agents_.end() && it->second->mount && it->second->mount->Decided() &&
-         !it->second->mount->Found();
+  return it != agents_.end() && it->second->mount && it->second->mount->NotFound();
 }
 
 std::optional<TimeS> MultiAgentIns::NewestSample(const std::string& agent) const {

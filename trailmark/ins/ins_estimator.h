@@ -53,7 +53,7 @@ class MultiAgentIns {
   /// Whether the IMU's mounting about the vertical was searched for and not found (a walk
   /// without straight strides: a search along walls, a crawl): its walk is turned about the
   /// start by an angle nobody knows, and its steps no longer claim the INS's own heading
-  /// variance (MountYawEstimator::Found).
+  /// variance (MountYawEstimator::NotFound).
   bool MountNotFound(const std::string& agent) const;
   /// The earliest EarliestNextStepEnd of the agents whose newest sample is at or after
   /// `active_since` (a device further behind does not hold the others back); nullopt if none.

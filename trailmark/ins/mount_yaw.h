@@ -73,8 +73,8 @@ class MountYawEstimator {
   /// turn.
   void Settle();
   bool Decided() const { return decided_; }
-  /// Decided from strides that agree (false until decided, and when it settled without: Note()).
-  bool Found() const { return decided_ && note_.empty(); }
+  /// Settled without strides that agree (Note() says why): the walk's turn is unknown.
+  bool NotFound() const { return decided_ && !note_.empty(); }
   /// The turn (rad, about the vertical) that takes the INS's frame to the stated one: minus the
   /// strides' median angle from the reference. 0 until decided and when undecidable.
   double CorrectionRad() const { return correction_rad_; }
