@@ -360,6 +360,65 @@ TEST(MapLeastSquares, AMovedSurveyIsInconsistent) {
   EXPECT_GT(s.chi2, s.chi2_threshold);
 }
 
+TEST(MapLeastSquares, ARangeScaleIsEstimatedAgainstTheSurveys) {
+  // Every link timed at a speed of sound 8 % off (ranges x 1.08), the two surveys 16 m apart
+  // (Problem's beacons 4 and 12) and the drop priors tight enough to count (0.1 m): with the
+  // scale among the unknowns the map is the truth within 5 cm and k is 1.08 less the prior's
+  // pull; the ranges as they are stretch the map; the marginals, k's too, equal
+  // ceres::Covariance's.
+  Random rng(4);
+  const auto truth = UTrail();
+  MapProblem p = Problem(truth, 0.0, 0.0, rng);
+  for (auto& q : p.priors) q.cov = Mat2::Identity() * (q.cov(0, 0) > 0.5 ? 0.01 : 0.0025);
+  for (auto& l : p.links) l.range_m *= 1.08, l.scaled = true;
+  p.range_scale_sigma = 0.02;
+  const MapSolution s = SolveMapLeastSquares(p, {truth});
+  ASSERT_TRUE(s.ok) << s.why;
+  // The written-out cost is stationary in k at the solution (every link inside Huber's
+  // quadratic part here): sum (k d - r) d / sigma^2 + (k - 1) / 0.02^2 = 0 with the solution's
+  // distances d, i.e. k = (sum r d / sigma^2 + 1 / 0.02^2) / (sum d^2 / sigma^2 + 1 / 0.02^2).
+  double rd = 0, dd = 0;
+  for (const auto& l : p.links) {
+    const double d = (s.position_n[l.i] - s.position_n[l.j]).norm();
+    ASSERT_LT(std::abs(s.range_scale * d - l.range_m) / l.sigma_m, 2.0);  // quadratic part
+    rd += l.range_m * d / (l.sigma_m * l.sigma_m);
+    dd += d * d / (l.sigma_m * l.sigma_m);
+  }
+  const double prior = 1.0 / (0.02 * 0.02);
+  EXPECT_NEAR(s.range_scale, (rd + prior) / (dd + prior), 1e-9);
+  EXPECT_GT(s.range_scale, 1.07);
+  double worst = 0;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    worst = std::max(worst, (s.position_n[i] - truth[i]).norm());
+  EXPECT_LT(worst, 0.05);
+  MapProblem as_they_are = p;
+  as_they_are.range_scale_sigma = 0;
+  const MapSolution t = SolveMapLeastSquares(as_they_are, {truth});
+  ASSERT_TRUE(t.ok) << t.why;
+  double worst_t = 0;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    worst_t = std::max(worst_t, (t.position_n[i] - truth[i]).norm());
+  EXPECT_GT(worst_t, 4 * worst);
+  EXPECT_EQ(t.range_scale, 1.0);
+  EXPECT_EQ(t.range_scale_var, 0.0);
+  const MapSolution a = ExpectMarginalsEqualCeres(p, truth);
+  MapLeastSquaresOptions reference;
+  reference.reference_covariance = true;
+  const MapSolution b = SolveMapLeastSquares(p, {truth}, reference);
+  EXPECT_GT(a.range_scale_var, 0);
+  EXPECT_LT(a.range_scale_var, 0.02 * 0.02);
+  EXPECT_NEAR(a.range_scale_var, b.range_scale_var, 1e-9 * b.range_scale_var);
+  // Links not timed (radio) keep no scale, and a bad sigma is refused.
+  MapProblem radio = p;
+  for (auto& l : radio.links) l.scaled = false;
+  EXPECT_EQ(SolveMapLeastSquares(radio, {truth}).range_scale, 1.0);
+  MapProblem bad = p;
+  bad.range_scale_sigma = std::nan("");
+  EXPECT_THROW(SolveMapLeastSquares(bad, {truth}), std::invalid_argument);
+  bad.range_scale_sigma = -0.1;
+  EXPECT_THROW(SolveMapLeastSquares(bad, {truth}), std::invalid_argument);
+}
+
 TEST(MapLeastSquares, BadInputIsRefusedAndAnUnanchoredPartIsNotSolved) {
   Random rng(9);
   const auto truth = UTrail();

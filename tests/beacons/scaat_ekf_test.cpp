@@ -39,26 +39,27 @@ TEST(UltrasoundModels, JacobiansMatchNumericalDerivatives) {
 
 TEST(ScaatEkf, StepPropagationMatchesLinearizationNumerically) {
   // The covariance after a step equals F P F^T + Q with F from finite differences of
-  // f(x) = (p + s R(psi) d, psi, s).
+  // f(x) = (p + s R(psi) d, psi, s, k).
   ScaatEkf::Options o;
   o.step_sigma_floor_m = 0;
   o.heading_walk_rad_per_sqrt_m = 0;
   o.scale_walk_per_sqrt_m = 0;
-  Eigen::Matrix4d P0 = Eigen::Matrix4d::Identity() * 0.1;
+  ScaatEkf::Cov P0 = ScaatEkf::Cov::Identity() * 0.1;
   P0(0, 2) = P0(2, 0) = 0.02;
+  P0(1, 4) = P0(4, 1) = 0.01;
   ScaatEkf::State x0;
-  x0 << 1, 2, 0.3, 1.1;
+  x0 << 1, 2, 0.3, 1.1, 1.05;
   ScaatEkf ekf(x0, P0, o);
   const Vec2 d(0.7, -0.2);
   ekf.PredictStep(d, Mat2::Zero());
-  auto f = [&](const Eigen::Vector4d& x) {
-    Eigen::Vector4d y = x;
+  auto f = [&](const ScaatEkf::State& x) {
+    ScaatEkf::State y = x;
     y.head<2>() += x(3) * Rot(x(2)) * d;
     return y;
   };
-  Eigen::Matrix4d F;
-  for (int k = 0; k < 4; ++k) {
-    Eigen::Vector4d dx = Eigen::Vector4d::Zero();
+  ScaatEkf::Cov F;
+  for (int k = 0; k < ScaatEkf::kDim; ++k) {
+    ScaatEkf::State dx = ScaatEkf::State::Zero();
     dx(k) = 1e-6;
     F.col(k) = (f(x0 + dx) - f(x0 - dx)) / 2e-6;
   }
@@ -75,11 +76,12 @@ TEST(ScaatEkf, EqualsALinearKalmanFilterWhenHeadingAndScaleAreKnown) {
   o.step_sigma_floor_m = 0;
   o.gate_chi2_2dof = 1e9;
   ScaatEkf::State x0;
-  x0 << 0.5, -0.5, 0, 1;
-  Eigen::Matrix4d P0 = Eigen::Matrix4d::Zero();
+  x0 << 0.5, -0.5, 0, 1, 1;
+  ScaatEkf::Cov P0 = ScaatEkf::Cov::Zero();
   P0.topLeftCorner<2, 2>() << 0.3, 0.05, 0.05, 0.2;
   P0(2, 2) = 1e-30;
   P0(3, 3) = 1e-30;
+  P0(4, 4) = 1e-30;
   ScaatEkf ekf(x0, P0, o);
   Vec2 x = x0.head<2>();
   Mat2 P = P0.topLeftCorner<2, 2>();
@@ -104,19 +106,25 @@ TEST(ScaatEkf, EqualsALinearKalmanFilterWhenHeadingAndScaleAreKnown) {
   }
 }
 
-// Simulates the filter's own model: a walk with heading offset psi and scale s drawn from the
-// prior, PDR steps with noise, range and bearing to beacons with Gaussian noise. Returns the
-// NEES of the full state at the end. `outliers`: that share of the ranges is NLOS (0.2-2.5 m
-// long) and of the bearings uniform on the circle (issue 22);
-// `mixture`: the filter's mixture updates, else its hard 3-sigma gate.
-double RunNees(std::uint64_t seed, bool position_update, double outliers = 0,
-               bool mixture = false) {
+// Simulates the filter's own model: a walk with heading offset psi, scale s and range scale k
+// drawn from the prior, PDR steps with noise, range (k times the distance) and bearing to
+// beacons with Gaussian noise. Returns the NEES of the full state at the end. `outliers`: that
+// share of the ranges is NLOS (0.2-2.5 m long) and of the bearings uniform on the circle (issue
+// 22); `mixture`: the filter's mixture updates, else its hard 3-sigma gate.
+struct NeesRun {
+  ScaatEkf::State error;  ///< truth minus estimate
+  ScaatEkf::Cov cov;
+};
+
+NeesRun RunNees(std::uint64_t seed, bool position_update, double outliers = 0,
+                bool mixture = false) {
   Random rng(seed);
   ScaatEkf::Options o;
   o.mixture_updates = mixture;
   o.range_outlier_probability = o.bearing_outlier_probability = std::max(outliers, 0.01);
   const double psi = rng.Normal(0, o.initial_heading_sigma_rad);
   const double scale = 1.0 + rng.Normal(0, o.initial_scale_sigma);
+  const double range_scale = 1.0 + rng.Normal(0, o.range_scale_sigma);
   const Vec2 start(0, 0);
   const Vec2 p0 = start + Vec2(rng.Normal(0, o.initial_position_sigma_m),
                                rng.Normal(0, o.initial_position_sigma_m));
@@ -141,7 +149,7 @@ double RunNees(std::uint64_t seed, bool position_update, double outliers = 0,
     for (const Vec2& b : beacons) {
       const double dist = (p - b).norm();
       if (dist > 5.0) continue;
-      double r = dist + rng.Normal(0, o.range_sigma_m);
+      double r = range_scale * dist + rng.Normal(0, o.range_sigma_m);
       double br = std::atan2(p.y() - b.y(), p.x() - b.x()) + rng.Normal(0, o.bearing_sigma_rad);
       if (outliers > 0 && rng.Uniform() < outliers) r = dist + rng.Uniform(0.2, 2.5);  // NLOS: long
       if (outliers > 0 && rng.Uniform() < outliers) br = rng.Uniform(-std::numbers::pi, std::numbers::pi);
@@ -154,42 +162,60 @@ double RunNees(std::uint64_t seed, bool position_update, double outliers = 0,
       }
     }
   }
-  Eigen::Vector4d e;
-  e << p - ekf.position(), WrapAngle(true_psi - ekf.psi()), true_scale - ekf.scale();
-  return e.dot(ekf.covariance().ldlt().solve(e));
+  ScaatEkf::State e;
+  e << p - ekf.position(), WrapAngle(true_psi - ekf.psi()), true_scale - ekf.scale(),
+      range_scale - ekf.range_scale();
+  return {e, ekf.covariance()};
+}
+
+double Nees(const NeesRun& r) { return r.error.dot(r.cov.ldlt().solve(r.error)); }
+
+// The NEES of the paper's four states (position, heading and step scale corrections).
+double PaperStatesNees(const NeesRun& r) {
+  const Eigen::Vector4d e = r.error.head<4>();
+  return e.dot(r.cov.topLeftCorner<4, 4>().ldlt().solve(e));
 }
 
 TEST(ScaatEkf, NormalizedEstimationErrorSquaredIsWithinChiSquareBounds) {
-  // 200 Monte Carlo runs: the average NEES of a consistent 4-state filter lies within the 95 %
-  // two-sided chi-square interval of 4 x 200 degrees of freedom divided by 200: [3.61, 4.41].
+  // 200 Monte Carlo runs: the average NEES of a consistent 5-state filter lies within the 95 %
+  // two-sided chi-square interval of 5 x 200 degrees of freedom divided by 200: [4.57, 5.45].
   const int runs = 200;
   double ours = 0, paper = 0;
   for (int s = 1; s <= runs; ++s) {
-    ours += RunNees(static_cast<std::uint64_t>(s), false) / runs;
-    paper += RunNees(static_cast<std::uint64_t>(s), true) / runs;
+    ours += Nees(RunNees(static_cast<std::uint64_t>(s), false)) / runs;
+    paper += Nees(RunNees(static_cast<std::uint64_t>(s), true)) / runs;
   }
-  EXPECT_GT(ours, 3.61);
-  EXPECT_LT(ours, 4.41);
+  EXPECT_GT(ours, 4.57);
+  EXPECT_LT(ours, 5.45);
   // The paper's update converts (range, bearing) to a position by first-order propagation; with
   // the moving node's bearing noise (~33 deg) that linearization is overconfident. This is why
   // the default updates range and bearing separately (measured NEES ~9.5 for the conversion).
-  EXPECT_GT(paper, 4.41);
+  EXPECT_GT(paper, 5.45);
 }
 
 TEST(ScaatEkf, MixtureUpdatesStayConsistentWithNlosRangesAndBearingOutliers) {
   // 15 % of ranges NLOS (0.2-2.5 m long) and 15 % of bearings uniform on the circle, as on a
   // trail laid out by someone else. The mixture (one-measurement PDA) keeps the mean NEES of
-  // 200 runs within the 95 % interval of its 4 dof (measured 4.00), below the 3-sigma gate's
-  // (4.39: the long ranges inside the gate go in whole).
+  // the paper's four states over 200 runs within the 95 % interval of 4 dof, [3.61, 4.41]
+  // (measured 4.16; 4.00 before the range scale state), below the 3-sigma gate's (the long
+  // ranges inside the gate go in whole).
+  // The range scale is outside that model here: the NLOS ranges that pass as inliers are long
+  // by a few tenths of a metre, which a scale reads as ranges too long (its mean error -0.008
+  // against its sigma of 0.008, measured). What must hold: estimating it is still better than
+  // taking the ranges as they are (its RMS error below the prior's sigma, the error of k = 1).
   const int runs = 200;
-  double mixture = 0, gate = 0;
+  double mixture = 0, gate = 0, k_squared = 0;
+  ScaatEkf::Options o;
   for (int s = 1; s <= runs; ++s) {
-    mixture += RunNees(static_cast<std::uint64_t>(s), false, 0.15, true) / runs;
-    gate += RunNees(static_cast<std::uint64_t>(s), false, 0.15, false) / runs;
+    const NeesRun m = RunNees(static_cast<std::uint64_t>(s), false, 0.15, true);
+    mixture += PaperStatesNees(m) / runs;
+    k_squared += m.error(ScaatEkf::kRangeScale) * m.error(ScaatEkf::kRangeScale) / runs;
+    gate += PaperStatesNees(RunNees(static_cast<std::uint64_t>(s), false, 0.15, false)) / runs;
   }
   EXPECT_GT(mixture, 3.61);
   EXPECT_LT(mixture, 4.41);
   EXPECT_LT(mixture, gate);
+  EXPECT_LT(std::sqrt(k_squared), o.range_scale_sigma);
 }
 
 TEST(ScaatEkf, MixtureUpdateEqualsTheMomentsOfItsTwoHypotheses) {
@@ -201,17 +227,22 @@ TEST(ScaatEkf, MixtureUpdateEqualsTheMomentsOfItsTwoHypotheses) {
   const Vec2 b(3.0, 1.0);
   for (const double r : {2.4, 3.1, 3.9, 4.6}) {
     ScaatEkf::State x0;
-    x0 << 0.2, -0.1, 0.05, 1.02;
+    x0 << 0.2, -0.1, 0.05, 1.02, 1.03;
     ScaatEkf::Cov P0 = ScaatEkf::Cov::Identity() * 0.04;
     P0(0, 1) = P0(1, 0) = 0.01;
     P0(2, 2) = 0.01;
     P0(3, 3) = 0.0025;
+    P0(4, 4) = 0.0004;
+    P0(0, 4) = P0(4, 0) = 0.001;
     ScaatEkf ekf(x0, P0, o);
     ASSERT_EQ(ekf.UpdateRange({b, Mat2::Zero()}, r, 0.3), UpdateResult::kAccepted);
+    // h = k |p - b|: dh/dp = k (p - b)' / |p - b|, dh/dk = |p - b|.
     Eigen::RowVector2d Hp;
-    const double h = UltrasoundRange(x0.head<2>(), b, &Hp);
-    Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
-    H.head<2>() = Hp;
+    const double distance = UltrasoundRange(x0.head<2>(), b, &Hp);
+    const double h = x0(4) * distance;
+    Eigen::Matrix<double, 1, ScaatEkf::kDim> H = Eigen::Matrix<double, 1, ScaatEkf::kDim>::Zero();
+    H.head<2>() = x0(4) * Hp;
+    H(4) = distance;
     const double R = 0.09, y = r - h;
     const double S = (H * P0 * H.transpose())(0) + R;
     const double inlier = (1 - 0.2) * std::exp(-0.5 * y * y / S) / std::sqrt(2 * std::numbers::pi * S);
@@ -238,7 +269,7 @@ TEST(ScaatEkf, GatesNlosRangesAndSkipsBadInput) {
   EXPECT_EQ(ekf.UpdateRange({ekf.position(), Mat2::Zero()}, 0.0), UpdateResult::kSkipped);
   EXPECT_EQ(ekf.summary().gated, 1u);
   EXPECT_TRUE(ekf.state().allFinite());
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> eig(ekf.covariance());
+  const Eigen::SelfAdjointEigenSolver<ScaatEkf::Cov> eig(ekf.covariance());
   EXPECT_GT(eig.eigenvalues().minCoeff(), 0);
   EXPECT_EQ(ekf.covariance(), ekf.covariance().transpose());
 }

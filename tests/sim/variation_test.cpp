@@ -245,19 +245,42 @@ TEST(Variation, RangesGetLongTailedNlosAndNeighbourOnlyLinks) {
   for (const auto& r : m.data.ranges) {
     if (order.count(r.a) && order.count(r.b)) ASSERT_LE(std::abs(order[r.a] - order[r.b]), 1);
   }
-  // Never shorter: NLOS adds; about the drawn share gets an excess.
+  // Never shorter than the scaled range: NLOS adds; about the drawn share gets an excess.
   Variation all_links = v;
   all_links.neighbour_only_links = false;
   SimulatedMission n = base;
   ApplyVariation(all_links, n);
   ASSERT_EQ(n.data.ranges.size(), base.data.ranges.size());
+  EXPECT_GE(v.ultrasound_range_scale, 0.93);
+  EXPECT_LE(v.ultrasound_range_scale, 1.04);
   std::size_t longer = 0;
   for (std::size_t i = 0; i < n.data.ranges.size(); ++i) {
-    ASSERT_GE(n.data.ranges[i].range_m, base.data.ranges[i].range_m);
-    longer += n.data.ranges[i].range_m > base.data.ranges[i].range_m;
+    ASSERT_EQ(base.data.ranges[i].kind, "ultrasound");
+    const double scaled = v.ultrasound_range_scale * base.data.ranges[i].range_m;
+    ASSERT_GE(n.data.ranges[i].range_m, scaled - 1e-12);
+    longer += n.data.ranges[i].range_m > scaled + 1e-12;
   }
   const double share = static_cast<double>(longer) / static_cast<double>(n.data.ranges.size());
   EXPECT_NEAR(share, v.nlos_fraction, 0.05);
+}
+
+TEST(Variation, RangesAreTimedAtTheAirsSpeedOfSoundOnlyForUltrasound) {
+  // The ranges family's speed of sound scales every ultrasound range alike (a range without
+  // NLOS excess by exactly the drawn factor) and leaves radio ranges alone.
+  SimulatedMission base = SimulateScenario("beacon-trail", 2);
+  base.data.ranges.push_back({base.data.ranges.back().t, "b01", "b02", 4.0, 0.1, "uwb"});
+  Variation v = DrawVariation(VariationFamily::kRanges, 3);
+  v.nlos_fraction = 0;
+  v.neighbour_only_links = false;
+  v.ultrasound_range_scale = 1.04;
+  SimulatedMission m = base;
+  ApplyVariation(v, m);
+  ASSERT_EQ(m.data.ranges.size(), base.data.ranges.size());
+  for (std::size_t i = 0; i < m.data.ranges.size(); ++i) {
+    const double expected =
+        base.data.ranges[i].range_m * (base.data.ranges[i].kind == "ultrasound" ? 1.04 : 1.0);
+    ASSERT_NEAR(m.data.ranges[i].range_m, expected, 1e-12) << i;
+  }
 }
 
 TEST(Variation, PdrHeadingDriftsWithTimeAlsoWhileStanding) {

@@ -47,6 +47,10 @@ bool BeaconMapOptions::IsValid(std::string* why) const {
     if (why) *why = "max_sightings and sightings_min_surveyed must be >= 0";
     return false;
   }
+  if (!(range_scale_sigma >= 0) || !std::isfinite(range_scale_sigma)) {
+    if (why) *why = "range_scale_sigma must be finite and >= 0";
+    return false;
+  }
   return least_squares.IsValid(why);
 }
 
@@ -363,8 +367,16 @@ void BeaconMap::EndSolve() {
   summary_.prior_inflation = 1;
   summary_.track_inflation = 1;
   summary_.sightings_used = summary_.sighting_outliers = 0;
+  summary_.range_scale = 1.0;
+  summary_.range_scale_sigma = 0.0;
+  std::size_t scaled_members = 0;
   summary_.tracks_without_sightings = tracks_without_sightings_.size();
   for (const auto& [first, part] : parts_) {
+    if (part.range_scale_sigma > 0 && part.members >= scaled_members) {
+      scaled_members = part.members;
+      summary_.range_scale = part.range_scale;
+      summary_.range_scale_sigma = part.range_scale_sigma;
+    }
     summary_.sightings_used += part.sightings;
     summary_.sighting_outliers += part.sighting_outliers;
     summary_.components += part.placed;
@@ -462,6 +474,8 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
   PartResult* part = &out->part;
   MapProblem problem;
   problem.beacons = m;
+  // The ranges' scale only where two surveys set a length the ranges do not.
+  problem.range_scale_sigma = in.SurveyedCount() >= 2 ? options.range_scale_sigma : 0.0;
   Vec2 prior_mean = Vec2::Zero();
   std::vector<const BeaconPosition*> prior(m, nullptr);
   std::map<int, int> track_index;  // the map's track -> the problem's
@@ -510,8 +524,9 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
   for (int a = 0; a < m; ++a) {
     for (int b = a + 1; b < m; ++b) {
       if (!in.measured[a][b]) continue;
+      // Every link of the map is ultrasound (the pipelines give it no other kind): timed.
       problem.links.push_back(
-          {a, b, *in.measured[a][b], MedianSigma(options, in.counts[a * m + b])});
+          {a, b, *in.measured[a][b], MedianSigma(options, in.counts[a * m + b]), true});
     }
   }
   // Start 0: the last solution, else the priors, else the MDS layout (the priors' mean when
@@ -650,6 +665,9 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
     return false;
   }
   part->least_squares = true;
+  part->members = static_cast<std::size_t>(m);
+  part->range_scale = solution.range_scale;
+  part->range_scale_sigma = std::sqrt(std::max(solution.range_scale_var, 0.0));
   part->sightings = problem.sightings.size();
   part->sighting_outliers = static_cast<std::size_t>(solution.sighting_outliers);
   out->fold_starts_won += solution.start == 1;

@@ -95,6 +95,11 @@ struct BeaconMapOptions {
   /// the map with confidence (beacon-trail variants K 1-20, `phone`: beacons-ekf p75 3.21 ->
   /// 2.64 m, in95 42 -> 51 %; docs/beacons.md). false: the shared errors alone (before).
   bool inflate_track_white = true;
+  /// Prior sigma of the ranges' common scale k (the speed of sound the devices assume over the
+  /// air's; ours, issue 21): estimated with the map in a part that holds two or more surveyed
+  /// beacons (a length the ranges do not set); 0, or fewer surveys: the ranges as they are.
+  /// The beacon pipelines set it to their tracker's `range_scale_sigma`.
+  double range_scale_sigma = 0.0;
   bool IsValid(std::string* why) const;
 };
 
@@ -121,6 +126,8 @@ struct BeaconMapSummary {
   /// Tracks whose sightings were left out (their shared errors beyond their stated sigma).
   std::size_t tracks_without_sightings = 0;
   std::string rejected_why;             ///< of the latest rejection
+  /// At the last solve, of the largest part whose ranges' scale was estimated (1 and 0: none).
+  double range_scale = 1.0, range_scale_sigma = 0.0;
   std::string BriefReport() const;
 };
 
@@ -230,6 +237,8 @@ class BeaconMap {
     bool reflected = false;
     double anchor_rms_m = 0, chi2_per_dof = 0, prior_inflation = 1, track_inflation = 1;
     std::size_t sightings = 0, sighting_outliers = 0;
+    double range_scale = 1.0, range_scale_sigma = 0.0;  ///< the ranges' scale, when estimated
+    std::size_t members = 0;                            ///< beacons in the part
   };
   /// What solving one connected part needs, copied at BeginSolve() (indices are the part's
   /// own: member a is beacon members[a]; members[0] is the smallest, the part's key).

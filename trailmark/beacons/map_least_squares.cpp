@@ -60,6 +60,43 @@ class LinkCost final : public ceres::SizedCostFunction<1, 2, 2> {
   double range_m_, inv_sigma_;
 };
 
+// (k |p_i - p_j| - range) / sigma: a link timed at a speed of sound off by k (ours, issue 21);
+// Jacobians (k u / sigma, -k u / sigma, |p_i - p_j| / sigma).
+class ScaledLinkCost final : public ceres::SizedCostFunction<1, 2, 2, 1> {
+ public:
+  ScaledLinkCost(double range_m, double sigma_m) : range_m_(range_m), inv_sigma_(1.0 / sigma_m) {}
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    const double dx = x[0][0] - x[1][0], dy = x[0][1] - x[1][1];
+    const double d = std::sqrt(dx * dx + dy * dy), k = x[2][0];
+    residual[0] = (k * d - range_m_) * inv_sigma_;
+    if (jacobians) {
+      const double ux = d > 1e-12 ? dx / d : 1.0, uy = d > 1e-12 ? dy / d : 0.0;
+      const double g = k * inv_sigma_;
+      if (jacobians[0]) jacobians[0][0] = ux * g, jacobians[0][1] = uy * g;
+      if (jacobians[1]) jacobians[1][0] = -ux * g, jacobians[1][1] = -uy * g;
+      if (jacobians[2]) jacobians[2][0] = d * inv_sigma_;
+    }
+    return true;
+  }
+
+ private:
+  double range_m_, inv_sigma_;
+};
+
+// (k - 1) / sigma: the range scale's prior.
+class ScalePriorCost final : public ceres::SizedCostFunction<1, 1> {
+ public:
+  explicit ScalePriorCost(double sigma) : inv_sigma_(1.0 / sigma) {}
+  bool Evaluate(double const* const* x, double* residual, double** jacobians) const override {
+    residual[0] = (x[0][0] - 1.0) * inv_sigma_;
+    if (jacobians && jacobians[0]) jacobians[0][0] = inv_sigma_;
+    return true;
+  }
+
+ private:
+  double inv_sigma_;
+};
+
 // W (p - mu), W = L^-1 with L L^T = cov: the whitened prior.
 class PriorCost final : public ceres::SizedCostFunction<2, 2> {
  public:
@@ -272,6 +309,9 @@ class SightingRangeCost final : public ceres::SizedCostFunction<1, 3, 2> {
 };
 
 void Check(const MapProblem& p) {
+  if (!std::isfinite(p.range_scale_sigma) || p.range_scale_sigma < 0)
+    throw std::invalid_argument(fmt::format(
+        "beacon map: range_scale_sigma {} (need finite and >= 0)", p.range_scale_sigma));
   const auto index_ok = [&](int i) { return i >= 0 && i < p.beacons; };
   for (std::size_t k = 0; k < p.links.size(); ++k) {
     const MapLink& l = p.links[k];
@@ -333,7 +373,21 @@ void Check(const MapProblem& p) {
   }
 }
 
-// The problem's residual blocks on x (2 per beacon, then 3 per track, then 2 per sighting).
+// Whether the problem has a range scale among its unknowns (the last of x).
+bool HasRangeScale(const MapProblem& problem) {
+  if (!(problem.range_scale_sigma > 0)) return false;
+  for (const MapLink& l : problem.links)
+    if (l.scaled) return true;
+  return false;
+}
+
+std::size_t Unknowns(const MapProblem& problem) {
+  return 2 * problem.beacons + kTrackErrors * problem.tracks.size() + 3 * problem.sightings.size() +
+         (HasRangeScale(problem) ? 1 : 0);
+}
+
+// The problem's residual blocks on x (2 per beacon, then 4 per track, then 3 per sighting, then
+// the range scale when there is one).
 void Build(const MapProblem& problem, const MapLeastSquaresOptions& options,
            std::vector<double>& x, ceres::Problem& p) {
   const int n = problem.beacons;
@@ -343,9 +397,20 @@ void Build(const MapProblem& problem, const MapLeastSquaresOptions& options,
     p.AddParameterBlock(tracks + kTrackErrors * k, kTrackErrors);
     p.AddResidualBlock(new TrackCost(problem.tracks[k].cov), nullptr, tracks + kTrackErrors * k);
   }
+  double* scale = HasRangeScale(problem) ? &x.back() : nullptr;
+  if (scale) {
+    p.AddParameterBlock(scale, 1);
+    p.AddResidualBlock(new ScalePriorCost(problem.range_scale_sigma), nullptr, scale);
+  }
   for (const MapLink& l : problem.links) {
-    p.AddResidualBlock(new LinkCost(l.range_m, l.sigma_m),
-                       new ceres::HuberLoss(options.link_huber_sigma), &x[2 * l.i], &x[2 * l.j]);
+    if (scale && l.scaled) {
+      p.AddResidualBlock(new ScaledLinkCost(l.range_m, l.sigma_m),
+                         new ceres::HuberLoss(options.link_huber_sigma), &x[2 * l.i], &x[2 * l.j],
+                         scale);
+    } else {
+      p.AddResidualBlock(new LinkCost(l.range_m, l.sigma_m),
+                         new ceres::HuberLoss(options.link_huber_sigma), &x[2 * l.i], &x[2 * l.j]);
+    }
   }
   for (const MapPrior& q : problem.priors) {
     const Mat2 cov = 0.5 * (q.cov + q.cov.transpose());
@@ -386,14 +451,16 @@ double TukeyRho(double s, double c) {
 
 // The same by ceres::Covariance (SPARSE_QR): the reference of the tests.
 bool ReferenceMarginalCovariances(ceres::Problem& p, std::vector<double>& x, int beacons,
-                                  std::vector<Mat2>* cov) {
+                                  std::vector<Mat2>* cov, double* scale, double* scale_var) {
   ceres::Covariance::Options co;
   co.algorithm_type = ceres::SPARSE_QR;
   co.num_threads = 1;
   ceres::Covariance covariance(co);
   std::vector<std::pair<const double*, const double*>> blocks;
   for (int i = 0; i < beacons; ++i) blocks.emplace_back(&x[2 * i], &x[2 * i]);
+  if (scale) blocks.emplace_back(scale, scale);
   if (!covariance.Compute(blocks, &p)) return false;
+  if (scale) covariance.GetCovarianceBlock(scale, scale, scale_var);
   cov->resize(beacons);
   for (int i = 0; i < beacons; ++i) {
     double c[4];
@@ -414,8 +481,10 @@ bool ReferenceMarginalCovariances(ceres::Problem& p, std::vector<double>& x, int
 // each beacon's 2 x 2 block does too (its two parameters share residuals). ceres::Covariance
 // (SPARSE_QR) gives the same to round-off (tested) but took ~0.9 s at 1,000 beacons and 20,000
 // links. False when the information is not positive definite.
+// `scalar_column` >= 0: that parameter's variance too, in *scalar_var.
 bool MarginalCovariances(ceres::Problem& p, const std::vector<double*>& blocks, int beacons,
-                         std::vector<Mat2>* cov) {
+                         std::vector<Mat2>* cov, int scalar_column = -1,
+                         double* scalar_var = nullptr) {
   ceres::Problem::EvaluateOptions eo;
   eo.parameter_blocks = blocks;
   eo.apply_loss_function = true;
@@ -467,6 +536,11 @@ bool MarginalCovariances(ceres::Problem& p, const std::vector<double*>& blocks, 
     c << at(u, u), at(u, v), at(v, u), at(v, v);
     (*cov)[i] = c;
     if (!c.allFinite()) return false;
+  }
+  if (scalar_column >= 0) {
+    const int u = perm(scalar_column);
+    *scalar_var = at(u, u);
+    if (!std::isfinite(*scalar_var)) return false;
   }
   return true;
 }
@@ -533,8 +607,8 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   double best_cost = std::numeric_limits<double>::infinity();
   std::vector<double> x;
   for (std::size_t s = 0; s < starts.size(); ++s) {
-    std::vector<double> xs(
-        2 * n + kTrackErrors * problem.tracks.size() + 3 * problem.sightings.size(), 0.0);
+    std::vector<double> xs(Unknowns(problem), 0.0);
+    if (HasRangeScale(problem)) xs.back() = 1.0;
     for (int i = 0; i < n; ++i) xs[2 * i] = starts[s][i].x(), xs[2 * i + 1] = starts[s][i].y();
     // Each sighting starts where its chain's previous one is plus the dead reckoning's step
     // between them, a chain's first at its dead reckoning; no white heading error.
@@ -587,9 +661,13 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   for (std::size_t k = 0; k < problem.tracks.size(); ++k)
     best.track_errors.push_back(Eigen::Map<const TrackVec>(x.data() + 2 * n + kTrackErrors * k));
   // The two parts of chi2: links (Huber rho of the squared whitened residual) and priors.
+  const bool scaled = HasRangeScale(problem);
+  if (scaled) best.range_scale = x.back();
   const double d2 = options.link_huber_sigma * options.link_huber_sigma;
   for (const MapLink& l : problem.links) {
-    const double r = ((best.position_n[l.i] - best.position_n[l.j]).norm() - l.range_m) / l.sigma_m;
+    const double k = scaled && l.scaled ? best.range_scale : 1.0;
+    const double r =
+        (k * (best.position_n[l.i] - best.position_n[l.j]).norm() - l.range_m) / l.sigma_m;
     const double r2 = r * r;
     best.chi2_links += r2 <= d2 ? r2 : 2 * options.link_huber_sigma * std::abs(r) - d2;
   }
@@ -612,6 +690,7 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     SightingPriorCost(problem, k, options)->Evaluate(blocks, u.data(), nullptr);
     best.chi2_sightings += u.squaredNorm();
   }
+  // The range scale's prior is counted with the priors (its residual and unknown cancel in dof).
   best.chi2_priors = best.chi2 - best.chi2_links - best.chi2_sightings;
   best.prior_residuals = static_cast<int>(2 * problem.priors.size());
   for (const MapTrack& t : problem.tracks) best.prior_residuals += t.dof;
@@ -629,9 +708,14 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
       blocks.push_back(&x[2 * n + kTrackErrors * k]);
     for (std::size_t k = 0; k < problem.sightings.size(); ++k)
       blocks.push_back(&x[2 * n + kTrackErrors * problem.tracks.size() + 3 * k]);
-    const bool ok = options.reference_covariance
-                        ? ReferenceMarginalCovariances(p, x, n, &best.cov)
-                        : MarginalCovariances(p, blocks, n, &best.cov);
+    if (scaled) blocks.push_back(&x.back());
+    const bool ok =
+        options.reference_covariance
+            ? ReferenceMarginalCovariances(p, x, n, &best.cov, scaled ? &x.back() : nullptr,
+                                           &best.range_scale_var)
+            : MarginalCovariances(p, blocks, n, &best.cov,
+                                  scaled ? static_cast<int>(x.size()) - 1 : -1,
+                                  &best.range_scale_var);
     if (!ok) {
       best.cov.clear();
       best.why = "the map's covariance is rank deficient";

@@ -21,6 +21,9 @@ struct MapLink {
   int i = 0, j = 0;       ///< beacon indices, i != j
   double range_m = 0;     ///< the pair's measured distance (e.g. the median of its samples)
   double sigma_m = 0.1;   ///< of `range_m` (for a median of n: 1.2533 sigma / sqrt(n))
+  /// Timed at the speed of sound (ultrasound): read as k |p_i - p_j| with the problem's range
+  /// scale k when it has one (MapProblem::range_scale_sigma).
+  bool scaled = false;
 };
 
 /// The errors a dead reckoning shares between all the positions it gives (ins/dead_reckoning.h):
@@ -90,6 +93,10 @@ struct MapSighting {
 struct MapProblem {
   int beacons = 0;
   std::vector<MapLink> links;
+  /// > 0: the scaled links share one unknown scale k (the speed of sound the devices assume
+  /// over the air's), prior 1 +- this; observable through two or more surveyed beacons, whose
+  /// distance the ranges do not set. 0: the ranges as they are.
+  double range_scale_sigma = 0;
   std::vector<MapPrior> priors;
   std::vector<MapTrack> tracks;
   std::vector<MapSighting> sightings;
@@ -148,6 +155,9 @@ struct MapSolution {
   std::vector<TrackVec> track_errors;  ///< the estimated e of each track
   std::vector<Vec3> sighting_state;    ///< [x, y, h] of the agent at each sighting
   int sighting_outliers = 0;           ///< sightings whose range is beyond the Tukey bound
+  /// The scaled links' k and its marginal variance (1 and 0 without one).
+  double range_scale = 1.0;
+  double range_scale_var = 0.0;
 };
 
 /// Solves `problem` from each of `starts` (each a position per beacon) and keeps the lowest

@@ -62,6 +62,12 @@ bool ScaatEkfOptions::IsValid(std::string* why) const {
     return fail("measurement sigmas must be > 0");
   if (!(gate_sigma > 0) || !(gate_chi2_2dof > 0)) return fail("gates must be > 0");
   if (!(scale_min > 0) || !(scale_max > scale_min)) return fail("need 0 < scale_min < scale_max");
+  if (!(range_scale_sigma >= 0) || !std::isfinite(range_scale_sigma))
+    return fail("range_scale_sigma must be finite and >= 0");
+  if (!(range_scale_min > 0) || !(range_scale_max > range_scale_min) ||
+      !(range_scale_min <= 1 && range_scale_max >= 1)) {
+    return fail("need 0 < range_scale_min <= 1 <= range_scale_max");
+  }
   if (max_considered_beacons < 1) return fail("max_considered_beacons must be >= 1");
   if (!(range_outlier_probability >= 0 && range_outlier_probability < 1) ||
       !(bearing_outlier_probability >= 0 && bearing_outlier_probability < 1)) {
@@ -89,11 +95,12 @@ ScaatEkf::ScaatEkf(const Vec2& position_n, const Mat2& position_cov, double psi_
     : options_(options) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("ScaatEkf options: " + why);
-  x_ << position_n, psi_rad, scale;
+  x_ << position_n, psi_rad, scale, 1.0;
   P_.setZero();
   P_.topLeftCorner<2, 2>() = 0.5 * (position_cov + position_cov.transpose());
   P_(kPsi, kPsi) = psi_sigma_rad * psi_sigma_rad;
   P_(kScale, kScale) = scale_sigma * scale_sigma;
+  P_(kRangeScale, kRangeScale) = options_.range_scale_sigma * options_.range_scale_sigma;
   Condition();
 }
 
@@ -116,10 +123,12 @@ ScaatEkf StartFromInit(const InitResult& init, const Vec2& pdr_n, const ScaatEkf
   J.block<2, 1>(0, 2) = RotationDerivative(init.psi_rad) * pdr_n;
   const Eigen::Matrix3d C = J * init.cov * J.transpose();
   ScaatEkf::State x;
-  x << init.Map(pdr_n), init.psi_rad, 1.0;
+  x << init.Map(pdr_n), init.psi_rad, 1.0, 1.0;
   ScaatEkf::Cov P = ScaatEkf::Cov::Zero();
   P.topLeftCorner<3, 3>() = C;
-  P(3, 3) = options.initial_scale_sigma * options.initial_scale_sigma;
+  P(ScaatEkf::kScale, ScaatEkf::kScale) = options.initial_scale_sigma * options.initial_scale_sigma;
+  P(ScaatEkf::kRangeScale, ScaatEkf::kRangeScale) =
+      options.range_scale_sigma * options.range_scale_sigma;
   return ScaatEkf(x, P, options);
 }
 
@@ -159,10 +168,9 @@ double ScaatEkf::InlierProbability(double y, double S, double outlier_density,
 
 template <int M>
 UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
-                              const Eigen::Matrix<double, M, 4>& H,
-                              const Eigen::Matrix<double, M, M>& R, double gate,
-                              const Admit& admit, double outlier_density,
-                              double outlier_probability) {
+                              const Eigen::Matrix<double, M, kDim>& H,
+                              const Eigen::Matrix<double, M, M>& R, double gate, const Admit& admit,
+                              double outlier_density, double outlier_probability) {
   const Eigen::Matrix<double, M, M> S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix<double, M, M>> ldlt(S);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) {
@@ -185,9 +193,9 @@ UpdateResult ScaatEkf::Update(const Eigen::Matrix<double, M, 1>& y,
     ++summary_.gated;
     return UpdateResult::kGated;
   }
-  const Eigen::Matrix<double, 4, M> K =
+  const Eigen::Matrix<double, kDim, M> K =
       ldlt.solve(H * P_).transpose();  // P H^T S^-1 (S, P symmetric)
-  const Eigen::Vector4d dx = K * y;
+  const State dx = K * y;
   const Cov IKH = Cov::Identity() - K * H;
   const Cov P_updated = IKH * P_ * IKH.transpose() + K * R * K.transpose();  // Joseph form
   // Mixture: w N(x + dx, P_updated) + (1 - w) N(x, P), collapsed to its two moments.
@@ -217,12 +225,12 @@ int ScaatEkf::AppendBeacon(int key) {
     }
     slots_.pop_back();
     last_used_.pop_back();
-    cross_.conservativeResize(4, 2 * last);
+    cross_.conservativeResize(kDim, 2 * last);
     beacons_.conservativeResize(2 * last, 2 * last);
     ++summary_.beacons_marginalized;
   }
   const int n = static_cast<int>(slots_.size());
-  cross_.conservativeResize(4, 2 * n + 2);
+  cross_.conservativeResize(kDim, 2 * n + 2);
   beacons_.conservativeResize(2 * n + 2, 2 * n + 2);
   cross_.rightCols<2>().setZero();
   beacons_.rightCols<2>().setZero();
@@ -265,7 +273,7 @@ void ScaatEkf::ConsiderDrop(int key, double drop_sigma_m) {
   const int j = it != considered_.end() ? it->second : AppendBeacon(key);
   if (it != considered_.end()) last_used_[j] = ++uses_;
   // b = p + drop noise: cov(x, b) = P(:, p), cov(b, b_i) = cov(p, b_i), cov(b) = P_pp + drop^2.
-  const Eigen::Matrix<double, 4, 2> px = P_.leftCols<2>();
+  const Cross px = P_.leftCols<2>();
   const Eigen::MatrixXd pb = cross_.topRows<2>();
   cross_.middleCols<2>(2 * j) = px;
   beacons_.middleRows<2>(2 * j) = pb;
@@ -274,22 +282,21 @@ void ScaatEkf::ConsiderDrop(int key, double drop_sigma_m) {
       P_.topLeftCorner<2, 2>() + Mat2::Identity() * drop_sigma_m * drop_sigma_m;
 }
 
-Eigen::Matrix<double, 4, 2> ScaatEkf::BeaconCrossCovariance(int beacon_key) const {
+Eigen::Matrix<double, ScaatEkf::kDim, 2> ScaatEkf::BeaconCrossCovariance(int beacon_key) const {
   const auto it = considered_.find(beacon_key);
   return it == considered_.end() ? Cross::Zero() : Cross(cross_.middleCols<2>(2 * it->second));
 }
 
-UpdateResult ScaatEkf::UpdateConsider(double y, const Eigen::Matrix<double, 1, 4>& H,
+UpdateResult ScaatEkf::UpdateConsider(double y, const Eigen::Matrix<double, 1, kDim>& H,
                                       const Eigen::RowVector2d& H_b, double r, int key,
-                                      const BeaconPosition& beacon, double gate,
-                                      const Admit& admit, double outlier_density,
-                                      double outlier_probability) {
+                                      const BeaconPosition& beacon, double gate, const Admit& admit,
+                                      double outlier_density, double outlier_probability) {
   const int j = Consider(key, beacon.cov);
   // Schmidt-Kalman update (Schmidt 1966; Simon, Optimal State Estimation, sec. 7.5): the
   // measurement h(x, b); the gain and covariance of x use cov(x, b), b itself is not updated.
   const Cross C = cross_.middleCols<2>(2 * j);
   const Mat2 B = beacons_.block<2, 2>(2 * j, 2 * j);
-  const Eigen::Vector4d PHt = P_ * H.transpose() + C * H_b.transpose();
+  const State PHt = P_ * H.transpose() + C * H_b.transpose();
   const double S = (H * PHt)(0) + (H_b * C.transpose() * H.transpose())(0) +
                    (H_b * B * H_b.transpose())(0) + r;
   if (!(S > 0) || !std::isfinite(S)) {
@@ -311,12 +318,12 @@ UpdateResult ScaatEkf::UpdateConsider(double y, const Eigen::Matrix<double, 1, 4
     ++summary_.gated;
     return UpdateResult::kGated;
   }
-  const Eigen::Vector4d K = PHt / S;
+  const State K = PHt / S;
   // cov(z, beacons) = H cross + H_b cov(b_j, beacons)
   const Eigen::RowVectorXd zb = H * cross_ + H_b * beacons_.middleRows<2>(2 * j);
   // Mixture (w = 1 without one): w N(x + K y, P - K S K^T) + (1 - w) N(x, P), collapsed; the
   // beacons are not updated in either hypothesis, so their cross-covariance mixes linearly.
-  const Eigen::Vector4d dx = K * y;
+  const State dx = K * y;
   x_ += w * dx;
   P_ += -w * K * S * K.transpose() + w * (1 - w) * dx * dx.transpose();
   cross_ -= w * K * zb;
@@ -333,13 +340,18 @@ UpdateResult ScaatEkf::UpdateRange(const BeaconPosition& beacon, double range_m,
   }
   const double s = sigma_m > 0 ? sigma_m : options_.range_sigma_m;
   Eigen::RowVector2d Hp;
-  const double predicted = UltrasoundRange(position(), beacon.position_n, &Hp);
+  const double distance = UltrasoundRange(position(), beacon.position_n, &Hp);
   if (Hp.squaredNorm() == 0) {
     ++summary_.skipped;
     return UpdateResult::kSkipped;
   }
-  Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
+  // h = k |p - B| (the range scale k: the speed of sound the device assumes over the room's).
+  const double k = x_(kRangeScale);
+  const double predicted = k * distance;
+  Hp *= k;
+  Eigen::Matrix<double, 1, kDim> H = Eigen::Matrix<double, 1, kDim>::Zero();
   H.head<2>() = Hp;
+  H(kRangeScale) = distance;
   const double gate = options_.gate_sigma * options_.gate_sigma;
   const double range_density =
       options_.mixture_updates ? 1.0 / options_.range_outlier_span_m : 0.0;  // uniform outliers
@@ -368,7 +380,7 @@ UpdateResult ScaatEkf::UpdateBearing(const BeaconPosition& beacon, double bearin
   const double s = sigma_rad > 0 ? sigma_rad : options_.bearing_sigma_rad;
   Eigen::RowVector2d Hp;
   const double predicted = UltrasoundBearing(position(), beacon.position_n, &Hp);
-  Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
+  Eigen::Matrix<double, 1, kDim> H = Eigen::Matrix<double, 1, kDim>::Zero();
   H.head<2>() = Hp;
   const double gate = options_.gate_sigma * options_.gate_sigma;
   const double bearing_density =
@@ -400,7 +412,7 @@ UpdateResult ScaatEkf::UpdatePosition(const BeaconPosition& beacon, double range
   PolarToPosition(beacon, range_m, bearing_rad,
                   range_sigma_m > 0 ? range_sigma_m : options_.range_sigma_m,
                   bearing_sigma_rad > 0 ? bearing_sigma_rad : options_.bearing_sigma_rad, &z, &R);
-  Eigen::Matrix<double, 2, 4> H = Eigen::Matrix<double, 2, 4>::Zero();
+  Eigen::Matrix<double, 2, kDim> H = Eigen::Matrix<double, 2, kDim>::Zero();
   H.leftCols<2>().setIdentity();
   const Vec2 y = z - position();
   const UpdateResult r = Update<2>(y, H, R, options_.gate_chi2_2dof, admit);
@@ -413,7 +425,7 @@ UpdateResult ScaatEkf::UpdateHeadingCorrection(double psi_rad, double sigma_rad)
     ++summary_.skipped;
     return UpdateResult::kSkipped;
   }
-  Eigen::Matrix<double, 1, 4> H = Eigen::Matrix<double, 1, 4>::Zero();
+  Eigen::Matrix<double, 1, kDim> H = Eigen::Matrix<double, 1, kDim>::Zero();
   H(kPsi) = 1;
   Eigen::Matrix<double, 1, 1> R, y;
   R(0, 0) = sigma_rad * sigma_rad;
@@ -421,11 +433,20 @@ UpdateResult ScaatEkf::UpdateHeadingCorrection(double psi_rad, double sigma_rad)
   return Update<1>(y, H, R, options_.gate_sigma * options_.gate_sigma);
 }
 
+double ScaatEkf::RangeScaleNis() const {
+  const double prior = options_.range_scale_sigma * options_.range_scale_sigma;
+  const double learnt = prior - P_(kRangeScale, kRangeScale);
+  if (!(prior > 0) || !(learnt >= 0.5 * prior)) return 0;
+  const double d = x_(kRangeScale) - 1.0;
+  return d * d / learnt;
+}
+
 void ScaatEkf::Condition() {
   x_(kPsi) = WrapAngle(x_(kPsi));
   x_(kScale) = std::clamp(x_(kScale), options_.scale_min, options_.scale_max);
+  x_(kRangeScale) = std::clamp(x_(kRangeScale), options_.range_scale_min, options_.range_scale_max);
   P_ = 0.5 * (P_ + P_.transpose());
-  for (int i = 0; i < 4; ++i) P_(i, i) = std::max(P_(i, i), 1e-15);
+  for (int i = 0; i < kDim; ++i) P_(i, i) = std::max(P_(i, i), 1e-15);
 }
 
 // ---------------------------------------------------------------------------------------------

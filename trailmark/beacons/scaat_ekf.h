@@ -3,8 +3,9 @@
 /// Tracking along an ultrasound beacon trail (ultrasound-beacons paper, sec. 6).
 ///
 /// `ScaatEkf`: the paper's extended Kalman filter with state x = (u, v, psi, scale) — position
-/// and the corrections applied to the PDR's step heading and step length. Measurements are
-/// processed one at a time in time order (SCAAT, Welch & Bishop 1997):
+/// and the corrections applied to the PDR's step heading and step length — and, ours, the
+/// ultrasound's range scale k (issue 21: a wrong speed of sound scales every range alike).
+/// Measurements are processed one at a time in time order (SCAAT, Welch & Bishop 1997):
 ///  - an inertial step d (navigation frame of the PDR) moves the position by
 ///        p <- p + scale R(psi) d                                            (sec. 6)
 ///    i.e. the step heading corrected by psi and the step length by scale;
@@ -12,7 +13,12 @@
 ///    The paper converts (r, b) to a position B + r (cos b, sin b) (`UpdatePosition`); ours,
 ///    by default, updates with the range and the bearing as two scalar measurements of
 ///    h_r = |p - B|, h_b = atan2(p - B), which keeps the long-tailed bearing from corrupting the
-///    range and lets each be gated on its own.
+///    range and lets each be gated on its own. The range is k |p - B|: ultrasound measures time
+///    of flight, and a range is that time at the speed of sound the device assumes; the speed in
+///    the room's air differs with its temperature (c ~ sqrt(T): 1.7 % for 10 deg C at 20 deg C),
+///    so every range of one device shares one factor. Its prior (`range_scale_sigma`) is the
+///    stated calibration; with surveyed beacons the ranges' geometry measures it, and a
+///    factor its prior does not allow is an integrity lie (`RangeScaleTest`).
 /// Deviation from the text, stated: the paper "does not update the state" on an inertial step and
 /// only applies the last (psi, scale); we propagate the covariance through the step (the
 /// Jacobians in psi and scale), without which psi and scale would never become observable from
@@ -90,6 +96,11 @@ struct ScaatEkfOptions {
   bool consider_beacons = true;
   /// The considered beacons kept (the least recently used beyond this is marginalized out).
   int max_considered_beacons = 64;
+  /// Prior sigma of the range scale k (ours, issue 21): the spread of the speed of sound about
+  /// the one the device assumes — 10 deg C about 20 deg C is 1.7 % (c = 331.3 sqrt(1 + T/273.15)
+  /// m/s). 0: k is fixed at 1 (the paper's ranges are taken as they are).
+  double range_scale_sigma = 0.02;
+  double range_scale_min = 0.5, range_scale_max = 1.5;  ///< physical bounds on k
 
   bool IsValid(std::string* why) const;
 };
@@ -114,13 +125,15 @@ struct ScaatEkfSummary {
 class ScaatEkf {
  public:
   using Options = ScaatEkfOptions;
-  using State = Eigen::Vector4d;  ///< (u, v, psi, scale)
-  using Cov = Eigen::Matrix4d;
-  enum Index { kU = 0, kV = 1, kPsi = 2, kScale = 3 };
+  static constexpr int kDim = 5;
+  using State = Eigen::Matrix<double, kDim, 1>;  ///< (u, v, psi, scale, range scale)
+  using Cov = Eigen::Matrix<double, kDim, kDim>;
+  enum Index { kU = 0, kV = 1, kPsi = 2, kScale = 3, kRangeScale = 4 };
 
   ScaatEkf(const Vec2& position_n, const Mat2& position_cov, double psi_rad, double psi_sigma_rad,
            double scale, double scale_sigma, Options options = {});
-  /// Starts with the options' priors around (position, psi 0, scale 1).
+  /// Starts with the options' priors around (position, psi 0, scale 1, range scale 1); the first
+  /// constructor's range scale too.
   ScaatEkf(const Vec2& position_n, Options options = {});
   /// Any state and covariance (e.g. from InitializeFromUltrasound).
   ScaatEkf(const State& x, const Cov& P, Options options = {});
@@ -151,6 +164,14 @@ class ScaatEkf {
   Mat2 position_cov() const { return P_.topLeftCorner<2, 2>(); }
   double psi() const { return x_(kPsi); }
   double scale() const { return x_(kScale); }
+  double range_scale() const { return x_(kRangeScale); }
+  /// The range scale against its prior (issue 21: a wrong speed of sound): (k - 1)^2 over
+  /// (sigma0^2 - P_kk), the estimate's departure from the prior's mean over its variance about
+  /// that mean (the prior's variance minus the posterior's, as for any linear-Gaussian
+  /// posterior mean) — chi-square of one degree of freedom while the device's scale is within
+  /// its prior. 0 while the ranges have said little of k (P_kk above half the prior's
+  /// variance) and when k is fixed (range_scale_sigma 0).
+  double RangeScaleNis() const;
   /// Normalized innovation squared of the last processed update (accepted or gated).
   double last_nis() const { return last_nis_; }
   /// The node dropped beacon `beacon_key` where it is, within `drop_sigma_m`: the beacon's error
@@ -158,19 +179,19 @@ class ScaatEkf {
   /// later says how far the node moved, not where it is (options.consider_beacons).
   void ConsiderDrop(int beacon_key, double drop_sigma_m);
   /// Cross-covariance of the state with a considered beacon's position (zero when unused).
-  Eigen::Matrix<double, 4, 2> BeaconCrossCovariance(int beacon_key) const;
+  Eigen::Matrix<double, kDim, 2> BeaconCrossCovariance(int beacon_key) const;
   std::size_t considered_beacons() const { return considered_.size(); }
   const ScaatEkfSummary& summary() const { return summary_; }
   const Options& options() const { return options_; }
 
  private:
-  using Cross = Eigen::Matrix<double, 4, 2>;
+  using Cross = Eigen::Matrix<double, kDim, 2>;
   // Joseph-form update with a measurement of dimension M.
   template <int M>
   // `outlier_density` > 0 (scalar updates only): the mixture update (options.mixture_updates)
   // with that density of the outlier component at the measurement; 0: the hard gate.
   UpdateResult Update(const Eigen::Matrix<double, M, 1>& innovation,
-                      const Eigen::Matrix<double, M, 4>& H, const Eigen::Matrix<double, M, M>& R,
+                      const Eigen::Matrix<double, M, kDim>& H, const Eigen::Matrix<double, M, M>& R,
                       double gate, const Admit& admit = nullptr, double outlier_density = 0,
                       double outlier_probability = 0);
   // The measurement's inlier probability under the mixture (1 without one) given its
@@ -178,7 +199,7 @@ class ScaatEkf {
   double InlierProbability(double y, double S, double outlier_density,
                            double outlier_probability) const;
   // Scalar update that depends on a considered beacon (H_b = dh / d beacon position).
-  UpdateResult UpdateConsider(double innovation, const Eigen::Matrix<double, 1, 4>& H,
+  UpdateResult UpdateConsider(double innovation, const Eigen::Matrix<double, 1, kDim>& H,
                               const Eigen::RowVector2d& H_b, double r, int beacon_key,
                               const BeaconPosition& beacon, double gate, const Admit& admit,
                               double outlier_density = 0, double outlier_probability = 0);
@@ -194,7 +215,7 @@ class ScaatEkf {
   Options options_;
   State x_ = State::Zero();
   Cov P_ = Cov::Identity();
-  // The considered beacons (Schmidt): cov(state, beacons) 4 x 2n and cov(beacons) 2n x 2n,
+  // The considered beacons (Schmidt): cov(state, beacons) kDim x 2n and cov(beacons) 2n x 2n,
   // the beacons in the order of slots_ (beacon key per pair of columns), at most
   // options.max_considered_beacons (the least recently used is marginalized out).
   Eigen::MatrixXd cross_, beacons_;

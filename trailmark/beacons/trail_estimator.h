@@ -224,6 +224,7 @@ class BeaconTrailEstimator : public OnlineEstimator {
     /// dr_first: decided at the agent's first step; its foot INS's dead reckoning and the
     /// filter's verdict on it.
     bool dr_first_decided = false;
+    bool range_scale_flagged = false;  ///< its ranges' scale contradicts the stated sigma
     std::optional<DeadReckoning> own_dr;
     std::optional<integrity::DeadReckoningFirst> dr_first;
     std::optional<UltrasoundOnlyKf> us_kf;
@@ -344,6 +345,9 @@ class BeaconTrailEstimator : public OnlineEstimator {
   /// t not after the step end or not after its last estimate).
   bool EmitAhead(TimeS t, Agent& a, EstimateSink& sink);
   bool Apply(Agent& a, const Deferred& m);
+  /// After a range of the agent's: its range scale against the stated sigma (an integrity note
+  /// when the verdict changes; the filter keeps estimating the scale either way).
+  void CheckRangeScale(Agent& a, TimeS t);
   /// The step (t0, t1, d) with the measurements it spans applied at their instants.
   void PredictWithMeasurements(Agent& a, TimeS t0, TimeS t1, const Vec2& d, const Mat2& cov);
   /// Measurements older than `before` that no step spans: applied where the node stands.
@@ -368,7 +372,12 @@ class BeaconTrailEstimator : public OnlineEstimator {
   std::map<std::string, std::size_t> ignored_;
   std::size_t rows_ignored_ = 0, close_pass_anchors_ = 0, entry_fixes_ = 0;
   std::set<std::string> foot_ins_;  ///< agents on a foot INS's steps (StepsFromFootIns)
-  std::vector<IntegrityNote> dr_notes_;  ///< dr_first: the filter's verdicts on dead reckoning
+  std::vector<IntegrityNote> dr_notes_;
+  /// The ranges' scale of an agent against its stated sigma (`CheckRangeScale`).
+  std::vector<IntegrityNote> range_scale_notes_;
+  double range_scale_threshold_ = 0;       ///< chi-square(1) at 1 - integrity.false_alarm
+  bool range_scale_unobservable_ = false;  ///< fewer than two surveyed nodes: k fixed at 1  ///<
+                                           ///< dr_first: the filter's verdicts on dead reckoning
 };
 
 }  // namespace trailmark::beacons

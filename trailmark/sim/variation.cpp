@@ -147,6 +147,9 @@ void DrawFamily(VariationFamily f, Random& r, Variation& v) {
       v.nlos_fraction = r.Uniform(0.05, 0.3);
       v.nlos_mean_m = r.Uniform(0.3, 2.0);
       v.neighbour_only_links = Coin(r);
+      // c = 331.3 sqrt(1 + T / 273.15) m/s: 331 m/s at 0 deg C, 367 m/s at 60 deg C against the
+      // 343 m/s of 20 deg C — measured ranges x 343 / c, 0.93-1.04.
+      v.ultrasound_range_scale = r.Uniform(0.93, 1.04);
       break;
     case VariationFamily::kNodes: v.survey_error = true; break;
     case VariationFamily::kPdr:
@@ -347,6 +350,7 @@ void ApplyRanges(const Variation& v, SimulatedMission& sim, Random& r, std::vect
       m.range_m += -v.nlos_mean_m * std::log(1.0 - r.Uniform());
       ++nlos;
     }
+    if (m.kind == "ultrasound") m.range_m *= v.ultrasound_range_scale;  // the path, timed
     kept.push_back(std::move(m));
   }
   d.ranges = std::move(kept);
@@ -703,6 +707,7 @@ std::vector<std::pair<std::string, std::string>> Variation::Describe() const {
     out.emplace_back("nlos_fraction", Num(nlos_fraction));
     out.emplace_back("nlos_mean_m", Num(nlos_mean_m));
     out.emplace_back("links", neighbour_only_links ? "neighbours only" : "all");
+    out.emplace_back("ultrasound_range_scale", Num(ultrasound_range_scale));
   }
   if (on(VariationFamily::kNodes)) out.emplace_back("survey_error", "one draw of the stated sigma");
   if (on(VariationFamily::kPdr)) {

@@ -87,6 +87,9 @@ struct Variation {
   double nlos_fraction = 0;     ///< share of ultrasound/uwb ranges with a positive NLOS excess
   double nlos_mean_m = 0;       ///< mean of the exponential excess
   bool neighbour_only_links = false;  ///< crumb-crumb ranges only between drop-order neighbours
+  /// Every ultrasound range x this (its NLOS excess too): the air's speed of sound against the
+  /// one the devices assume — a room at 0-60 deg C for devices calibrated at 20 deg C.
+  double ultrasound_range_scale = 1.0;
 
   // nodes
   bool survey_error = false;  ///< positions with a stated sigma are moved by a draw of it
