@@ -125,7 +125,7 @@ void IncidentState::Advance(TimeS now) {
   }
   for (const auto& [source, n] : latest) {
     if (n->action == "excluded" || n->action == "fallback" || n->action == "disagrees" ||
-        n->action == "repeats")
+        n->action == "repeats" || n->action == "scale")
       alerts_.push_back({n->node.empty() ? source : n->node, "integrity", n->message, n->t});
   }
   // The log keeps each alert once, when raised (a (node, kind) not active before).

@@ -186,6 +186,27 @@ TEST(IncidentState, IntegrityNotesAreAlertsFromTheirTimeUntilReadmitted) {
   EXPECT_TRUE(kinds().empty());
 }
 
+TEST(IncidentState, AWrongSpeedOfSoundIsAnAlertOnTheAgentUntilItsRangesAgree) {
+  // The beacon filter's note on an agent's ultrasound ranges (trail_estimator.h): "scale" while
+  // their scale contradicts the stated speed of sound, "scale agrees" once it does not.
+  IncidentState s(Info());
+  s.Apply(At("ff1", 0, 0));
+  s.SetIntegrity({{40, "ultrasound ranges of ff1", "ff1", "scale", "ranges read 1.120 x"},
+                  {55, "ultrasound ranges of ff1", "ff1", "scale agrees", "agree again"}});
+  const auto integrity = [&] {
+    std::vector<std::string> out;
+    for (const Alert& a : s.alerts())
+      if (a.kind == "integrity") out.push_back(a.id + ": " + a.message);
+    return out;
+  };
+  s.Advance(39);
+  EXPECT_TRUE(integrity().empty());
+  s.Advance(41);
+  EXPECT_EQ(integrity(), (std::vector<std::string>{"ff1: ranges read 1.120 x"}));
+  s.Advance(56);
+  EXPECT_TRUE(integrity().empty());
+}
+
 TEST(IncidentState, HistoryKeepsTheTrailAtItsPeriodAndTheLatestEstimate) {
   IncidentState s(Info());
   for (int k = 0; k <= 40; ++k) s.Apply(At("ff1", 0.1 * k, k));  // 10 Hz for 4 s
