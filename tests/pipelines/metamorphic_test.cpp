@@ -12,6 +12,7 @@
 #include "pipelines/run_named.h"
 #include "test_util.h"
 #include "trailmark/io/mission_io.h"
+#include "trailmark/sim/beacon_lab.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
 #include "trailmark/sim/variation.h"
@@ -87,6 +88,27 @@ TEST(Metamorphic, BeaconTrailsDoNotDependOnTheFrame) {
   const SimulatedMission sim = SimulateScenario("beacon-trail", 2);
   EXPECT_LT(LargestDifference("beacons-mds", sim, kRotatedShifted), 1e-6);
   EXPECT_LT(LargestDifference("beacons-ekf", sim, kRotatedShifted), 1e-6);
+}
+
+TEST(Metamorphic, TheRangesScaleAgainstSurveysDoesNotDependOnTheFrame) {
+  // Where surveys make the ultrasound ranges' scale observable, the beacon map and the filter
+  // estimate it — on the honest mission and with every range x 1.06. The lab (every beacon
+  // surveyed): to rounding.
+  SimulatedMission lab = SimulateBeaconLab({}, 2);
+  EXPECT_LT(LargestDifference("beacons-ekf", lab, kRotatedShifted), 1e-6);
+  for (auto& r : lab.data.ranges) r.range_m *= 1.06;
+  EXPECT_LT(LargestDifference("beacons-ekf", lab, kRotatedShifted), 1e-6);
+  // The neighbour trail (three surveyed beacons, the map solved from links, surveys and drops):
+  // its map depends on the frame by millimetres with or without the scale — measured 2026-12-07
+  // 1.9 mm with range_scale_sigma=0, 2.2 mm with it, 0.3 mm with map_turn_scale=false, 4.8 cm
+  // with refine=false (the MDS start is not the same in both frames and the solve ends at a
+  // nearby point; docs/beacons.md, not yet found). Asserted at 1 cm until that is fixed, the
+  // same with the lie.
+  SimulatedMission trail = SimulateScenario("beacon-neighbour-trail", 2);
+  EXPECT_LT(LargestDifference("beacons-ekf", trail, kRotatedShifted), 0.01);
+  for (auto& r : trail.data.ranges) r.range_m *= 1.06;
+  EXPECT_LT(LargestDifference("beacons-ekf", trail, kRotatedShifted), 0.01);
+  EXPECT_LT(LargestDifference("beacons-mds", trail, kRotatedShifted), 0.01);
 }
 
 TEST(Metamorphic, RadioLandmarksDoNotDependOnTheFramesRotation) {

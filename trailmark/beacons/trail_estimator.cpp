@@ -67,6 +67,12 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Flag("relative_drop_priors", [](O& o) -> bool& { return o.map.relative_drop_priors; },
          "least squares: drop priors on the displacement between consecutive drops");
   t.Flag("refine", [](O& o) -> bool& { return o.map.refine; }, "SMACOF after MDS (ours)");
+  t.Real(
+      "range_scale_sigma", [](O& o) -> double& { return o.ekf.range_scale_sigma; }, "",
+      OptionBounds::Between(0, 0.5),
+      "prior sigma of the ultrasound ranges' scale, the speed of sound (the map's with two "
+      "surveyed beacons, the filter's with two surveyed nodes; 0: ranges taken as they are, "
+      "the paper's); the filter names a scale beyond it in an integrity note");
   t.Flag("map_turn_scale", &O::map_turn_scale,
          "least squares: the gyro's turn-scale error a shared error of each track in the map "
          "(with heading offset, rate and scale)");
@@ -185,13 +191,9 @@ const OptionTable<BeaconTrailOptions>& BeaconTrackerOptionTable() {
            OptionBounds::NonNegative(), "random walk of the heading correction per metre");
     t.Real("range_sigma_m", [](O& o) -> double& { return o.ekf.range_sigma_m; }, "m",
            OptionBounds::Positive(), "sigma of an ultrasound range without one");
-    t.Real("bearing_sigma_rad", [](O& o) -> double& { return o.ekf.bearing_sigma_rad; }, "rad",
-           OptionBounds::Positive(), "sigma of a bearing without one");
     t.Real(
-        "range_scale_sigma", [](O& o) -> double& { return o.ekf.range_scale_sigma; }, "",
-        OptionBounds::Between(0, 0.5),
-        "prior sigma of the ultrasound ranges' scale (the speed of sound; 0: ranges taken as "
-        "they are, the paper's); a scale beyond it is an integrity note");
+        "bearing_sigma_rad", [](O& o) -> double& { return o.ekf.bearing_sigma_rad; }, "rad",
+        OptionBounds::Positive(), "sigma of a bearing without one");
     t.Include("", &O::integrity, integrity::ConsistencyOptionTable());
     t.Flag("dr_first", &O::dr_first,
            "an agent on a foot INS within its noise model (start and heading stated) is written "
