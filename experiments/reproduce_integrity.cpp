@@ -50,12 +50,14 @@ SimulatedMission NeighbourTrail(std::uint64_t seed) {
   return SimulateScenario("beacon-neighbour-trail", seed);
 }
 
+// An integrity note that says a source is not what it claims (a verdict, not its retraction).
+bool Flags(const IntegrityNote& n) {
+  return n.action == "excluded" || n.action == "repeats" || n.action == "scale";
+}
+
 bool Names(const EstimatorSummary& s, const std::string& source) {
   for (const IntegrityNote& n : s.integrity) {
-    if ((n.action == "excluded" || n.action == "repeats" || n.action == "scale" ||
-         n.action == "offset") &&
-        n.source.find(source) != std::string::npos)
-      return true;
+    if (Flags(n) && n.source.find(source) != std::string::npos) return true;
   }
   return false;
 }
@@ -63,9 +65,7 @@ bool Names(const EstimatorSummary& s, const std::string& source) {
 double OthersExcluded(const EstimatorSummary& s, const std::string& source) {
   double n = 0;
   for (const IntegrityNote& note : s.integrity) {
-    n += (note.action == "excluded" || note.action == "repeats" || note.action == "scale" ||
-          note.action == "offset") &&
-         note.source.find(source) == std::string::npos;
+    n += Flags(note) && note.source.find(source) == std::string::npos;
   }
   return n;
 }
