@@ -99,16 +99,14 @@ TEST(Metamorphic, TheRangesScaleAgainstSurveysDoesNotDependOnTheFrame) {
   for (auto& r : lab.data.ranges) r.range_m *= 1.06;
   EXPECT_LT(LargestDifference("beacons-ekf", lab, kRotatedShifted), 1e-6);
   // The neighbour trail (three surveyed beacons, the map solved from links, surveys and drops):
-  // its map depends on the frame by millimetres with or without the scale — measured 2026-12-07
-  // 1.9 mm with range_scale_sigma=0, 2.2 mm with it, 4.8 cm with refine=false: the map's solve
-  // stops at its 100-iteration cap there, not converged, at a point that depends on the path
-  // (with 300 iterations 1e-6 m; docs/beacons.md). Asserted at 1 cm until the solve converges,
-  // the same with the lie.
+  // its map's solve stopped at Ceres' 100-iteration cap, not converged, and depended on the
+  // frame by millimetres (1.9 mm, 2.2 mm with the scale, measured 2026-12-07); Newton's steps
+  // on the exact Hessian now finish it: to rounding, with and without the lie.
   SimulatedMission trail = SimulateScenario("beacon-neighbour-trail", 2);
-  EXPECT_LT(LargestDifference("beacons-ekf", trail, kRotatedShifted), 0.01);
+  EXPECT_LT(LargestDifference("beacons-ekf", trail, kRotatedShifted), 1e-6);
   for (auto& r : trail.data.ranges) r.range_m *= 1.06;
-  EXPECT_LT(LargestDifference("beacons-ekf", trail, kRotatedShifted), 0.01);
-  EXPECT_LT(LargestDifference("beacons-mds", trail, kRotatedShifted), 0.01);
+  EXPECT_LT(LargestDifference("beacons-ekf", trail, kRotatedShifted), 1e-6);
+  EXPECT_LT(LargestDifference("beacons-mds", trail, kRotatedShifted), 1e-6);
 }
 
 TEST(Metamorphic, RadioLandmarksDoNotDependOnTheFramesRotation) {

@@ -369,6 +369,7 @@ void BeaconMap::EndSolve() {
   summary_.sightings_used = summary_.sighting_outliers = 0;
   summary_.range_scale = 1.0;
   summary_.range_scale_sigma = 0.0;
+  summary_.max_gradient = 0;
   std::size_t scaled_members = 0;
   summary_.tracks_without_sightings = tracks_without_sightings_.size();
   for (const auto& [first, part] : parts_) {
@@ -377,6 +378,7 @@ void BeaconMap::EndSolve() {
       summary_.range_scale = part.range_scale;
       summary_.range_scale_sigma = part.range_scale_sigma;
     }
+    summary_.max_gradient = std::max(summary_.max_gradient, part.max_gradient);
     summary_.sightings_used += part.sightings;
     summary_.sighting_outliers += part.sighting_outliers;
     summary_.components += part.placed;
@@ -668,6 +670,7 @@ bool BeaconMap::SolveLeastSquares(const PartInput& in, const std::vector<MapTrac
   part->members = static_cast<std::size_t>(m);
   part->range_scale = solution.range_scale;
   part->range_scale_sigma = std::sqrt(std::max(solution.range_scale_var, 0.0));
+  part->max_gradient = solution.max_gradient;
   part->sightings = problem.sightings.size();
   part->sighting_outliers = static_cast<std::size_t>(solution.sighting_outliers);
   out->fold_starts_won += solution.start == 1;

@@ -128,6 +128,9 @@ struct BeaconMapSummary {
   std::string rejected_why;             ///< of the latest rejection
   /// At the last solve, of the largest part whose ranges' scale was estimated (1 and 0: none).
   double range_scale = 1.0, range_scale_sigma = 0.0;
+  /// At the last solve, the largest |gradient| of a least-squares part's cost at its solution
+  /// (MapSolution::max_gradient; converged to round-off: ~1e-9 and below).
+  double max_gradient = 0;
   std::string BriefReport() const;
 };
 
@@ -238,6 +241,7 @@ class BeaconMap {
     double anchor_rms_m = 0, chi2_per_dof = 0, prior_inflation = 1, track_inflation = 1;
     std::size_t sightings = 0, sighting_outliers = 0;
     double range_scale = 1.0, range_scale_sigma = 0.0;  ///< the ranges' scale, when estimated
+    double max_gradient = 0;                            ///< of the least squares' solution
     std::size_t members = 0;                            ///< beacons in the part
   };
   /// What solving one connected part needs, copied at BeginSolve() (indices are the part's

@@ -19,11 +19,12 @@ namespace trailmark::beacons {
 
 bool MapLeastSquaresOptions::IsValid(std::string* why) const {
   if (!(link_huber_sigma > 0) || !(sighting_tukey_sigma > 0) || max_iterations < 1 ||
-      !(false_alarm > 0 && false_alarm < 1)) {
+      !(false_alarm > 0 && false_alarm < 1) || newton_iterations < 0 ||
+      !(newton_step_tolerance > 0) || !std::isfinite(newton_step_tolerance)) {
     if (why)
       *why =
           "link_huber_sigma > 0, sighting_tukey_sigma > 0, max_iterations >= 1, 0 < false_alarm < "
-          "1";
+          "1, newton_iterations >= 0, newton_step_tolerance > 0";
     return false;
   }
   return true;
@@ -261,6 +262,18 @@ class SightingChainCost final : public ceres::SizedCostFunction<3, 3, 3, kTrackE
     return true;
   }
 
+  // r^T d2r/dphi2 at x: the residual along the curvature of the turned displacement (d2/dphi2
+  // of -R(phi) D is R(phi) D), the factor of this cost's exact-Hessian term (.) v v^T, v =
+  // dphi / d(h_A, e) = [1, g]. Zero in the first-order form (linear in phi).
+  double PhiCurvature(double const* const* x) const {
+    if (!rotate_) return 0.0;
+    Vec3 r;
+    Evaluate(x, r.data(), nullptr);
+    const double phi = x[1][2] + (g_ * Eigen::Map<const TrackVec>(x[2])).value();
+    return r.dot(w_.leftCols<2>() * (Eigen::Rotation2Dd(phi) * d_));
+  }
+  const Eigen::Matrix<double, 1, kTrackErrors>& g() const { return g_; }
+
  private:
   Vec2 d_;
   bool rotate_;
@@ -269,17 +282,23 @@ class SightingChainCost final : public ceres::SizedCostFunction<3, 3, 3, kTrackE
   TrackLever c_;
 };
 
+// A chained sighting's displacement prior (sighting k has a previous one).
+std::unique_ptr<SightingChainCost> ChainCost(const MapProblem& problem, std::size_t k,
+                                             const MapLeastSquaresOptions& options) {
+  const MapSighting& q = problem.sightings[k];
+  const MapSighting& a = problem.sightings[q.from_sighting];
+  return std::make_unique<SightingChainCost>(q.position_n - a.position_n,
+                                             Mat3(0.5 * (q.cov + q.cov.transpose())),
+                                             q.along - a.along, options.sighting_chain_rotation);
+}
+
 // The prior of sighting k: its chain's displacement from the previous one, or the chain's start
 // (its parameter blocks: the state, the previous state when chained, its track's e).
 std::unique_ptr<ceres::CostFunction> SightingPriorCost(const MapProblem& problem, std::size_t k,
                                                        const MapLeastSquaresOptions& options) {
   const MapSighting& q = problem.sightings[k];
+  if (q.from_sighting >= 0) return ChainCost(problem, k, options);
   Mat3 cov = 0.5 * (q.cov + q.cov.transpose());
-  if (q.from_sighting >= 0) {
-    const MapSighting& a = problem.sightings[q.from_sighting];
-    return std::make_unique<SightingChainCost>(q.position_n - a.position_n, cov, q.along - a.along,
-                                               options.sighting_chain_rotation);
-  }
   if (!options.sighting_start_marginal)
     return std::make_unique<SightingStartCost>(q.position_n, cov, q.along);
   Eigen::Matrix<double, 3, kTrackErrors> j;
@@ -472,34 +491,27 @@ bool ReferenceMarginalCovariances(ceres::Problem& p, std::vector<double>& x, int
   return true;
 }
 
-// The 2 x 2 marginal covariance of each beacon: the information J^T J at the solution (the
-// robust loss applied, as ceres::Covariance does) factored as P (J^T J) P^T = L D L^T (sparse,
+// The 2 x 2 marginal covariance of each beacon from the information at the solution (J^T J
+// with the robust loss applied, as ceres::Covariance does; or the exact Hessian) over x's
+// unknowns in x's order, factored as P (J^T J) P^T = L D L^T (sparse,
 // AMD ordering), then the entries of its inverse Z on the pattern of L by the Takahashi
 // recurrence (Takahashi, Fagan & Chen 1973; Erisman & Tinney 1975): from the last column back,
 // Z_ji = -sum_k L_ki Z_kj over k in column i's pattern, Z_ii = 1/d_i - sum_k L_ki Z_ki. Every
 // Z_kj it needs lies on the pattern (column i's rows form a clique of the filled graph), and
 // each beacon's 2 x 2 block does too (its two parameters share residuals). ceres::Covariance
 // (SPARSE_QR) gives the same to round-off (tested) but took ~0.9 s at 1,000 beacons and 20,000
-// links. False when the information is not positive definite.
+// links. False when the information is not positive definite (to round-off).
 // `scalar_column` >= 0: that parameter's variance too, in *scalar_var.
-bool MarginalCovariances(ceres::Problem& p, const std::vector<double*>& blocks, int beacons,
+bool MarginalCovariances(const Eigen::SparseMatrix<double>& information, int beacons,
                          std::vector<Mat2>* cov, int scalar_column = -1,
                          double* scalar_var = nullptr) {
-  ceres::Problem::EvaluateOptions eo;
-  eo.parameter_blocks = blocks;
-  eo.apply_loss_function = true;
-  eo.num_threads = 1;
-  ceres::CRSMatrix crs;
-  if (!p.Evaluate(eo, nullptr, nullptr, nullptr, &crs)) return false;
   using Sparse = Eigen::SparseMatrix<double>;
-  const Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> J(
-      crs.num_rows, crs.num_cols, static_cast<Eigen::Index>(crs.values.size()), crs.rows.data(),
-      crs.cols.data(), crs.values.data());
-  const Sparse information = Sparse(J.transpose()) * Sparse(J);
   const Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Eigen::AMDOrdering<int>> ldlt(information);
   if (ldlt.info() != Eigen::Success) return false;
   const Eigen::VectorXd d = ldlt.vectorD();
-  if (!(d.minCoeff() > 0)) return false;
+  // Singular to round-off (a pivot 1e-12 of the largest diagonal entry, or below): no
+  // covariance (a variance of 1e60 m^2 is not one).
+  if (!(d.minCoeff() > 1e-12 * information.diagonal().cwiseAbs().maxCoeff())) return false;
   // L: unit lower triangular, strictly lower part stored by column, rows ascending.
   const Sparse& L = ldlt.matrixL().nestedExpression();
   const int* outer = L.outerIndexPtr();
@@ -543,6 +555,207 @@ bool MarginalCovariances(ceres::Problem& p, const std::vector<double*>& blocks, 
     if (!std::isfinite(*scalar_var)) return false;
   }
   return true;
+}
+
+// x's parameter blocks in x's order (beacons, tracks' e, sightings' states, the range scale):
+// a column of the Jacobian Ceres evaluates on them is the same index of x.
+std::vector<double*> BlocksInOrder(const MapProblem& problem, std::vector<double>& x) {
+  const int n = problem.beacons;
+  std::vector<double*> blocks;
+  for (int i = 0; i < n; ++i) blocks.push_back(&x[2 * i]);
+  for (std::size_t k = 0; k < problem.tracks.size(); ++k)
+    blocks.push_back(&x[2 * n + kTrackErrors * k]);
+  for (std::size_t k = 0; k < problem.sightings.size(); ++k)
+    blocks.push_back(&x[2 * n + kTrackErrors * problem.tracks.size() + 3 * k]);
+  if (HasRangeScale(problem)) blocks.push_back(&x.back());
+  return blocks;
+}
+
+using Triplets = std::vector<Eigen::Triplet<double>>;
+
+// The part of a robust range residual's exact Hessian that Gauss-Newton leaves out (ours).
+// For the cost rho(s) / 2, s = r^2, r = (k |p_a - p_b| - range) / sigma, the Hessian is
+// rho' (dr dr^T + r d2r) + 2 rho'' s dr dr^T. Ceres' J^T J holds rho' dr dr^T: its corrector
+// adds the rho'' term only where rho'' > 0, and Huber's and Tukey's rho'' are <= 0 everywhere.
+// So added here: rho' r d2r, whose blocks are M = k (I - u u^T) / (d sigma) at (a, a) and
+// (b, b), -M at (a, b), and u / sigma, -u / sigma between p_a, p_b and k; and 2 rho'' s dr dr^T,
+// dr = (k u, -k u, d) / sigma. `ik` < 0: k is 1, not an unknown.
+void AddRangeCurvature(const ceres::LossFunction& loss, const double* pa, const double* pb, int ia,
+                       int ib, double k, int ik, double range_m, double sigma_m, Triplets& t) {
+  const Vec2 dp(pa[0] - pb[0], pa[1] - pb[1]);
+  const double d = dp.norm();
+  if (!(d > 1e-12)) return;  // coincident: no direction (the Jacobian's subgradient holds)
+  const Vec2 u = dp / d;
+  const double r = (k * d - range_m) / sigma_m, s = r * r;
+  double rho[3];
+  loss.Evaluate(s, rho);
+  const std::pair<int, double> dr[5] = {{ia, k * u.x() / sigma_m},
+                                        {ia + 1, k * u.y() / sigma_m},
+                                        {ib, -k * u.x() / sigma_m},
+                                        {ib + 1, -k * u.y() / sigma_m},
+                                        {ik, d / sigma_m}};
+  const int m = ik >= 0 ? 5 : 4;
+  const double c = 2 * rho[2] * s;
+  if (c != 0)
+    for (int a = 0; a < m; ++a)
+      for (int b = 0; b < m; ++b)
+        t.emplace_back(dr[a].first, dr[b].first, c * dr[a].second * dr[b].second);
+  const Mat2 M = rho[1] * r * k / (d * sigma_m) * (Mat2::Identity() - u * u.transpose());
+  for (int a = 0; a < 2; ++a)
+    for (int b = 0; b < 2; ++b) {
+      t.emplace_back(ia + a, ia + b, M(a, b));
+      t.emplace_back(ib + a, ib + b, M(a, b));
+      t.emplace_back(ia + a, ib + b, -M(a, b));
+      t.emplace_back(ib + a, ia + b, -M(a, b));
+    }
+  if (ik >= 0) {
+    const Vec2 g = rho[1] * r * u / sigma_m;
+    for (int a = 0; a < 2; ++a) {
+      t.emplace_back(ia + a, ik, g(a));
+      t.emplace_back(ik, ia + a, g(a));
+      t.emplace_back(ib + a, ik, -g(a));
+      t.emplace_back(ik, ib + a, -g(a));
+    }
+  }
+}
+
+// Every term of the exact Hessian at x that J^T J leaves out: the links' and sightings' ranges,
+// and each chained sighting's turn of its displacement, (r^T d2r/dphi2) v v^T over (h_A, e).
+// The priors are linear in x.
+void AddCurvature(const MapProblem& problem, const MapLeastSquaresOptions& options,
+                  const std::vector<double>& x, Triplets& t) {
+  const int n = problem.beacons;
+  const bool scaled = HasRangeScale(problem);
+  const int scale = static_cast<int>(x.size()) - 1;
+  const ceres::HuberLoss huber(options.link_huber_sigma);
+  for (const MapLink& l : problem.links) {
+    const bool k = scaled && l.scaled;
+    AddRangeCurvature(huber, &x[2 * l.i], &x[2 * l.j], 2 * l.i, 2 * l.j, k ? x.back() : 1.0,
+                      k ? scale : -1, l.range_m, l.sigma_m, t);
+  }
+  const ceres::TukeyLoss tukey(options.sighting_tukey_sigma);
+  const int states = 2 * n + kTrackErrors * static_cast<int>(problem.tracks.size());
+  for (std::size_t k = 0; k < problem.sightings.size(); ++k) {
+    const MapSighting& q = problem.sightings[k];
+    const int at = states + 3 * static_cast<int>(k);
+    AddRangeCurvature(tukey, &x[at], &x[2 * q.i], at, 2 * q.i, 1.0, -1, q.range_m, q.sigma_m, t);
+    if (q.from_sighting < 0) continue;
+    const std::unique_ptr<SightingChainCost> chain = ChainCost(problem, k, options);
+    const int from = states + 3 * q.from_sighting;
+    const int e = 2 * n + kTrackErrors * q.track;
+    const double* blocks[3] = {&x[at], &x[from], &x[e]};
+    const double c = chain->PhiCurvature(blocks);
+    if (c == 0) continue;
+    std::pair<int, double> v[1 + kTrackErrors] = {{from + 2, 1.0}};
+    for (int j = 0; j < kTrackErrors; ++j) v[1 + j] = {e + j, chain->g()(j)};
+    for (const auto& [ia, va] : v)
+      for (const auto& [ib, vb] : v) t.emplace_back(ia, ib, c * va * vb);
+  }
+}
+
+using Sparse = Eigen::SparseMatrix<double>;
+
+// J^T J of the Jacobian Ceres evaluated (loss-corrected), the Gauss-Newton Hessian.
+Sparse GaussNewtonHessian(const ceres::CRSMatrix& crs) {
+  const Eigen::Map<const Eigen::SparseMatrix<double, Eigen::RowMajor>> J(
+      crs.num_rows, crs.num_cols, static_cast<Eigen::Index>(crs.values.size()), crs.rows.data(),
+      crs.cols.data(), crs.values.data());
+  return Sparse(J.transpose()) * Sparse(J);
+}
+
+// The exact Hessian at x: J^T J plus AddCurvature's terms.
+Sparse ExactHessian(const Sparse& jtj, const MapProblem& problem,
+                    const MapLeastSquaresOptions& options, const std::vector<double>& x) {
+  Triplets t;
+  AddCurvature(problem, options, x, t);
+  Sparse curvature(jtj.rows(), jtj.cols());
+  curvature.setFromTriplets(t.begin(), t.end());
+  return jtj + curvature;
+}
+
+// The damping's scale per unknown: J^T J's diagonal, averaged over each position's x and y (a
+// beacon's, a sighting's), so that damped steps turn with the frame (the diagonal alone would
+// not, and a damped step that crosses a ridge between two minima, e.g. a beacon's mirror
+// images across its two neighbours, would choose by the frame).
+Eigen::VectorXd IsotropicDiagonal(const Sparse& jtj, const MapProblem& problem) {
+  Eigen::VectorXd d = jtj.diagonal();
+  const auto pair = [&](int a) { d(a) = d(a + 1) = 0.5 * (d(a) + d(a + 1)); };
+  for (int i = 0; i < problem.beacons; ++i) pair(2 * i);
+  const int states = 2 * problem.beacons + kTrackErrors * static_cast<int>(problem.tracks.size());
+  for (std::size_t k = 0; k < problem.sightings.size(); ++k) pair(states + 3 * static_cast<int>(k));
+  return d.cwiseMax(1e-12);
+}
+
+// Newton's method on the exact Hessian H = J^T J + AddCurvature from x, where Ceres stopped
+// (MapLeastSquaresOptions::newton_iterations). Each step solves (H + lambda diag(J^T J)) dx =
+// -g (diag averaged over each position's x and y: IsotropicDiagonal) with lambda 0, raised
+// tenfold from 1e-6 while the matrix is not positive definite or the
+// step does not lower the cost; it ends when a step moves no unknown by more than the
+// tolerance, or after `iterations` (0: the cost and gradient at x only). Returns the steps
+// taken; x is where they end, *cost its cost, *max_gradient the largest |gradient| there.
+int PolishByNewton(ceres::Problem& p, const MapProblem& problem,
+                   const MapLeastSquaresOptions& options, int iterations, std::vector<double>& x,
+                   double* cost, double* max_gradient) {
+  ceres::Problem::EvaluateOptions eo;
+  eo.parameter_blocks = BlocksInOrder(problem, x);
+  eo.apply_loss_function = true;
+  eo.num_threads = 1;
+  std::vector<double> gradient, tried_gradient;
+  ceres::CRSMatrix crs, tried_crs;
+  *max_gradient = 0;
+  if (!p.Evaluate(eo, cost, nullptr, &gradient, iterations > 0 ? &crs : nullptr)) return 0;
+  const int unknowns = static_cast<int>(x.size());
+  int steps = 0;
+  Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Eigen::AMDOrdering<int>> ldlt;
+  for (int it = 0; it < iterations; ++it) {
+    const Sparse jtj = GaussNewtonHessian(crs);
+    const Sparse hessian = ExactHessian(jtj, problem, options, x);
+    const Eigen::VectorXd diag = IsotropicDiagonal(jtj, problem);
+    const Eigen::Map<const Eigen::VectorXd> g(gradient.data(), unknowns);
+    const std::vector<double> before = x;
+    bool moved = false, done = false;
+    for (double lambda = 0; lambda <= 1e6; lambda = lambda > 0 ? 10 * lambda : 1e-6) {
+      Sparse a = hessian;
+      if (lambda > 0) a += Sparse(Eigen::VectorXd(lambda * diag).asDiagonal());
+      ldlt.compute(a);
+      if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0)) continue;
+      const Eigen::VectorXd dx = -ldlt.solve(g);
+      if (!dx.allFinite()) continue;
+      const double step = dx.lpNorm<Eigen::Infinity>();
+      for (int i = 0; i < unknowns; ++i) x[i] = before[i] + dx(i);
+      // The next step's Jacobian with the trial's cost: one evaluation where a step is taken.
+      double tried = HUGE_VAL;
+      if (!p.Evaluate(eo, &tried, nullptr, &tried_gradient, &tried_crs) || !std::isfinite(tried))
+        tried = HUGE_VAL;
+      // Where the cost's change is below its round-off, a step that lowers the gradient is
+      // taken (a minimum at a robust loss's kink, where the Hessian is the exact one on one
+      // side only, is reached that way).
+      const bool lower =
+          tried < *cost ||
+          (tried <= *cost + 1e-13 * std::abs(*cost) &&
+           Eigen::Map<const Eigen::VectorXd>(tried_gradient.data(), unknowns).squaredNorm() <
+               g.squaredNorm());
+      if (lower) {
+        *cost = tried;
+        moved = true;
+        done = step <= options.newton_step_tolerance;
+        break;
+      }
+      x = before;
+      // A step of a micrometre that lowers neither the cost nor the gradient: round-off.
+      if (step <= std::max(options.newton_step_tolerance, 1e-6)) {
+        done = true;
+        break;
+      }
+    }
+    if (!moved) break;
+    ++steps;
+    gradient.swap(tried_gradient);
+    std::swap(crs, tried_crs);
+    if (done) break;
+  }
+  for (double v : gradient) *max_gradient = std::max(*max_gradient, std::abs(v));
+  return steps;
 }
 
 // True when every connected part of the link graph holds two beacons with priors (or is one
@@ -633,7 +846,13 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
     so.max_num_iterations = options.max_iterations;
     so.num_threads = 1;
-    // Converged to round-off (not Ceres' 1e-6 defaults): the map must not depend on the frame.
+    // The map must not depend on the frame: converged to round-off (not Ceres' 1e-6 defaults),
+    // which Newton's steps finish where Gauss-Newton crawls to the cap. Ceres' path is kept as
+    // it was: where a beacon has two mirror images of equal cost (linked to two beacons, no
+    // prior yet), which one it reaches depends on the path, and Ceres' path (its diagonal
+    // scaling) is not the same in a turned frame; stopped earlier (at Ceres' default
+    // tolerances, or at 15 iterations) a turned beacon trail chose the other image
+    // (docs/beacons.md).
     so.function_tolerance = 1e-14;
     so.gradient_tolerance = 1e-14;
     so.parameter_tolerance = 1e-12;
@@ -654,6 +873,16 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   if (x.empty()) {
     best.why = "the solver found no usable solution from any start";
     return best;
+  }
+  // Newton's steps from the start that won (the starts are told apart by Ceres' costs: two
+  // that reach one minimum give one map; two minima differ by more than Ceres' crawl).
+  if (options.newton_iterations > 0) {
+    ceres::Problem p;
+    Build(problem, options, x, p);
+    double cost = 0;
+    best.newton_iterations = PolishByNewton(p, problem, options, options.newton_iterations, x,
+                                            &cost, &best.max_gradient);
+    if (std::isfinite(cost)) best_cost = best.start_chi2[best.start] = 2 * cost;
   }
   best.chi2 = best_cost;
   best.position_n.resize(n);
@@ -702,20 +931,34 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     // Marginals at the solution: the problem rebuilt around x (the solver's copy is gone).
     ceres::Problem p;
     Build(problem, options, x, p);
-    std::vector<double*> blocks;
-    for (int i = 0; i < n; ++i) blocks.push_back(&x[2 * i]);
-    for (std::size_t k = 0; k < problem.tracks.size(); ++k)
-      blocks.push_back(&x[2 * n + kTrackErrors * k]);
-    for (std::size_t k = 0; k < problem.sightings.size(); ++k)
-      blocks.push_back(&x[2 * n + kTrackErrors * problem.tracks.size() + 3 * k]);
-    if (scaled) blocks.push_back(&x.back());
-    const bool ok =
-        options.reference_covariance
-            ? ReferenceMarginalCovariances(p, x, n, &best.cov, scaled ? &x.back() : nullptr,
-                                           &best.range_scale_var)
-            : MarginalCovariances(p, blocks, n, &best.cov,
-                                  scaled ? static_cast<int>(x.size()) - 1 : -1,
-                                  &best.range_scale_var);
+    const std::vector<double*> blocks = BlocksInOrder(problem, x);
+    bool ok = false;
+    if (options.reference_covariance) {
+      ok = ReferenceMarginalCovariances(p, x, n, &best.cov, scaled ? &x.back() : nullptr,
+                                        &best.range_scale_var);
+    } else {
+      ceres::Problem::EvaluateOptions eo;
+      eo.parameter_blocks = blocks;
+      eo.apply_loss_function = true;
+      eo.num_threads = 1;
+      ceres::CRSMatrix crs;
+      const int scale = scaled ? static_cast<int>(x.size()) - 1 : -1;
+      if (p.Evaluate(eo, nullptr, nullptr, nullptr, &crs)) {
+        const Sparse information = GaussNewtonHessian(crs);
+        ok = MarginalCovariances(information, n, &best.cov, scale, &best.range_scale_var);
+        // Converged exactly onto a point where J^T J is singular — a beacon on the line
+        // through its two linked neighbours, where its ranges cannot form a triangle: the
+        // Gauss-Newton information has nothing across that line, but the cost's curvature
+        // there (the exact Hessian, positive definite at a strict minimum) does: the Laplace
+        // approximation at the minimum. (Gauss-Newton, crawling towards that line, stopped
+        // short of it with a variance of 1e5 m^2 across it.)
+        best.exact_hessian_covariance =
+            !ok && options.newton_iterations > 0 &&
+            MarginalCovariances(ExactHessian(information, problem, options, x), n, &best.cov, scale,
+                                &best.range_scale_var);
+        ok = ok || best.exact_hessian_covariance;
+      }
+    }
     if (!ok) {
       best.cov.clear();
       best.why = "the map's covariance is rank deficient";
@@ -724,6 +967,40 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
   }
   best.ok = true;
   return best;
+}
+
+namespace {
+
+// The cost (and the loss-corrected Jacobian when `crs`) of `problem` at x, checked.
+double EvaluateAt(const MapProblem& problem, const MapLeastSquaresOptions& options,
+                  std::vector<double>& x, ceres::CRSMatrix* crs) {
+  Check(problem);
+  if (x.size() != Unknowns(problem))
+    throw std::invalid_argument(
+        fmt::format("beacon map: {} unknowns given for {}", x.size(), Unknowns(problem)));
+  ceres::Problem p;
+  Build(problem, options, x, p);
+  ceres::Problem::EvaluateOptions eo;
+  eo.parameter_blocks = BlocksInOrder(problem, x);
+  eo.apply_loss_function = true;
+  eo.num_threads = 1;
+  double cost = 0;
+  p.Evaluate(eo, &cost, nullptr, nullptr, crs);
+  return cost;
+}
+
+}  // namespace
+
+double MapCost(const MapProblem& problem, const MapLeastSquaresOptions& options,
+               std::vector<double> x) {
+  return EvaluateAt(problem, options, x, nullptr);
+}
+
+Eigen::MatrixXd MapCostHessian(const MapProblem& problem, const MapLeastSquaresOptions& options,
+                               std::vector<double> x) {
+  ceres::CRSMatrix crs;
+  EvaluateAt(problem, options, x, &crs);
+  return Eigen::MatrixXd(ExactHessian(GaussNewtonHessian(crs), problem, options, x));
 }
 
 }  // namespace trailmark::beacons

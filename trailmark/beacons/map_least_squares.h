@@ -120,7 +120,18 @@ struct MapLeastSquaresOptions {
   /// the first-order lever on e (14 m from the entry at a heading error of 0.3 rad that lever
   /// is 0.6 m off; the chain's displacements keep their exact hold on e). False: the lever.
   bool sighting_start_marginal = true;
+  /// Ceres' Levenberg-Marquardt iterations (Gauss-Newton's J^T J) at most, from each start.
   int max_iterations = 100;
+  /// Then Newton's method on the exact Hessian (ours; J^T J plus the terms Gauss-Newton leaves
+  /// out: each range's curvature across its line of sight times its residual, the robust
+  /// losses' second derivative, a chain's turn of its displacement), damped only where that
+  /// Hessian is not positive definite or a step does not lower the cost, until a step moves no
+  /// unknown by more than `newton_step_tolerance`. Gauss-Newton converges only linearly where a
+  /// beacon's position across its links is held by its ranges' curvature (beacons nearly in a
+  /// line with their neighbours on a trail): Ceres crawled to its cap there and stopped at a
+  /// point that depended on the frame by millimetres (docs/beacons.md). 0: Ceres alone.
+  int newton_iterations = 20;
+  double newton_step_tolerance = 1e-10;  ///< m, rad and the scale's units
   /// The solution's robust chi-square is tested against its degrees of freedom at this false
   /// alarm rate (a map that disagrees with its noise: wrong fold, a moved anchor).
   double false_alarm = 1e-3;
@@ -150,7 +161,14 @@ struct MapSolution {
   double chi2_threshold = 0;         ///< the chi-square quantile at 1 - false_alarm (dof > 0)
   bool consistent = true;            ///< chi2 <= chi2_threshold (or dof <= 0)
   int start = 0;                     ///< index of the start that won
-  int iterations = 0;
+  int iterations = 0;                ///< Ceres' iterations at the start that won
+  int newton_iterations = 0;         ///< Newton's steps taken after them
+  /// The largest |gradient| of the cost at the solution, in cost per unit of the unknowns
+  /// (converged: round-off, ~1e-9 and below; 0 without Newton's steps).
+  double max_gradient = 0;
+  /// The marginals are the exact Hessian's, J^T J being singular at the solution (a beacon on
+  /// the line through its two neighbours; MapLeastSquaresOptions::newton_iterations > 0).
+  bool exact_hessian_covariance = false;
   std::vector<double> start_chi2;    ///< per start
   std::vector<TrackVec> track_errors;  ///< the estimated e of each track
   std::vector<Vec3> sighting_state;    ///< [x, y, h] of the agent at each sighting
@@ -167,5 +185,14 @@ struct MapSolution {
 /// solution is not ok ("not anchored").
 MapSolution SolveMapLeastSquares(const MapProblem& problem, const std::vector<std::vector<Vec2>>& starts,
                                  const MapLeastSquaresOptions& options = {});
+
+/// The cost SolveMapLeastSquares minimizes (half the robust chi-square) at x, and its exact
+/// Hessian as Newton's steps use it (J^T J and the second-order terms), for the tests. x holds 2
+/// unknowns per beacon, kTrackErrors per track, 3 per sighting and the range scale last when
+/// the problem has one; throws std::invalid_argument for another size.
+double MapCost(const MapProblem& problem, const MapLeastSquaresOptions& options,
+               std::vector<double> x);
+Eigen::MatrixXd MapCostHessian(const MapProblem& problem, const MapLeastSquaresOptions& options,
+                               std::vector<double> x);
 
 }  // namespace trailmark::beacons

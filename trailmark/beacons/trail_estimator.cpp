@@ -87,6 +87,11 @@ void AddMapOptions(OptionTable<BeaconTrailOptions>& t) {
   t.Real("map_turn_ambiguous_rad", &O::map_turn_ambiguous_rad, "rad", OptionBounds::Positive(),
          "a turn between two steps larger than this (a reversal, its sign unknown) is left out "
          "of the turn-scale lever, its share of the turn-scale error a heading error of its own");
+  t.Integer(
+      "map_newton_iterations", [](O& o) -> int& { return o.map.least_squares.newton_iterations; },
+      OptionBounds::NonNegative(),
+      "least squares: Newton's steps on the exact Hessian after Ceres' Gauss-Newton, until the "
+      "map is converged to round-off (0: Ceres alone, to its 100-iteration cap)");
   t.Flag(
       "sightings", [](O& o) -> bool& { return o.map.sightings; },
       "least squares: the agents' ranges to beacons from their dead-reckoning tracks in the "
@@ -1176,6 +1181,7 @@ EstimatorSummary BeaconTrailEstimator::Summary() const {
   num["mds_solves"] = static_cast<double>(ms.solves);
   num["map_part_solves"] = static_cast<double>(ms.part_solves);
   num["anchor_rms_m"] = ms.anchor_rms_m;
+  if (ms.least_squares_parts > 0) num["map_max_gradient"] = ms.max_gradient;
   if (ms.range_scale_sigma > 0) {
     num["map_range_scale"] = ms.range_scale;
     num["map_range_scale_sigma"] = ms.range_scale_sigma;
