@@ -468,18 +468,23 @@ void BM_BeaconMapLeastSquares(benchmark::State& state) {
     start.push_back(mu);
   }
   double error = 0;
+  int ceres_iterations = 0, newton_steps = 0;
   for (auto _ : state) {
     beacons::MapLeastSquaresOptions options;
     options.covariances = state.range(0) >= 1;
     options.reference_covariance = state.range(0) == 2;
     const beacons::MapSolution s = beacons::SolveMapLeastSquares(problem, {start}, options);
     if (!s.ok) state.SkipWithError(s.why.c_str());
+    ceres_iterations = s.iterations;
+    newton_steps = s.newton_iterations;
     error = 0;
     for (int i = 0; i < n; ++i) error += (s.position_n[i] - truth[i]).norm() / n;
     benchmark::DoNotOptimize(s.cov.data());
   }
   state.counters["links"] = static_cast<double>(problem.links.size());
   state.counters["mean_error_m"] = error;
+  state.counters["ceres_iterations"] = ceres_iterations;
+  state.counters["newton_steps"] = newton_steps;
 }
 BENCHMARK(BM_BeaconMapLeastSquares)->Arg(0)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->Iterations(3);
 

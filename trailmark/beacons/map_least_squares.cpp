@@ -20,11 +20,12 @@ namespace trailmark::beacons {
 bool MapLeastSquaresOptions::IsValid(std::string* why) const {
   if (!(link_huber_sigma > 0) || !(sighting_tukey_sigma > 0) || max_iterations < 1 ||
       !(false_alarm > 0 && false_alarm < 1) || newton_iterations < 0 ||
-      !(newton_step_tolerance > 0) || !std::isfinite(newton_step_tolerance)) {
+      !(newton_step_tolerance > 0) || !std::isfinite(newton_step_tolerance) ||
+      !(newton_gradient_tolerance >= 0) || !std::isfinite(newton_gradient_tolerance)) {
     if (why)
       *why =
           "link_huber_sigma > 0, sighting_tukey_sigma > 0, max_iterations >= 1, 0 < false_alarm < "
-          "1, newton_iterations >= 0, newton_step_tolerance > 0";
+          "1, newton_iterations >= 0, newton_step_tolerance > 0, newton_gradient_tolerance >= 0";
     return false;
   }
   return true;
@@ -691,7 +692,8 @@ Eigen::VectorXd IsotropicDiagonal(const Sparse& jtj, const MapProblem& problem) 
 // -g (diag averaged over each position's x and y: IsotropicDiagonal) with lambda 0, raised
 // tenfold from 1e-6 while the matrix is not positive definite or the
 // step does not lower the cost; it ends when a step moves no unknown by more than the
-// tolerance, or after `iterations` (0: the cost and gradient at x only). Returns the steps
+// tolerance or leaves no |gradient| above its tolerance, or after `iterations` (0: the cost and
+// gradient at x only). Returns the steps
 // taken; x is where they end, *cost its cost, *max_gradient the largest |gradient| there.
 int PolishByNewton(ceres::Problem& p, const MapProblem& problem,
                    const MapLeastSquaresOptions& options, int iterations, std::vector<double>& x,
@@ -705,6 +707,10 @@ int PolishByNewton(ceres::Problem& p, const MapProblem& problem,
   *max_gradient = 0;
   if (!p.Evaluate(eo, cost, nullptr, &gradient, iterations > 0 ? &crs : nullptr)) return 0;
   const int unknowns = static_cast<int>(x.size());
+  const auto largest = [&](const std::vector<double>& v) {
+    return Eigen::Map<const Eigen::VectorXd>(v.data(), unknowns).lpNorm<Eigen::Infinity>();
+  };
+  if (largest(gradient) <= options.newton_gradient_tolerance) iterations = 0;
   int steps = 0;
   Eigen::SimplicialLDLT<Sparse, Eigen::Lower, Eigen::AMDOrdering<int>> ldlt;
   for (int it = 0; it < iterations; ++it) {
@@ -738,7 +744,8 @@ int PolishByNewton(ceres::Problem& p, const MapProblem& problem,
       if (lower) {
         *cost = tried;
         moved = true;
-        done = step <= options.newton_step_tolerance;
+        done = step <= options.newton_step_tolerance ||
+               largest(tried_gradient) <= options.newton_gradient_tolerance;
         break;
       }
       x = before;
@@ -754,7 +761,7 @@ int PolishByNewton(ceres::Problem& p, const MapProblem& problem,
     std::swap(crs, tried_crs);
     if (done) break;
   }
-  for (double v : gradient) *max_gradient = std::max(*max_gradient, std::abs(v));
+  *max_gradient = largest(gradient);
   return steps;
 }
 

@@ -132,6 +132,9 @@ struct MapLeastSquaresOptions {
   /// point that depended on the frame by millimetres (docs/beacons.md). 0: Ceres alone.
   int newton_iterations = 20;
   double newton_step_tolerance = 1e-10;  ///< m, rad and the scale's units
+  /// ... or when no |gradient| of the cost is above this (cost per unit of the unknowns; a
+  /// direction held as loosely as 10 m sigma is then within 1e-7 m of its minimum).
+  double newton_gradient_tolerance = 1e-9;
   /// The solution's robust chi-square is tested against its degrees of freedom at this false
   /// alarm rate (a map that disagrees with its noise: wrong fold, a moved anchor).
   double false_alarm = 1e-3;
