@@ -572,6 +572,16 @@ std::vector<double*> BlocksInOrder(const MapProblem& problem, std::vector<double
   return blocks;
 }
 
+// Evaluation of the problem over x's blocks in x's order, the robust losses applied (the cost,
+// gradient and Jacobian the solver and the marginals see).
+ceres::Problem::EvaluateOptions InOrder(const MapProblem& problem, std::vector<double>& x) {
+  ceres::Problem::EvaluateOptions eo;
+  eo.parameter_blocks = BlocksInOrder(problem, x);
+  eo.apply_loss_function = true;
+  eo.num_threads = 1;
+  return eo;
+}
+
 using Triplets = std::vector<Eigen::Triplet<double>>;
 
 // The part of a robust range residual's exact Hessian that Gauss-Newton leaves out (ours).
@@ -698,10 +708,7 @@ Eigen::VectorXd IsotropicDiagonal(const Sparse& jtj, const MapProblem& problem) 
 int PolishByNewton(ceres::Problem& p, const MapProblem& problem,
                    const MapLeastSquaresOptions& options, int iterations, std::vector<double>& x,
                    double* cost, double* max_gradient) {
-  ceres::Problem::EvaluateOptions eo;
-  eo.parameter_blocks = BlocksInOrder(problem, x);
-  eo.apply_loss_function = true;
-  eo.num_threads = 1;
+  const ceres::Problem::EvaluateOptions eo = InOrder(problem, x);
   std::vector<double> gradient, tried_gradient;
   ceres::CRSMatrix crs, tried_crs;
   *max_gradient = 0;
@@ -881,13 +888,14 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     best.why = "the solver found no usable solution from any start";
     return best;
   }
-  // Newton's steps from the start that won (the starts are told apart by Ceres' costs: two
-  // that reach one minimum give one map; two minima differ by more than Ceres' crawl).
+  // The problem rebuilt around x (the solvers' copies are gone): Newton's steps from the start
+  // that won (the starts are told apart by Ceres' costs: two that reach one minimum give one
+  // map; two minima differ by more than Ceres' crawl), then the marginals.
+  ceres::Problem at_x;
+  Build(problem, options, x, at_x);
   if (options.newton_iterations > 0) {
-    ceres::Problem p;
-    Build(problem, options, x, p);
     double cost = 0;
-    best.newton_iterations = PolishByNewton(p, problem, options, options.newton_iterations, x,
+    best.newton_iterations = PolishByNewton(at_x, problem, options, options.newton_iterations, x,
                                             &cost, &best.max_gradient);
     if (std::isfinite(cost)) best_cost = best.start_chi2[best.start] = 2 * cost;
   }
@@ -935,22 +943,14 @@ MapSolution SolveMapLeastSquares(const MapProblem& problem,
     best.consistent = best.chi2 - best.chi2_sightings <= best.chi2_threshold;
   }
   if (options.covariances) {
-    // Marginals at the solution: the problem rebuilt around x (the solver's copy is gone).
-    ceres::Problem p;
-    Build(problem, options, x, p);
-    const std::vector<double*> blocks = BlocksInOrder(problem, x);
     bool ok = false;
     if (options.reference_covariance) {
-      ok = ReferenceMarginalCovariances(p, x, n, &best.cov, scaled ? &x.back() : nullptr,
+      ok = ReferenceMarginalCovariances(at_x, x, n, &best.cov, scaled ? &x.back() : nullptr,
                                         &best.range_scale_var);
     } else {
-      ceres::Problem::EvaluateOptions eo;
-      eo.parameter_blocks = blocks;
-      eo.apply_loss_function = true;
-      eo.num_threads = 1;
       ceres::CRSMatrix crs;
       const int scale = scaled ? static_cast<int>(x.size()) - 1 : -1;
-      if (p.Evaluate(eo, nullptr, nullptr, nullptr, &crs)) {
+      if (at_x.Evaluate(InOrder(problem, x), nullptr, nullptr, nullptr, &crs)) {
         const Sparse information = GaussNewtonHessian(crs);
         ok = MarginalCovariances(information, n, &best.cov, scale, &best.range_scale_var);
         // Converged exactly onto a point where J^T J is singular — a beacon on the line
@@ -987,12 +987,8 @@ double EvaluateAt(const MapProblem& problem, const MapLeastSquaresOptions& optio
         fmt::format("beacon map: {} unknowns given for {}", x.size(), Unknowns(problem)));
   ceres::Problem p;
   Build(problem, options, x, p);
-  ceres::Problem::EvaluateOptions eo;
-  eo.parameter_blocks = BlocksInOrder(problem, x);
-  eo.apply_loss_function = true;
-  eo.num_threads = 1;
   double cost = 0;
-  p.Evaluate(eo, &cost, nullptr, nullptr, crs);
+  p.Evaluate(InOrder(problem, x), &cost, nullptr, nullptr, crs);
   return cost;
 }
 
