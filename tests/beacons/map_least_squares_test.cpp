@@ -122,6 +122,37 @@ TEST(MapLeastSquares, MarginalsEqualCeresCovarianceWithTracksAndTheRobustLossAct
   ExpectMarginalsEqualCeres(p, truth);
 }
 
+TEST(MapLeastSquares, MarginalsEqualCeresCovarianceOnAFieldWhoseFactorFills) {
+  // The trail's factor hardly fills; a field does: 150 beacons uniform on 24 x 24 m, every pair
+  // within 5 m linked (each beacon ~20 links), drop priors and three surveys, a track's shared
+  // errors. Its elimination tree has columns whose patterns are a small part of the columns
+  // they reach, the case the selected inversion's one pass must skip rows for.
+  Random rng(41);
+  std::vector<Vec2> truth;
+  for (int i = 0; i < 150; ++i) truth.emplace_back(rng.Uniform(0, 24), rng.Uniform(0, 24));
+  MapProblem p;
+  p.beacons = static_cast<int>(truth.size());
+  for (int i = 0; i < p.beacons; ++i)
+    for (int j = i + 1; j < p.beacons; ++j)
+      if (const double d = (truth[i] - truth[j]).norm(); d < 5.0)
+        p.links.push_back({i, j, std::abs(d + 0.1 * rng.Normal()), 0.1});
+  ASSERT_GT(p.links.size(), 1000u);
+  for (int i = 0; i < p.beacons; ++i) {
+    const double s = i < 3 ? 0.05 : 1.0;
+    p.priors.push_back(
+        {i, truth[i] + s * Vec2(rng.Normal(), rng.Normal()), Mat2::Identity() * s * s});
+  }
+  p.tracks.push_back({TrackVec(0.05 * 0.05, 1e-6, 0.03 * 0.03, 0.03 * 0.03).asDiagonal()});
+  for (auto& q : p.priors) {
+    if (q.i < 3 || q.i % 2) continue;
+    q.track = 0;
+    q.along << -truth[q.i].y(), 0.01 * q.i, truth[q.i].x(), 0.02 * q.i, truth[q.i].x(), 0.01 * q.i,
+        truth[q.i].y(), -0.03 * q.i;
+  }
+  p.links[7].range_m += 1.5;  // one link deep in the Huber loss
+  ExpectMarginalsEqualCeres(p, truth);
+}
+
 // The U trail's drop priors on a track with shared errors, and an agent walking back along the
 // top arm ranging the beacons of the bottom arm (sightings across the trail, issue 22 item 1):
 // two chains of sightings, one range an outlier far into Tukey's bound.

@@ -520,7 +520,7 @@ bool MarginalCovariances(const Eigen::SparseMatrix<double>& information, int bea
   const double* values = L.valuePtr();
   const int n = static_cast<int>(L.cols());
   std::vector<double> z(static_cast<std::size_t>(L.nonZeros()), 0.0), z_diag(n, 0.0);
-  // Z at (r, c), r > c, on the pattern of L.
+  // Z at (r, c), r > c, on the pattern of L (the blocks' entries at the end only).
   const auto at = [&](int r, int c) -> double {
     if (r == c) return z_diag[r];
     if (r < c) std::swap(r, c);
@@ -529,15 +529,37 @@ bool MarginalCovariances(const Eigen::SparseMatrix<double>& information, int bea
     const int* it = std::lower_bound(first, last, r);
     return it != last && *it == r ? z[it - rows] : 0.0;
   };
+  // Column i's sums s_j = sum_k L_ki Z_kj (j, k in column i's pattern P) in one pass over the
+  // columns j of P, each already complete: an entry Z_rj of column j (r > j) adds L_ri Z_rj to
+  // s_j and, by symmetry, L_ji Z_rj to s_r, both counted only where r is in P too (`mark`); the
+  // diagonal adds L_ji Z_jj. So every Z_kj is read in place, once per column i, without a
+  // search: the work is the factor's own order (sum over P of its columns' lengths).
+  std::vector<double> l_col(n, 0.0), s(n, 0.0);
+  std::vector<int> mark(n, -1);
   for (int i = n - 1; i >= 0; --i) {
     const int begin = outer[i], end = outer[i + 1];
-    for (int a = end - 1; a >= begin; --a) {  // Z_ji for j in the pattern, j = rows[a]
-      double sum = 0;
-      for (int b = begin; b < end; ++b) sum += values[b] * at(rows[b], rows[a]);
-      z[a] = -sum;
+    for (int b = begin; b < end; ++b) {
+      l_col[rows[b]] = values[b];
+      s[rows[b]] = 0.0;
+      mark[rows[b]] = i;
+    }
+    for (int b = begin; b < end; ++b) {
+      const int j = rows[b];
+      const double l_j = values[b];
+      double s_j = l_j * z_diag[j];
+      for (int e = outer[j]; e < outer[j + 1]; ++e) {
+        const int r = rows[e];
+        if (mark[r] != i) continue;
+        s_j += l_col[r] * z[e];
+        s[r] += l_j * z[e];
+      }
+      s[j] += s_j;
     }
     double diag = 1.0 / d(i);
-    for (int b = begin; b < end; ++b) diag -= values[b] * z[b];
+    for (int b = begin; b < end; ++b) {
+      z[b] = -s[rows[b]];
+      diag -= values[b] * z[b];
+    }
     z_diag[i] = diag;
   }
   // Back to the parameters' order: parameter a is row P(a) of the factored matrix.
