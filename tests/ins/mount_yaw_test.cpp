@@ -96,6 +96,107 @@ TEST(MountYaw, StridesThatDisagreeDecideNothingAndSaySo) {
   EXPECT_NE(why.find("mount_yaw_max_spread"), std::string::npos);
 }
 
+/// Landings of a foot whose heading at the k-th landing is `foot[k]` (foot[0] the stated heading,
+/// the INS's start), its IMU's reference turned `mount_rad` from the foot. The stride to landing
+/// k points along the foot's landing heading (`chord_along_mean` false: a foot that turns as it
+/// lifts, as the simulator's walker) or along the mean of its lift-off and landing headings
+/// (true: the chord of a circular arc).
+std::vector<Landing> TurningWalk(double mount_rad, const std::vector<double>& foot,
+                                 bool chord_along_mean) {
+  std::vector<Landing> out;
+  Vec2 p = Vec2::Zero();
+  for (std::size_t k = 0; k < foot.size(); ++k) {
+    const double along = chord_along_mean && k > 0 ? 0.5 * (foot[k - 1] + foot[k]) : foot[k];
+    p += 1.2 * Vec2(std::cos(along), std::sin(along));
+    const Vec2 p_ins = Eigen::Rotation2Dd(-mount_rad) * p;
+    out.push_back({Vec3(p_ins.x(), p_ins.y(), 0),
+                   Eigen::Quaterniond(Eigen::AngleAxisd(foot[k], Vec3::UnitZ()))});
+  }
+  return out;
+}
+
+/// A search's foot headings: a turn at every stride, both ways, 20-50 deg (none straight).
+std::vector<double> SearchHeadings(double stated_rad, int landings) {
+  const double turns_deg[] = {35, -50, 20, -30, 45, -25, 30, -40, 25, -35, 50, -20};
+  std::vector<double> h = {stated_rad};
+  for (int k = 1; k < landings; ++k) h.push_back(h.back() + turns_deg[(k - 1) % 12] * kDeg);
+  return h;
+}
+
+TEST(MountYaw, TurningStridesBoundTheMountingOnASearchWalk) {
+  // A foot that turns as it lifts (the stride along its landing heading, the simulator's
+  // walker): each stride's angle from the reference at lift-off and at landing bound the
+  // mounting, and a walk that turns both ways pins it to the landing end. No stride is
+  // straight: the median never decides.
+  for (const double mount_deg : {25.0, -18.0, 40.0, 150.0}) {
+    const double stated = 0.3, mount = mount_deg * kDeg;
+    MountYawEstimator m({}, stated);
+    m.Start(Eigen::Quaterniond(Eigen::AngleAxisd(stated, Vec3::UnitZ())));
+    int landings = 0;
+    for (const Landing& l : TurningWalk(mount, SearchHeadings(stated, 30), false)) {
+      m.AddLanding(l.position_n, l.q_nb);
+      ++landings;
+      if (m.Decided()) break;
+    }
+    ASSERT_TRUE(m.Decided()) << mount_deg;
+    EXPECT_TRUE(m.DecidedByBounds());
+    EXPECT_EQ(m.Strides(), 0u);
+    // Four strides after the first landing (the fewest), where house searches took 13-34.
+    EXPECT_LE(landings, 6) << mount_deg;
+    EXPECT_NEAR(WrapAngle(m.CorrectionRad() - mount), 0.0, 1e-9) << mount_deg;
+    EXPECT_EQ(m.TurnWorthTakingRad(), m.CorrectionRad());
+    EXPECT_GT(m.SigmaRad(), 0.0);
+  }
+  // The chord of an arc (along the mean of the two headings): every stride's bounds are
+  // centred on the mounting and as wide as its turn (20-50 deg here), so they share no stretch
+  // as narrow as a straight stride's bounds and decide nothing — never a wrong turn; such a
+  // walk waits for straight strides, as before.
+  for (const double mount_deg : {25.0, -40.0}) {
+    MountYawEstimator wide({}, 0.0);
+    wide.Start(Eigen::Quaterniond::Identity());
+    for (const Landing& l : TurningWalk(mount_deg * kDeg, SearchHeadings(0.0, 30), true))
+      wide.AddLanding(l.position_n, l.q_nb);
+    EXPECT_FALSE(wide.Decided()) << mount_deg;
+  }
+}
+
+TEST(MountYaw, BoundsLeaveAMountingAboutTheFootsAndACircleUndecided) {
+  // Mounted 3 deg off the foot: zero lies in the shared stretch, so the bounds decide nothing
+  // (a toe-out waits for the straight strides' median, as before).
+  {
+    MountYawEstimator m({}, 0.0);
+    m.Start(Eigen::Quaterniond::Identity());
+    for (const Landing& l : TurningWalk(3 * kDeg, SearchHeadings(0.0, 30), false))
+      m.AddLanding(l.position_n, l.q_nb);
+    EXPECT_FALSE(m.Decided());
+  }
+  // A walk circling one way (30 deg a stride) with the IMU turned 40 deg: every stride's bounds
+  // are the same 40 deg wide stretch, whose centre depends on the gait (the landing heading's
+  // end or the middle): not decided by them.
+  {
+    std::vector<double> circle = {0.0};
+    for (int k = 1; k < 30; ++k) circle.push_back(circle.back() + 30 * kDeg);
+    MountYawEstimator m({}, 0.0);
+    m.Start(Eigen::Quaterniond::Identity());
+    for (const Landing& l : TurningWalk(40 * kDeg, circle, false))
+      m.AddLanding(l.position_n, l.q_nb);
+    EXPECT_FALSE(m.Decided());
+  }
+  // Off (interval_max_turn_rad = 0): the search walk of the test above decides nothing.
+  MountYawOptions off;
+  off.interval_max_turn_rad = 0;
+  MountYawEstimator m(off, 0.0);
+  m.Start(Eigen::Quaterniond::Identity());
+  for (const Landing& l : TurningWalk(25 * kDeg, SearchHeadings(0.0, 30), false))
+    m.AddLanding(l.position_n, l.q_nb);
+  EXPECT_FALSE(m.Decided());
+  MountYawOptions bad;
+  bad.interval_margin_rad = -0.1;
+  std::string why;
+  EXPECT_FALSE(bad.IsValid(&why));
+  EXPECT_NE(why.find("mount_yaw_interval_margin"), std::string::npos);
+}
+
 /// The IMU's samples as read by one mounted turned by R (foot frame -> IMU frame: v_imu = R^T v).
 std::vector<ImuSample> Mounted(std::vector<ImuSample> imu, const Eigen::Matrix3d& R) {
   for (auto& s : imu) {
@@ -181,6 +282,46 @@ TEST(MountYaw, TheSameWalkWithTheImuMountedAnotherWayGivesTheSameSteps) {
   // Without looking for the mounting the 90 deg IMU walks off sideways (what it did before).
   const InsRun blind = RunIns(info, Mounted(imu, mounts[0]), off);
   EXPECT_GT(WorstAlongTheWalk(blind, aligned, 20), 5.0);
+}
+
+TEST(MountYaw, AHouseSearchsTurnedImuIsDecidedWithinTheFirstStepsHold) {
+  // The simulator's house search turns at nearly every stride: its straight strides came 3 in
+  // 13-34 landings, beyond the 12 landings the step consumers' INS holds its first steps for,
+  // so those went out turned and a catch-up followed. Its turning strides' bounds decide
+  // within the hold, and the walk is the aligned IMU's from the first steps on.
+  const SimulatedMission sim = SimulateScenario("house1-search", 3);
+  const auto& [id, walk] = sim.walks.front();
+  ImuSimOptions io;
+  io.rate_hz = 200;
+  const std::vector<ImuSample> imu = SimulateFootImu(walk, id, io, Random(4)).samples;
+  const MissionInfo& info = sim.data.info;
+  InsOptions held;
+  held.mount_yaw.hold_first_landings = 12;
+  InsOptions median_only = held;
+  median_only.mount_yaw.interval_max_turn_rad = 0;
+  const InsRun aligned = RunIns(info, imu, held);
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(25 * kDeg, Vec3::UnitZ()).toRotationMatrix();
+  for (const InsOptions& o : {held, median_only}) {
+    MultiAgentIns ins(info, o);
+    InsRun r;
+    ins.on_step = [&](const Step& s) { r.steps.push_back(s); };
+    for (const auto& s : Mounted(imu, R)) ins.Add(s);
+    ins.Finish();
+    const auto numbers = ins.Summary().numbers;
+    const double landings = numbers.at(id + ".mount_yaw_landings");
+    const bool by_bounds = numbers.at(id + ".mount_yaw_by_bounds") > 0;
+    ASSERT_EQ(r.steps.size(), aligned.steps.size());
+    if (o.mount_yaw.interval_max_turn_rad > 0) {
+      EXPECT_TRUE(by_bounds);
+      EXPECT_LE(landings, 12);
+      EXPECT_NEAR(numbers.at(id + ".mount_yaw_turned_deg"), 25.0, 1.0);
+      EXPECT_LT(WorstAlongTheWalk(r, aligned, 0), 0.3);
+    } else {
+      EXPECT_FALSE(by_bounds);
+      EXPECT_GT(landings, 12);  // the hold ran out: the first steps went out turned
+      EXPECT_GT(WorstAlongTheWalk(r, aligned, 0), 1.0);
+    }
+  }
 }
 
 }  // namespace

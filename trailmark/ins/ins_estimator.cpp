@@ -102,6 +102,21 @@ const OptionTable<InsOptions>& InsOptionTable() {
         OptionBounds::NonNegative(),
         "the first steps' hold ends at a straight stride within this of the reference (a "
         "mounting about the foot's)");
+    t.Real(
+        "mount_yaw_interval_max_turn",
+        [](O& o) -> double& { return o.mount_yaw.interval_max_turn_rad; }, "rad",
+        OptionBounds::NonNegative(),
+        "a stride that turned up to this bounds the mounting between its lift-off and landing "
+        "headings (0: straight strides only)");
+    t.Real(
+        "mount_yaw_interval_margin",
+        [](O& o) -> double& { return o.mount_yaw.interval_margin_rad; }, "rad",
+        OptionBounds::NonNegative(), "each stride's bounds widened by this each way");
+    t.Integer(
+        "mount_yaw_interval_min_strides",
+        [](O& o) -> int& { return o.mount_yaw.interval_min_strides; },
+        OptionBounds::Between(1, 100000),
+        "strides whose bounds must share one stretch (three in four of all) to decide by them");
     t.Real("zaru_recover_s", &O::zaru_recover_s, "s", OptionBounds::NonNegative(),
            "stance over which every ZARU refused grows the gyro bias's covariance to take it "
            "(0: never)");
@@ -377,6 +392,8 @@ EstimatorSummary MultiAgentIns::Summary() const {
       summary.numbers[id + ".mount_yaw_turned_deg"] = a->turn_rad * 180 / std::numbers::pi;
       summary.numbers[id + ".mount_yaw_sigma_deg"] = a->mount->SigmaRad() * 180 / std::numbers::pi;
       summary.numbers[id + ".mount_yaw_strides"] = static_cast<double>(a->mount->Strides());
+      summary.numbers[id + ".mount_yaw_landings"] = static_cast<double>(a->mount->Landings());
+      summary.numbers[id + ".mount_yaw_by_bounds"] = a->mount->DecidedByBounds() ? 1.0 : 0.0;
       if (!a->mount->Note().empty()) summary.notes.push_back(id + ": " + a->mount->Note());
     }
     for (const auto& w : s.warnings) summary.notes.push_back(id + ": " + w);

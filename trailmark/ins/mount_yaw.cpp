@@ -39,6 +39,12 @@ bool MountYawOptions::IsValid(std::string* why) const {
     problem = "mount_yaw_hold_first_landings must be >= 0";
   else if (!(hold_first_release_rad >= 0) || !std::isfinite(hold_first_release_rad))
     problem = "mount_yaw_hold_first_release must be >= 0";
+  else if (!(interval_max_turn_rad >= 0) || !std::isfinite(interval_max_turn_rad))
+    problem = "mount_yaw_interval_max_turn must be >= 0";
+  else if (!(interval_margin_rad >= 0) || !std::isfinite(interval_margin_rad))
+    problem = "mount_yaw_interval_margin must be >= 0";
+  else if (interval_min_strides < 1)
+    problem = "mount_yaw_interval_min_strides must be >= 1";
   else if (max_landings < strides)
     problem = "mount_yaw_max_landings must be >= mount_yaw_strides";
   if (problem && why) *why = problem;
@@ -75,10 +81,21 @@ void MountYawEstimator::AddLanding(const Vec3& position_n, const Eigen::Quaterni
         angle = angles_rad_.front() + WrapAngle(angle - angles_rad_.front());
       angles_rad_.push_back(angle);
     }
+    if (stride.norm() >= options_.min_stride_m &&
+        std::abs(turned) <= options_.interval_max_turn_rad) {
+      // The angle from the reference at landing; at lift-off it is that plus the turn.
+      double at_landing = WrapAngle(std::atan2(stride.y(), stride.x()) - heading);
+      if (!unwrap_anchor_rad_) unwrap_anchor_rad_ = at_landing + 0.5 * turned;
+      at_landing = *unwrap_anchor_rad_ + WrapAngle(at_landing - *unwrap_anchor_rad_);
+      const double m = options_.interval_margin_rad;
+      bounds_rad_.emplace_back(std::min(at_landing, at_landing + turned) - m,
+                               std::max(at_landing, at_landing + turned) + m);
+    }
   }
   last_landing_n_ = position_n;
   last_heading_rad_ = heading;
   if (static_cast<int>(angles_rad_.size()) >= options_.strides) TryDecide(false);
+  if (!decided_) TryDecideByBounds();
   if (!decided_ && landings_ >= options_.max_landings) Settle();
 }
 
@@ -104,6 +121,55 @@ void MountYawEstimator::TryDecide(bool force) {
   sigma_rad_ = std::sqrt(var / static_cast<double>(inliers));
 }
 
+void MountYawEstimator::TryDecideByBounds() {
+  const std::size_t n = bounds_rad_.size();
+  if (options_.interval_max_turn_rad <= 0 || options_.strides == 0 ||
+      n < static_cast<std::size_t>(options_.interval_min_strides))
+    return;
+  // The stretch shared by the most bounds: a sweep over their ends (an opening before a closing
+  // at the same angle, so bounds that touch share it). Decided only by one such stretch.
+  std::vector<std::pair<double, int>> ends;
+  ends.reserve(2 * n);
+  for (const auto& [lo, hi] : bounds_rad_) {
+    ends.emplace_back(lo, +1);
+    ends.emplace_back(hi, -1);
+  }
+  std::sort(ends.begin(), ends.end(), [](const auto& a, const auto& b) {
+    return a.first < b.first || (a.first == b.first && a.second > b.second);
+  });
+  int covered = 0, best = 0, stretches = 0;
+  double from = 0, to = 0;
+  for (std::size_t k = 0; k + 1 < ends.size(); ++k) {
+    covered += ends[k].second;
+    if (covered > best) {
+      best = covered;
+      stretches = 1;
+      from = ends[k].first;
+      to = ends[k + 1].first;
+    } else if (covered == best && best > 0) {
+      if (ends[k].first > to) ++stretches;  // another stretch as wide in agreement
+      to = ends[k + 1].first;
+    }
+  }
+  const std::size_t shared = static_cast<std::size_t>(best);
+  if (stretches != 1 || shared < static_cast<std::size_t>(options_.interval_min_strides) ||
+      4 * shared < 3 * n)
+    return;
+  // No wider than one straight stride's bounds: a walk turning one way at every stride (a
+  // circle) shares a stretch as wide as its turns, whose centre depends on the gait.
+  if (to - from > 2 * options_.interval_margin_rad + options_.max_turn_rad) return;
+  const double centre = 0.5 * (from + to);
+  const double sigma = (to - from) / (2 * std::sqrt(3.0));
+  // Only a mounting clearly turned from the foot's: zero outside the stretch, and the turn
+  // worth taking; a mounting about the foot's waits for the straight strides' median.
+  if (std::abs(WrapAngle(centre)) <= 0.5 * (to - from) ||
+      std::abs(WrapAngle(centre)) <= std::max(3 * sigma, options_.min_turn_rad))
+    return;
+  decided_ = by_bounds_ = true;
+  correction_rad_ = -WrapAngle(centre);
+  sigma_rad_ = sigma;
+}
+
 double MountYawEstimator::TurnWorthTakingRad() const {
   const double c = correction_rad_;
   return decided_ && std::abs(c) > std::max(3 * sigma_rad_, options_.min_turn_rad) ? c : 0.0;
@@ -112,6 +178,7 @@ double MountYawEstimator::TurnWorthTakingRad() const {
 void MountYawEstimator::Settle() {
   if (decided_) return;
   TryDecide(true);
+  if (!decided_) TryDecideByBounds();
   if (decided_) return;
   decided_ = true;
   correction_rad_ = sigma_rad_ = 0;

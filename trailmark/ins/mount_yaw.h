@@ -14,6 +14,7 @@
 #include <Eigen/Geometry>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "trailmark/core/types.h"
@@ -51,6 +52,21 @@ struct MountYawOptions {
   /// `ins` (its own output places nothing; waiting is only latency), 12 for the steps of every
   /// other pipeline (StepFrontEndOptions).
   int hold_first_landings = 0;
+  /// Turning strides as bounds (0: off). A stride over which the foot turned by tau lies, by any
+  /// gait, between the foot's heading at lift-off and at landing: a circular arc's chord along
+  /// their mean (the median above takes that), a foot that turns as it lifts along the landing
+  /// one. So its angle from the reference at lift-off and at landing bound the mounting, widened
+  /// by `interval_margin_rad` each way (the stride's own scatter). Strides that turned up to this
+  /// (rad, 90 deg) give such a bound; a search walk that turns at every stride (house searches
+  /// counted 3 straight strides in 13-34 landings) then decides in a few. Decided by the bounds
+  /// when at least `interval_min_strides` of them, three in four of all, share one stretch no
+  /// wider than a straight stride's bounds (2 margins + max_turn_rad: a walk circling one way
+  /// shares one as wide as its turns), and its centre is a turn worth taking (beyond 3 sigma,
+  /// sigma its width over 2 sqrt 3) that leaves zero outside the stretch; a mounting about the
+  /// foot's waits for the straight strides' median.
+  double interval_max_turn_rad = 1.5708;
+  double interval_margin_rad = 0.087;
+  int interval_min_strides = 4;
   /// That hold ends sooner at a straight stride within this of the reference (rad, 5 deg: a
   /// mounting about the foot's, the common case; the decision's catch-up makes up the rest), so
   /// that only a turned IMU keeps everyone's rows waiting (the step consumers need global time
@@ -86,6 +102,8 @@ class MountYawEstimator {
   double SigmaRad() const { return sigma_rad_; }
   /// The strides counted so far, and the angle of the last one from the reference (rad).
   std::size_t Strides() const { return angles_rad_.size(); }
+  /// Decided by the strides' bounds (turning strides included), not the straight ones' median.
+  bool DecidedByBounds() const { return by_bounds_; }
   int Landings() const { return landings_; }
   std::optional<double> LastStrideRad() const {
     return angles_rad_.empty() ? std::nullopt : std::optional<double>(angles_rad_.back());
@@ -96,6 +114,8 @@ class MountYawEstimator {
  private:
   /// Decides if the strides so far agree (or `force`: with at least 3 that do).
   void TryDecide(bool force);
+  /// Decides if the strides' bounds (turning strides included) share one stretch away from zero.
+  void TryDecideByBounds();
   double HeadingOf(const Eigen::Quaterniond& q_nb) const;
 
   MountYawOptions options_;
@@ -105,7 +125,10 @@ class MountYawEstimator {
   double last_heading_rad_ = 0;
   int landings_ = 0;
   std::vector<double> angles_rad_;  ///< each stride's angle from the reference, unwrapped
-  bool decided_ = false;
+  /// Each stride's bounds on the mounting's angle (lift-off and landing, widened), unwrapped.
+  std::vector<std::pair<double, double>> bounds_rad_;
+  std::optional<double> unwrap_anchor_rad_;  ///< the first stride's angle: every angle near it
+  bool decided_ = false, by_bounds_ = false;
   double correction_rad_ = 0, sigma_rad_ = 0;
   std::string note_;
 };

@@ -351,7 +351,8 @@ EstimatorSummary StepFrontEnd::Summary() const {
   if (!agents.empty()) {
     const EstimatorSummary ins = ins_.Summary();
     for (const auto& id : agents) {
-      for (const char* key : {".steps", ".mount_yaw_turned_deg", ".zaru_recoveries"}) {
+      for (const char* key : {".steps", ".mount_yaw_turned_deg", ".mount_yaw_landings",
+                              ".mount_yaw_by_bounds", ".zaru_recoveries"}) {
         const auto it = ins.numbers.find(id + key);
         if (it != ins.numbers.end()) s.numbers["ins." + id + key] = it->second;
       }

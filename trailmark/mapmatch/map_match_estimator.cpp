@@ -11,11 +11,13 @@
 #include <stdexcept>
 
 #include "trailmark/core/error.h"
+#include "trailmark/ins/dead_reckoning.h"
 
 namespace trailmark::mapmatch {
 
 bool MapMatchEstimatorOptions::IsValid(std::string* why) const {
-  if (!filter.IsValid(why) || !sequences.grid.IsValid(why) || !comparison.IsValid(why))
+  if (!filter.IsValid(why) || !sequences.grid.IsValid(why) || !comparison.IsValid(why) ||
+      !dr_test.IsValid(why))
     return false;
   if (!(compare_every_m > 0) || !(variance_alarm_m2 > 0) || !(variance_alarm_min_s >= 0) ||
       map_error_wall_alarms < 1 || !(walking_direction_m > 0) ||
@@ -158,6 +160,10 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
     t.Flag(
         "grid_align", [](O& o) -> bool& { return o.sequences.grid.align_to_walls; },
         "search grid along the walls' dominant direction (ours; false: the map's x/y axes)");
+    t.Flag("dr_first", &O::dr_first,
+           "an agent on a foot INS within its noise model (known start, stated heading) is "
+           "written as its dead reckoning while the filter does not doubt it");
+    t.Include("", &O::dr_test, integrity::DeadReckoningFirstOptionTable());
     return t;
   }();
   return table;
@@ -196,6 +202,10 @@ struct AgentTrack {
   std::size_t level_changes = 0, level_changes_outside_stairwell = 0, level_changes_refused = 0;
   std::optional<int> refused_level;  ///< the level change being refused now
   std::vector<std::string> level_notes;
+  /// dr_first: the foot INS's dead reckoning and the filter's verdict on it.
+  std::optional<DeadReckoning> dr;
+  std::optional<integrity::DeadReckoningFirst> dr_first;
+  std::optional<Estimate> last;  ///< the estimate written last
 };
 
 }  // namespace
@@ -207,6 +217,7 @@ struct MapMatchEstimator::Impl {
   std::map<std::string, AgentTrack> agents;
   const LevelSource* level_source = nullptr;
   EstimatorSummary setup;
+  std::vector<IntegrityNote> dr_notes;  ///< dr_first: the filter's verdicts on dead reckoning
   std::size_t icp_runs = 0, icp_abandoned = 0, ignored = 0;
   std::size_t icp_iterations_abandoned = 0, icp_iterations_kept = 0;
   TimeS t_last = 0;
@@ -406,11 +417,22 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     return;
   }
   auto emit = [&](TimeS t, const std::string& id, AgentTrack& a) {
-    const Vec2 mean = a.filter->Mean();
-    const Mat2 c = a.filter->ReportedCovariance();
+    Vec2 mean = a.filter->Mean();
+    Mat2 c = a.filter->ReportedCovariance();
+    if (a.dr_first) {
+      // The verdict on the filter's own spread; the dead reckoning's region where it is
+      // written (its covariance, as `pdr` writes it).
+      const Vec2 dr_n = a.dr->position_n().head<2>();
+      if (auto note = a.dr_first->Test(t, id, "the map matcher", mean, c, dr_n))
+        m.dr_notes.push_back(std::move(*note));
+      c = a.dr_first->Covariance(mean, c, dr_n, a.dr->covariance());
+      mean = a.dr_first->Position(mean, dr_n);
+      a.dr_first->Count();
+    }
     a.t = t;
     Estimate e{t, id, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
     if (m.levels.size() > 1) e.floor = m.levels[a.level].level;
+    a.last = e;
     sink.Add(e);
   };
   auto it = m.agents.find(step->agent);
@@ -451,6 +473,17 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
     m.setup.notes.push_back(
         fmt::format("{}: initial state {}", step->agent, known ? "known" : "unknown (uniform)"));
+    // dr_first: decided at the first step (a foot INS within its noise model gives its steps'
+    // heading variance), for an agent whose start and heading the filter takes as known.
+    if (m.o.dr_first && known && step->heading_var_rad2 && node->start_heading_rad) {
+      a.dr.emplace(*start, node->start_sigma_m.value_or(m.o.default_start_sigma_m),
+                   PdrOptions{}.ForFootIns(), node->start_heading_sigma_rad);
+      a.dr_first.emplace(m.o.dr_test);
+      m.setup.notes.push_back(fmt::format(
+          "{}: steps from a foot INS within its noise model: its dead reckoning is written "
+          "until it leaves the map matcher's {:g} % region (dr_first)",
+          step->agent, 100 * m.o.dr_test.reject_probability));
+    }
     it = m.agents.emplace(step->agent, std::move(a)).first;
     emit(step->t0, step->agent, it->second);
   }
@@ -464,6 +497,13 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       } else {
         a.refused_level.reset();
       }
+    }
+  }
+  if (a.dr) {
+    a.dr->AddStep(*step);
+    if (!step->heading_var_rad2) {  // the IMU's mounting not found: no longer within its model
+      if (auto note = a.dr_first->Abandon(step->t1, step->agent, "the map matcher"))
+        m.dr_notes.push_back(std::move(*note));
     }
   }
   const Vec2 d = step->delta_n.head<2>();
@@ -523,16 +563,14 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
 std::optional<Estimate> MapMatchEstimator::Current(const std::string& node) const {
   const auto it = impl_->agents.find(node);
   if (it == impl_->agents.end()) return std::nullopt;
-  const Vec2 mean = it->second.filter->Mean();
-  const Mat2 c = it->second.filter->ReportedCovariance();
-  Estimate e{it->second.t, node, Vec3(mean.x(), mean.y(), 0), c(0, 0), c(0, 1), c(1, 1)};
-  if (impl_->levels.size() > 1) e.floor = impl_->levels[it->second.level].level;
-  return e;
+  return it->second.last;
 }
 
 std::optional<Mat2> MapMatchEstimator::StepTransform(const std::string& agent) const {
   const auto it = impl_->agents.find(agent);
   if (it == impl_->agents.end()) return std::nullopt;
+  if (it->second.dr_first && it->second.dr_first->doubt() < 0.5)
+    return std::nullopt;  // the steps as they come: the dead reckoning is written
   return Mat2(Eigen::Rotation2Dd(it->second.filter->MeanHeadingOffset()).toRotationMatrix());
 }
 
@@ -612,6 +650,11 @@ EstimatorSummary MapMatchEstimator::Summary() const {
       summary.notes.insert(summary.notes.end(), a.level_notes.begin(), a.level_notes.end());
     }
   }
+  // dr_first: the share of each agent's estimates that are not its dead reckoning's.
+  for (const auto& [id, a] : m.agents)
+    if (a.dr_first)
+      summary.numbers[id + ".dr_first_filter_share"] = a.dr_first->share_not_dead_reckoning();
+  summary.integrity.insert(summary.integrity.end(), m.dr_notes.begin(), m.dr_notes.end());
   summary.numbers["icp_runs"] = static_cast<double>(m.icp_runs);
   summary.numbers["icp_abandoned"] = static_cast<double>(m.icp_abandoned);
   summary.numbers["icp_iterations_abandoned"] = static_cast<double>(m.icp_iterations_abandoned);
