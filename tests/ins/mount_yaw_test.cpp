@@ -10,8 +10,10 @@
 #include <cmath>
 #include <numbers>
 
+#include "test_util.h"
 #include "trailmark/core/random.h"
 #include "trailmark/ins/ins_estimator.h"
+#include "trailmark/io/convert_foot_imu.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
 
@@ -321,6 +323,40 @@ TEST(MountYaw, AHouseSearchsTurnedImuIsDecidedWithinTheFirstStepsHold) {
       EXPECT_GT(landings, 12);  // the hold ran out: the first steps went out turned
       EXPECT_GT(WorstAlongTheWalk(r, aligned, 0), 1.0);
     }
+  }
+}
+
+TEST(MountYaw, TheRecordedFigureEightTurnedOnTheFootIsDecidedByItsTurningStrides) {
+  // Recorded gait, not the simulator's walker: OpenShoe's figure-8 turns all the way. Its IMU
+  // read turned by +25 and -40 degrees about its z axis (a metamorphic copy of the same walk)
+  // must give the same mounting plus that turn. The strides' bounds decide at the fifth landing
+  // (the straight strides' median at the sixth) and agree with that median within a degree.
+  const auto dir = testing::SharedData("openshoe-figure8");
+  if (dir.empty()) GTEST_SKIP() << "../shared/data not present";
+  const MissionData fig8 = ReadOpenShoeFigure8(dir / "imu_820hz.txt");
+  const std::string id = fig8.imu.front().agent;
+  auto decide = [&](double turn_deg, double interval_max_turn_rad) {
+    InsOptions o;
+    o.mount_yaw.interval_max_turn_rad = interval_max_turn_rad;
+    MultiAgentIns ins(fig8.info, o);
+    ins.on_step = [](const Step&) {};
+    for (const auto& s :
+         Mounted(fig8.imu, Eigen::AngleAxisd(turn_deg * kDeg, Vec3::UnitZ()).toRotationMatrix()))
+      ins.Add(s);
+    ins.Finish();
+    return ins.Summary().numbers;
+  };
+  const auto base = decide(0, MountYawOptions{}.interval_max_turn_rad);
+  const double turned0 = base.at(id + ".mount_yaw_turned_deg");
+  EXPECT_EQ(base.at(id + ".mount_yaw_by_bounds"), 1.0);
+  EXPECT_LE(base.at(id + ".mount_yaw_landings"), 5.0);
+  EXPECT_NEAR(turned0, decide(0, 0.0).at(id + ".mount_yaw_turned_deg"), 1.0);
+  for (const double turn : {25.0, -40.0}) {
+    const auto n = decide(turn, MountYawOptions{}.interval_max_turn_rad);
+    EXPECT_EQ(n.at(id + ".mount_yaw_by_bounds"), 1.0) << turn;
+    EXPECT_NEAR(WrapAngle((n.at(id + ".mount_yaw_turned_deg") - turned0 - turn) * kDeg), 0.0,
+                0.5 * kDeg)
+        << turn;
   }
 }
 
