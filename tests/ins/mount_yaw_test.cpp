@@ -240,13 +240,28 @@ Vec2 SumOfSteps(const InsRun& r) {
   return sum;
 }
 
-TEST(MountYaw, TheSameWalkWithTheImuMountedAnotherWayGivesTheSameSteps) {
-  const SimulatedMission sim = SimulateScenario("office-loop-1lap", 7);
-  const auto& [id, walk] = sim.walks.front();
+/// A simulated scenario's first walker and a 200 Hz foot IMU of its walk.
+struct SimulatedFootImu {
+  SimulatedMission sim;
+  std::string id;
+  std::vector<ImuSample> imu;
+};
+SimulatedFootImu FootImuOf(const std::string& scenario, std::uint64_t seed,
+                           std::uint64_t imu_seed) {
+  SimulatedFootImu out{SimulateScenario(scenario, seed), {}, {}};
+  const auto& [id, walk] = out.sim.walks.front();
   ImuSimOptions io;
   io.rate_hz = 200;
-  const std::vector<ImuSample> imu = SimulateFootImu(walk, id, io, Random(8)).samples;
-  const MissionInfo& info = sim.data.info;
+  out.id = id;
+  out.imu = SimulateFootImu(walk, id, io, Random(imu_seed)).samples;
+  return out;
+}
+
+TEST(MountYaw, TheSameWalkWithTheImuMountedAnotherWayGivesTheSameSteps) {
+  const SimulatedFootImu foot = FootImuOf("office-loop-1lap", 7, 8);
+  const std::string& id = foot.id;
+  const std::vector<ImuSample>& imu = foot.imu;
+  const MissionInfo& info = foot.sim.data.info;
   const InsRun aligned = RunIns(info, imu);
   // Mounted as the foot: exactly what the INS gave without looking for the mounting.
   InsOptions off;
@@ -291,12 +306,10 @@ TEST(MountYaw, AHouseSearchsTurnedImuIsDecidedWithinTheFirstStepsHold) {
   // 13-34 landings, beyond the 12 landings the step consumers' INS holds its first steps for,
   // so those went out turned and a catch-up followed. Its turning strides' bounds decide
   // within the hold, and the walk is the aligned IMU's from the first steps on.
-  const SimulatedMission sim = SimulateScenario("house1-search", 3);
-  const auto& [id, walk] = sim.walks.front();
-  ImuSimOptions io;
-  io.rate_hz = 200;
-  const std::vector<ImuSample> imu = SimulateFootImu(walk, id, io, Random(4)).samples;
-  const MissionInfo& info = sim.data.info;
+  const SimulatedFootImu foot = FootImuOf("house1-search", 3, 4);
+  const std::string& id = foot.id;
+  const std::vector<ImuSample>& imu = foot.imu;
+  const MissionInfo& info = foot.sim.data.info;
   InsOptions held;
   held.mount_yaw.hold_first_landings = 12;
   InsOptions median_only = held;
