@@ -176,6 +176,41 @@ TEST(Floors, AMountedDeviceIsOnTheStoreyBelowItsCeiling) {
   EXPECT_EQ(NodeLevelOf(nullptr, info, "lm-up"), 1);
 }
 
+TEST(Floors, MissionLevelsAreNodeLevelOfReadOnce) {
+  // The radio estimators ask every packet's two ends; MissionLevels reads mission.json once.
+  // On the multi-floor building with landmarks (every node kind, positions and none), with and
+  // without a level source that knows some nodes: the same answer as the free functions for
+  // every node and every pair, and none for an id the mission does not name.
+  const SimulatedMission sim = SimulateScenario("multi-floor-landmarks", 3);
+  const MissionInfo& info = sim.data.info;
+  struct Source : LevelSource {
+    std::optional<LevelBelief> NodeLevel(const std::string& node) const override {
+      if (node.size() % 3 != 0) return std::nullopt;  // knows about a third of the nodes
+      LevelBelief b;
+      b.level = static_cast<int>(node.size() % 4) - 1;
+      return b;
+    }
+  } source;
+  const MissionLevels levels(info);
+  ASSERT_GT(info.nodes.size(), 12u);
+  int known = 0, differ = 0;
+  for (const LevelSource* src :
+       {static_cast<const LevelSource*>(nullptr), static_cast<const LevelSource*>(&source)}) {
+    for (const NodeInfo& a : info.nodes) {
+      EXPECT_EQ(levels.Of(src, a.id), NodeLevelOf(src, info, a.id)) << a.id;
+      known += levels.Of(src, a.id).has_value();
+      for (const NodeInfo& b : info.nodes) {
+        const bool d = levels.Differ(src, a.id, b.id);
+        EXPECT_EQ(d, OnDifferentLevels(src, info, a.id, b.id)) << a.id << " " << b.id;
+        differ += d;
+      }
+    }
+    EXPECT_EQ(levels.Of(src, "nobody-xyz"), std::nullopt);  // 10 characters: no source either
+  }
+  EXPECT_GT(known, 0);
+  EXPECT_GT(differ, 0);  // pairs on different levels exist: the comparison is not vacuous
+}
+
 TEST(Floors, LandmarkRadioIsGatedByFloor) {
   // The building with surveyed landmarks on every level (issue 26, item 4): each landmark's z
   // puts it on its own level by the format's rule, and landmarks-ukf gated by floor is better

@@ -189,7 +189,7 @@ const OptionTable<BreadcrumbEstimatorOptions>& BreadcrumbOptionTable() {
 
 BreadcrumbEstimator::BreadcrumbEstimator(const MissionInfo& info,
                                          BreadcrumbEstimatorOptions options)
-    : options_(std::move(options)), info_(info) {
+    : options_(std::move(options)), info_(info), mission_levels_(info) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("breadcrumb: " + why);
   if (info.radio && info.radio->Complete()) {
@@ -372,7 +372,7 @@ void BreadcrumbEstimator::Add(const MissionRow& row, EstimateSink& sink) {
 }
 
 bool BreadcrumbEstimator::OnOtherFloors(const std::string& a, const std::string& b) const {
-  return options_.gate_other_floors && OnDifferentLevels(levels_, info_, a, b);
+  return options_.gate_other_floors && mission_levels_.Differ(levels_, a, b);
 }
 
 void BreadcrumbEstimator::Finish(EstimateSink& sink) {

@@ -103,6 +103,7 @@ class BreadcrumbEstimator : public OnlineEstimator {
   bool OnOtherFloors(const std::string& a, const std::string& b) const;
   const LevelSource* levels_ = nullptr;
   MissionInfo info_;
+  MissionLevels mission_levels_;  ///< mission.json's levels by id (every packet asks)
   std::size_t other_floor_ = 0;
 };
 

@@ -92,18 +92,42 @@ std::string EstimatorSummary::BriefReport() const {
   return out;
 }
 
+namespace {
+/// A node's level from mission.json: a person's start by the spec's rule; a static node is
+/// mounted somewhere in its storey. None without a position.
+std::optional<int> DeclaredLevel(const MissionInfo& info, const NodeInfo& n) {
+  if (!n.position) return std::nullopt;
+  return n.kind == NodeKind::kAgent ? LevelAt(info.floors, n.position->z())
+                                    : MountedLevelAt(info.floors, n.position->z());
+}
+}  // namespace
+
 std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& info,
                                const std::string& node) {
   if (levels != nullptr) {
     if (const auto b = levels->NodeLevel(node)) return b->level;
   }
   const NodeInfo* n = info.Find(node);
-  if (n != nullptr && n->position) {
-    // A person's start by the spec's rule; a static node is mounted somewhere in its storey.
-    return n->kind == NodeKind::kAgent ? LevelAt(info.floors, n->position->z())
-                                       : MountedLevelAt(info.floors, n->position->z());
+  return n != nullptr ? DeclaredLevel(info, *n) : std::nullopt;
+}
+
+MissionLevels::MissionLevels(const MissionInfo& info) {
+  for (const NodeInfo& n : info.nodes) by_id_.emplace(n.id, DeclaredLevel(info, n));
+}
+
+std::optional<int> MissionLevels::Of(const LevelSource* levels, const std::string& node) const {
+  if (levels != nullptr) {
+    if (const auto b = levels->NodeLevel(node)) return b->level;
   }
-  return std::nullopt;
+  const auto it = by_id_.find(node);
+  return it != by_id_.end() ? it->second : std::nullopt;
+}
+
+bool MissionLevels::Differ(const LevelSource* levels, const std::string& a,
+                           const std::string& b) const {
+  if (levels == nullptr) return false;
+  const auto la = Of(levels, a), lb = Of(levels, b);
+  return la && lb && *la != *lb;
 }
 
 bool OnDifferentLevels(const LevelSource* levels, const MissionInfo& info, const std::string& a,

@@ -14,6 +14,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <unordered_map>
 #include <variant>
 #include <vector>
 
@@ -142,6 +143,20 @@ std::optional<int> NodeLevelOf(const LevelSource* levels, const MissionInfo& inf
 /// measurements out: their models have no floors).
 bool OnDifferentLevels(const LevelSource* levels, const MissionInfo& info, const std::string& a,
                        const std::string& b);
+
+/// NodeLevelOf and OnDifferentLevels with mission.json's part read once: every node's level by
+/// its z (or none), looked up by id instead of a search of the nodes at every packet. Equal to
+/// the free functions for every node of `info` (tested); an id `info` does not name is asked of
+/// the level source only.
+class MissionLevels {
+ public:
+  explicit MissionLevels(const MissionInfo& info);
+  std::optional<int> Of(const LevelSource* levels, const std::string& node) const;
+  bool Differ(const LevelSource* levels, const std::string& a, const std::string& b) const;
+
+ private:
+  std::unordered_map<std::string, std::optional<int>> by_id_;
+};
 
 /// One source of a node's current estimate and its share of it (the fusion's members).
 struct SourceShare {

@@ -191,6 +191,7 @@ const OptionTable<LandmarkEstimatorOptions>& LandmarkOptionTable(Tracking tracki
 LandmarkEstimator::LandmarkEstimator(const MissionInfo& info, LandmarkEstimatorOptions options)
     : options_(std::move(options)),
       info_(info),
+      mission_levels_(info),
       landmark_integrity_("landmark", options_.integrity) {
   std::string why;
   if (!options_.IsValid(&why)) throw std::invalid_argument("landmarks: " + why);
@@ -697,7 +698,7 @@ void LandmarkEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     auto ait = agents_.find(agent);
     auto lit = index_.find(other);
     if (ait == agents_.end() || lit == index_.end()) return;
-    if (options_.gate_other_floors && OnDifferentLevels(levels_, info_, agent, other)) {
+    if (options_.gate_other_floors && mission_levels_.Differ(levels_, agent, other)) {
       ++other_floor_;
       return;
     }

@@ -301,6 +301,7 @@ class LandmarkEstimator : public OnlineEstimator {
   std::size_t fixes_ = 0, ukf_updates_ = 0, ignored_ = 0, other_floor_ = 0;
   const LevelSource* levels_ = nullptr;
   MissionInfo info_;
+  MissionLevels mission_levels_;  ///< mission.json's levels by id (every packet asks)
   integrity::ConsistencyMonitor landmark_integrity_;
 };
 
