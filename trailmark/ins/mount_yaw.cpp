@@ -160,11 +160,10 @@ void MountYawEstimator::TryDecideByBounds() {
   if (to - from > 2 * options_.interval_margin_rad + options_.max_turn_rad) return;
   const double centre = 0.5 * (from + to);
   const double sigma = (to - from) / (2 * std::sqrt(3.0));
-  // Only a mounting clearly turned from the foot's: zero outside the stretch, and the turn
-  // worth taking; a mounting about the foot's waits for the straight strides' median.
-  if (std::abs(WrapAngle(centre)) <= 0.5 * (to - from) ||
-      std::abs(WrapAngle(centre)) <= std::max(3 * sigma, options_.min_turn_rad))
-    return;
+  // Only a mounting clearly turned from the foot's, a turn worth taking (3 sigma is 0.87 of
+  // the stretch's width, so zero lies outside it); a mounting about the foot's waits for the
+  // straight strides' median.
+  if (std::abs(WrapAngle(centre)) <= std::max(3 * sigma, options_.min_turn_rad)) return;
   decided_ = by_bounds_ = true;
   correction_rad_ = -WrapAngle(centre);
   sigma_rad_ = sigma;
