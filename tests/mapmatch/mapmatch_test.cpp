@@ -4,6 +4,7 @@
 // exact pattern, and the particle filter's wall constraint.
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -11,6 +12,7 @@
 
 #include "trailmark/core/random.h"
 #include "trailmark/geometry/rigid_fit.h"
+#include "trailmark/ins/dead_reckoning.h"
 #include "trailmark/mapmatch/particle_filter.h"
 #include "trailmark/sim/house_search.h"
 
@@ -806,6 +808,119 @@ TEST(MapParticleFilter, KldSamplingOffIsTheFixedFilterBitForBit) {
       ASSERT_EQ(a.particles()[i].position_n, b.particles()[i].position_n);
   }
   EXPECT_EQ(a.particles().size(), static_cast<std::size_t>(MapParticleFilterOptions{}.particles));
+}
+
+// The foot INS's motion model (stated steps, issue 23): a loop of 0.5 m steps with four quarter
+// turns and a rest, in a room large enough that no particle meets a wall.
+struct StatedWalk {
+  std::vector<Vec2> steps_n;
+  std::vector<double> t1_s;
+  std::vector<StatedStep> stated;  ///< each step's turn and time since the last, no noise
+};
+StatedWalk LoopWithARest() {
+  StatedWalk w;
+  double t = 0, heading = 0.3;
+  for (int leg = 0; leg < 5; ++leg) {
+    for (int i = 0; i < 16; ++i) {
+      t += leg == 2 && i == 0 ? 40.0 : 0.6;  // standing 40 s before the third leg
+      w.steps_n.push_back(0.5 * Vec2(std::cos(heading), std::sin(heading)));
+      w.t1_s.push_back(t);
+    }
+    heading += leg % 2 == 0 ? std::numbers::pi / 2 : -std::numbers::pi / 3;
+  }
+  w.stated.resize(w.steps_n.size());
+  for (std::size_t i = 1; i < w.steps_n.size(); ++i) {
+    const Vec2& a = w.steps_n[i - 1];
+    const Vec2& b = w.steps_n[i];
+    w.stated[i].turn_rad = std::atan2(a.x() * b.y() - a.y() * b.x(), a.dot(b));
+    w.stated[i].dt_s = w.t1_s[i] - w.t1_s[i - 1];
+  }
+  return w;
+}
+
+/// An 80 x 80 m room (no particle meets a wall on the walk above), its grid and sequences, and
+/// a filter of `particles` without the wall-following model (nothing weighs the particles).
+struct OpenRoom {
+  explicit OpenRoom(int particles)
+      : grid(plan), seqs(ExtractSearchSequences(plan, Vec2(0, 1.5))), pf(grid, seqs, [&] {
+          MapParticleFilterOptions o;
+          o.particles = particles;
+          o.wall_follow = false;
+          return o;
+        }()) {}
+  const FloorPlan plan = Room(80, 80);
+  const SearchGrid grid;
+  const std::vector<NodeSequence> seqs;
+  MapParticleFilter pf;
+};
+
+TEST(MapParticleFilter, EachParticleMovesAsADeadReckoningWithItsOwnSharedErrors) {
+  // Without white noise each particle's walk is exactly its own dead reckoning: the steps
+  // stretched by its scale, each turned by its heading error, which grows by its gyro scale x
+  // the turns and its drift rate x the time (standing included).
+  OpenRoom room(200);
+  MapParticleFilter& pf = room.pf;
+  pf.UseSharedErrors({0.05, 0.05, 0.002});  // wide, so that a wrong sign or factor shows
+  const Vec2 start(40, 40);
+  pf.InitializeKnown(start, 0.0, 0.0, 0.0);
+  const StatedWalk walk = LoopWithARest();
+  for (std::size_t i = 0; i < walk.steps_n.size(); ++i)
+    pf.Predict(walk.steps_n[i], &walk.stated[i]);
+  EXPECT_EQ(pf.summary().wall_eliminations, 0u);
+  double spread = 0;
+  for (const auto& q : pf.particles()) {
+    Vec2 p = start;
+    double heading_error = 0;
+    for (std::size_t i = 0; i < walk.steps_n.size(); ++i) {
+      heading_error +=
+          q.turn_scale * walk.stated[i].turn_rad + q.drift_rad_per_s * walk.stated[i].dt_s;
+      p += (1.0 + q.step_scale) * (Rot(heading_error) * walk.steps_n[i]);
+    }
+    ASSERT_LT((q.position_n - p).norm(), 1e-9);
+    EXPECT_NEAR(WrapAngle(q.heading_offset_rad - heading_error), 0.0, 1e-12);
+    spread += (q.position_n - pf.Mean()).squaredNorm();
+  }
+  EXPECT_GT(spread / pf.particles().size(), 0.5);  // the errors moved them: 1.6 m^2 drawn
+}
+
+TEST(MapParticleFilter, StatedStepsSpreadTheParticlesAsTheDeadReckoningsCovariance) {
+  // The same walk with the foot INS's shared errors (PdrOptions::foot_ins) and each step's own
+  // noise: the cloud's covariance is the dead reckoning's (first order; 4,000 particles).
+  OpenRoom room(4000);
+  MapParticleFilter& pf = room.pf;
+  PdrOptions pdr = PdrOptions{}.ForFootIns();
+  pdr.track_heading_offset_sigma_rad = 0;
+  pf.UseSharedErrors(
+      {pdr.step_scale_sigma, pdr.turn_scale_sigma, pdr.heading_drift_sigma_rad_per_s});
+  const Vec2 start(40, 40);
+  const double start_sigma_m = 0.1, start_heading_sigma_rad = 0.05;
+  pf.InitializeKnown(start, 0.0, start_sigma_m, start_heading_sigma_rad);
+  DeadReckoning dr(Vec3(start.x(), start.y(), 0), start_sigma_m, pdr, start_heading_sigma_rad);
+  const StatedWalk walk = LoopWithARest();
+  for (std::size_t i = 0; i < walk.steps_n.size(); ++i) {
+    Step step;
+    step.t0 = i == 0 ? 0.0 : walk.t1_s[i - 1];
+    step.t1 = walk.t1_s[i];
+    step.agent = "ff1";
+    step.delta_n = Vec3(walk.steps_n[i].x(), walk.steps_n[i].y(), 0);
+    step.variance_m2 = Vec3(4e-4, 4e-4, 0);
+    step.heading_var_rad2 = 2e-6;
+    dr.AddStep(step);
+    StatedStep stated = walk.stated[i];  // the turn and time the dead reckoning sees too
+    stated.position_sigma_m = 0.02;
+    stated.heading_sigma_rad = std::sqrt(2e-6);
+    pf.Predict(walk.steps_n[i], &stated);
+  }
+  const Mat2 particles = pf.Covariance();
+  const Mat2 expected = dr.covariance();
+  // The mean within a tenth of the spread (the cloud's mean is the exact rotations', shrunk
+  // toward the start by the heading's second order; the dead reckoning's is the steps' sum).
+  EXPECT_LT((pf.Mean() - dr.position_n().head<2>()).norm(), 0.1 * std::sqrt(expected.trace()));
+  EXPECT_NEAR(particles.trace() / expected.trace(), 1.0, 0.1);
+  // The shape too: the largest axis along the same direction, of the same length.
+  const Eigen::SelfAdjointEigenSolver<Mat2> a(particles), b(expected);
+  EXPECT_NEAR(std::sqrt(a.eigenvalues()(1) / b.eigenvalues()(1)), 1.0, 0.05);
+  EXPECT_GT(std::abs(a.eigenvectors().col(1).dot(b.eigenvectors().col(1))), 0.99);
 }
 
 }  // namespace

@@ -163,6 +163,15 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
     t.Flag("dr_first", &O::dr_first,
            "an agent on a foot INS within its noise model (known start, stated heading) is "
            "written as its dead reckoning while the filter does not doubt it");
+    t.Real(
+        "stated_wall_follow_converged_power",
+        [](O& o) -> double& { return o.filter.stated_wall_follow_converged_power; }, "",
+        OptionBounds::Between(0, 1),
+        "wall-following weight once converged for an agent on stated steps (0: only while "
+        "uncertain)");
+    t.Flag("stated_steps", &O::stated_steps,
+           "a foot INS's steps move the particles by their own noise and the dead reckoning's "
+           "shared errors per particle (else the paper's noise)");
     t.Include("", &O::dr_test, integrity::DeadReckoningFirstOptionTable());
     return t;
   }();
@@ -206,6 +215,11 @@ struct AgentTrack {
   std::optional<DeadReckoning> dr;
   std::optional<integrity::DeadReckoningFirst> dr_first;
   std::optional<Estimate> last;  ///< the estimate written last
+  /// stated_steps: the shared errors' prior of its filters, the last step's end and walking
+  /// direction (of a step that moved at least PdrOptions::turn_min_step_m).
+  std::optional<SharedStepErrorPrior> shared;
+  std::optional<TimeS> last_step_t;
+  std::optional<double> last_direction_rad;
 };
 
 }  // namespace
@@ -242,6 +256,7 @@ struct MapMatchEstimator::Impl {
       fo.seed = a.seed + 7919 * i;
       const Level& l = levels[i];
       f = std::make_unique<MapParticleFilter>(*l.grid, l.sequences, fo, l.wall_distance);
+      if (a.shared) f->UseSharedErrors(*a.shared);
     }
     return *f;
   }
@@ -461,13 +476,26 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
       }
       a.level = m.IndexOf(level.value_or(0)).value_or(m.IndexOf(0).value_or(0));
     }
+    if (m.o.stated_steps && step->heading_var_rad2) {
+      const PdrOptions foot = PdrOptions{}.ForFootIns();
+      a.shared = SharedStepErrorPrior{foot.step_scale_sigma, foot.turn_scale_sigma,
+                                      foot.heading_drift_sigma_rad_per_s};
+      m.setup.notes.push_back(fmt::format(
+          "{}: steps from a foot INS within its noise model move the particles by their own "
+          "noise and the INS's shared errors (stated_steps)",
+          step->agent));
+    }
     a.filter = &m.FilterOn(a, a.level);
     if (known) {
+      // With the dead reckoning's errors (stated_steps), its start heading's too: the stated
+      // sigma and the steps' own offset from it (the foot's toe-out), in quadrature.
+      const double heading_sigma_rad =
+          a.shared ? PdrOptions{}.StartHeadingSigma(node->start_heading_sigma_rad)
+                   : node->start_heading_sigma_rad.value_or(m.o.default_start_heading_sigma_rad);
       a.filter->InitializeKnown(
           start->head<2>(), 0.0,
           std::max(node->start_sigma_m.value_or(m.o.default_start_sigma_m), m.o.min_start_sigma_m),
-          std::max(node->start_heading_sigma_rad.value_or(m.o.default_start_heading_sigma_rad),
-                   m.o.min_start_heading_sigma_rad));
+          std::max(heading_sigma_rad, m.o.min_start_heading_sigma_rad));
     } else {
       a.filter->InitializeUniform();
     }
@@ -507,7 +535,24 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
   }
   const Vec2 d = step->delta_n.head<2>();
-  a.filter->Predict(d);
+  if (a.shared && step->heading_var_rad2) {
+    StatedStep stated;
+    if (step->variance_m2) {
+      stated.position_sigma_m =
+          std::sqrt(0.5 * std::max(0.0, step->variance_m2->x() + step->variance_m2->y()));
+    }
+    stated.heading_sigma_rad = std::sqrt(std::max(0.0, *step->heading_var_rad2));
+    if (a.last_step_t) stated.dt_s = std::max(0.0, step->t1 - *a.last_step_t);
+    if (d.norm() >= PdrOptions{}.turn_min_step_m) {
+      const double direction = std::atan2(d.y(), d.x());
+      if (a.last_direction_rad) stated.turn_rad = WrapAngle(direction - *a.last_direction_rad);
+      a.last_direction_rad = direction;
+    }
+    a.filter->Predict(d, &stated);
+  } else {
+    a.filter->Predict(d);
+  }
+  a.last_step_t = step->t1;  // (as the dead reckoning: no drift before the first step's end)
   a.odometry_n += d;
   a.walked_m += d.norm();
   a.since_compare_m += d.norm();

@@ -74,10 +74,12 @@ bool MapParticleFilterOptions::IsValid(std::string* why) const {
   if (!(wall_follow_leave > 0 && wall_follow_leave < 1) ||
       !(wall_follow_return > 0 && wall_follow_return <= 1) ||
       !(wall_follow_off_likelihood > 0 && wall_follow_off_likelihood <= 1) ||
-      !(wall_follow_converged_power >= 0 && wall_follow_converged_power <= 1))
+      !(wall_follow_converged_power >= 0 && wall_follow_converged_power <= 1) ||
+      !(stated_wall_follow_converged_power >= 0 && stated_wall_follow_converged_power <= 1))
     return fail(
         "wall_follow_leave must be within (0, 1), wall_follow_return and "
-        "wall_follow_off_likelihood within (0, 1], wall_follow_converged_power within [0, 1]");
+        "wall_follow_off_likelihood within (0, 1], wall_follow_converged_power and its stated_ "
+        "within [0, 1]");
   if (!(free_walk_share >= 0 && free_walk_share < 1) ||
       !(free_walk_switch >= 0 && free_walk_switch <= 1))
     return fail("free_walk_share must be within [0, 1), free_walk_switch within [0, 1]");
@@ -171,6 +173,15 @@ Vec2 MapParticleFilter::RandomInsidePoint() {
   return c + grid_.ToNavigation(Vec2(rng_.Uniform(-h, h), rng_.Uniform(-h, h)));
 }
 
+void MapParticleFilter::UseSharedErrors(const SharedStepErrorPrior& prior) { shared_ = prior; }
+
+void MapParticleFilter::DrawSharedErrors(Particle& q) {
+  if (!shared_) return;  // the paper's random stream
+  q.step_scale = static_cast<float>(rng_.Normal(0, shared_->step_scale_sigma));
+  q.turn_scale = static_cast<float>(rng_.Normal(0, shared_->turn_scale_sigma));
+  q.drift_rad_per_s = static_cast<float>(rng_.Normal(0, shared_->heading_drift_sigma_rad_per_s));
+}
+
 void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps, double hs) {
   particles_.resize(options_.particles);
   NoteParticleCount();
@@ -183,6 +194,7 @@ void MapParticleFilter::InitializeKnown(const Vec2& p, double offset, double ps,
     q.position_n = p + GridNoise(ps);
     q.heading_offset_rad = offset + rng_.Normal(0, hs);
     q.hand = RandomHand();
+    DrawSharedErrors(q);
     q.p_off_wall = 0;
     q.step_from_n = q.position_n;
     q.weight = 1.0 / particles_.size();
@@ -203,6 +215,7 @@ void MapParticleFilter::InitializeUniform() {
     q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
     q.hand = RandomHand();
     q.p_off_wall = 0;
+    DrawSharedErrors(q);
     q.weight = 1.0 / particles_.size();
   }
 }
@@ -285,6 +298,7 @@ void MapParticleFilter::ReplaceFromSurvivors(const std::vector<char>& dead) {
         q.heading_offset_rad = rng_.Uniform(-std::numbers::pi, std::numbers::pi);
         q.hand = RandomHand();
         q.p_off_wall = 0;
+        DrawSharedErrors(q);
       }
       q.weight = 1.0 / particles_.size();
     }
@@ -417,7 +431,7 @@ void MapParticleFilter::NoteParticleCount() {
   summary_.particles_max = std::max(summary_.particles_max, n);
 }
 
-void MapParticleFilter::Predict(const Vec2& d) {
+void MapParticleFilter::Predict(const Vec2& d, const StatedStep* stated) {
   ++summary_.time_updates;
   summary_.particle_steps += particles_.size();
   NoteConvergence();
@@ -441,10 +455,24 @@ void MapParticleFilter::Predict(const Vec2& d) {
       auto& q = particles_[i];
       mass += q.weight;
       q.step_from_n = q.position_n;
-      const double ps = widen * options_.position_noise_m;
-      const Vec2 next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d + GridNoise(ps);
-      q.heading_offset_rad = WrapAngle(
-          q.heading_offset_rad + rng_.Normal(0, widen * options_.heading_noise_rad_per_m * len));
+      Vec2 next;
+      if (stated != nullptr) {
+        // As the dead reckoning's error propagates (ins/dead_reckoning.cpp, AddStep): the
+        // heading error grows by the drift rate x the time and the gyro scale x the turn, the
+        // step is turned by it and stretched by the scale, its end moved by its own noise; then
+        // the heading takes the step's own random walk.
+        const double heading_rad = q.heading_offset_rad + q.turn_scale * stated->turn_rad +
+                                   q.drift_rad_per_s * stated->dt_s;
+        next = q.position_n + (1.0 + q.step_scale) * (Eigen::Rotation2Dd(heading_rad) * d) +
+               GridNoise(widen * stated->position_sigma_m);
+        q.heading_offset_rad =
+            WrapAngle(heading_rad + rng_.Normal(0, widen * stated->heading_sigma_rad));
+      } else {
+        const double ps = widen * options_.position_noise_m;
+        next = q.position_n + Eigen::Rotation2Dd(q.heading_offset_rad) * d + GridNoise(ps);
+        q.heading_offset_rad = WrapAngle(
+            q.heading_offset_rad + rng_.Normal(0, widen * options_.heading_noise_rad_per_m * len));
+      }
       if (plan.Crosses(q.position_n, next)) {
         dead[i] = 1;
         ++n_dead;
@@ -488,7 +516,9 @@ void MapParticleFilter::Predict(const Vec2& d) {
         // Full weight while uncertain; once converged, tempered (see the option).
         const bool uncertain =
             forced_pattern_updates_ > 0 || TriggerVariance() > PatternThreshold();
-        const double power = uncertain ? 1.0 : options_.wall_follow_converged_power;
+        const double power = uncertain           ? 1.0
+                             : stated != nullptr ? options_.stated_wall_follow_converged_power
+                                                 : options_.wall_follow_converged_power;
         if (power > 0) WeighWallFollowing(std::atan2(d.y(), d.x()), power);
       }
       if (last_step_alarm_ && options_.recover_on_wall_alarm && options_.pseudo_observations)
@@ -634,6 +664,7 @@ void MapParticleFilter::UpdatePatterns(const PatternComparison& pc, double odome
                      ? 2
                      : static_cast<std::uint8_t>(o.end);
         q.p_off_wall = 0;
+        DrawSharedErrors(q);
         ++summary_.pattern_resamples;
       }
       Normalize();

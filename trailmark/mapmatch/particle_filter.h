@@ -3,7 +3,9 @@
 /// The information fusion of the map-aided search paper (sec. IV-E): a particle filter whose
 /// particles carry a position and the heading offset between the odometry frame and the map.
 ///  - time update: the odometry displacement rotated by each particle's offset, plus Gaussian
-///    noise (0.12 m per axis; 2 deg per metre walked on the offset);
+///    noise (0.12 m per axis; 2 deg per metre walked on the offset); ours, for a step that states
+///    its own errors (a foot INS): that step's noise, and each particle's own draw of the dead
+///    reckoning's shared errors (StatedStep, SharedStepErrorPrior);
 ///  - map: a particle whose step crosses a wall is eliminated (spatial index of the walls);
 ///  - pseudo observations (eq. 2-3): each particle takes the pattern observation at its nearest
 ///    node whose heading is closest to its walking heading; weight x exp(-E / sigma^2);
@@ -19,6 +21,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -130,6 +133,16 @@ struct MapParticleFilterOptions {
   double wall_follow_return = 0.15;
   double wall_follow_off_likelihood = 0.6;
   double wall_follow_converged_power = 1.0;
+  /// The same power for a step with its own statement (Predict with a StatedStep: a foot INS
+  /// within its noise model). The model's likelihood is evidence about where the walker stands,
+  /// taken at every step as if new: true while the paper's motion noise (0.12 m a step) moves
+  /// each particle's distance to the wall between steps, but a foot INS's steps (2-3 cm) carry
+  /// that distance from step to step, and the same evidence counted a hundred times pulls the
+  /// belief onto the model's offset from the wall (the landmark office's corridor walks, foot
+  /// IMU seeds 430-435: the map matcher 0.51-0.64 m p75 with 1, 0.39-0.43 m with 0, dead
+  /// reckoning 0.42-0.43 m; docs/mapmatch.md). 0: only while uncertain (finding the place,
+  /// after a wall alarm), as the pattern comparisons.
+  double stated_wall_follow_converged_power = 0.0;
   /// Ours: a walker who does not search (walks a corridor's middle along a beacon trail,
   /// crosses a room) as a second motion model beside the wall-following one. A share
   /// `free_walk_share` of the belief is free walkers (hand 2): the wall-following likelihood is
@@ -183,6 +196,27 @@ struct MapParticleFilterOptions {
   bool IsValid(std::string* why) const;
 };
 
+/// The dead reckoning's shared errors (ins/dead_reckoning.h: one value for every step of an
+/// agent) as each particle's own hypotheses, their prior sigmas (MapParticleFilter::
+/// UseSharedErrors). Ours (issue 23): the paper's motion noise is white per step; a foot INS's
+/// error is mostly not (its step-length scale, its gyro's scale over turns, the bias its stance
+/// updates leave), and a particle that carries them moves as a dead reckoning with those errors
+/// would, the walls deciding between them.
+struct SharedStepErrorPrior {
+  double step_scale_sigma = 0.0;               ///< step-length scale (fraction)
+  double turn_scale_sigma = 0.0;               ///< gyro scale factor over turns (fraction)
+  double heading_drift_sigma_rad_per_s = 0.0;  ///< heading drift rate, standing included
+};
+
+/// A step's own statement of its white errors, with what the shared errors act on: the time
+/// update of MapParticleFilter::Predict for steps of a source within its noise model.
+struct StatedStep {
+  double position_sigma_m = 0.0;   ///< per axis, the step's own noise
+  double heading_sigma_rad = 0.0;  ///< the heading's random walk over the step
+  double turn_rad = 0.0;           ///< the odometry's walking direction turned since the last step
+  double dt_s = 0.0;               ///< time since the last step (standing included)
+};
+
 /// KLD-sampling's sample size (Fox 2003, eq. (9) before its Wilson-Hilferty approximation):
 /// the number of samples that bounds the KL distance between the maximum-likelihood histogram
 /// of k occupied bins and the true one by epsilon with probability `quantile`:
@@ -226,6 +260,9 @@ class MapParticleFilter {
     Vec2 step_from_n = Vec2::Zero();  ///< where its last time update started (for checks)
     std::uint8_t hand = 0;            ///< 0 left-hand search, 1 right-hand, 2 free walker
     float p_off_wall = 0;             ///< probability it follows no wall of the map
+    /// Its shared step errors (UseSharedErrors; zero otherwise): the step-length scale, the
+    /// gyro's scale over turns, the heading drift rate (rad/s).
+    float step_scale = 0, turn_scale = 0, drift_rad_per_s = 0;
   };
 
   /// `grid` and the sequences must outlive the filter. `wall_distance`: the walls' distance
@@ -248,8 +285,13 @@ class MapParticleFilter {
   /// convergence state; the wall alarm's CUSUM starts again.
   void ContinueFrom(const MapParticleFilter& from, const std::vector<char>& keep);
 
-  /// Odometry displacement (odometry frame) since the last update.
-  void Predict(const Vec2& delta_odometry);
+  /// Each particle carries the dead reckoning's shared errors, drawn from `prior` for every
+  /// particle drawn from now on (the initial ones included: call before Initialize*).
+  void UseSharedErrors(const SharedStepErrorPrior& prior);
+  /// Odometry displacement (odometry frame) since the last update. Without `stated`, the
+  /// paper's motion noise; with it, the step's own white noise, and each particle's shared
+  /// errors (UseSharedErrors) act on the displacement, the turn and the time.
+  void Predict(const Vec2& delta_odometry, const StatedStep* stated = nullptr);
   /// Eq. (2)-(3) and the resampling from the pseudo observations. `odometry_heading_rad` is
   /// the odometry's current walking direction (odometry frame).
   void UpdatePatterns(const PatternComparison& comparison, double odometry_heading_rad);
@@ -316,6 +358,8 @@ class MapParticleFilter {
   void NoteConvergence();
   double Uniform() { return rng_.Uniform(); }
   std::uint8_t RandomHand();
+  /// A new particle's shared errors, drawn from the prior (no draw without one).
+  void DrawSharedErrors(Particle& q);
 
   const SearchGrid& grid_;
   const std::vector<NodeSequence>& sequences_;
@@ -332,6 +376,7 @@ class MapParticleFilter {
   struct NodeIndex;
   std::unique_ptr<NodeIndex> nodes_;
   MapParticleFilterSummary summary_;
+  std::optional<SharedStepErrorPrior> shared_;
   double last_blocked_mass_ = 0;
   bool converged_ = false;
   bool tracking_ = false;  ///< has converged (and been confirmed) since the last uniform start
