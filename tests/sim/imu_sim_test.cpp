@@ -169,6 +169,41 @@ TEST(ImuSim, EverySwingLastsAsAFootsDoesWhateverThePace) {
   }
 }
 
+TEST(ImuSim, TheGaitTurnsTheLandingFootTowardItsNextStride) {
+  // landing_anticipation a: the foot lands along its stride turned by a of the turn to the next
+  // stride (a = 0, the pivot gait the simulator had alone; the `imu` family draws a in [0, 0.5]).
+  // Each landing's heading against its chord and the next one (unless a short swing's largest
+  // turn clamps it), and the strides themselves the same for every gait.
+  const SimulatedMission sim = SimulateScenario("house1-search", 7);
+  const auto& [id, walk] = sim.walks.front();
+  ImuSimOptions o;
+  o.grade = ImuGrade::Perfect();
+  o.rate_hz = 100;
+  const SimulatedImu pivot = SimulateFootImu(walk, id, o, Random(5));
+  for (const double a : {0.0, 0.25, 0.5}) {
+    o.landing_anticipation = a;
+    const SimulatedImu imu = SimulateFootImu(walk, id, o, Random(5));
+    ASSERT_EQ(imu.landings.size(), pivot.landings.size());
+    int checked = 0, turned = 0;
+    for (std::size_t k = 1; k + 1 < imu.landings.size(); ++k) {
+      const auto& l = imu.landings;
+      EXPECT_EQ(l[k].position_n, pivot.landings[k].position_n);
+      const Vec2 chord = l[k].position_n - l[k - 1].position_n;
+      const Vec2 next = l[k + 1].position_n - l[k].position_n;
+      if (chord.norm() < 0.3 || next.norm() < 0.3) continue;
+      const double c = std::atan2(chord.y(), chord.x());
+      const double expected = c + a * WrapAngle(std::atan2(next.y(), next.x()) - c);
+      const double turn = std::abs(WrapAngle(l[k].yaw_rad - l[k - 1].yaw_rad));
+      if (turn > 2.3) continue;  // clamped: 8 rad/s over a 0.3 s swing at the most
+      EXPECT_NEAR(WrapAngle(l[k].yaw_rad - expected), 0.0, 1e-9) << a << " " << k;
+      ++checked;
+      turned += std::abs(WrapAngle(expected - c)) > 0.1;
+    }
+    EXPECT_GT(checked, 100) << a;
+    if (a > 0) EXPECT_GT(turned, 20) << a;  // a search turns often: the gait shows
+  }
+}
+
 }  // namespace
 }  // namespace trailmark
 

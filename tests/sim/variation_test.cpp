@@ -2,8 +2,11 @@
 // Randomized scenario families (issue 21, item 1): each family changes what it says and nothing
 // else, a variant is deterministic per (seed, K), every variant is a valid mission, and a mission
 // written in another style the spec allows reads back to the same rows.
+#include "trailmark/sim/variation.h"
+
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -15,7 +18,6 @@
 #include "trailmark/pipelines/batch_run.h"
 #include "trailmark/sim/imu_sim.h"
 #include "trailmark/sim/scenarios.h"
-#include "trailmark/sim/variation.h"
 
 namespace trailmark {
 namespace {
@@ -415,15 +417,21 @@ TEST(Variation, EventsAbsentDeclareTheCrumbsAndNodesGetOneSurveyError) {
 // `all`, whose variants keep their steps.
 TEST(Variation, TheImuFamilyReplacesTheStepsByAFootImuOfTheDrawnGrade) {
   std::set<std::string> grades;
+  std::vector<double> anticipations;
   for (std::uint64_t k = 1; k <= 40; ++k) {
     const Variation v = DrawVariation(VariationFamily::kImu, k);
     ASSERT_TRUE(v.foot_imu);
     grades.insert(v.imu_grade);
     EXPECT_TRUE(v.imu_rate_hz == 100 || v.imu_rate_hz == 200) << k;
     EXPECT_LE(std::abs(v.imu_turn_rad), 30 * std::numbers::pi / 180) << k;
+    EXPECT_GE(v.imu_landing_anticipation, 0.0) << k;  // the gait: a pivot ...
+    EXPECT_LE(v.imu_landing_anticipation, 0.5) << k;  // ... to half way to the next stride
+    anticipations.push_back(v.imu_landing_anticipation);
     EXPECT_FALSE(DrawVariation(VariationFamily::kAll, k).foot_imu) << k;
   }
   EXPECT_EQ(grades, (std::set<std::string>{"tactical", "industrial", "consumer"}));
+  EXPECT_LT(*std::min_element(anticipations.begin(), anticipations.end()), 0.1);
+  EXPECT_GT(*std::max_element(anticipations.begin(), anticipations.end()), 0.4);
   const testing::TempDir dir;
   int checked = 0;
   for (std::uint64_t k = 1; k <= 8 && checked < 2; ++k) {

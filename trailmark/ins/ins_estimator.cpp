@@ -117,6 +117,23 @@ const OptionTable<InsOptions>& InsOptionTable() {
         [](O& o) -> int& { return o.mount_yaw.interval_min_strides; },
         OptionBounds::Between(1, 100000),
         "strides whose bounds must share one stretch (three in four of all) to decide by them");
+    t.Integer(
+        "mount_yaw_gait_min_strides", [](O& o) -> int& { return o.mount_yaw.gait_min_strides; },
+        OptionBounds::Between(0, 100000),
+        "strides the gait's regression needs to decide the mounting (0: off; straight strides "
+        "only)");
+    t.Real(
+        "mount_yaw_gait_max_turn", [](O& o) -> double& { return o.mount_yaw.gait_max_turn_rad; },
+        "rad", OptionBounds::Positive(),
+        "the gait's regression takes strides whose foot and next chord turned up to this");
+    t.Real(
+        "mount_yaw_gait_max_sigma", [](O& o) -> double& { return o.mount_yaw.gait_max_sigma_rad; },
+        "rad", OptionBounds::Positive(),
+        "the gait's regression decides once the mounting's standard error is at most this");
+    t.Real(
+        "mount_yaw_gait_noise_floor",
+        [](O& o) -> double& { return o.mount_yaw.gait_noise_floor_rad; }, "rad",
+        OptionBounds::Positive(), "the least scale of the gait regression's residuals");
     t.Real("zaru_recover_s", &O::zaru_recover_s, "s", OptionBounds::NonNegative(),
            "stance over which every ZARU refused grows the gyro bias's covariance to take it "
            "(0: never)");
@@ -394,6 +411,11 @@ EstimatorSummary MultiAgentIns::Summary() const {
       summary.numbers[id + ".mount_yaw_strides"] = static_cast<double>(a->mount->Strides());
       summary.numbers[id + ".mount_yaw_landings"] = static_cast<double>(a->mount->Landings());
       summary.numbers[id + ".mount_yaw_by_bounds"] = a->mount->DecidedByBounds() ? 1.0 : 0.0;
+      summary.numbers[id + ".mount_yaw_by_gait"] = a->mount->DecidedByGait() ? 1.0 : 0.0;
+      if (a->mount->DecidedByGait()) {
+        summary.numbers[id + ".mount_yaw_gait_a"] = a->mount->GaitShares().first;
+        summary.numbers[id + ".mount_yaw_gait_b"] = a->mount->GaitShares().second;
+      }
       if (!a->mount->Note().empty()) summary.notes.push_back(id + ": " + a->mount->Note());
     }
     for (const auto& w : s.warnings) summary.notes.push_back(id + ": " + w);

@@ -45,6 +45,14 @@ bool MountYawOptions::IsValid(std::string* why) const {
     problem = "mount_yaw_interval_margin must be >= 0";
   else if (interval_min_strides < 1)
     problem = "mount_yaw_interval_min_strides must be >= 1";
+  else if (gait_min_strides < 0 || (gait_min_strides > 0 && gait_min_strides < 4))
+    problem = "mount_yaw_gait_min_strides must be 0 (off) or >= 4 (three parameters)";
+  else if (!(gait_max_turn_rad > 0) || !std::isfinite(gait_max_turn_rad))
+    problem = "mount_yaw_gait_max_turn must be > 0";
+  else if (!(gait_max_sigma_rad > 0) || !std::isfinite(gait_max_sigma_rad))
+    problem = "mount_yaw_gait_max_sigma must be > 0";
+  else if (!(gait_noise_floor_rad > 0) || !std::isfinite(gait_noise_floor_rad))
+    problem = "mount_yaw_gait_noise_floor must be > 0";
   else if (max_landings < strides)
     problem = "mount_yaw_max_landings must be >= mount_yaw_strides";
   if (problem && why) *why = problem;
@@ -73,13 +81,29 @@ void MountYawEstimator::AddLanding(const Vec3& position_n, const Eigen::Quaterni
   if (last_landing_n_) {
     const Vec2 stride = (position_n - *last_landing_n_).head<2>();
     const double turned = WrapAngle(heading - last_heading_rad_);
-    if (stride.norm() >= options_.min_stride_m && std::abs(turned) <= options_.max_turn_rad) {
-      // The reference's heading half way through the stride (the foot turns in the air).
-      const double mid = last_heading_rad_ + 0.5 * turned;
-      double angle = WrapAngle(std::atan2(stride.y(), stride.x()) - mid);
-      if (!angles_rad_.empty())
-        angle = angles_rad_.front() + WrapAngle(angle - angles_rad_.front());
-      angles_rad_.push_back(angle);
+    // Straight: the foot did not turn, nor did the walk into the stride or out of it (the
+    // chords before and after): a foot that anticipates its next stride turns little over a
+    // zig-zag's stride whose chords turned a lot, and lands turned toward the next; that stride's
+    // angle is then off by a share of those turns. So a straight stride counts once the next
+    // chord is seen straight too.
+    const double chord = std::atan2(stride.y(), stride.x());
+    const bool valid = stride.norm() >= options_.min_stride_m;
+    const bool straight_in =
+        !last_chord_rad_ || std::abs(WrapAngle(chord - *last_chord_rad_)) <= options_.max_turn_rad;
+    if (valid) {
+      if (straight_pending_rad_ && straight_in) {
+        double angle = *straight_pending_rad_;
+        if (!angles_rad_.empty())
+          angle = angles_rad_.front() + WrapAngle(angle - angles_rad_.front());
+        angles_rad_.push_back(angle);
+      }
+      straight_pending_rad_.reset();
+      last_chord_rad_ = chord;
+      if (std::abs(turned) <= options_.max_turn_rad && straight_in) {
+        // The reference's heading half way through the stride (the foot turns in the air).
+        const double mid = last_heading_rad_ + 0.5 * turned;
+        straight_pending_rad_ = WrapAngle(chord - mid);
+      }
     }
     if (stride.norm() >= options_.min_stride_m &&
         std::abs(turned) <= options_.interval_max_turn_rad) {
@@ -92,9 +116,34 @@ void MountYawEstimator::AddLanding(const Vec3& position_n, const Eigen::Quaterni
                                std::max(at_landing, at_landing + turned) + m);
     }
   }
+  if (last_landing_n_ && options_.gait_min_strides > 0) {
+    // The gait regression's row of the last stride, now that this chord says where it went
+    // next; then this stride waits for the next.
+    const Vec2 stride = (position_n - *last_landing_n_).head<2>();
+    const double turned = WrapAngle(heading - last_heading_rad_);
+    const bool valid = stride.norm() >= options_.min_stride_m;
+    const double chord = std::atan2(stride.y(), stride.x());
+    if (gait_pending_ && valid) {
+      const double next_turn = WrapAngle(chord - gait_pending_->chord_rad);
+      if (std::abs(next_turn) <= options_.gait_max_turn_rad)
+        gait_rows_.push_back({gait_pending_->alpha_rad, next_turn, gait_pending_->foot_turn_rad});
+    }
+    gait_pending_.reset();
+    // Not the first stride: a foot setting off from standing is not yet walking (its turn from
+    // where it stood is no gait's).
+    if (valid && std::abs(turned) <= options_.gait_max_turn_rad && landings_ > 2) {
+      double alpha = WrapAngle(chord - heading);
+      if (!gait_anchor_rad_) gait_anchor_rad_ = alpha;
+      alpha = *gait_anchor_rad_ + WrapAngle(alpha - *gait_anchor_rad_);
+      gait_pending_ = GaitPending{chord, alpha, turned};
+    }
+  }
   last_landing_n_ = position_n;
   last_heading_rad_ = heading;
+  // Straight strides first (exact on a straight walk, whatever the gait), then the gait's
+  // regression (a walk that turns at every stride), then the bounds (off by default).
   if (static_cast<int>(angles_rad_.size()) >= options_.strides) TryDecide(false);
+  if (!decided_ && options_.gait_min_strides > 0) TryDecideByGait();
   if (!decided_) TryDecideByBounds();
   if (!decided_ && landings_ >= options_.max_landings) Settle();
 }
@@ -169,6 +218,52 @@ void MountYawEstimator::TryDecideByBounds() {
   sigma_rad_ = sigma;
 }
 
+void MountYawEstimator::TryDecideByGait() {
+  const std::size_t n = gait_rows_.size();
+  if (options_.strides == 0 || options_.gait_min_strides == 0 ||
+      n < static_cast<std::size_t>(options_.gait_min_strides))
+    return;
+  // alpha = mu - a dnext - b tau: iteratively reweighted least squares with Huber's weights
+  // (k = 1.5 robust scales), weak priors a, b ~ N(0, 10^2) in the normal equations (a straight
+  // walk, whose turns say nothing of them, gives the mean).
+  Eigen::Matrix3d info;
+  Eigen::Vector3d beta = Eigen::Vector3d::Zero();
+  std::vector<double> w(n, 1.0), residual(n, 0.0);
+  double scale = options_.gait_noise_floor_rad;
+  for (int iteration = 0; iteration < 10; ++iteration) {
+    info = Eigen::Vector3d(0.0, 0.01, 0.01).asDiagonal();  // the priors' information
+    Eigen::Vector3d rhs = Eigen::Vector3d::Zero();
+    for (std::size_t k = 0; k < n; ++k) {
+      const GaitRow& g = gait_rows_[k];
+      const Eigen::Vector3d x(1.0, -g.next_turn_rad, -g.foot_turn_rad);
+      info += w[k] * x * x.transpose();
+      rhs += w[k] * g.alpha_rad * x;
+    }
+    beta = info.ldlt().solve(rhs);
+    for (std::size_t k = 0; k < n; ++k) {
+      const GaitRow& g = gait_rows_[k];
+      residual[k] = g.alpha_rad - (beta(0) - beta(1) * g.next_turn_rad - beta(2) * g.foot_turn_rad);
+    }
+    std::vector<double> magnitudes(n);
+    for (std::size_t k = 0; k < n; ++k) magnitudes[k] = std::abs(residual[k]);
+    scale = std::max(options_.gait_noise_floor_rad, 1.4826 * Median(magnitudes));
+    const double huber = 1.5 * scale;
+    for (std::size_t k = 0; k < n; ++k)
+      w[k] = std::abs(residual[k]) <= huber ? 1.0 : huber / std::abs(residual[k]);
+  }
+  std::size_t inliers = 0;
+  for (double r : residual) inliers += std::abs(r) <= options_.max_spread_rad ? 1 : 0;
+  if (4 * inliers < 3 * n) return;
+  // The residuals' scale from n residuals of a three-parameter fit: widened by sqrt(n / (n - 3)).
+  const double sigma = scale * std::sqrt(static_cast<double>(n) / static_cast<double>(n - 3)) *
+                       std::sqrt(info.inverse()(0, 0));
+  if (!(sigma <= options_.gait_max_sigma_rad) || !std::isfinite(beta(0))) return;
+  decided_ = by_gait_ = true;
+  correction_rad_ = -WrapAngle(beta(0));
+  sigma_rad_ = sigma;
+  gait_shares_ = {beta(1), beta(2)};
+}
+
 double MountYawEstimator::TurnWorthTakingRad() const {
   const double c = correction_rad_;
   return decided_ && std::abs(c) > std::max(3 * sigma_rad_, options_.min_turn_rad) ? c : 0.0;
@@ -176,7 +271,8 @@ double MountYawEstimator::TurnWorthTakingRad() const {
 
 void MountYawEstimator::Settle() {
   if (decided_) return;
-  TryDecide(true);
+  if (options_.gait_min_strides > 0) TryDecideByGait();
+  if (!decided_) TryDecide(true);
   if (!decided_) TryDecideByBounds();
   if (decided_) return;
   decided_ = true;

@@ -52,8 +52,10 @@ struct MountYawOptions {
   /// `ins` (its own output places nothing; waiting is only latency), 12 for the steps of every
   /// other pipeline (StepFrontEndOptions).
   int hold_first_landings = 0;
-  /// Turning strides as bounds (0: off). A stride over which the foot turned by tau lies, by any
-  /// gait, between the foot's heading at lift-off and at landing: a circular arc's chord along
+  /// Turning strides as bounds (0: off, the default since session 45: they hold for a foot that
+  /// lands along its stride and for an arc, not for one that lands turned toward its next stride,
+  /// see gait_min_strides). A stride over which the foot turned by tau lies, for those gaits,
+  /// between the foot's heading at lift-off and at landing: a circular arc's chord along
   /// their mean (the median above takes that), a foot that turns as it lifts along the landing
   /// one. So its angle from the reference at lift-off and at landing bound the mounting, widened
   /// by `interval_margin_rad` each way (the stride's own scatter). Strides that turned up to this
@@ -64,9 +66,28 @@ struct MountYawOptions {
   /// shares one as wide as its turns), and its centre is a turn worth taking (beyond 3 sigma,
   /// sigma its width over 2 sqrt 3) that leaves zero outside the stretch; a mounting about the
   /// foot's waits for the straight strides' median.
-  double interval_max_turn_rad = 1.5708;
+  double interval_max_turn_rad = 0.0;
   double interval_margin_rad = 0.087;
   int interval_min_strides = 4;
+  /// The gait's regression (ours, the default; supersedes the bounds above, off since session
+  /// 45). A foot lands turned toward where it goes next, by a gait's share of the next stride's
+  /// turn (the recorded figure-8: about two thirds), and a stride's chord follows the foot's own
+  /// turn by another share (an arc's chord: half of it). So each stride's angle from the
+  /// reference at landing is alpha_k = mu - a dnext_k - b tau_k, mu the mounting's angle, dnext_k
+  /// the turn of the next stride's chord (the INS frame's: independent of the mounting), tau_k
+  /// the foot's turn over the stride. mu, a, b by Huber-weighted least squares (weak priors a, b ~
+  /// N(0, 10^2): a straight walk gives the mean), over every stride of at least `min_stride_m`
+  /// whose turns are within `gait_max_turn_rad`; decided with at least `gait_min_strides` of them,
+  /// three in four within `max_spread_rad` of the fit, once mu's standard error (the residuals'
+  /// robust scale, at least `gait_noise_floor_rad`) is at most `gait_max_sigma_rad`. A pivot on the
+  /// standing foot (a = b = 0: the bounds' gait), a foot that anticipates its next stride, and an
+  /// arc all fit; the `imu` family's house searches drawn with each (0-0.5 of the next turn)
+  /// within 0.5 deg, the recorded figure-8 within 0.3-0.8 deg of its straight strides' median
+  /// (docs/ins.md). 0 strides: off.
+  int gait_min_strides = 6;
+  double gait_max_turn_rad = 1.5708;
+  double gait_max_sigma_rad = 0.035;
+  double gait_noise_floor_rad = 0.0087;
   /// That hold ends sooner at a straight stride within this of the reference (rad, 5 deg: a
   /// mounting about the foot's, the common case; the decision's catch-up makes up the rest), so
   /// that only a turned IMU keeps everyone's rows waiting (the step consumers need global time
@@ -104,6 +125,11 @@ class MountYawEstimator {
   std::size_t Strides() const { return angles_rad_.size(); }
   /// Decided by the strides' bounds (turning strides included), not the straight ones' median.
   bool DecidedByBounds() const { return by_bounds_; }
+  /// Decided by the gait's regression (every stride), not the straight ones' median.
+  bool DecidedByGait() const { return by_gait_; }
+  /// The regression's gait shares (a: toward the next stride, b: the chord's share of the
+  /// foot's turn) when decided by it.
+  std::pair<double, double> GaitShares() const { return gait_shares_; }
   int Landings() const { return landings_; }
   std::optional<double> LastStrideRad() const {
     return angles_rad_.empty() ? std::nullopt : std::optional<double>(angles_rad_.back());
@@ -116,6 +142,8 @@ class MountYawEstimator {
   void TryDecide(bool force);
   /// Decides if the strides' bounds (turning strides included) share one stretch away from zero.
   void TryDecideByBounds();
+  /// Decides by the gait's regression if it is sure enough (gait_max_sigma_rad).
+  void TryDecideByGait();
   double HeadingOf(const Eigen::Quaterniond& q_nb) const;
 
   MountYawOptions options_;
@@ -128,7 +156,21 @@ class MountYawEstimator {
   /// Each stride's bounds on the mounting's angle (lift-off and landing, widened), unwrapped.
   std::vector<std::pair<double, double>> bounds_rad_;
   std::optional<double> unwrap_anchor_rad_;  ///< the first stride's angle: every angle near it
-  bool decided_ = false, by_bounds_ = false;
+  /// The gait regression's rows (alpha_k, dnext_k, tau_k) and the last stride's, waiting for the
+  /// next chord.
+  struct GaitRow {
+    double alpha_rad = 0, next_turn_rad = 0, foot_turn_rad = 0;
+  };
+  std::vector<GaitRow> gait_rows_;
+  struct GaitPending {
+    double chord_rad = 0, alpha_rad = 0, foot_turn_rad = 0;
+  };
+  std::optional<GaitPending> gait_pending_;
+  std::optional<double> last_chord_rad_;  ///< the last stride's chord (of min_stride_m or more)
+  std::optional<double> straight_pending_rad_;  ///< a straight stride's angle, until the next
+  std::optional<double> gait_anchor_rad_;
+  std::pair<double, double> gait_shares_{0.0, 0.0};
+  bool decided_ = false, by_bounds_ = false, by_gait_ = false;
   double correction_rad_ = 0, sigma_rad_ = 0;
   std::string note_;
 };

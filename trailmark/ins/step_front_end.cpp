@@ -357,7 +357,7 @@ EstimatorSummary StepFrontEnd::Summary() const {
     const EstimatorSummary ins = ins_.Summary();
     for (const auto& id : agents) {
       for (const char* key : {".steps", ".mount_yaw_turned_deg", ".mount_yaw_landings",
-                              ".mount_yaw_by_bounds", ".zaru_recoveries"}) {
+                              ".mount_yaw_by_bounds", ".mount_yaw_by_gait", ".zaru_recoveries"}) {
         const auto it = ins.numbers.find(id + key);
         if (it != ins.numbers.end()) s.numbers["ins." + id + key] = it->second;
       }

@@ -134,11 +134,25 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   // ~30 deg from the direction it entered by: the foot faced the first step before, and the
   // INS of an --imu-only house search ran 30 deg off).
   double yaw = start_yaw_rad ? *start_yaw_rad : std::atan2(first_dir.y(), first_dir.x());
+  // The instrumented foot's footprints (every second one of the walk, and the last), so that a
+  // stride knows the direction of the next (landing_anticipation).
+  std::vector<Vec2> footprints{walk.steps.front().from};
+  for (std::size_t k = 1; k < walk.steps.size(); k += 2) footprints.push_back(walk.steps[k].to);
+  if (walk.steps.size() % 2 == 1 && walk.steps.size() > 1)
+    footprints.push_back(walk.steps.back().to);
   auto add_stride = [&](const TrueStep& s, double rise_m) {
     climbed += rise_m;
     const Vec3 to(s.to.x(), s.to.y(), s.z1 + climbed);
     const Vec2 d = (to - foot).head<2>();
-    const double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
+    double yaw_to = d.norm() > 1e-6 ? std::atan2(d.y(), d.x()) : yaw;
+    // Turned on toward the next stride's direction by the gait's share of the turn between them.
+    const std::size_t i = strides.size() + 1;  // this stride ends at footprints[i]
+    if (o.landing_anticipation > 0 && d.norm() > 1e-6 && i + 1 < footprints.size()) {
+      const Vec2 next = footprints[i + 1] - footprints[i];
+      if (next.norm() > 1e-6) {
+        yaw_to += o.landing_anticipation * WrapAngle(std::atan2(next.y(), next.x()) - yaw_to);
+      }
+    }
     // A step cut short before a stop can last milliseconds while this foot's stride spans the
     // step before it too: the swing then starts earlier, in this foot's rest, so that its mean
     // speed stays a foot's (the g-forces of a real stride, not thousands of g).
@@ -192,6 +206,8 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
     return f;
   };
 
+  SimulatedImu out;
+  for (const Stride& s : strides) out.landings.push_back({s.t1, s.to.head<2>(), s.yaw_to});
   // Sensor errors.
   const ImuGrade& g = o.grade;
   const double dt = 1.0 / o.rate_hz;
@@ -207,7 +223,6 @@ SimulatedImu SimulateFootImu(const Walk& walk, const std::string& agent, const I
   const double sigma_a = g.accel_noise_density * std::sqrt(o.rate_hz);
   const double sigma_g = g.gyro_noise_density * std::sqrt(o.rate_hz);
 
-  SimulatedImu out;
   const double t_begin = walk.truth.empty() ? walk.steps.front().t0 - o.rest_before_s
                                             : std::min(walk.truth.front().t, walk.steps.front().t0) -
                                                   o.rest_before_s;

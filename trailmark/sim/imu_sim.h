@@ -65,12 +65,24 @@ struct ImuSimOptions {
   double riser_m = 0.17;              ///< stairs: height of one step
   double gravity_mps2 = 9.8029;
   double rest_before_s = 1.0;         ///< at rest before the first step (INS alignment)
+  /// The gait: how far the foot has already turned toward its next stride when it lands, as a
+  /// share of the turn between this stride and the next (0: it lands pointing along its own
+  /// stride, a pivot on the standing foot; 0.5: half way, the stride a chord of an arc whose
+  /// headings the foot follows). The `imu` family draws it (issue 21: the simulator's one gait).
+  double landing_anticipation = 0.0;
 };
 
 struct SimulatedImu {
   std::vector<ImuSample> samples;
   std::vector<TruthSample> foot_truth;  ///< the foot's true position at every sample
   std::vector<bool> stance;             ///< true stance label of every sample
+  /// Each landing of the foot (truth): when, where and the foot's heading then (rad).
+  struct Landing {
+    TimeS t = 0;
+    Vec2 position_n = Vec2::Zero();
+    double yaw_rad = 0;
+  };
+  std::vector<Landing> landings;
 };
 
 /// The walk's steps alternate feet; the instrumented foot (agent `agent`) lands on every

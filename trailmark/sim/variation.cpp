@@ -189,6 +189,10 @@ void DrawFamily(VariationFamily f, Random& r, Variation& v) {
       v.imu_grade = u < 0.25 ? "tactical" : u < 0.75 ? "industrial" : "consumer";
       v.imu_rate_hz = Coin(r) ? 100.0 : 200.0;
       v.imu_turn_rad = r.Uniform(-30.0, 30.0) * std::numbers::pi / 180;
+      // The gait: the foot lands along its stride (a pivot) or already turned up to half way
+      // toward the next one (ImuSimOptions::landing_anticipation). Drawn last: the draws above
+      // are those of the family before the gait was drawn.
+      v.imu_landing_anticipation = r.Uniform(0.0, 0.5);
       break;
     }
     case VariationFamily::kAll: break;
@@ -620,13 +624,15 @@ std::vector<std::string> ApplyVariation(const Variation& v, SimulatedMission& si
       ImuSimOptions o;
       o.rate_hz = v.imu_rate_hz;
       o.grade = ImuGrade::ByName(v.imu_grade);
+      o.landing_anticipation = v.imu_landing_anticipation;
       sim.data.imu.clear();
       AddFootImu(sim, o, Mix(v.k, static_cast<int>(VariationFamily::kImu), 2));
       sim.data.steps.clear();
       MountImu(sim.data.imu, ImuMounting(v.imu_turn_rad));
       notes.push_back("steps.csv replaced by a " + v.imu_grade + " foot IMU at " +
                       Num(v.imu_rate_hz) + " Hz, turned " +
-                      Num(v.imu_turn_rad * 180 / std::numbers::pi) + " deg on the foot");
+                      Num(v.imu_turn_rad * 180 / std::numbers::pi) + " deg on the foot, landing " +
+                      Num(v.imu_landing_anticipation) + " of the way to its next stride");
     }
   }
   if (on(VariationFamily::kStart)) {
@@ -735,6 +741,7 @@ std::vector<std::pair<std::string, std::string>> Variation::Describe() const {
     out.emplace_back("imu_grade", imu_grade);
     out.emplace_back("imu_rate_hz", Num(imu_rate_hz));
     out.emplace_back("imu_turn_deg", Num(imu_turn_rad * 180 / std::numbers::pi));
+    out.emplace_back("imu_landing_anticipation", Num(imu_landing_anticipation));
   }
   if (on(VariationFamily::kCsv)) {
     out.emplace_back("csv_comments", write.csv_comments ? "yes" : "no");

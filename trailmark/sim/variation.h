@@ -111,6 +111,7 @@ struct Variation {
   std::string imu_grade = "industrial";  ///< ImuGrade::ByName
   double imu_rate_hz = 100.0;
   double imu_turn_rad = 0;  ///< the IMU turned about its vertical on the foot (toe-out, strap)
+  double imu_landing_anticipation = 0;  ///< the gait (ImuSimOptions::landing_anticipation)
 
   // events, start
   EventsKept events = EventsKept::kAll;
