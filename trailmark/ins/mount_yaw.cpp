@@ -105,6 +105,24 @@ void MountYawEstimator::AddLanding(const Vec3& position_n, const Eigen::Quaterni
         straight_pending_rad_ = WrapAngle(chord - mid);
       }
     }
+    if (options_.gait_min_strides > 0) {
+      // The gait regression's row of the last stride, now that this chord says where it went
+      // next; then this stride waits for the next.
+      if (gait_pending_ && valid) {
+        const double next_turn = WrapAngle(chord - gait_pending_->chord_rad);
+        if (std::abs(next_turn) <= options_.gait_max_turn_rad)
+          gait_rows_.push_back({gait_pending_->alpha_rad, next_turn, gait_pending_->foot_turn_rad});
+      }
+      gait_pending_.reset();
+      // Not the first stride: a foot setting off from standing is not yet walking (its turn from
+      // where it stood is no gait's).
+      if (valid && std::abs(turned) <= options_.gait_max_turn_rad && landings_ > 2) {
+        double alpha = WrapAngle(chord - heading);
+        if (!gait_anchor_rad_) gait_anchor_rad_ = alpha;
+        alpha = *gait_anchor_rad_ + WrapAngle(alpha - *gait_anchor_rad_);
+        gait_pending_ = GaitPending{chord, alpha, turned};
+      }
+    }
     if (stride.norm() >= options_.min_stride_m &&
         std::abs(turned) <= options_.interval_max_turn_rad) {
       // The angle from the reference at landing; at lift-off it is that plus the turn.
@@ -114,28 +132,6 @@ void MountYawEstimator::AddLanding(const Vec3& position_n, const Eigen::Quaterni
       const double m = options_.interval_margin_rad;
       bounds_rad_.emplace_back(std::min(at_landing, at_landing + turned) - m,
                                std::max(at_landing, at_landing + turned) + m);
-    }
-  }
-  if (last_landing_n_ && options_.gait_min_strides > 0) {
-    // The gait regression's row of the last stride, now that this chord says where it went
-    // next; then this stride waits for the next.
-    const Vec2 stride = (position_n - *last_landing_n_).head<2>();
-    const double turned = WrapAngle(heading - last_heading_rad_);
-    const bool valid = stride.norm() >= options_.min_stride_m;
-    const double chord = std::atan2(stride.y(), stride.x());
-    if (gait_pending_ && valid) {
-      const double next_turn = WrapAngle(chord - gait_pending_->chord_rad);
-      if (std::abs(next_turn) <= options_.gait_max_turn_rad)
-        gait_rows_.push_back({gait_pending_->alpha_rad, next_turn, gait_pending_->foot_turn_rad});
-    }
-    gait_pending_.reset();
-    // Not the first stride: a foot setting off from standing is not yet walking (its turn from
-    // where it stood is no gait's).
-    if (valid && std::abs(turned) <= options_.gait_max_turn_rad && landings_ > 2) {
-      double alpha = WrapAngle(chord - heading);
-      if (!gait_anchor_rad_) gait_anchor_rad_ = alpha;
-      alpha = *gait_anchor_rad_ + WrapAngle(alpha - *gait_anchor_rad_);
-      gait_pending_ = GaitPending{chord, alpha, turned};
     }
   }
   last_landing_n_ = position_n;
@@ -271,6 +267,8 @@ double MountYawEstimator::TurnWorthTakingRad() const {
 
 void MountYawEstimator::Settle() {
   if (decided_) return;
+  // At the end the gait's regression before the straight strides' median, which is forced
+  // here (three strides within the spread suffice).
   if (options_.gait_min_strides > 0) TryDecideByGait();
   if (!decided_) TryDecide(true);
   if (!decided_) TryDecideByBounds();
