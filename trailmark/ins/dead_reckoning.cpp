@@ -90,19 +90,27 @@ DeadReckoning::DeadReckoning(const Vec3& start_n, double start_sigma_m, const Pd
   error_cov_(kTurnScale, kTurnScale) = options_.turn_scale_sigma * options_.turn_scale_sigma;
 }
 
-void DeadReckoning::AddStep(const Step& step) {
-  // Time since the last step (or none at the first): the heading error grows by the rate error.
-  const double dt_s = last_t_ ? std::max(0.0, step.t1 - *last_t_) : 0.0;
+StepTurnCounter::Since StepTurnCounter::Next(const Step& step, double turn_min_step_m) {
+  Since since;
+  if (last_t_) since.dt_s = std::max(0.0, step.t1 - *last_t_);
   last_t_ = step.t1;
-  Mat6 f = Mat6::Identity();
-  f(kHeading, kRate) = dt_s;
-  // The walking direction's turn since the last step that said where the body faces.
   const Vec2 d_n = step.delta_n.head<2>();
-  if (d_n.norm() >= std::max(options_.turn_min_step_m, 1e-9)) {
+  if (d_n.norm() >= std::max(turn_min_step_m, 1e-9)) {
     const double direction = std::atan2(d_n.y(), d_n.x());
-    if (last_direction_rad_) f(kHeading, kTurnScale) = WrapAngle(direction - *last_direction_rad_);
+    if (last_direction_rad_) since.turn_rad = WrapAngle(direction - *last_direction_rad_);
     last_direction_rad_ = direction;
   }
+  return since;
+}
+
+void DeadReckoning::AddStep(const Step& step) {
+  // Time since the last step (or none at the first): the heading error grows by the rate error;
+  // and by the turn-scale error x the walking direction's turn since the last step that said
+  // where the body faces.
+  const StepTurnCounter::Since since = turns_.Next(step, options_.turn_min_step_m);
+  Mat6 f = Mat6::Identity();
+  f(kHeading, kRate) = since.dt_s;
+  f(kHeading, kTurnScale) = since.turn_rad;
   // The step, turned by the heading error and stretched by the scale error (first order):
   // p += d + d_heading (-d_y, d_x) + d_scale d.
   const double dx = step.delta_n.x(), dy = step.delta_n.y();

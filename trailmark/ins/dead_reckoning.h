@@ -94,6 +94,25 @@ struct PdrOptions {
   bool IsValid(std::string* why) const;
 };
 
+/// What the shared errors of a dead reckoning act on between two steps of an agent: the time
+/// since its last step (none at the first; standing included) and the turn of its walking
+/// direction since the last step of at least `turn_min_step_m` (shorter ones say nothing of
+/// where the body faces). DeadReckoning counts with it, and so does the map matcher's particle
+/// model of a foot INS (mapmatch/), so that both see the same turns.
+class StepTurnCounter {
+ public:
+  struct Since {
+    double dt_s = 0.0;
+    double turn_rad = 0.0;
+  };
+  /// The step's time and turn since the last one; remembers it.
+  Since Next(const Step& step, double turn_min_step_m);
+
+ private:
+  std::optional<TimeS> last_t_;
+  std::optional<double> last_direction_rad_;  ///< of the last step >= turn_min_step_m
+};
+
 /// Dead reckoning of one agent, usable without files. The position is the sum of the steps;
 /// its covariance propagates the error state [dx, dy, d_heading, d_heading_rate, d_scale,
 /// d_turn_scale]: a step d turns by the heading error (lever (-d_y, d_x)) and stretches by the
@@ -156,8 +175,7 @@ class DeadReckoning {
   Mat6 last_transition_ = Mat6::Identity();
   double considered_sigma_rad_ = 0.0;
   Eigen::Matrix<double, kErrors, 1> offset_sens_ = Eigen::Matrix<double, kErrors, 1>::Zero();
-  std::optional<TimeS> last_t_;
-  std::optional<double> last_direction_rad_;  ///< of the last step >= turn_min_step_m
+  StepTurnCounter turns_;
 };
 
 /// The covariance, about the dead reckoning, of a walk turned about its start by an unknown

@@ -180,6 +180,9 @@ const OptionTable<MapMatchEstimatorOptions>& MapMatchOptionTable() {
 
 namespace {
 
+/// The dead reckoning's turn threshold (PdrOptions::turn_min_step_m) for the particles' turns.
+const double kTurnMinStepM = PdrOptions{}.turn_min_step_m;
+
 /// One level of the building: its plan, search sequences, grid and wall distances.
 struct Level {
   int level = 0;
@@ -215,11 +218,10 @@ struct AgentTrack {
   std::optional<DeadReckoning> dr;
   std::optional<integrity::DeadReckoningFirst> dr_first;
   std::optional<Estimate> last;  ///< the estimate written last
-  /// stated_steps: the shared errors' prior of its filters, the last step's end and walking
-  /// direction (of a step that moved at least PdrOptions::turn_min_step_m).
+  /// stated_steps: the shared errors' prior of its filters, and what they act on between steps
+  /// (as the dead reckoning counts it).
   std::optional<SharedStepErrorPrior> shared;
-  std::optional<TimeS> last_step_t;
-  std::optional<double> last_direction_rad;
+  StepTurnCounter turns;
 };
 
 }  // namespace
@@ -535,24 +537,20 @@ void MapMatchEstimator::Add(const MissionRow& row, EstimateSink& sink) {
     }
   }
   const Vec2 d = step->delta_n.head<2>();
+  const StepTurnCounter::Since since = a.turns.Next(*step, kTurnMinStepM);
   if (a.shared && step->heading_var_rad2) {
     StatedStep stated;
+    stated.dt_s = since.dt_s;
+    stated.turn_rad = since.turn_rad;
     if (step->variance_m2) {
       stated.position_sigma_m =
           std::sqrt(0.5 * std::max(0.0, step->variance_m2->x() + step->variance_m2->y()));
     }
     stated.heading_sigma_rad = std::sqrt(std::max(0.0, *step->heading_var_rad2));
-    if (a.last_step_t) stated.dt_s = std::max(0.0, step->t1 - *a.last_step_t);
-    if (d.norm() >= PdrOptions{}.turn_min_step_m) {
-      const double direction = std::atan2(d.y(), d.x());
-      if (a.last_direction_rad) stated.turn_rad = WrapAngle(direction - *a.last_direction_rad);
-      a.last_direction_rad = direction;
-    }
     a.filter->Predict(d, &stated);
   } else {
     a.filter->Predict(d);
   }
-  a.last_step_t = step->t1;  // (as the dead reckoning: no drift before the first step's end)
   a.odometry_n += d;
   a.walked_m += d.norm();
   a.since_compare_m += d.norm();
